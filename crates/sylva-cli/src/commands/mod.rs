@@ -1,0 +1,18 @@
+//! One module per `sylva` command.
+
+use std::process::ExitCode;
+
+/// Prints an error chain the way users expect (`error: ...` then `caused by: ...`) and maps it
+/// to the exit code.
+pub fn finish(result: anyhow::Result<()>) -> ExitCode {
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            for cause in e.chain().skip(1) {
+                eprintln!("  caused by: {cause}");
+            }
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,18 @@
+//! Conventions and small utilities every sylva crate shares.
+//!
+//! * The world frame is right-handed with **+y up**; the ground is the plane y = 0.
+//! * A [`Sun`] is given by the unit vector pointing *towards* the sun (the `L` of `N·L`);
+//!   light travels along its negation, [`Sun::travel`].
+//! * Elevation is measured in degrees above the horizon, azimuth in degrees from +x towards
+//!   +z (so azimuth 90° puts the sun over +z).
+//! * Files are written atomically with [`atomic_write`]: a temporary file beside the target,
+//!   then a rename, so a crash never leaves a half-written cache or image.
+//! * Large allocations are checked first with [`check_memory`].
+
+mod atomic;
+mod memory;
+mod sun;
+
+pub use atomic::{atomic_write, atomic_write_with};
+pub use memory::{available_memory_bytes, check_memory, format_bytes, MemoryError};
+pub use sun::{Sun, SunError};

@@ -1,0 +1,1 @@
+//! Lattice-Boltzmann photon transport (paper 002 §3).

@@ -1,0 +1,1 @@
+//! Tree models, the species generator and forest scenes: what sylva lights and renders.
