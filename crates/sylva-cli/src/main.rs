@@ -8,25 +8,46 @@ mod commands;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(name = "sylva", version, about = "Render forest ecosystems with lattice-Boltzmann global illumination", long_about = None)]
+#[command(
+    name = "sylva",
+    version,
+    about = "Render forest ecosystems with lattice-Boltzmann global illumination",
+    long_about = "sylva lights plants and forests with a lattice-Boltzmann photon-transport \
+solver (leaf transparency, light scattered between leaves and trees) and renders them with a \
+ray tracer. Run `sylva <command> --help` for each command's options."
+)]
 struct Cli {
+    /// Worker threads (default: all cores). Results do not depend on it.
+    #[arg(long, global = true)]
+    threads: Option<usize>,
     #[command(subcommand)]
     command: Command,
 }
 
 #[derive(Subcommand)]
 enum Command {
-    /// Print version and build information.
-    Version,
+    /// Lattice-Boltzmann lighting: solve a grid, describe grid files.
+    Lb(commands::lb::LbArgs),
+    /// Measure speed on this machine (LB solver against copy bandwidth, ...).
+    Bench(commands::bench::BenchArgs),
 }
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
-    let result = match cli.command {
-        Command::Version => {
-            println!("sylva {}", env!("CARGO_PKG_VERSION"));
-            Ok(())
+    if let Some(n) = cli.threads {
+        if n == 0 {
+            return commands::finish(Err(anyhow::anyhow!("--threads must be at least 1")));
         }
+        if let Err(e) = rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+        {
+            return commands::finish(Err(e.into()));
+        }
+    }
+    let result = match cli.command {
+        Command::Lb(a) => commands::lb::run(a),
+        Command::Bench(a) => commands::bench::run(a),
     };
     commands::finish(result)
 }

@@ -1,1 +1,27 @@
-//! Lattice-Boltzmann photon transport (paper 002 §3).
+//! Lattice-Boltzmann photon transport (papers 000 §2.2-3, 002 §3, 004 §2.2; SPEC §1).
+//!
+//! Owns the D3Q19 lattice, the collision matrix with Henyey-Greenstein anisotropy, the
+//! parameter presets, the solver (boundary shell, green/brown sites, convergence), the
+//! density and lighting grids with their file format and previews, and the built-in test
+//! shapes.
+
+// Tests index lattice tables by direction and axis together.
+#![cfg_attr(test, allow(clippy::needless_range_loop))]
+
+pub mod bandwidth;
+pub mod collision;
+pub mod grid;
+pub mod grid_file;
+pub mod kernel;
+pub mod lattice;
+pub mod params;
+pub mod preview;
+pub mod shapes;
+pub mod solver;
+
+pub use grid::{Bounds, DensityGrid, Dims, GridError, LightingGrid};
+pub use grid_file::{Element, GridFile, GridFileError, GridKind};
+pub use params::{ColourParams, MediumParams, ParamError, Preset};
+pub use solver::{
+    solve_lighting, Boundary, Flows, Lattice, SolveError, SolveOptions, SolveReport, StopReason,
+};

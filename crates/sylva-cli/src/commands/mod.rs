@@ -16,3 +16,7 @@ pub fn finish(result: anyhow::Result<()>) -> ExitCode {
         }
     }
 }
+
+pub mod bench;
+pub mod lb;
+pub mod progress;

@@ -1,0 +1,141 @@
+//! `sylva bench`: measured speed of sylva's stages on this machine.
+
+use anyhow::{bail, Result};
+use clap::{Args, Subcommand};
+use serde::Serialize;
+use sylva_lb::bandwidth::copy_bandwidth_gbs;
+use sylva_lb::kernel::KernelIsa;
+use sylva_lb::lattice::Q;
+use sylva_lb::{Boundary, DensityGrid, Dims, Lattice, Preset, SolveOptions};
+
+use super::progress::bar;
+
+#[derive(Args)]
+pub struct BenchArgs {
+    #[command(subcommand)]
+    command: BenchCommand,
+}
+
+#[derive(Subcommand)]
+enum BenchCommand {
+    /// The LB solver on one colour of a dense medium (every site collides), against this
+    /// machine's copy bandwidth measured in the same run.
+    Lb(BenchLbArgs),
+}
+
+#[derive(Args)]
+struct BenchLbArgs {
+    /// Grid edge N (an N³ grid) or NXxNYxNZ.
+    #[arg(long, default_value = "128")]
+    grid: String,
+    /// Steps per run.
+    #[arg(long, default_value_t = 256)]
+    steps: usize,
+    /// Runs; the median is reported.
+    #[arg(long, default_value_t = 3)]
+    repeats: usize,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(Serialize)]
+struct LbBench {
+    grid: String,
+    steps: usize,
+    seconds: f64,
+    mlups: f64,
+    bytes_per_update: usize,
+    effective_gbs: f64,
+    copy_gbs: f64,
+    ratio: f64,
+    threads: usize,
+    kernel: &'static str,
+    runs: Vec<f64>,
+}
+
+pub fn run(args: BenchArgs) -> Result<()> {
+    match args.command {
+        BenchCommand::Lb(a) => bench_lb(a),
+    }
+}
+
+fn bench_lb(a: BenchLbArgs) -> Result<()> {
+    let dims = match Dims::parse(&a.grid) {
+        Some(d) => d?,
+        None => bail!("--grid '{}': expected N or NXxNYxNZ", a.grid),
+    };
+    if a.steps == 0 || a.repeats == 0 {
+        bail!("--steps and --repeats must be at least 1");
+    }
+    // A dense cloud-like medium: every site runs the full collision.
+    let mut grid = DensityGrid::empty(dims);
+    grid.density.fill(1.0);
+    let medium = Preset::Cloud.params();
+    let boundary = Boundary::sun([0.3, -0.9, 0.3], 1.0);
+    let mut lattice = Lattice::new(&grid, &medium, 0, boundary)?;
+    let opts = SolveOptions {
+        max_steps: a.steps,
+        tolerance: None,
+    };
+    let pb = if a.json {
+        indicatif::ProgressBar::hidden()
+    } else {
+        bar((a.steps * a.repeats) as u64, "bench lb")
+    };
+    let mut runs = Vec::with_capacity(a.repeats);
+    for r in 0..a.repeats {
+        lattice.reset(boundary);
+        let report = lattice.run(&opts, &mut |s, _| pb.set_position((r * a.steps + s) as u64))?;
+        runs.push(report.seconds);
+    }
+    pb.finish_and_clear();
+    // Copy bandwidth on a buffer far larger than the last-level cache, in the same run.
+    let copy_gbs = copy_bandwidth_gbs(256 << 20, 7);
+    let mut sorted = runs.clone();
+    sorted.sort_by(f64::total_cmp);
+    let seconds = sorted[sorted.len() / 2];
+    let mlups = dims.sites() as f64 * a.steps as f64 / seconds / 1e6;
+    // Each update reads and writes the 19 f32 of a site and reads its f32 density.
+    let bytes_per_update = 2 * Q * 4 + 4;
+    let effective_gbs = mlups * 1e6 * bytes_per_update as f64 / 1e9;
+    let b = LbBench {
+        grid: dims.to_string().replace('×', "x"),
+        steps: a.steps,
+        seconds,
+        mlups,
+        bytes_per_update,
+        effective_gbs,
+        copy_gbs,
+        ratio: effective_gbs / copy_gbs,
+        threads: rayon::current_num_threads(),
+        kernel: KernelIsa::detect().name(),
+        runs,
+    };
+    if a.json {
+        println!("{}", serde_json::to_string(&b)?);
+    } else {
+        println!(
+            "LB solver, {} grid, {} steps, one colour, {} threads, {} kernel",
+            b.grid, b.steps, b.threads, b.kernel
+        );
+        println!(
+            "  runs (s):        {}",
+            b.runs
+                .iter()
+                .map(|t| format!("{t:.3}"))
+                .collect::<Vec<_>>()
+                .join(" ")
+        );
+        println!("  median:          {:.3} s", b.seconds);
+        println!("  MLUPS:           {:.1}", b.mlups);
+        println!("  bytes/update:    {}", b.bytes_per_update);
+        println!("  effective:       {:.2} GB/s", b.effective_gbs);
+        println!(
+            "  copy bandwidth:  {:.2} GB/s (read + write, same run)",
+            b.copy_gbs
+        );
+        println!("  ratio:           {:.2}", b.ratio);
+    }
+    Ok(())
+}

@@ -1,0 +1,418 @@
+//! `sylva lb`: light a density grid with the lattice-Boltzmann solver; describe grid files.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Subcommand};
+use sylva_core::Sun;
+use sylva_lb::grid_file::{read_header_verified, GridKind};
+use sylva_lb::preview::write_lighting_preview;
+use sylva_lb::shapes::Shape;
+use sylva_lb::{
+    solve_lighting, Boundary, ColourParams, DensityGrid, Dims, Element, GridFile, MediumParams,
+    Preset, SolveOptions,
+};
+
+use super::progress::bar;
+
+#[derive(Args)]
+pub struct LbArgs {
+    #[command(subcommand)]
+    command: LbCommand,
+}
+
+#[derive(Subcommand)]
+enum LbCommand {
+    /// Light a density grid: iterate the LB update to steady state and write the lighting
+    /// grid (.sgrid) and a PNG preview of three central slices.
+    Solve(Box<SolveArgs>),
+    /// Describe a grid file (.sgrid): kind, size, precision, bounds, metadata, value ranges.
+    /// Truncated or corrupted files are refused.
+    Info {
+        /// The grid file.
+        file: PathBuf,
+    },
+}
+
+/// Where the medium comes from.
+#[derive(Args)]
+#[group(required = false, multiple = false)]
+struct Source {
+    /// A built-in shape: sphere, cube or crown (a brown trunk under a leafy crown).
+    #[arg(long, value_name = "SHAPE")]
+    shape: Option<String>,
+    /// A density grid file (.sgrid, as written by `sylva voxelize` or `sylva lb solve`'s
+    /// input side).
+    #[arg(long, value_name = "FILE")]
+    input: Option<PathBuf>,
+    /// A headerless raw file of densities in site order (x slowest, z fastest); needs
+    /// --raw-dims and --raw-type.
+    #[arg(long, value_name = "FILE", requires_all = ["raw_dims"])]
+    raw: Option<PathBuf>,
+}
+
+#[derive(Args)]
+pub struct SolveArgs {
+    #[command(flatten)]
+    source: Source,
+    /// Grid size for --shape: N for N³ or NXxNYxNZ.
+    #[arg(long, default_value = "128")]
+    grid: String,
+    /// Dimensions of a --raw file: NXxNYxNZ.
+    #[arg(long, value_name = "NXxNYxNZ")]
+    raw_dims: Option<String>,
+    /// Element type of a --raw file: u8 (0..255 maps to 0..1) or f32 (little-endian).
+    #[arg(long, default_value = "u8", value_parser = ["u8", "f32"])]
+    raw_type: String,
+    /// Direction towards the sun as x,y,z (+y up).
+    #[arg(long, value_name = "X,Y,Z", conflicts_with_all = ["elevation", "azimuth"])]
+    sun: Option<String>,
+    /// Sun elevation above the horizon in degrees (default 50).
+    #[arg(long, allow_negative_numbers = true)]
+    elevation: Option<f64>,
+    /// Sun azimuth in degrees from +x towards +z (default 30).
+    #[arg(long, allow_negative_numbers = true)]
+    azimuth: Option<f64>,
+    /// Parameter preset: leaf (000 Table 1), dogrose (002 Table 1), cloud, pmma.
+    #[arg(long, default_value = "leaf")]
+    preset: String,
+    /// Absorption σ_a: one value for all colours or R,G,B (overrides the preset).
+    #[arg(long, value_name = "V|R,G,B")]
+    sigma_a: Option<String>,
+    /// Scattering σ_s: one value or R,G,B (overrides the preset).
+    #[arg(long, value_name = "V|R,G,B")]
+    sigma_s: Option<String>,
+    /// Henyey-Greenstein g in [-1, 1]: one value or R,G,B (overrides the preset).
+    #[arg(long, value_name = "V|R,G,B", allow_hyphen_values = true)]
+    g: Option<String>,
+    /// Keep f_0 on green sites instead of zeroing it each step (the absorbed light then
+    /// re-scatters, as in a cloud).
+    #[arg(long)]
+    keep_f0: bool,
+    /// Do not zero f_0 on brown (wood) sites.
+    #[arg(long)]
+    brown_keeps_f0: bool,
+    /// Wood fraction above which a site is brown (g = -1).
+    #[arg(long, default_value_t = 0.5)]
+    brown_threshold: f64,
+    /// Steps to run (default: 2 × the longest edge, as in the papers; with --tolerance,
+    /// the most steps allowed, default 10 × the longest edge).
+    #[arg(long)]
+    steps: Option<usize>,
+    /// Stop once the relative change of total density per step is below this.
+    #[arg(long)]
+    tolerance: Option<f64>,
+    /// Boundary intensity of the sun.
+    #[arg(long, default_value_t = 1.0)]
+    intensity: f64,
+    /// Output lighting grid (default sylva-out/lb-<source>.sgrid).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Preview image (default: the output path with .png).
+    #[arg(long)]
+    png: Option<PathBuf>,
+    /// Store the lighting grid as f16 (half the size).
+    #[arg(long)]
+    f16: bool,
+}
+
+pub fn run(args: LbArgs) -> Result<()> {
+    match args.command {
+        LbCommand::Solve(a) => solve(*a),
+        LbCommand::Info { file } => info(&file),
+    }
+}
+
+/// Parses "v" or "r,g,b" into three values.
+fn per_colour(name: &str, s: &str) -> Result<[f64; 3]> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .with_context(|| {
+            format!("--{name} '{s}': expected a number or three comma-separated numbers")
+        })?;
+    match v.as_slice() {
+        [a] => Ok([*a; 3]),
+        [r, g, b] => Ok([*r, *g, *b]),
+        _ => bail!(
+            "--{name} '{s}': expected one value or three (R,G,B), got {}",
+            v.len()
+        ),
+    }
+}
+
+pub fn parse_sun(sun: Option<&str>, elevation: Option<f64>, azimuth: Option<f64>) -> Result<Sun> {
+    Ok(match (sun, elevation, azimuth) {
+        (Some(v), _, _) => Sun::parse_vector(v).context("--sun")?,
+        (None, None, None) => Sun::default(),
+        (None, e, a) => Sun::from_angles(e.unwrap_or(50.0), a.unwrap_or(30.0))
+            .context("--elevation/--azimuth")?,
+    })
+}
+
+fn medium(a: &SolveArgs) -> Result<MediumParams> {
+    let mut m = Preset::parse(&a.preset)?.params();
+    if let Some(s) = &a.sigma_a {
+        let v = per_colour("sigma-a", s)?;
+        for (colour, value) in m.colours.iter_mut().zip(v) {
+            colour.sigma_a = value;
+            // σ_s follows σ_a as in 000 (σ_s = 1 - σ_a) unless given too.
+            if a.sigma_s.is_none() {
+                colour.sigma_s = 1.0 - value;
+            }
+        }
+    }
+    if let Some(s) = &a.sigma_s {
+        for (colour, value) in m.colours.iter_mut().zip(per_colour("sigma-s", s)?) {
+            colour.sigma_s = value;
+        }
+    }
+    if let Some(s) = &a.g {
+        for (colour, value) in m.colours.iter_mut().zip(per_colour("g", s)?) {
+            colour.g = value;
+        }
+    }
+    if a.keep_f0 {
+        m.zero_f0_on_green = false;
+    }
+    if a.brown_keeps_f0 {
+        m.zero_f0_on_brown = false;
+    }
+    m.brown_threshold = a.brown_threshold;
+    m.validate()?;
+    Ok(m)
+}
+
+fn parse_dims(s: &str, what: &str) -> Result<Dims> {
+    match Dims::parse(s) {
+        Some(d) => Ok(d.with_context(|| format!("{what} '{s}'"))?),
+        None => bail!("{what} '{s}': expected N or NXxNYxNZ, e.g. 128 or 256x128x128"),
+    }
+}
+
+/// Loads the medium and names it for default output paths.
+fn load_source(a: &SolveArgs) -> Result<(DensityGrid, String)> {
+    if let Some(path) = &a.source.input {
+        let grid = GridFile::read(path)?.into_density(path)?;
+        let name = path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "input".into());
+        return Ok((grid, name));
+    }
+    if let Some(path) = &a.source.raw {
+        let dims = parse_dims(a.raw_dims.as_deref().unwrap_or_default(), "--raw-dims")?;
+        return Ok((read_raw(path, dims, &a.raw_type)?, "raw".into()));
+    }
+    let shape_name = a.source.shape.as_deref().unwrap_or("crown");
+    let Some(shape) = Shape::parse(shape_name) else {
+        bail!("unknown shape '{shape_name}': expected sphere, cube or crown");
+    };
+    let dims = parse_dims(&a.grid, "--grid")?;
+    sylva_core::check_memory(
+        &format!("an LB solve on a {dims} grid"),
+        sylva_lb::solver::memory_needed(dims) + dims.sites() as u64 * 8,
+    )?;
+    Ok((shape.grid(dims), shape.name().into()))
+}
+
+fn read_raw(path: &Path, dims: Dims, ty: &str) -> Result<DensityGrid> {
+    let size = if ty == "f32" { 4 } else { 1 };
+    let want = dims.sites() as u64 * size;
+    let meta =
+        std::fs::metadata(path).with_context(|| format!("cannot read {}", path.display()))?;
+    if meta.len() != want {
+        bail!(
+            "{}: a {dims} grid of {ty} needs {want} bytes, the file has {}",
+            path.display(),
+            meta.len()
+        );
+    }
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let density: Vec<f32> = if size == 4 {
+        bytes
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
+            .collect()
+    } else {
+        bytes.iter().map(|&b| b as f32 / 255.0).collect()
+    };
+    DensityGrid::new(
+        dims,
+        sylva_lb::Bounds::UNIT,
+        density,
+        vec![0.0; dims.sites()],
+    )
+    .with_context(|| format!("{}", path.display()))
+}
+
+fn solve(a: SolveArgs) -> Result<()> {
+    let m = medium(&a)?;
+    let sun = parse_sun(a.sun.as_deref(), a.elevation, a.azimuth)?;
+    if !(a.intensity.is_finite() && a.intensity > 0.0) {
+        bail!("--intensity {} must be a positive number", a.intensity);
+    }
+    let t0 = Instant::now();
+    let (grid, name) = load_source(&a)?;
+    let dims = grid.dims;
+    let load_s = t0.elapsed().as_secs_f64();
+    let opts = match (a.steps, a.tolerance) {
+        (Some(s), t) => SolveOptions {
+            max_steps: s,
+            tolerance: t,
+        },
+        (None, None) => SolveOptions::papers(dims),
+        (None, Some(t)) => SolveOptions {
+            max_steps: 10 * dims.longest_edge(),
+            tolerance: Some(t),
+        },
+    };
+    let output = a
+        .output
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("sylva-out/lb-{name}.sgrid")));
+    let png = a
+        .png
+        .clone()
+        .unwrap_or_else(|| output.with_extension("png"));
+    let (mean, occupied) = grid.occupancy();
+    let d = sun.travel();
+    println!(
+        "lighting {name}: {dims} grid, {occupied} occupied sites (mean density {mean:.4}), preset {}, sun elevation {:.1}° azimuth {:.1}°",
+        a.preset,
+        sun.elevation_deg(),
+        sun.azimuth_deg()
+    );
+    let pb = bar(3 * opts.max_steps as u64, "LB solve");
+    let mut last_colour = usize::MAX;
+    let t1 = Instant::now();
+    let (lighting, reports) = solve_lighting(
+        &grid,
+        &m,
+        Boundary::sun([d.x, d.y, d.z], a.intensity),
+        &opts,
+        &mut |c, s, r| {
+            if c != last_colour {
+                last_colour = c;
+                pb.set_position((c * opts.max_steps) as u64);
+            }
+            pb.set_position((c * opts.max_steps + s) as u64);
+            if s % 8 == 0 {
+                pb.set_message(format!(
+                    "{} residual {r:.2e}",
+                    sylva_lb::params::COLOUR_NAMES[c]
+                ));
+            }
+        },
+    )?;
+    pb.finish_and_clear();
+    let solve_s = t1.elapsed().as_secs_f64();
+    let kernel = sylva_lb::kernel::KernelIsa::detect();
+    for (c, r) in reports.iter().enumerate() {
+        let p: &ColourParams = &m.colours[c];
+        println!(
+            "  {:>5}: σ_a {:.3} σ_s {:.3} g {:+.3}: {} steps, stop: {}, final residual {:.2e}, {:.2} s, {:.0} MLUPS",
+            sylva_lb::params::COLOUR_NAMES[c],
+            p.sigma_a,
+            p.sigma_s,
+            p.g,
+            r.steps,
+            r.stop,
+            r.residual,
+            r.seconds,
+            r.mlups(dims)
+        );
+    }
+    let metadata = vec![
+        ("source".to_string(), name.clone()),
+        ("preset".to_string(), a.preset.clone()),
+        (
+            "sun_to".to_string(),
+            format!(
+                "{:.6},{:.6},{:.6}",
+                sun.to_sun().x,
+                sun.to_sun().y,
+                sun.to_sun().z
+            ),
+        ),
+        (
+            "params".to_string(),
+            m.colours
+                .iter()
+                .map(|c| format!("{}/{}/{}", c.sigma_a, c.sigma_s, c.g))
+                .collect::<Vec<_>>()
+                .join(" "),
+        ),
+        (
+            "steps".to_string(),
+            reports
+                .iter()
+                .map(|r| r.steps.to_string())
+                .collect::<Vec<_>>()
+                .join(","),
+        ),
+    ];
+    let element = if a.f16 { Element::F16 } else { Element::F32 };
+    GridFile::from_lighting(&lighting, element, metadata).write(&output)?;
+    write_lighting_preview(&lighting, &png)
+        .with_context(|| format!("cannot write {}", png.display()))?;
+    println!(
+        "total {:.2} s (setup {load_s:.2} s, solve {solve_s:.2} s, kernel {}, {} threads)",
+        t0.elapsed().as_secs_f64(),
+        kernel.name(),
+        rayon::current_num_threads()
+    );
+    println!("wrote {} and {}", output.display(), png.display());
+    Ok(())
+}
+
+fn info(path: &Path) -> Result<()> {
+    let header = read_header_verified(path)?;
+    println!("{}", path.display());
+    println!("  kind:      {} grid", header.kind.name());
+    println!(
+        "  size:      {} ({} sites)",
+        header.dims,
+        header.dims.sites()
+    );
+    println!("  element:   {}", header.element.name());
+    println!(
+        "  bounds:    ({}, {}, {}) .. ({}, {}, {})",
+        header.bounds.min[0],
+        header.bounds.min[1],
+        header.bounds.min[2],
+        header.bounds.max[0],
+        header.bounds.max[1],
+        header.bounds.max[2]
+    );
+    println!(
+        "  file:      {} ({}), checksum {:08x} ok",
+        header.file_bytes,
+        sylva_core::format_bytes(header.file_bytes),
+        header.checksum
+    );
+    for (k, v) in &header.metadata {
+        println!("  {k:<10} {v}");
+    }
+    let file = GridFile::read(path)?;
+    for (name, ch) in header.kind.channel_names().iter().zip(&file.channels) {
+        let (mut lo, mut hi, mut sum) = (f32::INFINITY, f32::NEG_INFINITY, 0.0f64);
+        for &v in ch {
+            lo = lo.min(v);
+            hi = hi.max(v);
+            sum += v as f64;
+        }
+        println!(
+            "  {name:<14} min {lo:.5}  max {hi:.5}  mean {:.5}",
+            sum / ch.len() as f64
+        );
+    }
+    if header.kind == GridKind::Density {
+        let g = file.into_density(path)?;
+        let (mean, occupied) = g.occupancy();
+        println!("  occupied:  {occupied} sites, mean density {mean:.5}");
+    }
+    Ok(())
+}

@@ -1,0 +1,557 @@
+//! The lattice-Boltzmann solver for one colour, and the three-colour driver.
+
+use std::time::Instant;
+
+use rayon::prelude::*;
+use thiserror::Error;
+
+use crate::collision::{Omega, ReducedOmega};
+use crate::grid::{DensityGrid, Dims, LightingGrid};
+use crate::kernel::{process_row, row_targets, stream_shell_row, KernelIsa, RowParams, WideOmega};
+use crate::lattice::{unit, Q};
+use crate::params::{ColourParams, MediumParams, ParamError};
+
+#[derive(Debug, Error)]
+pub enum SolveError {
+    #[error(transparent)]
+    Params(#[from] ParamError),
+    #[error(transparent)]
+    Memory(#[from] sylva_core::MemoryError),
+    #[error("boundary value f_{index} = {value} must be finite and non-negative")]
+    Boundary { index: usize, value: f32 },
+    #[error("convergence tolerance {0} must be a positive finite number")]
+    Tolerance(f64),
+    #[error("step count must be at least 1")]
+    Steps,
+}
+
+/// Fixed directional densities of the shell sites (002 §3).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Boundary {
+    pub values: [f32; Q],
+}
+
+impl Boundary {
+    /// Sunlight travelling along unit vector `travel`: `f_i = I · max(0, n_i · d)`, `f_0 = 0`.
+    pub fn sun(travel: [f64; 3], intensity: f64) -> Boundary {
+        let mut values = [0.0f32; Q];
+        for (i, v) in values.iter_mut().enumerate().skip(1) {
+            let n = unit(i);
+            let d = n[0] * travel[0] + n[1] * travel[1] + n[2] * travel[2];
+            *v = (intensity * d.max(0.0)) as f32;
+        }
+        Boundary { values }
+    }
+
+    /// The relighting bases of 004: `B_0` has every `f_i = 1` (i ≥ 1), `B_j` has `f_i = δ_ij`.
+    pub fn basis(j: usize) -> Boundary {
+        assert!(j < Q, "basis index {j} out of range");
+        let mut values = [0.0f32; Q];
+        if j == 0 {
+            values[1..].fill(1.0);
+        } else {
+            values[j] = 1.0;
+        }
+        Boundary { values }
+    }
+
+    fn validate(&self) -> Result<(), SolveError> {
+        for (index, &value) in self.values.iter().enumerate() {
+            if !(value.is_finite() && value >= 0.0) {
+                return Err(SolveError::Boundary { index, value });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// When a solve stops.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolveOptions {
+    /// Upper bound on steps (the papers run exactly 2 × the longest edge).
+    pub max_steps: usize,
+    /// Stop early once the relative change of total interior density per step falls below
+    /// this.
+    pub tolerance: Option<f64>,
+}
+
+impl SolveOptions {
+    /// The papers' schedule: 2 × the longest grid edge, no early stop.
+    pub fn papers(dims: Dims) -> SolveOptions {
+        SolveOptions {
+            max_steps: 2 * dims.longest_edge(),
+            tolerance: None,
+        }
+    }
+
+    fn validate(&self) -> Result<(), SolveError> {
+        if self.max_steps == 0 {
+            return Err(SolveError::Steps);
+        }
+        if let Some(t) = self.tolerance {
+            if !(t.is_finite() && t > 0.0) {
+                return Err(SolveError::Tolerance(t));
+            }
+        }
+        Ok(())
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopReason {
+    /// Ran `max_steps`.
+    StepLimit,
+    /// The relative change fell below the tolerance.
+    Converged,
+}
+
+impl std::fmt::Display for StopReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            StopReason::StepLimit => "step limit",
+            StopReason::Converged => "converged",
+        })
+    }
+}
+
+/// What one colour's solve did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolveReport {
+    pub steps: usize,
+    pub stop: StopReason,
+    /// Relative change of total interior density in the last step.
+    pub residual: f64,
+    pub seconds: f64,
+}
+
+impl SolveReport {
+    /// Million lattice-site updates per second.
+    pub fn mlups(&self, dims: Dims) -> f64 {
+        dims.sites() as f64 * self.steps as f64 / self.seconds.max(1e-12) / 1e6
+    }
+}
+
+/// Energy moved by one step from the current state (for balance checks).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Flows {
+    /// Density streamed from the shell into the interior.
+    pub inflow: f64,
+    /// Density streamed from the interior onto the shell (dropped).
+    pub outflow: f64,
+    /// Density removed by zeroing `f_0`.
+    pub absorbed: f64,
+}
+
+/// Bytes of memory a solve over `dims` holds: two states, the site codes and the
+/// three-colour result.
+pub fn memory_needed(dims: Dims) -> u64 {
+    let n = dims.sites() as u64;
+    2 * Q as u64 * n * 4 + n * 4 + 3 * n * 4
+}
+
+/// A raw pointer the planes of a step share; each (row, direction) run of the next state has
+/// exactly one source row, so concurrent writes never overlap.
+#[derive(Clone, Copy)]
+struct SharedState(*mut f32);
+unsafe impl Send for SharedState {}
+unsafe impl Sync for SharedState {}
+
+impl SharedState {
+    /// Going through a method makes closures capture the whole (Sync) wrapper, not the raw
+    /// pointer field.
+    fn ptr(self) -> *mut f32 {
+        self.0
+    }
+}
+
+/// One colour's lattice: site codes, two states, collision constants.
+pub struct Lattice {
+    dims: Dims,
+    /// Per site: density ρ for green (leaf) and plain medium sites, -ρ for brown (wood) sites,
+    /// 0 on the shell (boundary sites only emit).
+    codes: Vec<f32>,
+    states: [Vec<f32>; 2],
+    current: usize,
+    green: WideOmega,
+    brown: WideOmega,
+    dense_green: Omega,
+    dense_brown: Omega,
+    keep_f0_green: f32,
+    keep_f0_brown: f32,
+    isa: KernelIsa,
+    boundary: Boundary,
+    /// Total interior density of the current state (computed by the last step).
+    last_total: f64,
+}
+
+impl Lattice {
+    /// Builds the lattice for `grid` with colour `colour` of `medium`, interior at zero and
+    /// the shell at `boundary`.
+    pub fn new(
+        grid: &DensityGrid,
+        medium: &MediumParams,
+        colour: usize,
+        boundary: Boundary,
+    ) -> Result<Lattice, SolveError> {
+        medium.validate()?;
+        boundary.validate()?;
+        let dims = grid.dims;
+        sylva_core::check_memory(
+            &format!("an LB solve on a {dims} grid"),
+            memory_needed(dims),
+        )?;
+        let mut codes = vec![0.0f32; dims.sites()];
+        codes.par_iter_mut().enumerate().for_each(|(i, c)| {
+            let (x, y, z) = dims.coords(i);
+            if dims.on_shell(x, y, z) {
+                return;
+            }
+            let rho = grid.density[i];
+            *c = if rho > 0.0 && grid.wood[i] as f64 > medium.brown_threshold {
+                -rho
+            } else {
+                rho
+            };
+        });
+        let p = medium.colours[colour];
+        let wood = ColourParams { g: -1.0, ..p };
+        let dense_green = Omega::new(&p);
+        let dense_brown = Omega::new(&wood);
+        let len = dims.sites() * Q;
+        let mut lattice = Lattice {
+            dims,
+            codes,
+            states: [vec![0.0; len], vec![0.0; len]],
+            current: 0,
+            green: WideOmega::new(&ReducedOmega::new(&dense_green)),
+            brown: WideOmega::new(&ReducedOmega::new(&dense_brown)),
+            dense_green,
+            dense_brown,
+            keep_f0_green: if medium.zero_f0_on_green { 0.0 } else { 1.0 },
+            keep_f0_brown: if medium.zero_f0_on_brown { 0.0 } else { 1.0 },
+            isa: KernelIsa::detect(),
+            boundary,
+            last_total: 0.0,
+        };
+        lattice.reset(boundary);
+        Ok(lattice)
+    }
+
+    /// Interior back to zero, shell to `boundary` (both states), keeping the medium.
+    pub fn reset(&mut self, boundary: Boundary) {
+        self.boundary = boundary;
+        let dims = self.dims;
+        let nz = dims.nz;
+        for state in &mut self.states {
+            state
+                .par_chunks_mut(Q * nz)
+                .enumerate()
+                .for_each(|(row, block)| {
+                    let (x, y) = (row / dims.ny, row % dims.ny);
+                    let whole_row = x == 0 || y == 0 || x == dims.nx - 1 || y == dims.ny - 1;
+                    for m in 0..Q {
+                        let run = &mut block[m * nz..(m + 1) * nz];
+                        let v = boundary.values[m];
+                        if whole_row {
+                            run.fill(v);
+                        } else {
+                            run.fill(0.0);
+                            run[0] = v;
+                            run[nz - 1] = v;
+                        }
+                    }
+                });
+        }
+        self.current = 0;
+        self.last_total = 0.0;
+    }
+
+    /// Chooses the portable kernel even where AVX2 exists (for comparisons).
+    pub fn force_portable_kernel(&mut self) {
+        self.isa = KernelIsa::Portable;
+    }
+
+    pub fn kernel(&self) -> KernelIsa {
+        self.isa
+    }
+
+    pub fn dims(&self) -> Dims {
+        self.dims
+    }
+
+    /// State index of `f_m` at (x, y, z).
+    #[inline]
+    pub fn state_index(&self, x: usize, y: usize, z: usize, m: usize) -> usize {
+        ((x * self.dims.ny + y) * Q + m) * self.dims.nz + z
+    }
+
+    /// `f_m` at (x, y, z) in the current state.
+    pub fn f(&self, x: usize, y: usize, z: usize, m: usize) -> f32 {
+        self.states[self.current][self.state_index(x, y, z, m)]
+    }
+
+    /// Sets `f_m` at an interior site of the current state (for custom initial conditions).
+    pub fn set_f(&mut self, x: usize, y: usize, z: usize, m: usize, value: f32) {
+        assert!(
+            !self.dims.on_shell(x, y, z),
+            "shell sites hold the boundary"
+        );
+        let i = self.state_index(x, y, z, m);
+        self.states[self.current][i] = value;
+    }
+
+    /// Σ_m f_m per site of the current state.
+    pub fn site_totals(&self) -> Vec<f32> {
+        let dims = self.dims;
+        let nz = dims.nz;
+        let state = &self.states[self.current];
+        let mut out = vec![0.0f32; dims.sites()];
+        out.par_chunks_mut(nz)
+            .zip(state.par_chunks(Q * nz))
+            .for_each(|(o, block)| {
+                for m in 0..Q {
+                    for (acc, v) in o.iter_mut().zip(&block[m * nz..(m + 1) * nz]) {
+                        *acc += v;
+                    }
+                }
+            });
+        out
+    }
+
+    /// Advances one step with the vector kernel; returns the total density of the interior
+    /// before the step (the convergence monitor).
+    pub fn step(&mut self) -> f64 {
+        let dims = self.dims;
+        let (nx, ny, nz) = (dims.nx, dims.ny, dims.nz);
+        let (a, b) = self.states.split_at_mut(1);
+        let (src, dst) = if self.current == 0 {
+            (&a[0], &mut b[0])
+        } else {
+            (&b[0], &mut a[0])
+        };
+        let dst = SharedState(dst.as_mut_ptr());
+        let params = RowParams {
+            green: &self.green,
+            brown: &self.brown,
+            keep_f0_green: self.keep_f0_green,
+            keep_f0_brown: self.keep_f0_brown,
+            boundary: &self.boundary.values,
+        };
+        let (codes, isa) = (&self.codes, self.isa);
+        // Per-plane totals in plane order: the sum is the same for any thread count.
+        let totals: Vec<f64> = (0..nx)
+            .into_par_iter()
+            .map_init(
+                || vec![0.0f32; nz + 2],
+                |sink, x| {
+                    let mut plane_total = 0.0f64;
+                    for y in 0..ny {
+                        let row = x * ny + y;
+                        let block = &src[row * Q * nz..(row + 1) * Q * nz];
+                        // SAFETY: `block` holds the row's 19 runs; each (row, m) run of `dst` is
+                        // written by exactly one source row, so planes never write the same floats.
+                        unsafe {
+                            if x == 0 || y == 0 || x == nx - 1 || y == ny - 1 {
+                                stream_shell_row(block, dst.ptr(), (nx, ny, nz), x, y);
+                            } else {
+                                let targets =
+                                    row_targets(dst.ptr(), sink.as_mut_ptr(), (nx, ny, nz), x, y);
+                                plane_total += process_row(
+                                    isa,
+                                    block.as_ptr(),
+                                    nz,
+                                    &codes[row * nz..(row + 1) * nz],
+                                    &params,
+                                    &targets,
+                                ) as f64;
+                            }
+                        }
+                    }
+                    plane_total
+                },
+            )
+            .collect();
+        self.current ^= 1;
+        let total = totals.iter().sum();
+        self.last_total = total;
+        total
+    }
+
+    /// Advances one step with a direct scalar implementation of eq. 2 in f64 (the dense Ω,
+    /// site by site): the reference the vector kernel is tested against.
+    pub fn step_reference(&mut self) {
+        let dims = self.dims;
+        let next = self.current ^ 1;
+        let src = self.states[self.current].clone();
+        let mut dst = std::mem::take(&mut self.states[next]);
+        for x in 0..dims.nx {
+            for y in 0..dims.ny {
+                for z in 0..dims.nz {
+                    let (post, _) = self.post_collision(&src, x, y, z);
+                    for (m, c) in crate::lattice::C.iter().enumerate() {
+                        let (tx, ty, tz) = (
+                            x as isize + c[0] as isize,
+                            y as isize + c[1] as isize,
+                            z as isize + c[2] as isize,
+                        );
+                        let inside = |v: isize, n: usize| v >= 1 && v <= n as isize - 2;
+                        if inside(tx, dims.nx) && inside(ty, dims.ny) && inside(tz, dims.nz) {
+                            let i = self.state_index(tx as usize, ty as usize, tz as usize, m);
+                            dst[i] = post[m] as f32;
+                        }
+                    }
+                }
+            }
+        }
+        self.states[next] = dst;
+        self.current = next;
+    }
+
+    /// Post-collision values of one site in f64, and `f_0` before any zeroing.
+    fn post_collision(&self, state: &[f32], x: usize, y: usize, z: usize) -> ([f64; Q], f64) {
+        let code = self.codes[self.dims.index(x, y, z)] as f64;
+        let f: [f64; Q] = std::array::from_fn(|m| state[self.state_index(x, y, z, m)] as f64);
+        let (omega, rho, keep) = if code < 0.0 {
+            (&self.dense_brown, -code, self.keep_f0_brown)
+        } else {
+            (
+                &self.dense_green,
+                code,
+                if code > 0.0 { self.keep_f0_green } else { 1.0 },
+            )
+        };
+        let mut post = [0.0; Q];
+        for (m, p) in post.iter_mut().enumerate() {
+            let acc: f64 = omega.0[m].iter().zip(&f).map(|(o, v)| o * v).sum();
+            *p = f[m] + rho * acc;
+        }
+        let raw_f0 = post[0];
+        post[0] *= keep as f64;
+        (post, raw_f0)
+    }
+
+    /// The flows one step from the current state would move (f64, scalar).
+    pub fn flows(&self) -> Flows {
+        let dims = self.dims;
+        let state = &self.states[self.current];
+        let mut flows = Flows {
+            inflow: 0.0,
+            outflow: 0.0,
+            absorbed: 0.0,
+        };
+        let inside = |v: isize, n: usize| v >= 1 && v <= n as isize - 2;
+        for x in 0..dims.nx {
+            for y in 0..dims.ny {
+                for z in 0..dims.nz {
+                    let shell = dims.on_shell(x, y, z);
+                    let code = self.codes[dims.index(x, y, z)];
+                    let (post, raw_f0) = self.post_collision(state, x, y, z);
+                    if !shell && code != 0.0 {
+                        flows.absorbed += raw_f0 - post[0];
+                    }
+                    for (m, c) in crate::lattice::C.iter().enumerate().skip(1) {
+                        let t = (
+                            x as isize + c[0] as isize,
+                            y as isize + c[1] as isize,
+                            z as isize + c[2] as isize,
+                        );
+                        let lands_inside =
+                            inside(t.0, dims.nx) && inside(t.1, dims.ny) && inside(t.2, dims.nz);
+                        if shell && lands_inside {
+                            flows.inflow += post[m];
+                        } else if !shell && !lands_inside {
+                            flows.outflow += post[m];
+                        }
+                    }
+                }
+            }
+        }
+        flows
+    }
+
+    /// Steps until `opts` says stop. `progress(step, residual)` is called after every step.
+    pub fn run(
+        &mut self,
+        opts: &SolveOptions,
+        progress: &mut dyn FnMut(usize, f64),
+    ) -> Result<SolveReport, SolveError> {
+        opts.validate()?;
+        let start = Instant::now();
+        let mut previous = f64::NAN;
+        let mut residual = f64::INFINITY;
+        let mut steps = 0;
+        let mut stop = StopReason::StepLimit;
+        while steps < opts.max_steps {
+            // `step` reports the total of the state it started from, so the change over the
+            // previous step is known one step late; that is all the monitor needs.
+            let total = self.step();
+            steps += 1;
+            if previous.is_finite() {
+                residual = (total - previous).abs() / total.abs().max(f64::MIN_POSITIVE);
+            }
+            previous = total;
+            progress(steps, residual);
+            if let Some(tol) = opts.tolerance {
+                if residual < tol {
+                    stop = StopReason::Converged;
+                    break;
+                }
+            }
+        }
+        Ok(SolveReport {
+            steps,
+            stop,
+            residual,
+            seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+}
+
+/// Lights `grid` in all three colours with the sun boundary `boundary`. Colours with
+/// identical parameters are solved once. `progress(colour, step, residual)`.
+pub fn solve_lighting(
+    grid: &DensityGrid,
+    medium: &MediumParams,
+    boundary: Boundary,
+    opts: &SolveOptions,
+    progress: &mut dyn FnMut(usize, usize, f64),
+) -> Result<(LightingGrid, Vec<SolveReport>), SolveError> {
+    medium.validate()?;
+    opts.validate()?;
+    let mut colours: [Vec<f32>; 3] = Default::default();
+    let mut reports = Vec::with_capacity(3);
+    let mut lattice: Option<Lattice> = None;
+    for c in 0..3 {
+        if let Some(prev) = (0..c).find(|&p| medium.colours[p] == medium.colours[c]) {
+            colours[c] = colours[prev].clone();
+            reports.push(reports[prev]);
+            continue;
+        }
+        // One lattice's memory, reused colour after colour.
+        let lat = match lattice.take() {
+            Some(mut l) => {
+                let p = medium.colours[c];
+                l.dense_green = Omega::new(&p);
+                l.dense_brown = Omega::new(&ColourParams { g: -1.0, ..p });
+                l.green = WideOmega::new(&ReducedOmega::new(&l.dense_green));
+                l.brown = WideOmega::new(&ReducedOmega::new(&l.dense_brown));
+                l.reset(boundary);
+                l
+            }
+            None => Lattice::new(grid, medium, c, boundary)?,
+        };
+        let mut lat = lat;
+        let report = lat.run(opts, &mut |s, r| progress(c, s, r))?;
+        colours[c] = lat.site_totals();
+        reports.push(report);
+        lattice = Some(lat);
+    }
+    Ok((
+        LightingGrid {
+            dims: grid.dims,
+            bounds: grid.bounds,
+            colours,
+        },
+        reports,
+    ))
+}

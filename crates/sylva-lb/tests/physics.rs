@@ -1,0 +1,334 @@
+//! The physics of SPEC §1, checked on the real solver.
+#![allow(clippy::needless_range_loop)]
+
+use sylva_lb::lattice::{weight, C, Q};
+use sylva_lb::shapes::Shape;
+use sylva_lb::{
+    solve_lighting, Boundary, ColourParams, DensityGrid, Dims, Lattice, MediumParams, Preset,
+    SolveOptions,
+};
+
+fn medium(c: ColourParams, zero_f0: bool) -> MediumParams {
+    MediumParams {
+        colours: [c; 3],
+        zero_f0_on_green: zero_f0,
+        zero_f0_on_brown: zero_f0,
+        brown_threshold: 0.5,
+    }
+}
+
+fn uniform(dims: Dims, rho: f32) -> DensityGrid {
+    let mut g = DensityGrid::empty(dims);
+    g.density.fill(rho);
+    g
+}
+
+/// A deterministic pseudo-random medium with empty, green and brown sites.
+fn mixed_grid(dims: Dims, seed: u64) -> DensityGrid {
+    let mut g = DensityGrid::empty(dims);
+    let mut s = seed;
+    let mut next = || {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((s >> 40) as f32) / (1u64 << 24) as f32
+    };
+    for i in 0..dims.sites() {
+        let r = next();
+        if r < 0.3 {
+            continue;
+        }
+        g.density[i] = next();
+        g.wood[i] = if r > 0.85 { 1.0 } else { 0.0 };
+    }
+    g
+}
+
+#[test]
+fn vector_kernel_matches_dense_reference() {
+    // Odd nz exercises the scalar tail of the 8-wide kernel.
+    let dims = Dims::new(9, 7, 21).unwrap();
+    let grid = mixed_grid(dims, 7);
+    for preset in Preset::ALL {
+        let m = preset.params();
+        for colour in 0..3 {
+            let b = Boundary::sun([0.3, -0.8, 0.52], 1.0);
+            let mut fast = Lattice::new(&grid, &m, colour, b).unwrap();
+            let mut slow = Lattice::new(&grid, &m, colour, b).unwrap();
+            let mut portable = Lattice::new(&grid, &m, colour, b).unwrap();
+            portable.force_portable_kernel();
+            for _ in 0..25 {
+                fast.step();
+                portable.step();
+                slow.step_reference();
+            }
+            for x in 0..9 {
+                for y in 0..7 {
+                    for z in 0..21 {
+                        for q in 0..Q {
+                            let (a, p, r) = (
+                                fast.f(x, y, z, q),
+                                portable.f(x, y, z, q),
+                                slow.f(x, y, z, q),
+                            );
+                            // f32 state against an f64 reference over 25 steps: rounding alone reaches ~1e-5.
+                            let tol = 5e-5 * r.abs().max(1e-3);
+                            assert!(
+                                (a - r).abs() <= tol,
+                                "{} c{colour} ({x},{y},{z}) f{q}: {a} vs {r}",
+                                preset.name()
+                            );
+                            assert!(
+                                (p - r).abs() <= tol,
+                                "portable {} ({x},{y},{z}) f{q}: {p} vs {r}",
+                                preset.name()
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn empty_space_streams_unchanged() {
+    let dims = Dims::cube(12).unwrap();
+    let grid = DensityGrid::empty(dims);
+    let m = Preset::Leaf.params();
+    let mut lat = Lattice::new(&grid, &m, 0, Boundary { values: [0.0; Q] }).unwrap();
+    for q in 0..Q {
+        lat.set_f(5, 6, 4, q, 1.0 + q as f32);
+    }
+    lat.step();
+    lat.step();
+    for (q, c) in C.iter().enumerate() {
+        let (x, y, z) = (
+            (5 + 2 * c[0]) as usize,
+            (6 + 2 * c[1]) as usize,
+            (4 + 2 * c[2]) as usize,
+        );
+        assert_eq!(lat.f(x, y, z, q), 1.0 + q as f32, "direction {q}");
+    }
+    let total: f32 = lat.site_totals().iter().sum();
+    assert_eq!(total, (1..=Q).map(|v| v as f32).sum::<f32>());
+}
+
+#[test]
+fn no_absorption_full_forward_scattering_is_a_pass_through() {
+    let dims = Dims::new(14, 11, 17).unwrap();
+    let b = Boundary::sun([0.2, -0.9, 0.39], 1.0);
+    let m = medium(ColourParams::new(0.0, 0.8, 1.0).unwrap(), true);
+    let opts = SolveOptions::papers(dims);
+    let (dense, _) = solve_lighting(&uniform(dims, 1.0), &m, b, &opts, &mut |_, _, _| {}).unwrap();
+    let (empty, _) =
+        solve_lighting(&DensityGrid::empty(dims), &m, b, &opts, &mut |_, _, _| {}).unwrap();
+    for (a, e) in dense.colours[0].iter().zip(&empty.colours[0]) {
+        assert!((a - e).abs() <= 1e-6 * e.abs().max(1.0), "{a} vs {e}");
+    }
+    // And light did get through: the interior is lit.
+    assert!(empty.colours[0][dims.index(7, 5, 8)] > 0.1);
+}
+
+/// Second moment per axis of the site totals about the centre.
+fn second_moment(lat: &Lattice, c: usize) -> f64 {
+    let d = lat.dims();
+    let totals = lat.site_totals();
+    let (mut m0, mut m2) = (0.0f64, 0.0f64);
+    for (i, &v) in totals.iter().enumerate() {
+        let (x, y, z) = d.coords(i);
+        let r2 = [x, y, z]
+            .iter()
+            .map(|&a| (a as f64 - c as f64).powi(2))
+            .sum::<f64>();
+        m0 += v as f64;
+        m2 += v as f64 * r2;
+    }
+    m2 / m0 / 3.0
+}
+
+#[test]
+fn point_source_diffuses_with_the_coefficient_of_eq_4() {
+    let n = 81;
+    let c = n / 2;
+    let dims = Dims::cube(n).unwrap();
+    let grid = uniform(dims, 1.0);
+    for (sigma_s, sigma_a) in [(1.0, 0.0), (0.8, 0.2), (0.4, 0.1)] {
+        let p = ColourParams::new(sigma_a, sigma_s, 0.0).unwrap();
+        let want = (2.0 / p.sigma_t() - 1.0) / (4.0 * (1.0 + sigma_a));
+        let mut lat =
+            Lattice::new(&grid, &medium(p, false), 0, Boundary { values: [0.0; Q] }).unwrap();
+        lat.set_f(c, c, c, 0, 1.0);
+        let (t1, t2) = (30, 60);
+        for _ in 0..t1 {
+            lat.step();
+        }
+        let m1 = second_moment(&lat, c);
+        for _ in t1..t2 {
+            lat.step();
+        }
+        let m2 = second_moment(&lat, c);
+        let d = (m2 - m1) / (2.0 * (t2 - t1) as f64);
+        assert!(
+            (d - want).abs() < 0.01 * want,
+            "σ_s = {sigma_s}, σ_a = {sigma_a}: D = {d}, eq. 4 gives {want}"
+        );
+    }
+}
+
+#[test]
+fn symmetric_setup_gives_symmetric_result() {
+    let n = 25;
+    let dims = Dims::cube(n).unwrap();
+    let grid = Shape::Sphere.grid(dims);
+    let m = Preset::Leaf.params();
+    let b = Boundary::sun([0.0, -1.0, 0.0], 1.0);
+    let (g, _) =
+        solve_lighting(&grid, &m, b, &SolveOptions::papers(dims), &mut |_, _, _| {}).unwrap();
+    for col in &g.colours {
+        for x in 0..n {
+            for y in 0..n {
+                for z in 0..n {
+                    let v = col[dims.index(x, y, z)];
+                    for w in [
+                        col[dims.index(n - 1 - x, y, z)],
+                        col[dims.index(x, y, n - 1 - z)],
+                        col[dims.index(z, y, x)],
+                    ] {
+                        assert!(
+                            (v - w).abs() <= 1e-5 * v.abs().max(1e-3),
+                            "({x},{y},{z}): {v} vs {w}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+    // The top of the sphere is brighter than its bottom.
+    let top = g.colours[1][dims.index(n / 2, n / 2 + 9, n / 2)];
+    let bottom = g.colours[1][dims.index(n / 2, n / 2 - 9, n / 2)];
+    assert!(top > 2.0 * bottom, "top {top}, bottom {bottom}");
+}
+
+#[test]
+fn steady_state_balances_inflow_against_absorption_and_outflow() {
+    let dims = Dims::new(30, 34, 26).unwrap();
+    let grid = Shape::Crown.grid(dims);
+    for preset in [Preset::Leaf, Preset::Dogrose] {
+        let m = preset.params();
+        for colour in 0..3 {
+            let b = Boundary::sun([0.4, -0.8, 0.3], 1.0);
+            let mut lat = Lattice::new(&grid, &m, colour, b).unwrap();
+            let report = lat
+                .run(
+                    &SolveOptions {
+                        max_steps: 5000,
+                        tolerance: Some(1e-9),
+                    },
+                    &mut |_, _| {},
+                )
+                .unwrap();
+            assert_eq!(report.stop, sylva_lb::StopReason::Converged);
+            let f = lat.flows();
+            assert!(f.absorbed > 0.01 * f.inflow, "{f:?}");
+            let imbalance = (f.inflow - f.absorbed - f.outflow).abs() / f.inflow;
+            assert!(
+                imbalance < 0.005,
+                "{} colour {colour}: {f:?} imbalance {imbalance}",
+                preset.name()
+            );
+        }
+    }
+}
+
+#[test]
+fn same_result_on_one_and_two_threads() {
+    let dims = Dims::new(20, 24, 36).unwrap();
+    let grid = mixed_grid(dims, 3);
+    let m = Preset::Dogrose.params();
+    let b = Boundary::sun([-0.5, -0.7, 0.5], 2.0);
+    let opts = SolveOptions {
+        max_steps: 40,
+        tolerance: None,
+    };
+    let run = |threads| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| solve_lighting(&grid, &m, b, &opts, &mut |_, _, _| {}).unwrap())
+    };
+    let (a, ra) = run(1);
+    let (b2, rb) = run(2);
+    assert_eq!(a, b2);
+    assert_eq!(
+        ra.iter().map(|r| r.residual).collect::<Vec<_>>(),
+        rb.iter().map(|r| r.residual).collect::<Vec<_>>()
+    );
+}
+
+#[test]
+fn sun_solution_is_the_weighted_sum_of_base_solutions() {
+    // LB is linear (SPEC §3): a sun boundary equals Σ_i max(0, n_i·d) B_i.
+    let dims = Dims::cube(16).unwrap();
+    let grid = Shape::Crown.grid(dims);
+    let m = Preset::Leaf.params();
+    let opts = SolveOptions {
+        max_steps: 48,
+        tolerance: None,
+    };
+    let sun = Boundary::sun([0.3, -0.9, 0.3], 1.0);
+    let solve = |b: Boundary| {
+        let mut lat = Lattice::new(&grid, &m, 1, b).unwrap();
+        lat.run(&opts, &mut |_, _| {}).unwrap();
+        lat.site_totals()
+    };
+    let full = solve(sun);
+    let mut sum = vec![0.0f32; full.len()];
+    for (j, &w) in sun.values.iter().enumerate().skip(1) {
+        if w > 0.0 {
+            for (s, v) in sum.iter_mut().zip(solve(Boundary::basis(j))) {
+                *s += w * v;
+            }
+        }
+    }
+    for (a, b) in full.iter().zip(&sum) {
+        assert!((a - b).abs() <= 1e-5 * a.abs().max(1e-3), "{a} vs {b}");
+    }
+    assert!(weight(1) > weight(7));
+}
+
+#[test]
+fn bad_parameters_are_refused() {
+    let dims = Dims::cube(8).unwrap();
+    let grid = DensityGrid::empty(dims);
+    let mut m = Preset::Leaf.params();
+    m.colours[1].g = f64::NAN;
+    let e = Lattice::new(&grid, &m, 0, Boundary::sun([0.0, -1.0, 0.0], 1.0))
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("green g"), "{e}");
+    let m = Preset::Leaf.params();
+    let mut b = Boundary::sun([0.0, -1.0, 0.0], 1.0);
+    b.values[3] = f32::INFINITY;
+    assert!(Lattice::new(&grid, &m, 0, b).is_err());
+    let mut lat = Lattice::new(&grid, &m, 0, Boundary::basis(0)).unwrap();
+    assert!(lat
+        .run(
+            &SolveOptions {
+                max_steps: 0,
+                tolerance: None
+            },
+            &mut |_, _| {}
+        )
+        .is_err());
+    assert!(lat
+        .run(
+            &SolveOptions {
+                max_steps: 5,
+                tolerance: Some(-1.0)
+            },
+            &mut |_, _| {}
+        )
+        .is_err());
+}
