@@ -1,0 +1,203 @@
+//! The simplified plane-parallel (SPP) model, 003 eqs. 8-22, and its ray-marching refinement
+//! (Appendix A.1).
+//!
+//! The cosine factor is frozen at the incident one (eq. 8, `cos θ ≈ ±mu0`) and the phase
+//! function replaced by hemispheric averages (eq. 9): a fraction `T` of scattered light stays in
+//! the hemisphere it travels in and `R = 1 - T` crosses over, with `T` the exact HG fraction for
+//! the incident direction (eq. 10). The diffuse field is then uniform over each hemisphere and
+//! its hemispheric integrals `E+(z)`, `E-(z)` obey two linear ODEs (eqs. 11-12) solved in
+//! closed form (eqs. 13-22).
+//!
+//! Three places where the extracted text of eqs. 17-22 is not self-consistent, and what is done
+//! here instead (each checked by a test that eqs. 11-12 and 21 hold to rounding):
+//!
+//! * The Type II solution and the beam decay as `exp(-σt z / mu0)` in the depth `z`; eq. 18's
+//!   `exp(-σt z)` holds only at normal incidence or for `z` measured along the beam.
+//! * The growing Type I solution has its hemispheres swapped, `(βU+ + αU-) exp(λz)` (the ODEs
+//!   are symmetric under `λ → -λ`, `α ↔ β`); this is what makes eq. 22's denominator
+//!   `α²E3 - β²E1`. With it, eq. 21 gives `c3 = +βE1 c2 / (α²E3 - β²E1)` (the printed minus sign
+//!   does not satisfy eq. 21).
+//! * `c2 = -∫ i0 = -1`: eqs. 11-12 hold for `(c2 U+ + i0) exp(-σt z / mu0)` only if its
+//!   integral over Ω+ vanishes (the Type II condition), which rules out eq. 20's `/T`.
+//!
+//! For numerical safety the solution is written with `ρ = 1/α` and each exponential anchored at
+//! the face it decays from: `E+ = A1 e^{-λz} - e^{-qz} + ρ A3 e^{-λ(w-z)}`,
+//! `E- = ρ A1 e^{-λz} + A3 e^{-λ(w-z)}`, `A1 = 1/(1 - ρ²e^{-2λw})`, `A3 = -ρ e^{-λw} A1`.
+
+use crate::error::SppError;
+use crate::exp_sum::{eval, ray_integral, ExpTerm};
+use crate::full::MAX_ALBEDO;
+use crate::phase::{fraction_into_lower_hemisphere, henyey_greenstein};
+use crate::slab::{Direction, Slab};
+use std::f64::consts::PI;
+
+/// Solved SPP model for one slab.
+#[derive(Clone, Debug)]
+pub struct SppModel {
+    slab: Slab,
+    sigma_s: f64,
+    /// Eq. 10: fraction of the light scattered from the beam that keeps going down.
+    t: f64,
+    /// Eq. 10: the fraction that turns up, `1 - T`.
+    r: f64,
+    /// Eq. 17: decay rate per unit depth.
+    lambda: f64,
+    /// `1/α` of eq. 17.
+    rho: f64,
+    /// Beam decay rate per unit depth, `σt / mu0`.
+    q: f64,
+    down: Vec<ExpTerm>,
+    up: Vec<ExpTerm>,
+}
+
+/// The parameters of eqs. 17, 20 and 22 in the paper's notation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SppConstants {
+    pub t: f64,
+    pub r: f64,
+    pub lambda: f64,
+    pub alpha: f64,
+    pub beta: f64,
+    pub c1: f64,
+    pub c2: f64,
+    /// `c3` of eq. 19 (multiplying `exp(λz)`); 0 for a half-space.
+    pub c3: f64,
+}
+
+impl SppModel {
+    /// Solves the SPP model for `slab`.
+    pub fn new(slab: Slab) -> Result<Self, SppError> {
+        slab.validate()?;
+        let sigma_t = slab.sigma_t;
+        let sigma_s = slab.albedo.min(MAX_ALBEDO) * sigma_t;
+        let mu0 = slab.mu0;
+        let t = fraction_into_lower_hemisphere(slab.g, mu0);
+        let r = 1.0 - t;
+        // Eq. 17: (λ mu0)² = (σt - δσ)(σt - σs), δσ = σs (T - R).
+        let kappa = ((sigma_t - sigma_s * (t - r)) * (sigma_t - sigma_s)).max(0.0).sqrt();
+        let lambda = kappa / mu0;
+        // α = σs R / (σt - σs T - λ mu0) = (σt - σs T + λ mu0) / (σs R), so ρ = 1/α is the
+        // form that stays finite at albedo 0.
+        let rho = sigma_s * r / (sigma_t - sigma_s * t + kappa);
+        let q = sigma_t / mu0;
+        let w = slab.thickness;
+        let edge = if w.is_infinite() { 0.0 } else { (-lambda * w).exp() };
+        let a1 = 1.0 / (1.0 - rho * rho * edge * edge);
+        let a3 = -rho * edge * a1;
+        let down = vec![
+            ExpTerm::top(a1, lambda),
+            ExpTerm::top(-1.0, q),
+            ExpTerm::bottom(rho * a3, lambda),
+        ];
+        let up = vec![ExpTerm::top(rho * a1, lambda), ExpTerm::bottom(a3, lambda)];
+        Ok(Self {
+            slab,
+            sigma_s,
+            t,
+            r,
+            lambda,
+            rho,
+            q,
+            down,
+            up,
+        })
+    }
+
+    /// The slab this model solves.
+    pub fn slab(&self) -> &Slab {
+        &self.slab
+    }
+
+    /// The paper's constants (eqs. 17, 20, 22) with `β = 1`. `α` and `c1` are infinite and 0
+    /// at albedo 0, where the diffuse field vanishes; `c3` is `A3 ρ e^{-λw}` rescaled to
+    /// multiply `exp(λz)` and underflows to 0 for thick slabs.
+    pub fn constants(&self) -> SppConstants {
+        let w = self.slab.thickness;
+        let a1 = self.down[0].coef;
+        let a3 = self.up[1].coef;
+        let c3 = if w.is_infinite() {
+            0.0
+        } else {
+            // (βU+ + αU-) c3 e^{λz} = A3 (ρU+ + U-) e^{-λ(w-z)} ⇒ c3 = A3 ρ e^{-λw}.
+            a3 * self.rho * (-self.lambda * w).exp()
+        };
+        SppConstants {
+            t: self.t,
+            r: self.r,
+            lambda: self.lambda,
+            alpha: 1.0 / self.rho,
+            beta: 1.0,
+            c1: a1 * self.rho,
+            c2: -1.0,
+            c3,
+        }
+    }
+
+    /// Hemispheric integrals of the diffuse field at depth `z`: `(E+, E-)`.
+    pub fn hemispheric_totals(&self, z: f64) -> Result<(f64, f64), SppError> {
+        self.slab.check_depth(z)?;
+        let w = self.slab.thickness;
+        Ok((eval(&self.down, z, w), eval(&self.up, z, w)))
+    }
+
+    /// Depth derivatives `(dE+/dz, dE-/dz)` at `z`, from the closed form.
+    pub fn hemispheric_derivatives(&self, z: f64) -> Result<(f64, f64), SppError> {
+        self.slab.check_depth(z)?;
+        let w = self.slab.thickness;
+        let d = |terms: &[ExpTerm]| terms.iter().map(|t| t.derivative(z, w)).sum::<f64>();
+        Ok((d(&self.down), d(&self.up)))
+    }
+
+    /// Simplified diffuse radiance (eq. 19 without the beam): uniform over each hemisphere.
+    pub fn radiance(&self, z: f64, dir: Direction) -> Result<f64, SppError> {
+        let (down, up) = self.hemispheric_totals(z)?;
+        Ok(if dir.mu > 0.0 { down } else { up } / (2.0 * PI))
+    }
+
+    /// The direction-independent parts of the refined solution at `z` for cosine `mu`:
+    /// `(∫ E+ ·ray, ∫ E- ·ray, ∫ beam ·ray)`, each the ray integral of Appendix A.1.
+    pub fn refined_parts(&self, z: f64, mu: f64) -> Result<(f64, f64, f64), SppError> {
+        self.slab.check_depth(z)?;
+        Direction::new(mu, 0.0)?;
+        let (w, st) = (self.slab.thickness, self.slab.sigma_t);
+        Ok((
+            ray_integral(&self.down, z, w, mu, st),
+            ray_integral(&self.up, z, w, mu, st),
+            ray_integral(&[ExpTerm::top(1.0, self.q)], z, w, mu, st),
+        ))
+    }
+
+    /// Combines [`Self::refined_parts`] for a direction: the source function is the exact phase
+    /// function applied to the SPP field, `σs (S+ E+ + S- E- + p(s, s0) e^{-qz})` with
+    /// `S± = f±(mu)/2π` the hemispheric fractions.
+    pub fn refined_from_parts(&self, parts: (f64, f64, f64), dir: Direction, frac_down: f64) -> f64 {
+        let s0 = Direction {
+            mu: self.slab.mu0,
+            phi: 0.0,
+        };
+        let p_beam = henyey_greenstein(self.slab.g, dir.cos_angle_to(&s0));
+        self.sigma_s * ((parts.0 * frac_down + parts.1 * (1.0 - frac_down)) / (2.0 * PI) + p_beam * parts.2)
+    }
+
+    /// Refined diffuse radiance (Appendix A.1): the SPP field scattered once more with the exact
+    /// phase function and integrated along the ray to `(z, s)`.
+    pub fn refined_radiance(&self, z: f64, dir: Direction) -> Result<f64, SppError> {
+        let parts = self.refined_parts(z, dir.mu)?;
+        let frac = fraction_into_lower_hemisphere(self.slab.g, dir.mu);
+        Ok(self.refined_from_parts(parts, dir, frac))
+    }
+
+    /// Diffuse reflectance of the simplified model: `mu0 E-(0)` over the incident horizontal
+    /// flux `mu0` (the model's fluxes carry the frozen cosine `mu0`).
+    pub fn reflectance(&self) -> f64 {
+        self.hemispheric_totals(0.0).expect("0 is a valid depth").1
+    }
+
+    /// Diffuse transmittance of the simplified model, `E+(w)` (0 for a half-space).
+    pub fn diffuse_transmittance(&self) -> f64 {
+        if self.slab.is_semi_infinite() {
+            return 0.0;
+        }
+        self.hemispheric_totals(self.slab.thickness).expect("w is a valid depth").0
+    }
+}
