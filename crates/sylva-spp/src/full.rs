@@ -48,6 +48,11 @@ struct Mode {
     /// Particular solution for the beam, downward and upward components.
     z_down: Vec<f64>,
     z_up: Vec<f64>,
+    /// The ODE system, kept for checking residuals: `α`, `β` and the beam source `s±`.
+    alpha: DMatrix<f64>,
+    beta: DMatrix<f64>,
+    s_down: Vec<f64>,
+    s_up: Vec<f64>,
 }
 
 /// Solved full plane-parallel model for one slab.
@@ -252,6 +257,10 @@ impl FullModel {
                 b,
                 z_down,
                 z_up,
+                alpha,
+                beta,
+                s_down,
+                s_up,
             });
         }
 
@@ -311,7 +320,7 @@ impl FullModel {
         let n = self.mu.len();
         let mut down = Vec::with_capacity(self.modes.len());
         let mut up = Vec::with_capacity(self.modes.len());
-        for (m, mode) in self.modes.iter().enumerate() {
+        for mode in &self.modes {
             let top: Vec<f64> = mode.k.iter().map(|k| (-k * z).exp()).collect();
             let bottom: Vec<f64> = if w.is_infinite() {
                 vec![0.0; n]
@@ -332,7 +341,6 @@ impl FullModel {
                 dv[i] = sd;
                 uv[i] = su;
             }
-            let _ = m;
             down.push(dv);
             up.push(uv);
         }
@@ -382,14 +390,11 @@ impl FullModel {
 
     /// The source function `J_m(z', mu)` of mode `m` for direction cosine `mu` as exponential
     /// terms: in-scattering of the discrete field plus single scattering of the beam.
-    fn source_terms(&self, m: usize, mu_dir: f64) -> Vec<ExpTerm> {
+    fn source_terms(&self, m: usize, coeffs: &DirectionCoefficients) -> Vec<ExpTerm> {
         let n = self.mu.len();
-        let g = self.slab.g;
-        let modes = self.modes.len();
         let mode = &self.modes[m];
-        let coeff = |b: f64| azimuthal_coefficients(g, mu_dir, b, modes, self.azimuth_samples)[m];
-        let to_down: Vec<f64> = self.mu.iter().map(|&b| coeff(b)).collect();
-        let to_up: Vec<f64> = self.mu.iter().map(|&b| coeff(-b)).collect();
+        let to_down: Vec<f64> = coeffs.to_down.iter().map(|c| c[m]).collect();
+        let to_up: Vec<f64> = coeffs.to_up.iter().map(|c| c[m]).collect();
         let mut terms = Vec::with_capacity(2 * n + 1);
         for j in 0..n {
             let mut top = 0.0;
@@ -404,7 +409,7 @@ impl FullModel {
                 terms.push(ExpTerm::bottom(self.sigma_s * mode.b[j] * bottom, mode.k[j]));
             }
         }
-        let mut beam = self.source_scale * coeff(self.slab.mu0);
+        let mut beam = self.source_scale * coeffs.to_beam[m];
         for i in 0..n {
             beam += 2.0 * PI * self.weight[i] * (to_down[i] * mode.z_down[i] + to_up[i] * mode.z_up[i]);
         }
@@ -412,25 +417,46 @@ impl FullModel {
         terms
     }
 
-    /// Azimuthal mode `m` of the diffuse radiance at depth `z`, direction cosine `mu`.
-    pub fn radiance_mode(&self, m: usize, z: f64, mu: f64) -> Result<f64, SppError> {
+    fn coefficients_for(&self, mu_dir: f64) -> DirectionCoefficients {
+        let modes = self.modes.len();
+        let coeff = |b: f64| azimuthal_coefficients(self.slab.g, mu_dir, b, modes, self.azimuth_samples);
+        DirectionCoefficients {
+            to_down: self.mu.iter().map(|&b| coeff(b)).collect(),
+            to_up: self.mu.iter().map(|&b| coeff(-b)).collect(),
+            to_beam: coeff(self.slab.mu0),
+        }
+    }
+
+    /// Azimuthal modes `I_m(z, mu)` of the diffuse radiance at depth `z`, direction cosine `mu`.
+    pub fn radiance_modes(&self, z: f64, mu: f64) -> Result<Vec<f64>, SppError> {
         self.slab.check_depth(z)?;
         Direction::new(mu, 0.0)?;
-        if m >= self.modes.len() {
-            return Ok(0.0);
-        }
-        let terms = self.source_terms(m, mu);
+        let coeffs = self.coefficients_for(mu);
+        Ok((0..self.modes.len())
+            .map(|m| {
+                let terms = self.source_terms(m, &coeffs);
+                ray_integral(&terms, z, self.slab.thickness, mu, self.slab.sigma_t)
+            })
+            .collect())
+    }
+
+    /// Azimuth-averaged diffuse radiance `I_0(z, mu)`.
+    pub fn azimuthal_mean_radiance(&self, z: f64, mu: f64) -> Result<f64, SppError> {
+        self.slab.check_depth(z)?;
+        Direction::new(mu, 0.0)?;
+        let coeffs = self.coefficients_for(mu);
+        let terms = self.source_terms(0, &coeffs);
         Ok(ray_integral(&terms, z, self.slab.thickness, mu, self.slab.sigma_t))
     }
 
     /// Diffuse radiance `I(z, s)` at any depth and direction (the unscattered beam excluded).
     pub fn radiance(&self, z: f64, dir: Direction) -> Result<f64, SppError> {
-        let mut total = 0.0;
-        for m in 0..self.modes.len() {
-            let v = self.radiance_mode(m, z, dir.mu)?;
-            total += if m == 0 { v } else { 2.0 * v * (m as f64 * dir.phi).cos() };
-        }
-        Ok(total)
+        let modes = self.radiance_modes(z, dir.mu)?;
+        Ok(modes
+            .iter()
+            .enumerate()
+            .map(|(m, v)| if m == 0 { *v } else { 2.0 * v * (m as f64 * dir.phi).cos() })
+            .sum())
     }
 
     /// Diffuse flux leaving a face through the cone `mu_lo <= |mu| <= mu_hi` (azimuth
@@ -443,10 +469,18 @@ impl FullModel {
             if z.is_infinite() {
                 return Ok(0.0);
             }
-            total += w * 2.0 * PI * m * self.radiance_mode(0, z, dir)?;
+            total += w * 2.0 * PI * m * self.azimuthal_mean_radiance(z, dir)?;
         }
         Ok(total / self.slab.mu0)
     }
+}
+
+/// Phase-function Fourier coefficients from the quadrature directions and the beam into one
+/// direction, all modes.
+struct DirectionCoefficients {
+    to_down: Vec<Vec<f64>>,
+    to_up: Vec<Vec<f64>>,
+    to_beam: Vec<f64>,
 }
 
 type EigenParts = (Vec<f64>, DMatrix<f64>, DMatrix<f64>, DMatrix<f64>, DMatrix<f64>);
@@ -509,4 +543,169 @@ fn eigen_solve(
         k.push(kj);
     }
     Ok((k, g_down, g_up, alpha, beta))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::exp_sum::eval;
+    use crate::phase::henyey_greenstein;
+
+    fn slab(albedo: f64, g: f64, w: f64, deg: f64) -> Slab {
+        Slab::with_incidence_deg(1.0, albedo, g, w, deg).unwrap()
+    }
+
+    #[test]
+    fn albedo_one_conserves_energy() {
+        for &(g, w, deg) in &[(0.0, 1.0, 0.0), (0.5, 2.0, 30.0), (-0.5, 10.0, 60.0), (0.5, 0.3, 75.0)] {
+            let model = FullModel::new(slab(1.0, g, w, deg)).unwrap();
+            let s = model.slab();
+            let total = model.reflectance() + model.diffuse_transmittance() + s.direct(w);
+            assert!((total - 1.0).abs() < 1e-7, "g {g} w {w} deg {deg}: R+T = {total}");
+            // The net flux (diffuse + beam) is the same at every depth when nothing is absorbed.
+            for &z in &[0.0, 0.3 * w, w] {
+                let net = model.net_diffuse_flux(z).unwrap() + s.direct(z);
+                assert!((net - model.diffuse_transmittance() - s.direct(w)).abs() < 1e-7);
+            }
+        }
+    }
+
+    #[test]
+    fn albedo_zero_is_beer_lambert() {
+        let model = FullModel::new(slab(0.0, 0.5, 3.0, 40.0)).unwrap();
+        assert_eq!(model.reflectance(), 0.0);
+        assert_eq!(model.diffuse_transmittance(), 0.0);
+        for &z in &[0.0, 1.0, 3.0] {
+            for &mu in &[-0.9, -0.2, 0.3, 1.0] {
+                assert_eq!(model.radiance(z, Direction::new(mu, 0.4).unwrap()).unwrap(), 0.0);
+            }
+        }
+        let s = model.slab();
+        assert!((s.direct(3.0) - (-3.0 / 40f64.to_radians().cos()).exp()).abs() < 1e-15);
+    }
+
+    #[test]
+    fn satisfies_the_discrete_equations_and_boundary_conditions() {
+        // Residual of dI/dz = α I+ + β I- (+ beam) at the nodes, via the exact derivative of each
+        // exponential term, and eq. 21 at both faces.
+        let model = FullModel::with_streams(slab(0.9, 0.5, 4.0, 30.0), 8).unwrap();
+        let w = 4.0;
+        let n = model.mu.len();
+        for m in 0..model.modes.len() {
+            for i in 0..n {
+                let down = model.node_terms(m, i, true);
+                let up = model.node_terms(m, i, false);
+                assert!(eval(&down, 0.0, w).abs() < 1e-12, "mode {m} node {i} top");
+                assert!(eval(&up, w, w).abs() < 1e-12, "mode {m} node {i} bottom");
+            }
+            let mode = &model.modes[m];
+            for &z in &[0.0, 1.3, 4.0] {
+                let vals = |down: bool| -> Vec<f64> { (0..n).map(|j| eval(&model.node_terms(m, j, down), z, w)).collect() };
+                let slope = |i: usize, down: bool| -> f64 {
+                    model.node_terms(m, i, down).iter().map(|t| t.derivative(z, w)).sum()
+                };
+                let (ip, im) = (vals(true), vals(false));
+                let beam = (-model.q * z).exp();
+                for i in 0..n {
+                    let mut rhs_down = mode.s_down[i] * beam;
+                    let mut rhs_up = -mode.s_up[i] * beam;
+                    for j in 0..n {
+                        rhs_down += mode.alpha[(i, j)] * ip[j] + mode.beta[(i, j)] * im[j];
+                        rhs_up -= mode.beta[(i, j)] * ip[j] + mode.alpha[(i, j)] * im[j];
+                    }
+                    let scale = 1.0 + rhs_down.abs() + rhs_up.abs();
+                    assert!((slope(i, true) - rhs_down).abs() < 1e-10 * scale, "mode {m} z {z} node {i} down");
+                    assert!((slope(i, false) - rhs_up).abs() < 1e-10 * scale, "mode {m} z {z} node {i} up");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn ray_integrated_radiance_reproduces_the_nodes() {
+        let model = FullModel::with_streams(slab(0.95, 0.5, 3.0, 45.0), 12).unwrap();
+        let (mu, _) = model.nodes();
+        for &z in &[0.0, 1.2, 3.0] {
+            let field = model.node_field(z).unwrap();
+            for i in [0, 5, 11] {
+                for &phi in &[0.0, 1.0, 3.0] {
+                    for down in [true, false] {
+                        let dir = Direction::new(if down { mu[i] } else { -mu[i] }, phi).unwrap();
+                        let node = field.radiance(i, down, phi);
+                        let ray = model.radiance(z, dir).unwrap();
+                        assert!(
+                            (node - ray).abs() < 1e-6 * node.abs().max(1e-3),
+                            "z {z} i {i} phi {phi} down {down}: {node} vs {ray}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn low_albedo_radiance_is_single_scattering() {
+        // To first order in the albedo the diffuse radiance is the closed-form single scatter
+        // σs p(s, s0) ∫ e^{-q z'} e^{-σt |z - z'| / |mu|} dz' / |mu|.
+        let albedo = 1e-4;
+        let (w, mu0) = (2.0, 0.6f64);
+        let model = FullModel::new(Slab::new(1.0, albedo, 0.5, w, mu0).unwrap()).unwrap();
+        let q = 1.0 / mu0;
+        let s0 = Direction { mu: mu0, phi: 0.0 };
+        for &z in &[0.0, 0.7, 2.0] {
+            for &(mu, phi) in &[(0.3, 0.0), (0.9, 2.0), (-0.5, 0.5), (-0.95, 3.1)] {
+                let dir = Direction::new(mu, phi).unwrap();
+                let s = 1.0 / f64::abs(mu);
+                let path = if mu > 0.0 {
+                    ((-q * z).exp() - (-s * z).exp()) / (s - q)
+                } else {
+                    (-q * z).exp() * (1.0 - (-(q + s) * (w - z)).exp()) / (q + s)
+                };
+                let want = albedo * henyey_greenstein(0.5, dir.cos_angle_to(&s0)) * path * s;
+                let got = model.radiance(z, dir).unwrap();
+                if want == 0.0 {
+                    assert!(got.abs() < 1e-12);
+                } else {
+                    assert!((got / want - 1.0).abs() < 1e-3, "z {z} mu {mu}: {got} vs {want}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn answer_stops_changing_as_directions_are_added() {
+        let s = slab(0.95, 0.5, 5.0, 30.0);
+        let r: Vec<(f64, f64)> = [4, 8, 16, 32]
+            .iter()
+            .map(|&n| {
+                let m = FullModel::with_streams(s, n).unwrap();
+                (m.reflectance(), m.diffuse_transmittance())
+            })
+            .collect();
+        let diff = |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).abs().max((a.1 - b.1).abs());
+        // Successive differences shrink and 16 → 32 is below 1e-4 of the incident flux.
+        assert!(diff(r[2], r[3]) < 1e-4, "{r:?}");
+        assert!(diff(r[2], r[3]) < diff(r[0], r[1]), "{r:?}");
+    }
+
+    #[test]
+    fn half_space_matches_a_thick_slab() {
+        let thick = FullModel::new(slab(0.9, 0.5, 60.0, 30.0)).unwrap();
+        let half = FullModel::new(slab(0.9, 0.5, f64::INFINITY, 30.0)).unwrap();
+        assert!((thick.reflectance() - half.reflectance()).abs() < 1e-10);
+        let dir = Direction::new(-0.4, 1.0).unwrap();
+        let (a, b) = (thick.radiance(2.0, dir).unwrap(), half.radiance(2.0, dir).unwrap());
+        assert!((a - b).abs() < 1e-10 * a.abs(), "{a} vs {b}");
+    }
+
+    #[test]
+    fn bad_inputs_are_errors() {
+        let s = slab(0.9, 0.0, 2.0, 0.0);
+        assert!(FullModel::with_streams(s, 0).is_err());
+        let m = FullModel::with_streams(s, 4).unwrap();
+        assert!(m.node_field(-1.0).is_err());
+        assert!(m.node_field(2.5).is_err());
+        assert!(m.node_field(f64::NAN).is_err());
+        assert!(m.radiance_modes(1.0, 0.0).is_err());
+    }
 }

@@ -93,9 +93,15 @@ pub fn azimuthal_coefficients(g: f64, mu: f64, mu_prime: f64, modes: usize, samp
     let mut out = vec![0.0; modes];
     for k in 0..samples {
         let dphi = 2.0 * PI * k as f64 / samples as f64;
-        let p = henyey_greenstein(g, (c + s * dphi.cos()).clamp(-1.0, 1.0));
-        for (m, o) in out.iter_mut().enumerate() {
-            *o += p * (m as f64 * dphi).cos();
+        let cos1 = dphi.cos();
+        let p = henyey_greenstein(g, (c + s * cos1).clamp(-1.0, 1.0));
+        // cos(mΔφ) by the Chebyshev recurrence cos((m+1)x) = 2 cos x cos(mx) - cos((m-1)x).
+        let (mut prev, mut cur) = (cos1, 1.0);
+        for o in out.iter_mut() {
+            *o += p * cur;
+            let next = 2.0 * cos1 * cur - prev;
+            prev = cur;
+            cur = next;
         }
     }
     for o in &mut out {
