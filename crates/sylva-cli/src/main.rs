@@ -18,6 +18,8 @@ struct Cli {
 enum Command {
     /// Print version and build information.
     Version,
+    /// Plane-parallel scattering in slabs (paper 003): radiance, Tables 1 and 2.
+    Spp(commands::spp::SppArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -27,6 +29,7 @@ fn main() -> std::process::ExitCode {
             println!("sylva {}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Spp(args) => commands::spp::run(args),
     };
     commands::finish(result)
 }

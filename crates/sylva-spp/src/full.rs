@@ -48,10 +48,14 @@ struct Mode {
     /// Particular solution for the beam, downward and upward components.
     z_down: Vec<f64>,
     z_up: Vec<f64>,
-    /// The ODE system, kept for checking residuals: `α`, `β` and the beam source `s±`.
+    /// The ODE system, kept for the residual tests: `α`, `β` and the beam source `s±`.
+    #[cfg_attr(not(test), allow(dead_code))]
     alpha: DMatrix<f64>,
+    #[cfg_attr(not(test), allow(dead_code))]
     beta: DMatrix<f64>,
+    #[cfg_attr(not(test), allow(dead_code))]
     s_down: Vec<f64>,
+    #[cfg_attr(not(test), allow(dead_code))]
     s_up: Vec<f64>,
 }
 

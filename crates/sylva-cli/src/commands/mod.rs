@@ -1,5 +1,7 @@
 //! One module per `sylva` command.
 
+pub mod spp;
+
 use std::process::ExitCode;
 
 /// Prints an error chain the way users expect (`error: ...` then `caused by: ...`) and maps it
