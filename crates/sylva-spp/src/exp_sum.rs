@@ -24,11 +24,19 @@ pub struct ExpTerm {
 
 impl ExpTerm {
     pub fn top(coef: f64, rate: f64) -> Self {
-        Self { coef, rate, anchor: Anchor::Top }
+        Self {
+            coef,
+            rate,
+            anchor: Anchor::Top,
+        }
     }
 
     pub fn bottom(coef: f64, rate: f64) -> Self {
-        Self { coef, rate, anchor: Anchor::Bottom }
+        Self {
+            coef,
+            rate,
+            anchor: Anchor::Bottom,
+        }
     }
 
     /// The term's value at depth `z` in a slab of thickness `w`.

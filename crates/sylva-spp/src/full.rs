@@ -90,7 +90,13 @@ impl NodeField {
         modes
             .iter()
             .enumerate()
-            .map(|(m, v)| if m == 0 { v[i] } else { 2.0 * v[i] * (m as f64 * phi).cos() })
+            .map(|(m, v)| {
+                if m == 0 {
+                    v[i]
+                } else {
+                    2.0 * v[i] * (m as f64 * phi).cos()
+                }
+            })
             .sum()
     }
 }
@@ -134,7 +140,9 @@ impl FullModel {
         for m in 0..max_modes {
             for i in 0..n {
                 for j in 0..n {
-                    largest[m] = largest[m].max(p_same[i][j][m].abs()).max(p_opp[i][j][m].abs());
+                    largest[m] = largest[m]
+                        .max(p_same[i][j][m].abs())
+                        .max(p_opp[i][j][m].abs());
                 }
                 largest[m] = largest[m].max(src_down[i][m].abs()).max(src_up[i][m].abs());
             }
@@ -153,7 +161,9 @@ impl FullModel {
             let sums: Vec<f64> = (0..n)
                 .map(|i| {
                     (0..n)
-                        .map(|j| 2.0 * PI * weight[j] * d[i] * d[j] * (p_same[i][j][0] + p_opp[i][j][0]))
+                        .map(|j| {
+                            2.0 * PI * weight[j] * d[i] * d[j] * (p_same[i][j][0] + p_opp[i][j][0])
+                        })
                         .sum::<f64>()
                 })
                 .collect();
@@ -251,7 +261,10 @@ impl FullModel {
                     .lu()
                     .solve(&rhs)
                     .ok_or(SppError::Solve("singular slab boundary system"))?;
-                ((0..n).map(|j| sol[j]).collect(), (0..n).map(|j| sol[n + j]).collect())
+                (
+                    (0..n).map(|j| sol[j]).collect(),
+                    (0..n).map(|j| sol[n + j]).collect(),
+                )
             };
             modes.push(Mode {
                 k,
@@ -355,8 +368,12 @@ impl FullModel {
     /// quantities the SPP model's `α`, `β` amplitudes stand for.
     pub fn hemispheric_totals(&self, z: f64) -> Result<(f64, f64), SppError> {
         let f = self.node_field(z)?;
-        let down: f64 = (0..self.mu.len()).map(|i| 2.0 * PI * self.weight[i] * f.down[0][i]).sum();
-        let up: f64 = (0..self.mu.len()).map(|i| 2.0 * PI * self.weight[i] * f.up[0][i]).sum();
+        let down: f64 = (0..self.mu.len())
+            .map(|i| 2.0 * PI * self.weight[i] * f.down[0][i])
+            .sum();
+        let up: f64 = (0..self.mu.len())
+            .map(|i| 2.0 * PI * self.weight[i] * f.up[0][i])
+            .sum();
         Ok((down, up))
     }
 
@@ -385,7 +402,9 @@ impl FullModel {
         if self.slab.is_semi_infinite() {
             return 0.0;
         }
-        let f = self.node_field(self.slab.thickness).expect("w is a valid depth");
+        let f = self
+            .node_field(self.slab.thickness)
+            .expect("w is a valid depth");
         let flux: f64 = (0..self.mu.len())
             .map(|i| 2.0 * PI * self.weight[i] * self.mu[i] * f.down[0][i])
             .sum();
@@ -410,12 +429,16 @@ impl FullModel {
             }
             terms.push(ExpTerm::top(self.sigma_s * mode.a[j] * top, mode.k[j]));
             if mode.b[j] != 0.0 {
-                terms.push(ExpTerm::bottom(self.sigma_s * mode.b[j] * bottom, mode.k[j]));
+                terms.push(ExpTerm::bottom(
+                    self.sigma_s * mode.b[j] * bottom,
+                    mode.k[j],
+                ));
             }
         }
         let mut beam = self.source_scale * coeffs.to_beam[m];
         for i in 0..n {
-            beam += 2.0 * PI * self.weight[i] * (to_down[i] * mode.z_down[i] + to_up[i] * mode.z_up[i]);
+            beam +=
+                2.0 * PI * self.weight[i] * (to_down[i] * mode.z_down[i] + to_up[i] * mode.z_up[i]);
         }
         terms.push(ExpTerm::top(self.sigma_s * beam, self.q));
         terms
@@ -423,7 +446,8 @@ impl FullModel {
 
     fn coefficients_for(&self, mu_dir: f64) -> DirectionCoefficients {
         let modes = self.modes.len();
-        let coeff = |b: f64| azimuthal_coefficients(self.slab.g, mu_dir, b, modes, self.azimuth_samples);
+        let coeff =
+            |b: f64| azimuthal_coefficients(self.slab.g, mu_dir, b, modes, self.azimuth_samples);
         DirectionCoefficients {
             to_down: self.mu.iter().map(|&b| coeff(b)).collect(),
             to_up: self.mu.iter().map(|&b| coeff(-b)).collect(),
@@ -450,7 +474,13 @@ impl FullModel {
         Direction::new(mu, 0.0)?;
         let coeffs = self.coefficients_for(mu);
         let terms = self.source_terms(0, &coeffs);
-        Ok(ray_integral(&terms, z, self.slab.thickness, mu, self.slab.sigma_t))
+        Ok(ray_integral(
+            &terms,
+            z,
+            self.slab.thickness,
+            mu,
+            self.slab.sigma_t,
+        ))
     }
 
     /// Diffuse radiance `I(z, s)` at any depth and direction (the unscattered beam excluded).
@@ -459,7 +489,13 @@ impl FullModel {
         Ok(modes
             .iter()
             .enumerate()
-            .map(|(m, v)| if m == 0 { *v } else { 2.0 * v * (m as f64 * dir.phi).cos() })
+            .map(|(m, v)| {
+                if m == 0 {
+                    *v
+                } else {
+                    2.0 * v * (m as f64 * dir.phi).cos()
+                }
+            })
             .sum())
     }
 
@@ -469,7 +505,11 @@ impl FullModel {
         let (x, wt) = gauss_legendre(24, mu_lo, mu_hi);
         let mut total = 0.0;
         for (m, w) in x.iter().zip(&wt) {
-            let (z, dir) = if top { (0.0, -m) } else { (self.slab.thickness, *m) };
+            let (z, dir) = if top {
+                (0.0, -m)
+            } else {
+                (self.slab.thickness, *m)
+            };
             if z.is_infinite() {
                 return Ok(0.0);
             }
@@ -487,7 +527,13 @@ struct DirectionCoefficients {
     to_beam: Vec<f64>,
 }
 
-type EigenParts = (Vec<f64>, DMatrix<f64>, DMatrix<f64>, DMatrix<f64>, DMatrix<f64>);
+type EigenParts = (
+    Vec<f64>,
+    DMatrix<f64>,
+    DMatrix<f64>,
+    DMatrix<f64>,
+    DMatrix<f64>,
+);
 
 /// Homogeneous solutions of one mode: `dI+/dz = α I+ + β I-`, `dI-/dz = -β I+ - α I-` with
 /// `α = M⁻¹(2π σs P++ W - σt)`, `β = M⁻¹ 2π σs P+- W`. With `S = G+ + G-`, `D = G+ - G-` and
@@ -515,16 +561,20 @@ fn eigen_solve(
     };
     let neg_k = -sym(-1.0);
     let neg_l = -sym(1.0);
-    let chol = Cholesky::new(neg_k.clone()).ok_or(SppError::Solve("(α-β) is not negative definite"))?;
+    let chol =
+        Cholesky::new(neg_k.clone()).ok_or(SppError::Solve("(α-β) is not negative definite"))?;
     let c = chol.l();
     let mut a = c.transpose() * &neg_l * &c;
     a = (&a + a.transpose()) * 0.5;
     let eig = SymmetricEigen::new(a);
 
     let alpha = DMatrix::from_fn(n, n, |i, j| {
-        (2.0 * PI * sigma_s * p_same[(i, j)] * weight[j] - if i == j { sigma_t } else { 0.0 }) / mu[i]
+        (2.0 * PI * sigma_s * p_same[(i, j)] * weight[j] - if i == j { sigma_t } else { 0.0 })
+            / mu[i]
     });
-    let beta = DMatrix::from_fn(n, n, |i, j| 2.0 * PI * sigma_s * p_opp[(i, j)] * weight[j] / mu[i]);
+    let beta = DMatrix::from_fn(n, n, |i, j| {
+        2.0 * PI * sigma_s * p_opp[(i, j)] * weight[j] / mu[i]
+    });
     let alpha_plus_beta = &alpha + &beta;
 
     let mut k = Vec::with_capacity(n);
@@ -532,7 +582,7 @@ fn eigen_solve(
     let mut g_up = DMatrix::zeros(n, n);
     for j in 0..n {
         let k2 = eig.eigenvalues[j];
-        if !(k2 > 0.0) {
+        if k2.is_nan() || k2 <= 0.0 {
             return Err(SppError::Solve("non-positive eigenvalue k²"));
         }
         let kj = k2.sqrt();
@@ -561,11 +611,19 @@ mod tests {
 
     #[test]
     fn albedo_one_conserves_energy() {
-        for &(g, w, deg) in &[(0.0, 1.0, 0.0), (0.5, 2.0, 30.0), (-0.5, 10.0, 60.0), (0.5, 0.3, 75.0)] {
+        for &(g, w, deg) in &[
+            (0.0, 1.0, 0.0),
+            (0.5, 2.0, 30.0),
+            (-0.5, 10.0, 60.0),
+            (0.5, 0.3, 75.0),
+        ] {
             let model = FullModel::new(slab(1.0, g, w, deg)).unwrap();
             let s = model.slab();
             let total = model.reflectance() + model.diffuse_transmittance() + s.direct(w);
-            assert!((total - 1.0).abs() < 1e-7, "g {g} w {w} deg {deg}: R+T = {total}");
+            assert!(
+                (total - 1.0).abs() < 1e-7,
+                "g {g} w {w} deg {deg}: R+T = {total}"
+            );
             // The net flux (diffuse + beam) is the same at every depth when nothing is absorbed.
             for &z in &[0.0, 0.3 * w, w] {
                 let net = model.net_diffuse_flux(z).unwrap() + s.direct(z);
@@ -581,7 +639,10 @@ mod tests {
         assert_eq!(model.diffuse_transmittance(), 0.0);
         for &z in &[0.0, 1.0, 3.0] {
             for &mu in &[-0.9, -0.2, 0.3, 1.0] {
-                assert_eq!(model.radiance(z, Direction::new(mu, 0.4).unwrap()).unwrap(), 0.0);
+                assert_eq!(
+                    model.radiance(z, Direction::new(mu, 0.4).unwrap()).unwrap(),
+                    0.0
+                );
             }
         }
         let s = model.slab();
@@ -604,9 +665,17 @@ mod tests {
             }
             let mode = &model.modes[m];
             for &z in &[0.0, 1.3, 4.0] {
-                let vals = |down: bool| -> Vec<f64> { (0..n).map(|j| eval(&model.node_terms(m, j, down), z, w)).collect() };
+                let vals = |down: bool| -> Vec<f64> {
+                    (0..n)
+                        .map(|j| eval(&model.node_terms(m, j, down), z, w))
+                        .collect()
+                };
                 let slope = |i: usize, down: bool| -> f64 {
-                    model.node_terms(m, i, down).iter().map(|t| t.derivative(z, w)).sum()
+                    model
+                        .node_terms(m, i, down)
+                        .iter()
+                        .map(|t| t.derivative(z, w))
+                        .sum()
                 };
                 let (ip, im) = (vals(true), vals(false));
                 let beam = (-model.q * z).exp();
@@ -618,8 +687,14 @@ mod tests {
                         rhs_up -= mode.beta[(i, j)] * ip[j] + mode.alpha[(i, j)] * im[j];
                     }
                     let scale = 1.0 + rhs_down.abs() + rhs_up.abs();
-                    assert!((slope(i, true) - rhs_down).abs() < 1e-10 * scale, "mode {m} z {z} node {i} down");
-                    assert!((slope(i, false) - rhs_up).abs() < 1e-10 * scale, "mode {m} z {z} node {i} up");
+                    assert!(
+                        (slope(i, true) - rhs_down).abs() < 1e-10 * scale,
+                        "mode {m} z {z} node {i} down"
+                    );
+                    assert!(
+                        (slope(i, false) - rhs_up).abs() < 1e-10 * scale,
+                        "mode {m} z {z} node {i} up"
+                    );
                 }
             }
         }
@@ -670,7 +745,10 @@ mod tests {
                 if want == 0.0 {
                     assert!(got.abs() < 1e-12);
                 } else {
-                    assert!((got / want - 1.0).abs() < 1e-3, "z {z} mu {mu}: {got} vs {want}");
+                    assert!(
+                        (got / want - 1.0).abs() < 1e-3,
+                        "z {z} mu {mu}: {got} vs {want}"
+                    );
                 }
             }
         }
@@ -698,7 +776,10 @@ mod tests {
         let half = FullModel::new(slab(0.9, 0.5, f64::INFINITY, 30.0)).unwrap();
         assert!((thick.reflectance() - half.reflectance()).abs() < 1e-10);
         let dir = Direction::new(-0.4, 1.0).unwrap();
-        let (a, b) = (thick.radiance(2.0, dir).unwrap(), half.radiance(2.0, dir).unwrap());
+        let (a, b) = (
+            thick.radiance(2.0, dir).unwrap(),
+            half.radiance(2.0, dir).unwrap(),
+        );
         assert!((a - b).abs() < 1e-10 * a.abs(), "{a} vs {b}");
     }
 

@@ -158,13 +158,23 @@ pub fn simulate(slab: &Slab, config: &McConfig) -> Result<McResult, SppError> {
         direct_transmittance: Estimate::from_count(counts.direct, total),
         absorbed: Estimate::from_count(counts.absorbed, total),
         unfinished: counts.unfinished,
-        reflect_bands: counts.reflect_bands.iter().map(|&c| Estimate::from_count(c, total)).collect(),
-        transmit_bands: counts.transmit_bands.iter().map(|&c| Estimate::from_count(c, total)).collect(),
+        reflect_bands: counts
+            .reflect_bands
+            .iter()
+            .map(|&c| Estimate::from_count(c, total))
+            .collect(),
+        transmit_bands: counts
+            .transmit_bands
+            .iter()
+            .map(|&c| Estimate::from_count(c, total))
+            .collect(),
     })
 }
 
 fn band_of(edges: &[f64], mu_abs: f64) -> Option<usize> {
-    edges.windows(2).position(|p| mu_abs >= p[0] && mu_abs <= p[1])
+    edges
+        .windows(2)
+        .position(|p| mu_abs >= p[0] && mu_abs <= p[1])
 }
 
 /// Follows one photon from the lit face to its fate.
@@ -246,17 +256,33 @@ mod tests {
 
     #[test]
     fn full_model_agrees_with_monte_carlo() {
-        for &(albedo, g, w, deg) in &[(0.9, 0.5, 2.0, 30.0), (0.99, -0.5, 1.0, 60.0), (0.7, 0.0, 3.0, 0.0)] {
+        for &(albedo, g, w, deg) in &[
+            (0.9, 0.5, 2.0, 30.0),
+            (0.99, -0.5, 1.0, 60.0),
+            (0.7, 0.0, 3.0, 0.0),
+        ] {
             let slab = Slab::with_incidence_deg(1.0, albedo, g, w, deg).unwrap();
             let mc = simulate(&slab, &McConfig::new(300_000, 11)).unwrap();
             let model = FullModel::new(slab).unwrap();
             agrees(model.reflectance(), mc.reflectance, "reflectance");
-            agrees(model.diffuse_transmittance(), mc.diffuse_transmittance, "diffuse transmittance");
-            agrees(slab.direct(w), mc.direct_transmittance, "direct transmittance");
+            agrees(
+                model.diffuse_transmittance(),
+                mc.diffuse_transmittance,
+                "diffuse transmittance",
+            );
+            agrees(
+                slab.direct(w),
+                mc.direct_transmittance,
+                "direct transmittance",
+            );
             let edges = McConfig::new(1, 0).band_edges;
             for b in 0..edges.len() - 1 {
-                let up = model.exit_flux_in_band(true, edges[b], edges[b + 1]).unwrap();
-                let down = model.exit_flux_in_band(false, edges[b], edges[b + 1]).unwrap();
+                let up = model
+                    .exit_flux_in_band(true, edges[b], edges[b + 1])
+                    .unwrap();
+                let down = model
+                    .exit_flux_in_band(false, edges[b], edges[b + 1])
+                    .unwrap();
                 agrees(up, mc.reflect_bands[b], "reflected band");
                 agrees(down, mc.transmit_bands[b], "transmitted band");
             }

@@ -19,7 +19,8 @@ pub fn hg_cdf(g: f64, x: f64) -> f64 {
     if g.abs() < ISOTROPIC_G {
         return ((x + 1.0) / 2.0).clamp(0.0, 1.0);
     }
-    let c = (1.0 - g * g) / (2.0 * g) * (1.0 / (1.0 + g * g - 2.0 * g * x).sqrt() - 1.0 / (1.0 + g));
+    let c =
+        (1.0 - g * g) / (2.0 * g) * (1.0 / (1.0 + g * g - 2.0 * g * x).sqrt() - 1.0 / (1.0 + g));
     c.clamp(0.0, 1.0)
 }
 
@@ -58,7 +59,7 @@ pub fn fraction_into_lower_hemisphere(g: f64, mu: f64) -> f64 {
         }
         (-num / s).clamp(-1.0, 1.0).acos() / PI
     };
-    let mut breaks = vec![0.0, hg_cdf(g, -sin_theta), hg_cdf(g, sin_theta), 1.0];
+    let mut breaks = [0.0, hg_cdf(g, -sin_theta), hg_cdf(g, sin_theta), 1.0];
     breaks.sort_by(|a, b| a.total_cmp(b));
     let (nodes, weights) = gauss_legendre(GAUSS_SEGMENT, 0.0, 1.0);
     let mut total = 0.0;
@@ -87,7 +88,13 @@ const GAUSS_SEGMENT: usize = 64;
 /// `p_m(mu, mu') = (1/2π) ∫ p(cosΘ(Δφ)) cos(mΔφ) dΔφ`, for `m = 0..modes`, so that
 /// `p = Σ_m (2 - δ_m0) p_m cos(mΔφ)`. The trapezoid rule in Δφ is spectrally accurate for this
 /// smooth periodic integrand.
-pub fn azimuthal_coefficients(g: f64, mu: f64, mu_prime: f64, modes: usize, samples: usize) -> Vec<f64> {
+pub fn azimuthal_coefficients(
+    g: f64,
+    mu: f64,
+    mu_prime: f64,
+    modes: usize,
+    samples: usize,
+) -> Vec<f64> {
     let s = (1.0 - mu * mu).max(0.0).sqrt() * (1.0 - mu_prime * mu_prime).max(0.0).sqrt();
     let c = mu * mu_prime;
     let mut out = vec![0.0; modes];
@@ -125,8 +132,16 @@ mod tests {
     fn hg_is_normalised_and_has_mean_cosine_g() {
         for &g in &[-0.7, -0.5, 0.0, 0.3, 0.5, 0.9] {
             let (x, w) = gauss_legendre(400, -1.0, 1.0);
-            let norm: f64 = x.iter().zip(&w).map(|(x, w)| w * 2.0 * PI * henyey_greenstein(g, *x)).sum();
-            let mean: f64 = x.iter().zip(&w).map(|(x, w)| w * 2.0 * PI * x * henyey_greenstein(g, *x)).sum();
+            let norm: f64 = x
+                .iter()
+                .zip(&w)
+                .map(|(x, w)| w * 2.0 * PI * henyey_greenstein(g, *x))
+                .sum();
+            let mean: f64 = x
+                .iter()
+                .zip(&w)
+                .map(|(x, w)| w * 2.0 * PI * x * henyey_greenstein(g, *x))
+                .sum();
             assert!((norm - 1.0).abs() < 1e-9, "g {g}: norm {norm}");
             assert!((mean - g).abs() < 1e-9, "g {g}: mean {mean}");
         }
@@ -191,11 +206,20 @@ mod tests {
             let sum: f64 = pm
                 .iter()
                 .enumerate()
-                .map(|(m, p)| if m == 0 { *p } else { 2.0 * p * (m as f64 * dphi).cos() })
+                .map(|(m, p)| {
+                    if m == 0 {
+                        *p
+                    } else {
+                        2.0 * p * (m as f64 * dphi).cos()
+                    }
+                })
                 .sum();
             let st = (1.0 - mu * mu).sqrt() * (1.0 - mup * mup).sqrt();
             let want = henyey_greenstein(g, mu * mup + st * f64::cos(dphi));
-            assert!((sum - want).abs() < 1e-12 * want.max(1.0), "{sum} vs {want}");
+            assert!(
+                (sum - want).abs() < 1e-12 * want.max(1.0),
+                "{sum} vs {want}"
+            );
         }
     }
 }

@@ -58,7 +58,10 @@ mod tests {
             for deg in 0..(2 * n) {
                 let sum: f64 = x.iter().zip(&w).map(|(x, w)| w * x.powi(deg as i32)).sum();
                 let exact = 1.0 / (deg as f64 + 1.0);
-                assert!((sum - exact).abs() < 1e-13, "n {n} deg {deg}: {sum} vs {exact}");
+                assert!(
+                    (sum - exact).abs() < 1e-13,
+                    "n {n} deg {deg}: {sum} vs {exact}"
+                );
             }
             assert!(x.windows(2).all(|p| p[0] < p[1]));
         }

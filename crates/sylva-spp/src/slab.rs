@@ -20,7 +20,13 @@ pub struct Slab {
 
 impl Slab {
     /// A validated slab; every parameter out of range is a clear error.
-    pub fn new(sigma_t: f64, albedo: f64, g: f64, thickness: f64, mu0: f64) -> Result<Self, SppError> {
+    pub fn new(
+        sigma_t: f64,
+        albedo: f64,
+        g: f64,
+        thickness: f64,
+        mu0: f64,
+    ) -> Result<Self, SppError> {
         let slab = Self {
             sigma_t,
             albedo,
@@ -47,7 +53,13 @@ impl Slab {
             89.0,
             "the incidence angle must be in [0, 89] degrees (grazing light never enters a plane-parallel slab)",
         )?;
-        Self::new(sigma_t, albedo, g, thickness, incidence_deg.to_radians().cos())
+        Self::new(
+            sigma_t,
+            albedo,
+            g,
+            thickness,
+            incidence_deg.to_radians().cos(),
+        )
     }
 
     /// Checks every field (a `Slab` built by hand may bypass [`Slab::new`]).
@@ -59,7 +71,13 @@ impl Slab {
                 reason: "the total cross section must be finite and > 0",
             });
         }
-        check_range("albedo", self.albedo, 0.0, 1.0, "the albedo must be in [0, 1]")?;
+        check_range(
+            "albedo",
+            self.albedo,
+            0.0,
+            1.0,
+            "the albedo must be in [0, 1]",
+        )?;
         if !(self.g.is_finite() && self.g.abs() < 1.0) {
             return Err(SppError::InvalidParameter {
                 name: "g",

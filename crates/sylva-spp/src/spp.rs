@@ -74,14 +74,20 @@ impl SppModel {
         let t = fraction_into_lower_hemisphere(slab.g, mu0);
         let r = 1.0 - t;
         // Eq. 17: (λ mu0)² = (σt - δσ)(σt - σs), δσ = σs (T - R).
-        let kappa = ((sigma_t - sigma_s * (t - r)) * (sigma_t - sigma_s)).max(0.0).sqrt();
+        let kappa = ((sigma_t - sigma_s * (t - r)) * (sigma_t - sigma_s))
+            .max(0.0)
+            .sqrt();
         let lambda = kappa / mu0;
         // α = σs R / (σt - σs T - λ mu0) = (σt - σs T + λ mu0) / (σs R), so ρ = 1/α is the
         // form that stays finite at albedo 0.
         let rho = sigma_s * r / (sigma_t - sigma_s * t + kappa);
         let q = sigma_t / mu0;
         let w = slab.thickness;
-        let edge = if w.is_infinite() { 0.0 } else { (-lambda * w).exp() };
+        let edge = if w.is_infinite() {
+            0.0
+        } else {
+            (-lambda * w).exp()
+        };
         let a1 = 1.0 / (1.0 - rho * rho * edge * edge);
         let a3 = -rho * edge * a1;
         let down = vec![
@@ -170,13 +176,19 @@ impl SppModel {
     /// Combines [`Self::refined_parts`] for a direction: the source function is the exact phase
     /// function applied to the SPP field, `σs (S+ E+ + S- E- + p(s, s0) e^{-qz})` with
     /// `S± = f±(mu)/2π` the hemispheric fractions.
-    pub fn refined_from_parts(&self, parts: (f64, f64, f64), dir: Direction, frac_down: f64) -> f64 {
+    pub fn refined_from_parts(
+        &self,
+        parts: (f64, f64, f64),
+        dir: Direction,
+        frac_down: f64,
+    ) -> f64 {
         let s0 = Direction {
             mu: self.slab.mu0,
             phi: 0.0,
         };
         let p_beam = henyey_greenstein(self.slab.g, dir.cos_angle_to(&s0));
-        self.sigma_s * ((parts.0 * frac_down + parts.1 * (1.0 - frac_down)) / (2.0 * PI) + p_beam * parts.2)
+        self.sigma_s
+            * ((parts.0 * frac_down + parts.1 * (1.0 - frac_down)) / (2.0 * PI) + p_beam * parts.2)
     }
 
     /// Refined diffuse radiance (Appendix A.1): the SPP field scattered once more with the exact
@@ -198,7 +210,9 @@ impl SppModel {
         if self.slab.is_semi_infinite() {
             return 0.0;
         }
-        self.hemispheric_totals(self.slab.thickness).expect("w is a valid depth").0
+        self.hemispheric_totals(self.slab.thickness)
+            .expect("w is a valid depth")
+            .0
     }
 }
 
@@ -240,13 +254,19 @@ mod tests {
                         let tol = if albedo == 1.0 { 1e-6 } else { 1e-12 };
                         for &z in &depths {
                             let (a, b) = residuals(&model, z);
-                            assert!(a.abs() < tol && b.abs() < tol, "a {albedo} g {g} w {w} deg {deg} z {z}: {a} {b}");
+                            assert!(
+                                a.abs() < tol && b.abs() < tol,
+                                "a {albedo} g {g} w {w} deg {deg} z {z}: {a} {b}"
+                            );
                         }
                         let (down_top, _) = model.hemispheric_totals(0.0).unwrap();
                         assert!(down_top.abs() < 1e-12, "I(0, Ω+) = i0 violated: {down_top}");
                         if w.is_finite() {
                             let (_, up_bottom) = model.hemispheric_totals(w).unwrap();
-                            assert!(up_bottom.abs() < 1e-12, "I(w, Ω-) = 0 violated: {up_bottom}");
+                            assert!(
+                                up_bottom.abs() < 1e-12,
+                                "I(w, Ω-) = 0 violated: {up_bottom}"
+                            );
                         }
                     }
                 }
@@ -261,7 +281,10 @@ mod tests {
         let s = model.slab();
         let (st, ss, mu0) = (s.sigma_t, model.sigma_s, s.mu0);
         // Eq. 14 with β = 1.
-        assert!((-c.lambda * c.alpha * mu0 - (-st * c.alpha + ss * (c.alpha * c.t + c.r))).abs() < 1e-12);
+        assert!(
+            (-c.lambda * c.alpha * mu0 - (-st * c.alpha + ss * (c.alpha * c.t + c.r))).abs()
+                < 1e-12
+        );
         assert!((c.lambda * mu0 - (-st + ss * (c.alpha * c.r + c.t))).abs() < 1e-12);
         assert!((c.t + c.r - 1.0).abs() < 1e-15);
         // Eq. 22 (with the sign of c3 that satisfies eq. 21).
@@ -272,7 +295,9 @@ mod tests {
         // Eq. 19 rebuilt from the paper's constants equals the model at a depth.
         let z = 1.1;
         let e = (-model.q * z).exp();
-        let down = c.c1 * c.alpha * (-c.lambda * z).exp() + c.c2 * e + c.c3 * c.beta * (c.lambda * z).exp();
+        let down = c.c1 * c.alpha * (-c.lambda * z).exp()
+            + c.c2 * e
+            + c.c3 * c.beta * (c.lambda * z).exp();
         let up = c.c1 * c.beta * (-c.lambda * z).exp() + c.c3 * c.alpha * (c.lambda * z).exp();
         let (ep, em) = model.hemispheric_totals(z).unwrap();
         assert!((down - ep).abs() < 1e-12 && (up - em).abs() < 1e-12);
@@ -301,7 +326,10 @@ mod tests {
         let s = *model.slab();
         for &(z, mu, phi) in &[(1.0, 0.6, 0.4), (2.0, -0.3, 2.0), (0.0, -0.9, 0.0)] {
             let dir = Direction::new(mu, phi).unwrap();
-            let s0 = Direction { mu: s.mu0, phi: 0.0 };
+            let s0 = Direction {
+                mu: s.mu0,
+                phi: 0.0,
+            };
             let frac = crate::phase::fraction_into_lower_hemisphere(s.g, mu);
             let (a, b) = if mu > 0.0 { (0.0, z) } else { (z, s.thickness) };
             let (xs, ws) = gauss_legendre(400, a, b);

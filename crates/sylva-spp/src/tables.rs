@@ -43,9 +43,30 @@ pub const TABLE2_THICKNESS: [f64; 4] = [f64::INFINITY, 16.0, 10.0, 5.0];
 /// The paper's Table 1, fractions: `[g index][albedo index] = (simplified, refined)`, g in
 /// the order of [`TABLE1_G`], then the "total" row at index 5.
 pub const PAPER_TABLE1: [[(f64, f64); 6]; 3] = [
-    [(0.027, 0.003), (0.019, 0.005), (0.021, 0.012), (0.029, 0.017), (0.045, 0.039), (0.028, 0.017)],
-    [(0.013, 0.003), (0.021, 0.007), (0.034, 0.017), (0.041, 0.027), (0.055, 0.058), (0.033, 0.025)],
-    [(0.012, 0.002), (0.018, 0.004), (0.027, 0.013), (0.034, 0.020), (0.050, 0.047), (0.029, 0.021)],
+    [
+        (0.027, 0.003),
+        (0.019, 0.005),
+        (0.021, 0.012),
+        (0.029, 0.017),
+        (0.045, 0.039),
+        (0.028, 0.017),
+    ],
+    [
+        (0.013, 0.003),
+        (0.021, 0.007),
+        (0.034, 0.017),
+        (0.041, 0.027),
+        (0.055, 0.058),
+        (0.033, 0.025),
+    ],
+    [
+        (0.012, 0.002),
+        (0.018, 0.004),
+        (0.027, 0.013),
+        (0.034, 0.020),
+        (0.050, 0.047),
+        (0.029, 0.021),
+    ],
 ];
 
 /// The paper's Table 2, fractions: `[thickness index][albedo index]`, thickness in the order of
@@ -118,11 +139,18 @@ impl RmsSums {
 
 /// Sums of squared errors of both SPP variants against the full model for one slab
 /// (σt = 1) over the protocol's incidences, depths and directions.
-pub fn rms_sums(albedo: f64, g: f64, thickness: f64, protocol: &RmsProtocol) -> Result<RmsSums, SppError> {
+pub fn rms_sums(
+    albedo: f64,
+    g: f64,
+    thickness: f64,
+    protocol: &RmsProtocol,
+) -> Result<RmsSums, SppError> {
     let mut sums = RmsSums::default();
     let deepest = thickness.min(protocol.max_depth);
     let depth_count = (deepest / protocol.depth_step + 1e-9).floor() as usize;
-    let depths: Vec<f64> = (0..=depth_count).map(|k| k as f64 * protocol.depth_step).collect();
+    let depths: Vec<f64> = (0..=depth_count)
+        .map(|k| k as f64 * protocol.depth_step)
+        .collect();
     let azimuths: Vec<f64> = (0..protocol.azimuths)
         .map(|k| 2.0 * PI * k as f64 / protocol.azimuths as f64)
         .collect();
@@ -133,7 +161,10 @@ pub fn rms_sums(albedo: f64, g: f64, thickness: f64, protocol: &RmsProtocol) -> 
         let (mu, weight) = full.nodes();
         let mu = mu.to_vec();
         let weight = weight.to_vec();
-        let frac_down: Vec<f64> = mu.iter().map(|&m| fraction_into_lower_hemisphere(g, m)).collect();
+        let frac_down: Vec<f64> = mu
+            .iter()
+            .map(|&m| fraction_into_lower_hemisphere(g, m))
+            .collect();
         for &z in &depths {
             let field = full.node_field(z)?;
             let (spp_down, spp_up) = spp.hemispheric_totals(z)?;
@@ -142,7 +173,11 @@ pub fn rms_sums(albedo: f64, g: f64, thickness: f64, protocol: &RmsProtocol) -> 
             for (i, (&m, &wi)) in mu.iter().zip(&weight).enumerate() {
                 for down in [true, false] {
                     let cos = if down { m } else { -m };
-                    let frac = if down { frac_down[i] } else { 1.0 - frac_down[i] };
+                    let frac = if down {
+                        frac_down[i]
+                    } else {
+                        1.0 - frac_down[i]
+                    };
                     let simplified = if down { spp_down } else { spp_up } / (2.0 * PI);
                     let parts = spp.refined_parts(z, cos)?;
                     for &phi in &azimuths {

@@ -29,26 +29,26 @@ enum SppCommand {
 #[derive(clap::Args)]
 struct SlabArgs {
     /// Total cross section σt (per unit length).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_hyphen_values = true)]
     sigma_t: f64,
     /// Single-scattering albedo σs/σt, in [0, 1].
-    #[arg(long, default_value_t = 0.9)]
+    #[arg(long, default_value_t = 0.9, allow_hyphen_values = true)]
     albedo: f64,
     /// Henyey-Greenstein asymmetry g, |g| < 1.
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     g: f64,
     /// Slab thickness w (same length unit as 1/σt), or "inf" for a half-space.
-    #[arg(long, default_value = "10")]
+    #[arg(long, default_value = "10", allow_hyphen_values = true)]
     thickness: String,
     /// Incidence angle of the light, degrees from the slab normal, in [0, 89].
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     incidence: f64,
     /// Depths z at which to report the radiance (comma-separated, within [0, w]).
     #[arg(long, value_delimiter = ',', default_values_t = vec![0.0, 1.0, 2.0, 5.0], allow_hyphen_values = true)]
     depths: Vec<f64>,
     /// Polar angles of the reported directions, degrees from the inward normal
     /// (0 = straight down into the slab, 180 = straight up; 90 is not allowed).
-    #[arg(long, value_delimiter = ',', default_values_t = vec![0.0, 30.0, 60.0, 120.0, 150.0, 180.0])]
+    #[arg(long, value_delimiter = ',', default_values_t = vec![0.0, 30.0, 60.0, 120.0, 150.0, 180.0], allow_hyphen_values = true)]
     angles: Vec<f64>,
     /// Azimuths of the reported directions, degrees from the plane of incidence.
     #[arg(long, value_delimiter = ',', default_values_t = vec![0.0], allow_hyphen_values = true)]
@@ -191,7 +191,11 @@ fn slab(a: SlabArgs) -> Result<()> {
             if !azimuth.is_finite() {
                 bail!("azimuths must be finite, got {azimuth}");
             }
-            directions.push((polar, azimuth, Direction::new(polar.to_radians().cos(), azimuth.to_radians())?));
+            directions.push((
+                polar,
+                azimuth,
+                Direction::new(polar.to_radians().cos(), azimuth.to_radians())?,
+            ));
         }
     }
     let full = FullModel::with_streams(slab, a.streams)?;
@@ -236,7 +240,11 @@ fn slab(a: SlabArgs) -> Result<()> {
         reflectance_simplified: spp.reflectance(),
         diffuse_transmittance_full: full.diffuse_transmittance(),
         diffuse_transmittance_simplified: spp.diffuse_transmittance(),
-        direct_transmittance: if thickness.is_infinite() { 0.0 } else { slab.direct(thickness) },
+        direct_transmittance: if thickness.is_infinite() {
+            0.0
+        } else {
+            slab.direct(thickness)
+        },
         monte_carlo,
         convergence,
         radiance,
@@ -251,20 +259,35 @@ fn slab(a: SlabArgs) -> Result<()> {
 
 fn slab_text(r: &SlabReport) -> String {
     let mut s = String::new();
-    let w = if r.thickness.is_infinite() { "inf".to_string() } else { format!("{}", r.thickness) };
+    let w = if r.thickness.is_infinite() {
+        "inf".to_string()
+    } else {
+        format!("{}", r.thickness)
+    };
     let _ = writeln!(
         s,
         "slab: sigma_t {} albedo {} g {} thickness {} incidence {}°  ({} directions per hemisphere)",
         r.sigma_t, r.albedo, r.g, w, r.incidence_deg, r.streams
     );
-    let _ = writeln!(s, "fluxes per unit incident flux:      full      simplified");
-    let _ = writeln!(s, "  diffuse reflectance            {:9.6}  {:9.6}", r.reflectance_full, r.reflectance_simplified);
+    let _ = writeln!(
+        s,
+        "fluxes per unit incident flux:      full      simplified"
+    );
+    let _ = writeln!(
+        s,
+        "  diffuse reflectance            {:9.6}  {:9.6}",
+        r.reflectance_full, r.reflectance_simplified
+    );
     let _ = writeln!(
         s,
         "  diffuse transmittance          {:9.6}  {:9.6}",
         r.diffuse_transmittance_full, r.diffuse_transmittance_simplified
     );
-    let _ = writeln!(s, "  direct transmittance           {:9.6}", r.direct_transmittance);
+    let _ = writeln!(
+        s,
+        "  direct transmittance           {:9.6}",
+        r.direct_transmittance
+    );
     if let Some(mc) = &r.monte_carlo {
         let _ = writeln!(
             s,
@@ -281,11 +304,21 @@ fn slab_text(r: &SlabReport) -> String {
     if !r.convergence.is_empty() {
         let _ = writeln!(s, "full model vs directions per hemisphere:");
         for c in &r.convergence {
-            let _ = writeln!(s, "  {:3}  R {:.8}  T {:.8}", c.streams, c.reflectance, c.diffuse_transmittance);
+            let _ = writeln!(
+                s,
+                "  {:3}  R {:.8}  T {:.8}",
+                c.streams, c.reflectance, c.diffuse_transmittance
+            );
         }
     }
-    let _ = writeln!(s, "diffuse radiance I(z, s) per unit incident flux (the unscattered beam excluded):");
-    let _ = writeln!(s, "  depth  polar°  azim°        full  simplified     refined");
+    let _ = writeln!(
+        s,
+        "diffuse radiance I(z, s) per unit incident flux (the unscattered beam excluded):"
+    );
+    let _ = writeln!(
+        s,
+        "  depth  polar°  azim°        full  simplified     refined"
+    );
     for row in &r.radiance {
         let _ = writeln!(
             s,
@@ -312,9 +345,14 @@ const TABLE_NOTE: &str = "RMS of the diffuse-radiance difference against the ful
 averaged over incidence 0-60° (step 15°), depths 0..min(w, 10) step 0.5, and the whole sphere of directions.\n";
 
 fn table1_text(rows: &[Table1Row]) -> String {
-    let mut s = String::from("003 Table 1 (w = 10/σt): simplified (S.) and refined (R.) SPP vs the full model\n");
+    let mut s = String::from(
+        "003 Table 1 (w = 10/σt): simplified (S.) and refined (R.) SPP vs the full model\n",
+    );
     s += TABLE_NOTE;
-    let _ = writeln!(s, "     g  albedo    S. ours  S. paper    R. ours  R. paper");
+    let _ = writeln!(
+        s,
+        "     g  albedo    S. ours  S. paper    R. ours  R. paper"
+    );
     for r in rows {
         let _ = writeln!(
             s,
@@ -336,7 +374,11 @@ fn table2_text(rows: &[Table2Row]) -> String {
     s += "The paper prints one value per cell; it matches the simplified model's error.\n";
     let _ = writeln!(s, "      w  albedo    S. ours  paper    R. ours");
     for r in rows {
-        let w = if r.thickness.is_infinite() { "inf".to_string() } else { format!("{}", r.thickness) };
+        let w = if r.thickness.is_infinite() {
+            "inf".to_string()
+        } else {
+            format!("{}", r.thickness)
+        };
         let _ = writeln!(
             s,
             "  {:>5}  {:>6}    {}  {}      {}",
