@@ -160,7 +160,7 @@ impl Direction {
         Ok(Self { mu, phi })
     }
 
-    /// Cosine of the angle between `self` and the direction `(mu0, 0)`.
+    /// Cosine of the angle between `self` and `other`.
     pub fn cos_angle_to(&self, other: &Direction) -> f64 {
         let s1 = (1.0 - self.mu * self.mu).max(0.0).sqrt();
         let s2 = (1.0 - other.mu * other.mu).max(0.0).sqrt();

@@ -318,6 +318,40 @@ mod tests {
     }
 
     #[test]
+    fn refinement_is_exact_for_single_scattering() {
+        // To first order in the albedo the refined radiance is the closed-form single scatter
+        // σs p(s, s0) ∫ e^{-q z'} e^{-σt |z - z'| / |mu|} dz' / |mu|, while the simplified one is
+        // off by O(1) relative (it spreads the single scatter uniformly over the hemisphere).
+        let albedo = 1e-4;
+        let (w, mu0) = (2.0, 0.6f64);
+        let model = SppModel::new(Slab::new(1.0, albedo, 0.5, w, mu0).unwrap()).unwrap();
+        let q = 1.0 / mu0;
+        let s0 = Direction { mu: mu0, phi: 0.0 };
+        for &z in &[0.4, 1.5] {
+            for &(mu, phi) in &[(0.3, 0.0), (0.9, 2.0), (-0.5, 0.5), (-0.95, 3.1)] {
+                let dir = Direction::new(mu, phi).unwrap();
+                let s = 1.0 / f64::abs(mu);
+                let path = if mu > 0.0 {
+                    ((-q * z).exp() - (-s * z).exp()) / (s - q)
+                } else {
+                    (-q * z).exp() * (1.0 - (-(q + s) * (w - z)).exp()) / (q + s)
+                };
+                let want = albedo * henyey_greenstein(0.5, dir.cos_angle_to(&s0)) * path * s;
+                let refined = model.refined_radiance(z, dir).unwrap();
+                assert!(
+                    (refined / want - 1.0).abs() < 1e-3,
+                    "z {z} mu {mu}: {refined} vs {want}"
+                );
+                let simplified = model.radiance(z, dir).unwrap();
+                assert!(
+                    (simplified / want - 1.0).abs() > 0.05,
+                    "simplified should differ here"
+                );
+            }
+        }
+    }
+
+    #[test]
     fn refinement_is_the_ray_integral_of_the_spp_source() {
         // Brute force: integrate σs(∫p(s,s') I_spp(z',s') ds' + p(s,s0) e^{-qz'}) e^{-σt l} along
         // the ray with the hemispheric fractions from a direct 2D quadrature of the phase function.

@@ -323,10 +323,24 @@ fn slab_text(r: &SlabReport) -> String {
         let _ = writeln!(
             s,
             "  {:5.2}  {:6.1}  {:5.1}  {:10.6}  {:10.6}  {:10.6}",
-            row.depth, row.polar_deg, row.azimuth_deg, row.full, row.simplified, row.refined
+            row.depth,
+            row.polar_deg,
+            row.azimuth_deg,
+            tidy(row.full),
+            tidy(row.simplified),
+            tidy(row.refined)
         );
     }
     s
+}
+
+/// Shows rounding residues of exact zeros (a boundary condition, ±1e-17) as 0.
+fn tidy(x: f64) -> f64 {
+    if x.abs() < 1e-15 {
+        0.0
+    } else {
+        x
+    }
 }
 
 fn pct(x: f64) -> String {
