@@ -28,6 +28,8 @@ struct Cli {
 enum Command {
     /// Lattice-Boltzmann lighting: solve a grid, describe grid files.
     Lb(commands::lb::LbArgs),
+    /// Plane-parallel scattering in slabs (paper 003): radiance, Tables 1 and 2.
+    Spp(commands::spp::SppArgs),
     /// Measure speed on this machine (LB solver against copy bandwidth, ...).
     Bench(commands::bench::BenchArgs),
 }
@@ -47,6 +49,7 @@ fn main() -> std::process::ExitCode {
     }
     let result = match cli.command {
         Command::Lb(a) => commands::lb::run(a),
+        Command::Spp(a) => commands::spp::run(a),
         Command::Bench(a) => commands::bench::run(a),
     };
     commands::finish(result)

@@ -1,5 +1,6 @@
 //! One module per `sylva` command.
 
+
 use std::process::ExitCode;
 
 /// Prints an error chain the way users expect (`error: ...` then `caused by: ...`) and maps it
@@ -20,3 +21,4 @@ pub fn finish(result: anyhow::Result<()>) -> ExitCode {
 pub mod bench;
 pub mod lb;
 pub mod progress;
+pub mod spp;
