@@ -1,6 +1,5 @@
 //! One module per `sylva` command.
 
-
 use std::process::ExitCode;
 
 /// Prints an error chain the way users expect (`error: ...` then `caused by: ...`) and maps it
