@@ -9,8 +9,12 @@ use rayon::prelude::*;
 /// Counting both directions matches how the solver's effective bandwidth is counted.
 pub fn copy_bandwidth_gbs(bytes: usize, repeats: usize) -> f64 {
     let n = bytes / 4;
-    let src: Vec<f32> = (0..n).into_par_iter().map(|i| i as f32).collect();
-    let mut dst = vec![0.0f32; n];
+    // Huge pages as for the solver's states, so both are measured the same way.
+    let mut src = crate::alloc::AlignedBuf::zeroed(n);
+    src.par_iter_mut()
+        .enumerate()
+        .for_each(|(i, v)| *v = i as f32);
+    let mut dst = crate::alloc::AlignedBuf::zeroed(n);
     let chunk = n.div_ceil(rayon::current_num_threads() * 4).max(1024);
     // First touch outside the timing so page faults are not measured.
     dst.par_chunks_mut(chunk)

@@ -271,52 +271,77 @@ unsafe fn process_row_generic<A: MulAdd>(
     rp: &RowParams,
     targets: &RowTargets,
 ) -> f32 {
-    let interior_end = nz - 1;
-    let mut total = [0.0f32; LANES];
-    let store = |k: usize| {
-        move |m: usize, v: [f32; LANES]| {
-            std::ptr::write_unaligned(targets.run[m].add(k) as *mut [f32; LANES], v);
+    // Shell sites have code 0, so the collision passes their fixed values through: chunks can
+    // start at z = 0 and stay aligned with the runs. A store may then reach z = 0 or nz - 1
+    // of its own run (restored below) but must not cross into the next run, which only the
+    // first and last chunk could do.
+    let mut total = 0.0f32;
+    if nz < LANES + 2 {
+        for k in 0..nz {
+            let t = collide_chunk::<A, 1>(src, nz, k, codes, rp, |m, v: [f32; 1]| {
+                store_in_run(targets.run[m], m, k, &v, nz)
+            });
+            if k > 0 && k < nz - 1 {
+                total += t[0];
+            }
         }
-    };
-    let mut k = 1;
-    while k + LANES <= interior_end {
-        let t = collide_chunk::<A, LANES>(src, nz, k, codes, rp, store(k));
-        for l in 0..LANES {
-            total[l] += t[l];
-        }
-        k += LANES;
-    }
-    let mut total: f32 = total.iter().sum();
-    if k < interior_end && interior_end > LANES {
-        // The remainder as one more full chunk ending at the last interior site. It overlaps
-        // the previous chunk, whose sites it recomputes and stores again, identically; only
-        // the new sites count towards the total.
-        let start = interior_end - LANES;
-        let t = collide_chunk::<A, LANES>(src, nz, start, codes, rp, store(start));
-        total += t[LANES - (interior_end - k)..].iter().sum::<f32>();
-        k = interior_end;
-    }
-    while k < interior_end {
-        let t = collide_chunk::<A, 1>(src, nz, k, codes, rp, |m, v: [f32; 1]| {
-            *targets.run[m].add(k) = v[0];
+    } else {
+        let t = collide_chunk::<A, LANES>(src, nz, 0, codes, rp, |m, v| {
+            store_in_run(targets.run[m], m, 0, &v, nz)
         });
-        total += t[0];
-        k += 1;
+        total += t[1..].iter().sum::<f32>();
+        let mut lanes = [0.0f32; LANES];
+        let mut k = LANES;
+        // Chunks of interior sites only: their stores stay inside [k - 1, k + LANES].
+        while k + LANES < nz {
+            let t = collide_chunk::<A, LANES>(src, nz, k, codes, rp, |m, v| {
+                std::ptr::write_unaligned(targets.run[m].add(k) as *mut [f32; LANES], v)
+            });
+            for l in 0..LANES {
+                lanes[l] += t[l];
+            }
+            k += LANES;
+        }
+        total += lanes.iter().sum::<f32>();
+        // The last chunk ends at the shell site nz - 1. When nz is not a multiple of LANES
+        // it overlaps the previous chunk, whose sites it recomputes and stores again,
+        // identically; only the new interior sites count.
+        let last = nz - LANES;
+        let t = collide_chunk::<A, LANES>(src, nz, last, codes, rp, |m, v| {
+            store_in_run(targets.run[m], m, last, &v, nz)
+        });
+        total += t[k - last..LANES - 1].iter().sum::<f32>();
     }
     for m in 0..Q {
-        let t = targets.run[m];
-        let cz = C[m][2] as isize;
-        // The shell sites' own emission into the interior (z = 0 → 1, z = nz-1 → nz-2).
-        if cz == 1 {
-            *t = *src.add(m * nz);
-        } else if cz == -1 {
-            *t.add(nz - 1) = *src.add(m * nz + nz - 1);
-        }
-        let run = t.offset(-cz);
+        let run = targets.run[m].offset(-(C[m][2] as isize));
         *run = rp.boundary[m];
         *run.add(nz - 1) = rp.boundary[m];
     }
     total
+}
+
+/// Stores sites `k0..k0 + L` of direction m shifted by `c_z`, dropping lanes that would
+/// leave the target run (z < 0 or z ≥ nz).
+#[inline(always)]
+unsafe fn store_in_run<const L: usize>(
+    target: *mut f32,
+    m: usize,
+    k0: usize,
+    v: &[f32; L],
+    nz: usize,
+) {
+    let cz = C[m][2] as isize;
+    let first = k0 as isize + cz;
+    if first >= 0 && first + L as isize <= nz as isize {
+        std::ptr::write_unaligned(target.add(k0) as *mut [f32; L], *v);
+    } else {
+        for (l, &x) in v.iter().enumerate() {
+            let z = first + l as isize;
+            if z >= 0 && z < nz as isize {
+                *target.add(k0 + l) = x;
+            }
+        }
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -329,6 +354,26 @@ unsafe fn process_row_avx2(
     targets: &RowTargets,
 ) -> f32 {
     process_row_generic::<Fused>(src, nz, codes, rp, targets)
+}
+
+/// Asks the CPU to bring `data` into cache (one hint per 64-byte line); a no-op elsewhere.
+#[inline]
+pub fn prefetch(data: &[f32]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let mut i = 0;
+        while i < data.len() {
+            // SAFETY: prefetching is only a hint; the address lies inside `data`.
+            unsafe {
+                std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
+                    data.as_ptr().add(i) as *const i8,
+                );
+            }
+            i += 16;
+        }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = data;
 }
 
 /// Which instruction set the kernel runs with (chosen once at start-up).

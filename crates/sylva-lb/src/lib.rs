@@ -8,6 +8,7 @@
 // Tests index lattice tables by direction and axis together.
 #![cfg_attr(test, allow(clippy::needless_range_loop))]
 
+pub mod alloc;
 pub mod bandwidth;
 pub mod collision;
 pub mod grid;

@@ -5,6 +5,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 use thiserror::Error;
 
+use crate::alloc::AlignedBuf;
 use crate::collision::{Omega, ReducedOmega};
 use crate::grid::{DensityGrid, Dims, LightingGrid};
 use crate::kernel::{process_row, row_targets, stream_shell_row, KernelIsa, RowParams, WideOmega};
@@ -170,7 +171,7 @@ pub struct Lattice {
     /// Per site: density ρ for green (leaf) and plain medium sites, -ρ for brown (wood) sites,
     /// 0 on the shell (boundary sites only emit).
     codes: Vec<f32>,
-    states: [Vec<f32>; 2],
+    states: [AlignedBuf; 2],
     current: usize,
     green: WideOmega,
     brown: WideOmega,
@@ -221,7 +222,7 @@ impl Lattice {
         let mut lattice = Lattice {
             dims,
             codes,
-            states: [vec![0.0; len], vec![0.0; len]],
+            states: [AlignedBuf::zeroed(len), AlignedBuf::zeroed(len)],
             current: 0,
             green: WideOmega::new(&ReducedOmega::new(&dense_green)),
             brown: WideOmega::new(&ReducedOmega::new(&dense_brown)),
@@ -348,6 +349,11 @@ impl Lattice {
                     for y in 0..ny {
                         let row = x * ny + y;
                         let block = &src[row * Q * nz..(row + 1) * Q * nz];
+                        // Fetch the next row's 19 runs while this one computes: the hardware
+                        // prefetchers lose track of 19 interleaved runs per row.
+                        if y + 1 < ny {
+                            crate::kernel::prefetch(&src[(row + 1) * Q * nz..(row + 2) * Q * nz]);
+                        }
                         // SAFETY: `block` holds the row's 19 runs; each (row, m) run of `dst` is
                         // written by exactly one source row, so planes never write the same floats.
                         unsafe {
@@ -356,6 +362,10 @@ impl Lattice {
                             } else {
                                 let targets =
                                     row_targets(dst.ptr(), sink.as_mut_ptr(), (nx, ny, nz), x, y);
+                                #[cfg(target_arch = "x86_64")]
+                                if zero_lines {
+                                    crate::kernel::zero_target_lines(&targets, nz);
+                                }
                                 plane_total += process_row(
                                     isa,
                                     block.as_ptr(),
@@ -382,8 +392,8 @@ impl Lattice {
     pub fn step_reference(&mut self) {
         let dims = self.dims;
         let next = self.current ^ 1;
-        let src = self.states[self.current].clone();
-        let mut dst = std::mem::take(&mut self.states[next]);
+        let src = self.states[self.current].to_vec();
+        let mut dst = self.states[next].to_vec();
         for x in 0..dims.nx {
             for y in 0..dims.ny {
                 for z in 0..dims.nz {
@@ -403,7 +413,7 @@ impl Lattice {
                 }
             }
         }
-        self.states[next] = dst;
+        self.states[next].copy_from_slice(&dst);
         self.current = next;
     }
 

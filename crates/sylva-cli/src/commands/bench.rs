@@ -37,6 +37,10 @@ struct BenchLbArgs {
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
+    /// The medium: `dense` (density 1 everywhere: every site collides) or `empty`
+    /// (streaming only, the memory-traffic floor).
+    #[arg(long, default_value = "dense", value_parser = ["dense", "empty"])]
+    medium: String,
 }
 
 #[derive(Serialize)]
@@ -70,7 +74,9 @@ fn bench_lb(a: BenchLbArgs) -> Result<()> {
     }
     // A dense cloud-like medium: every site runs the full collision.
     let mut grid = DensityGrid::empty(dims);
-    grid.density.fill(1.0);
+    if a.medium == "dense" {
+        grid.density.fill(1.0);
+    }
     let medium = Preset::Cloud.params();
     let boundary = Boundary::sun([0.3, -0.9, 0.3], 1.0);
     let mut lattice = Lattice::new(&grid, &medium, 0, boundary)?;
