@@ -362,10 +362,6 @@ impl Lattice {
                             } else {
                                 let targets =
                                     row_targets(dst.ptr(), sink.as_mut_ptr(), (nx, ny, nz), x, y);
-                                #[cfg(target_arch = "x86_64")]
-                                if zero_lines {
-                                    crate::kernel::zero_target_lines(&targets, nz);
-                                }
                                 plane_total += process_row(
                                     isa,
                                     block.as_ptr(),
