@@ -224,7 +224,7 @@ fn paper_birch() -> Species {
 fn southern_catalpa() -> Species {
     let p = params(&[
         ("Shape", 2.0), ("BaseSize", 0.3), ("Scale", 12.0), ("Levels", 3.0),
-        ("Ratio", 0.025), ("RatioPower", 1.3), ("Flare", 0.6), ("Leaves", 40.0),
+        ("Ratio", 0.025), ("RatioPower", 1.3), ("Flare", 0.6), ("Leaves", 36.0),
         ("LeafScale", 0.28), ("LeafScaleX", 0.85), ("LeafBend", 0.5), ("AttractionUp", 0.3),
         ("0CurveRes", 6.0), ("0CurveV", 30.0), ("0SegSplits", 0.4), ("0SplitAngle", 30.0),
         ("1DownAngle", 55.0), ("1DownAngleV", -20.0), ("1Rotate", 140.0), ("1Branches", 30.0),

@@ -75,7 +75,7 @@ impl Texture {
         self.sample_with(u, v, filter, self.wrap)
     }
 
-    /// RGBA in [0, 1] at (u, v). Non-finite coordinates read texel (0, 0).
+    /// RGBA in [0, 1] at (u, v). Non-finite coordinates sample at (0, 0).
     pub fn sample_with(&self, u: f32, v: f32, filter: Filter, wrap: Wrap) -> Vec4 {
         let (u, v) = if u.is_finite() && v.is_finite() {
             (u, v)
@@ -163,7 +163,7 @@ mod tests {
         );
         assert_eq!(t.alpha(0.25, 0.25), 0.0);
         assert_eq!(t.alpha(0.25, 0.75), 1.0);
-        assert_eq!(t.sample(f32::NAN, 0.3, Filter::Bilinear).w, 0.0);
+        assert_eq!(t.sample(f32::NAN, 0.3, Filter::Nearest).w, 0.0);
     }
 
     #[test]
