@@ -21,6 +21,7 @@ pub mod weber_penn;
 
 pub use material::{Material, MaterialKind};
 pub use mesh::{Aabb, Mesh, Model};
+pub use scene::{Camera, Instance, LbSettings, Scene, SceneDesc, SceneError};
 
 pub use species::Species;
 pub use texture::{Filter, Texture, Wrap};
