@@ -11,6 +11,7 @@ use crate::rng::Rng;
 use glam::{Quat, Vec3};
 use rayon::prelude::*;
 use std::f32::consts::TAU;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Material id of bark triangles.
 pub const WOOD: u8 = 0;
@@ -107,6 +108,8 @@ struct Tree<'a> {
     leaf_length: f32,
     leaf_width: f32,
     max_triangles: usize,
+    /// Triangles emitted by all growers so far: stops runaway trees early on any thread.
+    emitted: AtomicUsize,
 }
 
 /// Grows stems into one mesh with one random stream.
@@ -169,7 +172,9 @@ impl Tree<'_> {
 
 impl<'t, 'a> Grower<'t, 'a> {
     fn check_budget(&self) -> Result<(), GenerateError> {
-        if self.mesh.triangle_count() > self.tree.max_triangles {
+        // The running total only grows, so exceeding it early implies the final count would:
+        // the outcome does not depend on thread timing.
+        if self.tree.emitted.load(Ordering::Relaxed) > self.tree.max_triangles {
             return Err(GenerateError::TooManyTriangles {
                 limit: self.tree.max_triangles,
             });
@@ -461,6 +466,7 @@ impl<'t, 'a> Grower<'t, 'a> {
         let d = m.push_vertex(base - side * half_w + axis * len, normal, [0.0, 1.0]);
         m.push_triangle(a, b, c, LEAF);
         m.push_triangle(a, c, d, LEAF);
+        self.tree.emitted.fetch_add(2, Ordering::Relaxed);
     }
 
     /// Appends the tube through `rings` (centre, frame, z along the stem).
@@ -502,6 +508,9 @@ impl<'t, 'a> Grower<'t, 'a> {
                 m.push_triangle(b, c, d, WOOD);
             }
         }
+        self.tree
+            .emitted
+            .fetch_add(2 * sides * (rings.len() - 1), Ordering::Relaxed);
     }
 }
 
@@ -536,6 +545,7 @@ pub fn generate_with_limit(params: &Params, seed: u64, max_triangles: usize) -> 
         leaf_length: (g.leaf_scale / quality) as f32,
         leaf_width: (g.leaf_scale * g.leaf_scale_x / quality) as f32,
         max_triangles,
+        emitted: AtomicUsize::new(0),
     };
     let trunk = StemSeed {
         level: 0,
