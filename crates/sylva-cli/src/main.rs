@@ -18,6 +18,10 @@ struct Cli {
 enum Command {
     /// Print version and build information.
     Version,
+    /// Inspect scenes: `sylva scene info SCENE [--json]`, `sylva scene list`.
+    Scene(commands::scene::SceneArgs),
+    /// The species library: `sylva species list`, `sylva species show NAME`.
+    Species(commands::species::SpeciesArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -27,6 +31,8 @@ fn main() -> std::process::ExitCode {
             println!("sylva {}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Scene(args) => commands::scene::run(args),
+        Command::Species(args) => commands::species::run(args),
     };
     commands::finish(result)
 }

@@ -1,5 +1,11 @@
 //! One module per `sylva` command.
 
+// Hooked up as `sylva bench scene` when the bench command is merged.
+#[allow(dead_code)]
+pub mod bench_scene;
+pub mod scene;
+pub mod species;
+
 use std::process::ExitCode;
 
 /// Prints an error chain the way users expect (`error: ...` then `caused by: ...`) and maps it

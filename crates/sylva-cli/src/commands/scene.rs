@@ -1,0 +1,167 @@
+//! `sylva scene info|list`: what a scene holds.
+
+use anyhow::Context;
+use sylva_scene::builtin_scenes;
+use sylva_scene::{Scene, SceneDesc};
+
+#[derive(clap::Args)]
+pub struct SceneArgs {
+    #[command(subcommand)]
+    pub command: SceneCommand,
+}
+
+#[derive(clap::Subcommand)]
+pub enum SceneCommand {
+    /// Species, instances, unique and instanced triangle counts, bounds and memory of a scene.
+    Info {
+        /// A scene file (TOML) or a built-in scene: demo, beech, catalpa, canopy.
+        #[arg(default_value = "demo")]
+        scene: String,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// The built-in scenes.
+    List,
+    /// Print a built-in scene's TOML (a starting point for your own).
+    Source {
+        /// A built-in scene name.
+        name: String,
+    },
+}
+
+/// `1234567` → `"1,234,567"`.
+pub fn thousands(n: u64) -> String {
+    let s = n.to_string();
+    let mut out = String::new();
+    for (i, c) in s.chars().enumerate() {
+        if i > 0 && (s.len() - i) % 3 == 0 {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    out
+}
+
+pub fn run(args: SceneArgs) -> anyhow::Result<()> {
+    match args.command {
+        SceneCommand::List => {
+            for name in builtin_scenes::NAMES {
+                println!(
+                    "{name:<8} {}",
+                    builtin_scenes::describe(name).unwrap_or_default()
+                );
+            }
+            Ok(())
+        }
+        SceneCommand::Source { name } => {
+            let text = builtin_scenes::source(&name).with_context(|| {
+                format!(
+                    "no built-in scene '{name}' (built-in scenes: {})",
+                    builtin_scenes::NAMES.join(", ")
+                )
+            })?;
+            print!("{text}");
+            Ok(())
+        }
+        SceneCommand::Info { scene, json } => info(&scene, json),
+    }
+}
+
+fn info(name: &str, json: bool) -> anyhow::Result<()> {
+    let desc = SceneDesc::load(name)?;
+    let scene: Scene = desc.build()?;
+    let stats = scene.stats();
+    if json {
+        let mut v = serde_json::to_value(&stats)?;
+        let o = v.as_object_mut().expect("stats serialise to an object");
+        o.insert("origin".into(), scene.origin.clone().into());
+        o.insert(
+            "sun".into(),
+            serde_json::json!({
+                "elevation_deg": scene.sun.elevation_deg(),
+                "azimuth_deg": scene.sun.azimuth_deg(),
+                "direction": scene.sun.to_sun().to_array(),
+            }),
+        );
+        let c = &scene.camera;
+        o.insert(
+            "camera".into(),
+            serde_json::json!({
+                "position": c.position.to_array(),
+                "look_at": c.look_at.to_array(),
+                "fov_deg": c.fov_deg,
+                "resolution": [c.width, c.height],
+                "rays_per_pixel": c.rays_per_pixel,
+            }),
+        );
+        o.insert("lb".into(), serde_json::to_value(&scene.lb)?);
+        o.insert("ground".into(), serde_json::to_value(scene.ground)?);
+        o.insert("sky_color".into(), serde_json::to_value(scene.sky_color)?);
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!("scene {} ({})", stats.name, scene.origin);
+    println!("  instances            {}", thousands(stats.instances as u64));
+    println!(
+        "  unique triangles     {} in {} models",
+        thousands(stats.unique_triangles as u64),
+        stats.models.len()
+    );
+    println!("  instanced triangles  {}", thousands(stats.instanced_triangles));
+    let [a, b, c] = stats.bounds_min;
+    let [d, e, f] = stats.bounds_max;
+    println!(
+        "  bounds               ({a:.1}, {b:.1}, {c:.1}) .. ({d:.1}, {e:.1}, {f:.1}) m"
+    );
+    println!(
+        "  memory               {} (models and textures, instance records)",
+        sylva_core::format_bytes(stats.memory_bytes)
+    );
+    println!(
+        "  sun                  elevation {:.1}°, azimuth {:.1}°",
+        scene.sun.elevation_deg(),
+        scene.sun.azimuth_deg()
+    );
+    let cam = &scene.camera;
+    println!(
+        "  camera               {}×{}, {} ray(s)/pixel, fov {}°, at {:?} looking at {:?}",
+        cam.width,
+        cam.height,
+        cam.rays_per_pixel,
+        cam.fov_deg,
+        cam.position.to_array(),
+        cam.look_at.to_array()
+    );
+    println!("  lb                   grid {}, preset {}", scene.lb.grid, scene.lb.preset);
+    println!();
+    println!(
+        "  {:<18} {:<18} {:>9} {:>11} {:>11} {:>11}",
+        "model", "species", "instances", "triangles", "leaf", "wood"
+    );
+    for m in &stats.models {
+        println!(
+            "  {:<18} {:<18} {:>9} {:>11} {:>11} {:>11}",
+            m.name,
+            m.species,
+            m.instances,
+            thousands(m.triangles as u64),
+            thousands(m.leaf_triangles as u64),
+            thousands(m.wood_triangles as u64)
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn groups_thousands() {
+        assert_eq!(thousands(0), "0");
+        assert_eq!(thousands(999), "999");
+        assert_eq!(thousands(1000), "1,000");
+        assert_eq!(thousands(273_376_528), "273,376,528");
+    }
+}
