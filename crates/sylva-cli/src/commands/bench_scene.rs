@@ -1,5 +1,6 @@
 //! `sylva bench scene`: times generating each built-in species and building a scene.
 
+use super::scene::{emit, outln};
 use std::time::Instant;
 use sylva_scene::{Scene, Species};
 
@@ -35,6 +36,7 @@ fn peak_rss_bytes() -> Option<u64> {
 }
 
 pub fn run(args: BenchSceneArgs) -> anyhow::Result<()> {
+    let mut o = String::new();
     let threads = rayon::current_num_threads();
     let mut species = Vec::new();
     for s in Species::all_builtin() {
@@ -77,17 +79,17 @@ pub fn run(args: BenchSceneArgs) -> anyhow::Result<()> {
             },
             "peak_rss_bytes": peak,
         });
-        println!("{}", serde_json::to_string_pretty(&v)?);
-        return Ok(());
+        outln!(o, "{}", serde_json::to_string_pretty(&v)?);
+        return emit(&o);
     }
-    println!(
+    outln!(o, 
         "species generation (median of {} runs, {threads} threads):",
         args.runs
     );
     for (n, t, s) in &species {
-        println!("  {n:<18} {t:>9} triangles  {:>8.1} ms", s * 1e3);
+        outln!(o, "  {n:<18} {t:>9} triangles  {:>8.1} ms", s * 1e3);
     }
-    println!(
+    outln!(o, 
         "scene {}: built in {:.3} s (median), {} instances, {} unique / {} instanced triangles, {} in models",
         stats.name,
         build,
@@ -97,9 +99,9 @@ pub fn run(args: BenchSceneArgs) -> anyhow::Result<()> {
         sylva_core::format_bytes(stats.memory_bytes)
     );
     if let Some(p) = peak {
-        println!("peak resident memory {}", sylva_core::format_bytes(p));
+        outln!(o, "peak resident memory {}", sylva_core::format_bytes(p));
     }
-    Ok(())
+    emit(&o)
 }
 
 #[cfg(test)]

@@ -30,6 +30,37 @@ pub enum SceneCommand {
     },
 }
 
+/// Appends a formatted line to a `String`.
+macro_rules! outln {
+    ($o:expr) => {
+        $o.push('\n')
+    };
+    ($o:expr, $($t:tt)*) => {{
+        $o.push_str(&format!($($t)*));
+        $o.push('\n');
+    }};
+}
+pub(crate) use outln;
+
+/// Appends formatted text to a `String`.
+macro_rules! outs {
+    ($o:expr, $($t:tt)*) => {
+        $o.push_str(&format!($($t)*))
+    };
+}
+pub(crate) use outs;
+
+/// Writes `text` to stdout; a closed pipe (`sylva ... | head`) ends the output quietly
+/// instead of panicking.
+pub fn emit(text: &str) -> anyhow::Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|_| out.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        r => Ok(r?),
+    }
+}
+
 /// `1234567` → `"1,234,567"`.
 pub fn thousands(n: u64) -> String {
     let s = n.to_string();
@@ -46,13 +77,14 @@ pub fn thousands(n: u64) -> String {
 pub fn run(args: SceneArgs) -> anyhow::Result<()> {
     match args.command {
         SceneCommand::List => {
+            let mut o = String::new();
             for name in builtin_scenes::NAMES {
-                println!(
+                outln!(o, 
                     "{name:<8} {}",
                     builtin_scenes::describe(name).unwrap_or_default()
                 );
             }
-            Ok(())
+            emit(&o)
         }
         SceneCommand::Source { name } => {
             let text = builtin_scenes::source(&name).with_context(|| {
@@ -61,22 +93,24 @@ pub fn run(args: SceneArgs) -> anyhow::Result<()> {
                     builtin_scenes::NAMES.join(", ")
                 )
             })?;
-            print!("{text}");
-            Ok(())
+            let mut o = String::new();
+            outs!(o, "{text}");
+            emit(&o)
         }
         SceneCommand::Info { scene, json } => info(&scene, json),
     }
 }
 
 fn info(name: &str, json: bool) -> anyhow::Result<()> {
+    let mut o = String::new();
     let desc = SceneDesc::load(name)?;
     let scene: Scene = desc.build()?;
     let stats = scene.stats();
     if json {
         let mut v = serde_json::to_value(&stats)?;
-        let o = v.as_object_mut().expect("stats serialise to an object");
-        o.insert("origin".into(), scene.origin.clone().into());
-        o.insert(
+        let obj = v.as_object_mut().expect("stats serialise to an object");
+        obj.insert("origin".into(), scene.origin.clone().into());
+        obj.insert(
             "sun".into(),
             serde_json::json!({
                 "elevation_deg": scene.sun.elevation_deg(),
@@ -85,7 +119,7 @@ fn info(name: &str, json: bool) -> anyhow::Result<()> {
             }),
         );
         let c = &scene.camera;
-        o.insert(
+        obj.insert(
             "camera".into(),
             serde_json::json!({
                 "position": c.position.to_array(),
@@ -95,36 +129,36 @@ fn info(name: &str, json: bool) -> anyhow::Result<()> {
                 "rays_per_pixel": c.rays_per_pixel,
             }),
         );
-        o.insert("lb".into(), serde_json::to_value(&scene.lb)?);
-        o.insert("ground".into(), serde_json::to_value(scene.ground)?);
-        o.insert("sky_color".into(), serde_json::to_value(scene.sky_color)?);
-        println!("{}", serde_json::to_string_pretty(&v)?);
-        return Ok(());
+        obj.insert("lb".into(), serde_json::to_value(&scene.lb)?);
+        obj.insert("ground".into(), serde_json::to_value(scene.ground)?);
+        obj.insert("sky_color".into(), serde_json::to_value(scene.sky_color)?);
+        outln!(o, "{}", serde_json::to_string_pretty(&v)?);
+        return emit(&o);
     }
-    println!("scene {} ({})", stats.name, scene.origin);
-    println!("  instances            {}", thousands(stats.instances as u64));
-    println!(
+    outln!(o, "scene {} ({})", stats.name, scene.origin);
+    outln!(o, "  instances            {}", thousands(stats.instances as u64));
+    outln!(o, 
         "  unique triangles     {} in {} models",
         thousands(stats.unique_triangles as u64),
         stats.models.len()
     );
-    println!("  instanced triangles  {}", thousands(stats.instanced_triangles));
+    outln!(o, "  instanced triangles  {}", thousands(stats.instanced_triangles));
     let [a, b, c] = stats.bounds_min;
     let [d, e, f] = stats.bounds_max;
-    println!(
+    outln!(o, 
         "  bounds               ({a:.1}, {b:.1}, {c:.1}) .. ({d:.1}, {e:.1}, {f:.1}) m"
     );
-    println!(
+    outln!(o, 
         "  memory               {} (models and textures, instance records)",
         sylva_core::format_bytes(stats.memory_bytes)
     );
-    println!(
+    outln!(o, 
         "  sun                  elevation {:.1}°, azimuth {:.1}°",
         scene.sun.elevation_deg(),
         scene.sun.azimuth_deg()
     );
     let cam = &scene.camera;
-    println!(
+    outln!(o, 
         "  camera               {}×{}, {} ray(s)/pixel, fov {}°, at {:?} looking at {:?}",
         cam.width,
         cam.height,
@@ -133,14 +167,14 @@ fn info(name: &str, json: bool) -> anyhow::Result<()> {
         cam.position.to_array(),
         cam.look_at.to_array()
     );
-    println!("  lb                   grid {}, preset {}", scene.lb.grid, scene.lb.preset);
-    println!();
-    println!(
+    outln!(o, "  lb                   grid {}, preset {}", scene.lb.grid, scene.lb.preset);
+    outln!(o);
+    outln!(o, 
         "  {:<18} {:<18} {:>9} {:>11} {:>11} {:>11}",
         "model", "species", "instances", "triangles", "leaf", "wood"
     );
     for m in &stats.models {
-        println!(
+        outln!(o, 
             "  {:<18} {:<18} {:>9} {:>11} {:>11} {:>11}",
             m.name,
             m.species,
@@ -150,7 +184,7 @@ fn info(name: &str, json: bool) -> anyhow::Result<()> {
             thousands(m.wood_triangles as u64)
         );
     }
-    Ok(())
+    emit(&o)
 }
 
 #[cfg(test)]

@@ -1,6 +1,6 @@
 //! `sylva species list|show`: the built-in species and Arbaro files.
 
-use super::scene::thousands;
+use super::scene::{emit, outln, outs, thousands};
 use anyhow::Context;
 use std::path::Path;
 use sylva_scene::species::BUILTIN_NAMES;
@@ -62,6 +62,7 @@ pub fn run(args: SpeciesArgs) -> anyhow::Result<()> {
 }
 
 fn list(json: bool) -> anyhow::Result<()> {
+    let mut o = String::new();
     let mut rows = Vec::new();
     for s in Species::all_builtin() {
         let mesh = s
@@ -82,10 +83,10 @@ fn list(json: bool) -> anyhow::Result<()> {
                 })
             })
             .collect();
-        println!("{}", serde_json::to_string_pretty(&v)?);
-        return Ok(());
+        outln!(o, "{}", serde_json::to_string_pretty(&v)?);
+        return emit(&o);
     }
-    println!(
+    outln!(o, 
         "{:<18} {:>11} {:>13} {:>8}  source",
         "species", "triangles", "paper", "height"
     );
@@ -94,7 +95,7 @@ fn list(json: bool) -> anyhow::Result<()> {
             .reference_triangles
             .map(|r| thousands(r as u64))
             .unwrap_or_else(|| "-".into());
-        println!(
+        outln!(o, 
             "{:<18} {:>11} {:>13} {:>7.1}m  {}",
             s.name,
             thousands(*tris as u64),
@@ -103,14 +104,15 @@ fn list(json: bool) -> anyhow::Result<()> {
             s.source
         );
     }
-    Ok(())
+    emit(&o)
 }
 
 fn show(name: &str, json: bool, xml: bool) -> anyhow::Result<()> {
+    let mut o = String::new();
     let s = resolve(name)?;
     if xml {
-        print!("{}", arbaro::to_xml(&s.name, &s.params));
-        return Ok(());
+        outs!(o, "{}", arbaro::to_xml(&s.name, &s.params));
+        return emit(&o);
     }
     let mesh = s
         .generate_mesh()
@@ -141,11 +143,11 @@ fn show(name: &str, json: bool, xml: bool) -> anyhow::Result<()> {
             "bark_color_srgb": s.bark_color,
             "params": params,
         });
-        println!("{}", serde_json::to_string_pretty(&v)?);
-        return Ok(());
+        outln!(o, "{}", serde_json::to_string_pretty(&v)?);
+        return emit(&o);
     }
-    println!("species {} ({})", s.name, s.source);
-    println!(
+    outln!(o, "species {} ({})", s.name, s.source);
+    outln!(o, 
         "  triangles   {} ({} leaf, {} wood){}",
         thousands(mesh.triangle_count() as u64),
         thousands(leaf as u64),
@@ -155,17 +157,17 @@ fn show(name: &str, json: bool, xml: bool) -> anyhow::Result<()> {
             .unwrap_or_default()
     );
     let size = b.size();
-    println!(
+    outln!(o, 
         "  size        {:.1} × {:.1} × {:.1} m (x × y × z)",
         size.x, size.y, size.z
     );
-    println!(
+    outln!(o, 
         "  leaves      {:?}, sRGB {:?}; bark {:?}, sRGB {:?}; seed {}",
         s.leaf_outline, s.leaf_color, s.bark_pattern, s.bark_color, s.seed
     );
-    println!("  parameters (Arbaro names):");
+    outln!(o, "  parameters (Arbaro names):");
     for (k, v) in s.params.entries() {
-        println!("    {k:<16} {v}");
+        outln!(o, "    {k:<16} {v}");
     }
-    Ok(())
+    emit(&o)
 }
