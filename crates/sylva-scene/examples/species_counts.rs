@@ -14,7 +14,9 @@ fn main() {
             m.triangle_count() - leaves,
             leaves,
             s.reference_triangles,
-            s.reference_triangles.map(|r| m.triangle_count() as f64 / r as f64).unwrap_or(0.0),
+            s.reference_triangles
+                .map(|r| m.triangle_count() as f64 / r as f64)
+                .unwrap_or(0.0),
             b.size(),
             dt.as_secs_f64() * 1e3
         );

@@ -195,10 +195,22 @@ mod tests {
         let e = parse(xml, "bad.xml").unwrap_err();
         let msg = e.to_string();
         assert!(msg.starts_with("bad.xml: "), "{msg}");
-        assert!(msg.contains("line 2: parameter 'Shape' = 12 is outside [0, 8]"), "{msg}");
-        assert!(msg.contains("line 3: unknown parameter 'Frobnicate'"), "{msg}");
-        assert!(msg.contains("line 4: parameter '1Length' = 'abc' is not a number"), "{msg}");
-        assert!(msg.contains("'Levels'") && msg.contains("not a finite number"), "{msg}");
+        assert!(
+            msg.contains("line 2: parameter 'Shape' = 12 is outside [0, 8]"),
+            "{msg}"
+        );
+        assert!(
+            msg.contains("line 3: unknown parameter 'Frobnicate'"),
+            "{msg}"
+        );
+        assert!(
+            msg.contains("line 4: parameter '1Length' = 'abc' is not a number"),
+            "{msg}"
+        );
+        assert!(
+            msg.contains("'Levels'") && msg.contains("not a finite number"),
+            "{msg}"
+        );
         assert!(!msg.contains("Ratio"), "{msg}");
         match e {
             ArbaroError::Params { problems, .. } => assert_eq!(problems.len(), 4),
@@ -214,11 +226,17 @@ mod tests {
         assert!(e.to_string().contains("expected <arbaro>"), "{e}");
         let e = parse("<arbaro></arbaro>", "c.xml").unwrap_err();
         assert!(e.to_string().contains("no <species>"), "{e}");
-        let e = parse("<arbaro><species><param name=\"Shape\"/></species></arbaro>", "d.xml")
-            .unwrap_err();
+        let e = parse(
+            "<arbaro><species><param name=\"Shape\"/></species></arbaro>",
+            "d.xml",
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("name and a value"), "{e}");
         let e = load_file(Path::new("/nonexistent/x.xml")).unwrap_err();
-        assert!(e.to_string().starts_with("/nonexistent/x.xml: cannot read"), "{e}");
+        assert!(
+            e.to_string().starts_with("/nonexistent/x.xml: cannot read"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -85,13 +85,20 @@ impl Occupancy {
     /// `cell` should be about the largest spacing used; any positive value is correct.
     pub fn new(cell: f32) -> Occupancy {
         Occupancy {
-            cell: if cell.is_finite() && cell > 0.0 { cell } else { 1.0 },
+            cell: if cell.is_finite() && cell > 0.0 {
+                cell
+            } else {
+                1.0
+            },
             grid: HashMap::new(),
         }
     }
 
     fn key(&self, x: f32, z: f32) -> (i32, i32) {
-        ((x / self.cell).floor() as i32, (z / self.cell).floor() as i32)
+        (
+            (x / self.cell).floor() as i32,
+            (z / self.cell).floor() as i32,
+        )
     }
 
     pub fn insert(&mut self, x: f32, z: f32) {
@@ -132,7 +139,10 @@ fn finite_nonneg(what: &'static str, v: f64) -> Result<(), LayoutError> {
 }
 
 /// Places the instances of `spec`, respecting spacing against `occupied` (and adding them).
-pub fn scatter(spec: &ScatterSpec, occupied: &mut Occupancy) -> Result<Vec<Placement>, LayoutError> {
+pub fn scatter(
+    spec: &ScatterSpec,
+    occupied: &mut Occupancy,
+) -> Result<Vec<Placement>, LayoutError> {
     let a = spec.area;
     if !(a.min[0] < a.max[0] && a.min[1] < a.max[1])
         || a.min.iter().chain(&a.max).any(|v| !v.is_finite())
@@ -273,13 +283,22 @@ mod tests {
     fn impossible_requests_are_errors() {
         // 1000 m² cannot hold 500 points 5 m apart (at most about 1000/(5²·0.87) ≈ 46).
         let e = scatter(&spec(500, 5.0, 1), &mut Occupancy::new(5.0)).unwrap_err();
-        assert!(matches!(e, LayoutError::TooDense { requested: 500, .. }), "{e}");
+        assert!(
+            matches!(e, LayoutError::TooDense { requested: 500, .. }),
+            "{e}"
+        );
         let mut s = spec(10, 1.0, 1);
         s.area.max[0] = -30.0;
-        assert!(matches!(scatter(&s, &mut Occupancy::new(1.0)), Err(LayoutError::EmptyArea { .. })));
+        assert!(matches!(
+            scatter(&s, &mut Occupancy::new(1.0)),
+            Err(LayoutError::EmptyArea { .. })
+        ));
         let mut s = spec(10, 1.0, 1);
         s.amount = Amount::Count(MAX_GENERATED + 1);
-        assert!(matches!(scatter(&s, &mut Occupancy::new(1.0)), Err(LayoutError::TooMany { .. })));
+        assert!(matches!(
+            scatter(&s, &mut Occupancy::new(1.0)),
+            Err(LayoutError::TooMany { .. })
+        ));
         let mut s = spec(10, f32::NAN, 1);
         assert!(scatter(&s, &mut Occupancy::new(1.0)).is_err());
         s.min_spacing = 1.0;

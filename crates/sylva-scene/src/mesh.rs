@@ -167,7 +167,11 @@ impl Mesh {
         if self.material_ids.len() != self.indices.len() {
             return Err("material_ids and indices differ in length".into());
         }
-        if let Some(t) = self.indices.iter().find(|t| t.iter().any(|&i| i as usize >= n)) {
+        if let Some(t) = self
+            .indices
+            .iter()
+            .find(|t| t.iter().any(|&i| i as usize >= n))
+        {
             return Err(format!("triangle {t:?} indexes past {n} vertices"));
         }
         if let Some(m) = self
@@ -175,7 +179,9 @@ impl Mesh {
             .iter()
             .find(|&&m| m as usize >= material_count)
         {
-            return Err(format!("material id {m} but only {material_count} materials"));
+            return Err(format!(
+                "material id {m} but only {material_count} materials"
+            ));
         }
         if self
             .positions

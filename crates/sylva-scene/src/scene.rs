@@ -343,11 +343,7 @@ impl SceneDesc {
             return SceneDesc::load_file(path);
         }
         match builtin_scenes::source(name_or_path) {
-            Some(text) => SceneDesc::parse(
-                text,
-                &format!("built-in scene '{name_or_path}'"),
-                None,
-            ),
+            Some(text) => SceneDesc::parse(text, &format!("built-in scene '{name_or_path}'"), None),
             None => Err(SceneError::NotFound(name_or_path.to_string())),
         }
     }
@@ -363,7 +359,11 @@ impl SceneDesc {
 
     /// Parses and checks scene TOML. Relative model files resolve against `base_dir`
     /// (the current directory when `None`).
-    pub fn parse(text: &str, origin: &str, base_dir: Option<&Path>) -> Result<SceneDesc, SceneError> {
+    pub fn parse(
+        text: &str,
+        origin: &str,
+        base_dir: Option<&Path>,
+    ) -> Result<SceneDesc, SceneError> {
         let invalid = |line: Option<usize>, message: String| SceneError::Invalid {
             origin: origin.to_string(),
             line,
@@ -381,13 +381,19 @@ impl SceneDesc {
             let l = line(m.span());
             let m = m.get_ref();
             if models.iter().any(|o| o.name == m.name) {
-                return Err(invalid(Some(l), format!("model '{}' is defined twice", m.name)));
+                return Err(invalid(
+                    Some(l),
+                    format!("model '{}' is defined twice", m.name),
+                ));
             }
             let sources = [m.species.is_some(), m.arbaro.is_some(), m.mesh.is_some()];
             if sources.iter().filter(|&&s| s).count() != 1 {
                 return Err(invalid(
                     Some(l),
-                    format!("model '{}' needs exactly one of 'species', 'arbaro' or 'mesh'", m.name),
+                    format!(
+                        "model '{}' needs exactly one of 'species', 'arbaro' or 'mesh'",
+                        m.name
+                    ),
                 ));
             }
             let species = if let Some(name) = &m.species {
@@ -417,7 +423,12 @@ impl SceneDesc {
                     source,
                 })?;
                 let seed = m.seed.or(a.seed).unwrap_or(0);
-                Species::from_params(&normalize_name(&a.name), a.params, seed, p.display().to_string())
+                Species::from_params(
+                    &normalize_name(&a.name),
+                    a.params,
+                    seed,
+                    p.display().to_string(),
+                )
             } else {
                 return Err(invalid(
                     Some(l),
@@ -440,18 +451,24 @@ impl SceneDesc {
         for (k, inst) in raw.instances.iter().enumerate() {
             let l = line(inst.span());
             let i = inst.get_ref();
-            let model = models.iter().position(|m| m.name == i.model).ok_or_else(|| {
-                invalid(
-                    Some(l),
-                    format!(
-                        "instance refers to model '{}', which no [[models]] entry defines",
-                        i.model
-                    ),
-                )
-            })?;
+            let model = models
+                .iter()
+                .position(|m| m.name == i.model)
+                .ok_or_else(|| {
+                    invalid(
+                        Some(l),
+                        format!(
+                            "instance refers to model '{}', which no [[models]] entry defines",
+                            i.model
+                        ),
+                    )
+                })?;
             let scale = i.scale.unwrap_or(1.0);
             if !(scale.is_finite() && scale > 0.0) {
-                return Err(invalid(Some(l), format!("scale must be a positive number, got {scale}")));
+                return Err(invalid(
+                    Some(l),
+                    format!("scale must be a positive number, got {scale}"),
+                ));
             }
             let placement = if let Some(position) = i.position {
                 let generator_keys = [
@@ -471,7 +488,10 @@ impl SceneDesc {
                 }
                 let rotation_deg = i.rotation.unwrap_or(0.0);
                 if !finite3(position) || !rotation_deg.is_finite() {
-                    return Err(invalid(Some(l), "position and rotation must be finite".into()));
+                    return Err(invalid(
+                        Some(l),
+                        "position and rotation must be finite".into(),
+                    ));
                 }
                 Placement::Explicit {
                     position: Vec3::from_array(position),
@@ -496,7 +516,10 @@ impl SceneDesc {
                     }
                 };
                 let area = i.area.as_ref().ok_or_else(|| {
-                    invalid(Some(l), "a generator needs 'area = { min = [x, z], max = [x, z] }'".into())
+                    invalid(
+                        Some(l),
+                        "a generator needs 'area = { min = [x, z], max = [x, z] }'".into(),
+                    )
                 })?;
                 Placement::Scatter(ScatterSpec {
                     amount,
@@ -530,12 +553,18 @@ impl SceneDesc {
                 let g = g.get_ref();
                 if let Some(s) = g.size {
                     if !s.iter().all(|v| v.is_finite() && *v > 0.0) {
-                        return Err(invalid(Some(l), format!("ground size {s:?} must be positive")));
+                        return Err(invalid(
+                            Some(l),
+                            format!("ground size {s:?} must be positive"),
+                        ));
                     }
                 }
                 let color = g.color.unwrap_or([0.20, 0.17, 0.12]);
                 if !color.iter().all(|c| c.is_finite() && *c >= 0.0) {
-                    return Err(invalid(Some(l), format!("ground color {color:?} must be ≥ 0")));
+                    return Err(invalid(
+                        Some(l),
+                        format!("ground color {color:?} must be ≥ 0"),
+                    ));
                 }
                 Ground {
                     enabled: g.enabled.unwrap_or(true),
@@ -570,7 +599,10 @@ impl SceneDesc {
             Some(s) => {
                 let c = s.get_ref().color;
                 if !c.iter().all(|v| v.is_finite() && *v >= 0.0) {
-                    return Err(invalid(Some(line(s.span())), format!("sky color {c:?} must be ≥ 0")));
+                    return Err(invalid(
+                        Some(line(s.span())),
+                        format!("sky color {c:?} must be ≥ 0"),
+                    ));
                 }
                 c
             }
@@ -590,22 +622,37 @@ impl SceneDesc {
                 let c = c.get_ref();
                 let fov = c.fov.unwrap_or(45.0);
                 if !(fov > 0.0 && fov < 180.0) {
-                    return Err(invalid(Some(l), format!("camera fov {fov} must be in (0, 180) degrees")));
+                    return Err(invalid(
+                        Some(l),
+                        format!("camera fov {fov} must be in (0, 180) degrees"),
+                    ));
                 }
                 let [w, h] = c.resolution.unwrap_or([640, 360]);
                 if !(1..=16384).contains(&w) || !(1..=16384).contains(&h) {
-                    return Err(invalid(Some(l), format!("camera resolution {w}×{h} must be 1 to 16384 per side")));
+                    return Err(invalid(
+                        Some(l),
+                        format!("camera resolution {w}×{h} must be 1 to 16384 per side"),
+                    ));
                 }
                 let rpp = c.rays_per_pixel.unwrap_or(1);
                 if !(1..=1024).contains(&rpp) {
-                    return Err(invalid(Some(l), format!("rays_per_pixel {rpp} must be 1 to 1024")));
+                    return Err(invalid(
+                        Some(l),
+                        format!("rays_per_pixel {rpp} must be 1 to 1024"),
+                    ));
                 }
                 if c.position.is_some() != c.look_at.is_some() {
-                    return Err(invalid(Some(l), "camera needs both 'position' and 'look_at' (or neither)".into()));
+                    return Err(invalid(
+                        Some(l),
+                        "camera needs both 'position' and 'look_at' (or neither)".into(),
+                    ));
                 }
                 if let (Some(p), Some(t)) = (c.position, c.look_at) {
                     if !finite3(p) || !finite3(t) || p == t {
-                        return Err(invalid(Some(l), "camera position and look_at must be finite and differ".into()));
+                        return Err(invalid(
+                            Some(l),
+                            "camera position and look_at must be finite and differ".into(),
+                        ));
                     }
                 }
                 CameraDesc {
@@ -626,13 +673,19 @@ impl SceneDesc {
                 let s = s.get_ref();
                 let grid = s.grid.unwrap_or(128);
                 if !(4..=2048).contains(&grid) {
-                    return Err(invalid(Some(l), format!("lb grid {grid} must be 4 to 2048")));
+                    return Err(invalid(
+                        Some(l),
+                        format!("lb grid {grid} must be 4 to 2048"),
+                    ));
                 }
                 let preset = s.preset.clone().unwrap_or_else(|| "leaf".into());
                 if !LB_PRESETS.contains(&preset.as_str()) {
                     return Err(invalid(
                         Some(l),
-                        format!("unknown lb preset '{preset}' (presets: {})", LB_PRESETS.join(", ")),
+                        format!(
+                            "unknown lb preset '{preset}' (presets: {})",
+                            LB_PRESETS.join(", ")
+                        ),
                     ));
                 }
                 LbSettings { grid, preset }
@@ -751,11 +804,13 @@ impl SceneDesc {
                     });
                 }
                 Placement::Scatter(spec) => {
-                    let placed = layout::scatter(spec, &mut occupied).map_err(|source| SceneError::Layout {
-                        origin: self.origin.clone(),
-                        line: inst.line,
-                        model: self.models[inst.model].name.clone(),
-                        source,
+                    let placed = layout::scatter(spec, &mut occupied).map_err(|source| {
+                        SceneError::Layout {
+                            origin: self.origin.clone(),
+                            line: inst.line,
+                            model: self.models[inst.model].name.clone(),
+                            source,
+                        }
                     })?;
                     out.extend(placed.into_iter().map(|p| Instance {
                         model: inst.model as u32,
@@ -790,14 +845,16 @@ impl Scene {
 
     /// World bounds of all instances (the ground excluded).
     pub fn instance_bounds(&self) -> Aabb {
-        self.instances
-            .iter()
-            .fold(Aabb::EMPTY, |b, i| b.union(&i.world_bounds(&self.models[i.model as usize])))
+        self.instances.iter().fold(Aabb::EMPTY, |b, i| {
+            b.union(&i.world_bounds(&self.models[i.model as usize]))
+        })
     }
 
     /// Iterates (instance, its model).
     pub fn instances_with_models(&self) -> impl Iterator<Item = (&Instance, &Model)> {
-        self.instances.iter().map(|i| (i, &self.models[i.model as usize]))
+        self.instances
+            .iter()
+            .map(|i| (i, &self.models[i.model as usize]))
     }
 
     pub fn unique_triangles(&self) -> usize {
@@ -841,7 +898,11 @@ impl Scene {
                     ModelStats {
                         name: m.name.clone(),
                         species: self.species[k].name.clone(),
-                        instances: self.instances.iter().filter(|i| i.model as usize == k).count(),
+                        instances: self
+                            .instances
+                            .iter()
+                            .filter(|i| i.model as usize == k)
+                            .count(),
                         triangles: m.triangle_count(),
                         leaf_triangles: leaf,
                         wood_triangles: m.triangle_count() - leaf,

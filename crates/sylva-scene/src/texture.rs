@@ -42,7 +42,12 @@ impl Texture {
     }
 
     /// Fills each texel from `f(u, v)` evaluated at its centre.
-    pub fn from_fn(width: u32, height: u32, wrap: Wrap, f: impl Fn(f32, f32) -> [u8; 4]) -> Texture {
+    pub fn from_fn(
+        width: u32,
+        height: u32,
+        wrap: Wrap,
+        f: impl Fn(f32, f32) -> [u8; 4],
+    ) -> Texture {
         let mut pixels = Vec::with_capacity((width * height) as usize);
         for y in 0..height {
             for x in 0..width {
@@ -66,7 +71,10 @@ impl Texture {
     }
 
     fn texel_f(&self, x: i64, y: i64, wrap: Wrap) -> Vec4 {
-        let t = self.texel(self.index(x, self.width, wrap), self.index(y, self.height, wrap));
+        let t = self.texel(
+            self.index(x, self.width, wrap),
+            self.index(y, self.height, wrap),
+        );
         Vec4::new(t[0] as f32, t[1] as f32, t[2] as f32, t[3] as f32) / 255.0
     }
 

@@ -76,7 +76,13 @@ impl LeafOutline {
                 let (dx, dy) = (x, (y - cy) * 2.0);
                 let r = (dx * dx + dy * dy).sqrt();
                 let phi = dx.atan2(dy); // 0 = towards the tip
-                let lobes: [(f32, f32); 5] = [(0.0, 1.44), (0.95, 1.2), (-0.95, 1.2), (1.9, 0.6), (-1.9, 0.6)];
+                let lobes: [(f32, f32); 5] = [
+                    (0.0, 1.44),
+                    (0.95, 1.2),
+                    (-0.95, 1.2),
+                    (1.9, 0.6),
+                    (-1.9, 0.6),
+                ];
                 let mut reach: f32 = 0.3;
                 for (a, len) in lobes {
                     let d = phi - a;
@@ -88,7 +94,13 @@ impl LeafOutline {
             }
             PalmatelyCompound => {
                 let oy = 0.1;
-                let leaflets: [(f32, f32); 5] = [(0.0, 0.88), (0.6, 0.8), (-0.6, 0.8), (1.25, 0.58), (-1.25, 0.58)];
+                let leaflets: [(f32, f32); 5] = [
+                    (0.0, 0.88),
+                    (0.6, 0.8),
+                    (-0.6, 0.8),
+                    (1.25, 0.58),
+                    (-1.25, 0.58),
+                ];
                 let (dx, dy) = (x * 0.5, y - oy);
                 leaflets.iter().any(|&(a, len)| {
                     let along = dx * a.sin() + dy * a.cos();
@@ -216,7 +228,9 @@ pub fn bark_texture(pattern: BarkPattern, base: [u8; 3], seed: u32) -> Texture {
         let n = noise(u, v, 16, 8, seed);
         let c = match pattern {
             BarkPattern::Furrowed => {
-                let furrow = ((u * 12.0 + 0.6 * noise(u, v, 4, 16, seed + 1)) * PI).sin().abs();
+                let furrow = ((u * 12.0 + 0.6 * noise(u, v, 4, 16, seed + 1)) * PI)
+                    .sin()
+                    .abs();
                 mix(base, dark, (1.0 - furrow).powi(3) * 1.2 + 0.2 * n)
             }
             BarkPattern::Smooth => mix(base, dark, 0.35 * noise(u, v, 6, 12, seed + 2)),

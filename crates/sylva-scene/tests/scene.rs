@@ -36,7 +36,10 @@ fn minimal_scene_builds_with_defaults() {
     assert_eq!(i.scale, 1.5);
     // The transform rotates about +y, scales, then translates.
     let p = i.transform().transform_point3(glam::Vec3::X);
-    assert!((p - glam::Vec3::new(1.0, 0.0, 2.0 - 1.5)).length() < 1e-5, "{p}");
+    assert!(
+        (p - glam::Vec3::new(1.0, 0.0, 2.0 - 1.5)).length() < 1e-5,
+        "{p}"
+    );
     // The default camera frames the scene and looks at it.
     let b = s.instance_bounds();
     let c = (b.min + b.max) * 0.5;
@@ -73,21 +76,38 @@ fn bad_values_are_explained() {
         ("[lb]\npreset = \"fog\"\n", "unknown lb preset 'fog'"),
         ("[lb]\ngrid = 1\n", "lb grid 1"),
         ("[sun]\nelevation = 95.0\nazimuth = 0.0\n", "elevation 95"),
-        ("[sun]\nelevation = 45.0\n", "both 'elevation' and 'azimuth'"),
+        (
+            "[sun]\nelevation = 45.0\n",
+            "both 'elevation' and 'azimuth'",
+        ),
         ("[sun]\ndirection = [0.0, 0.0, 0.0]\n", "zero vector"),
         ("[camera]\nfov = 0.0\n", "fov 0"),
-        ("[camera]\nposition = [0.0, 1.0, 0.0]\n", "both 'position' and 'look_at'"),
-        ("[[models]]\nname = \"a\"\nspecies = \"oak\"\n", "unknown species 'oak'"),
+        (
+            "[camera]\nposition = [0.0, 1.0, 0.0]\n",
+            "both 'position' and 'look_at'",
+        ),
+        (
+            "[[models]]\nname = \"a\"\nspecies = \"oak\"\n",
+            "unknown species 'oak'",
+        ),
         ("[[models]]\nname = \"a\"\n", "exactly one of"),
-        ("[[models]]\nname = \"a\"\nmesh = \"tree.obj\"\n", "not supported yet"),
-        ("[[instances]]\nmodel = \"nope\"\ncount = 3\n", "model 'nope'"),
+        (
+            "[[models]]\nname = \"a\"\nmesh = \"tree.obj\"\n",
+            "not supported yet",
+        ),
+        (
+            "[[instances]]\nmodel = \"nope\"\ncount = 3\n",
+            "model 'nope'",
+        ),
     ];
     for (text, want) in cases {
         let e = err(text);
         assert!(e.contains(want), "{text:?}: {e}");
         assert!(e.starts_with("test.toml: line "), "{e}");
     }
-    let e = err(&format!("{MINIMAL}\n[[instances]]\nmodel = \"m\"\ncount = 3\n"));
+    let e = err(&format!(
+        "{MINIMAL}\n[[instances]]\nmodel = \"m\"\ncount = 3\n"
+    ));
     assert!(e.contains("line 12") && e.contains("area"), "{e}");
     let e = err(&format!(
         "{MINIMAL}\n[[instances]]\nmodel = \"m\"\nposition = [0.0, 0.0, 0.0]\ncount = 3\n"
@@ -101,18 +121,35 @@ fn impossible_layout_is_an_error_with_the_line() {
         "{MINIMAL}\n[[instances]]\nmodel = \"m\"\ncount = 1000\narea = {{ min = [0.0, 0.0], max = [10.0, 10.0] }}\nmin_spacing = 2.0\n"
     );
     let e = parse(&text).unwrap().build().unwrap_err().to_string();
-    assert!(e.contains("line 12") && e.contains("could place only"), "{e}");
+    assert!(
+        e.contains("line 12") && e.contains("could place only"),
+        "{e}"
+    );
 }
 
 #[test]
 fn missing_files_are_named() {
-    let e = SceneDesc::load("/no/such/scene.toml").unwrap_err().to_string();
-    assert!(e.contains("/no/such/scene.toml") && e.contains("built-in scenes: demo"), "{e}");
+    let e = SceneDesc::load("/no/such/scene.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("/no/such/scene.toml") && e.contains("built-in scenes: demo"),
+        "{e}"
+    );
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("s.toml");
-    fs::write(&path, "[[models]]\nname = \"a\"\narbaro = \"missing.xml\"\n").unwrap();
-    let e = SceneDesc::load(path.to_str().unwrap()).unwrap_err().to_string();
-    assert!(e.contains("line 1") && e.contains("missing.xml") && e.contains("cannot read"), "{e}");
+    fs::write(
+        &path,
+        "[[models]]\nname = \"a\"\narbaro = \"missing.xml\"\n",
+    )
+    .unwrap();
+    let e = SceneDesc::load(path.to_str().unwrap())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("line 1") && e.contains("missing.xml") && e.contains("cannot read"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -139,7 +176,11 @@ fn arbaro_models_resolve_relative_to_the_scene_file() {
     assert_eq!(s.instances.len(), 50);
     let m = &s.models[0];
     assert!(m.triangle_count() > 1000);
-    assert!(m.bounds.size().y > 4.0 && m.bounds.size().y < 12.0, "{:?}", m.bounds);
+    assert!(
+        m.bounds.size().y > 4.0 && m.bounds.size().y < 12.0,
+        "{:?}",
+        m.bounds
+    );
     for (k, a) in s.instances.iter().enumerate() {
         assert!((0.0..=100.0).contains(&a.position.x) && (0.0..=50.0).contains(&a.position.z));
         for b in &s.instances[k + 1..] {
@@ -155,17 +196,32 @@ fn beech_scene_is_table_2_with_five_unique_models() {
     assert_eq!(s.models.len(), 5);
     assert_eq!((s.camera.width, s.camera.height), (896, 448));
     let stats = s.stats();
-    let count = |n: &str| stats.models.iter().find(|m| m.species == n).unwrap().instances;
+    let count = |n: &str| {
+        stats
+            .models
+            .iter()
+            .find(|m| m.species == n)
+            .unwrap()
+            .instances
+    };
     assert_eq!(count("red_maple"), 12);
     assert_eq!(count("ohio_buckeye"), 285);
     assert_eq!(count("paper_birch"), 291);
     assert_eq!(count("southern_catalpa"), 206);
     assert_eq!(count("american_beech"), 168);
     let ratio = stats.instanced_triangles as f64 / 273_376_528.0;
-    assert!((0.9..=1.1).contains(&ratio), "{}", stats.instanced_triangles);
+    assert!(
+        (0.9..=1.1).contains(&ratio),
+        "{}",
+        stats.instanced_triangles
+    );
     // Memory is the five models, not 962 copies: well under what one copy per tree would take.
     let per_triangle_copy = stats.instanced_triangles * 40;
-    assert!(stats.memory_bytes * 100 < per_triangle_copy, "{}", stats.memory_bytes);
+    assert!(
+        stats.memory_bytes * 100 < per_triangle_copy,
+        "{}",
+        stats.memory_bytes
+    );
     let json = serde_json::to_value(&stats).unwrap();
     for key in ["instances", "unique_triangles", "instanced_triangles"] {
         assert!(json.get(key).is_some(), "{key}");

@@ -62,11 +62,19 @@ fn every_builtin_keeps_leaf_and_wood_apart_with_textures() {
         assert!(m.materials[LEAF as usize].two_sided);
         let leaf_tex = m.materials[LEAF as usize].texture.as_ref().unwrap();
         let bark_tex = m.materials[WOOD as usize].texture.as_ref().unwrap();
-        assert!(leaf_tex.opaque_fraction() < 0.9, "{}: leaf shape must be in alpha", s.name);
+        assert!(
+            leaf_tex.opaque_fraction() < 0.9,
+            "{}: leaf shape must be in alpha",
+            s.name
+        );
         assert_eq!(bark_tex.opaque_fraction(), 1.0);
         let leaves = m.mesh.triangles_with_material(LEAF);
         let wood = m.mesh.triangles_with_material(WOOD);
-        assert!(leaves > 10_000 && wood > 10_000, "{}: {leaves} leaf, {wood} wood", s.name);
+        assert!(
+            leaves > 10_000 && wood > 10_000,
+            "{}: {leaves} leaf, {wood} wood",
+            s.name
+        );
         // Leaf colour is green; wood is not.
         let lc = m.materials[LEAF as usize].base_color;
         assert!(lc[1] > lc[0] && lc[1] > lc[2], "{}: leaf {lc:?}", s.name);
@@ -85,9 +93,15 @@ fn forms_read_as_their_species() {
     assert!(rose.y > 1.0 && rose.y < 4.0, "a dogrose is a shrub: {rose}");
     assert!(rose.x > rose.y, "a dogrose spreads wider than tall: {rose}");
     let birch = size("paper_birch");
-    assert!(birch.y > 1.5 * birch.x, "paper birch has a narrow crown: {birch}");
+    assert!(
+        birch.y > 1.5 * birch.x,
+        "paper birch has a narrow crown: {birch}"
+    );
     let catalpa = size("southern_catalpa");
-    assert!(catalpa.x > catalpa.y, "catalpa has a broad crown: {catalpa}");
+    assert!(
+        catalpa.x > catalpa.y,
+        "catalpa has a broad crown: {catalpa}"
+    );
     let beech = size("american_beech");
     assert!(beech.y > 15.0, "american beech is a tall tree: {beech}");
     // Birch bark is light, pine bark reddish brown.

@@ -82,14 +82,15 @@ pub fn run(args: BenchSceneArgs) -> anyhow::Result<()> {
         outln!(o, "{}", serde_json::to_string_pretty(&v)?);
         return emit(&o);
     }
-    outln!(o, 
+    outln!(
+        o,
         "species generation (median of {} runs, {threads} threads):",
         args.runs
     );
     for (n, t, s) in &species {
         outln!(o, "  {n:<18} {t:>9} triangles  {:>8.1} ms", s * 1e3);
     }
-    outln!(o, 
+    outln!(o,
         "scene {}: built in {:.3} s (median), {} instances, {} unique / {} instanced triangles, {} in models",
         stats.name,
         build,

@@ -64,12 +64,14 @@ pub fn emit(text: &str) -> anyhow::Result<()> {
 /// `1234567` → `"1,234,567"`.
 pub fn thousands(n: u64) -> String {
     let s = n.to_string();
-    let mut out = String::new();
-    for (i, c) in s.chars().enumerate() {
-        if i > 0 && (s.len() - i) % 3 == 0 {
-            out.push(',');
-        }
-        out.push(c);
+    let head = match s.len() % 3 {
+        0 => 3.min(s.len()),
+        h => h,
+    };
+    let mut out = s[..head].to_string();
+    for group in s.as_bytes()[head..].chunks(3) {
+        out.push(',');
+        out.push_str(std::str::from_utf8(group).expect("ASCII digits"));
     }
     out
 }
@@ -79,7 +81,8 @@ pub fn run(args: SceneArgs) -> anyhow::Result<()> {
         SceneCommand::List => {
             let mut o = String::new();
             for name in builtin_scenes::NAMES {
-                outln!(o, 
+                outln!(
+                    o,
                     "{name:<8} {}",
                     builtin_scenes::describe(name).unwrap_or_default()
                 );
@@ -136,29 +139,42 @@ fn info(name: &str, json: bool) -> anyhow::Result<()> {
         return emit(&o);
     }
     outln!(o, "scene {} ({})", stats.name, scene.origin);
-    outln!(o, "  instances            {}", thousands(stats.instances as u64));
-    outln!(o, 
+    outln!(
+        o,
+        "  instances            {}",
+        thousands(stats.instances as u64)
+    );
+    outln!(
+        o,
         "  unique triangles     {} in {} models",
         thousands(stats.unique_triangles as u64),
         stats.models.len()
     );
-    outln!(o, "  instanced triangles  {}", thousands(stats.instanced_triangles));
+    outln!(
+        o,
+        "  instanced triangles  {}",
+        thousands(stats.instanced_triangles)
+    );
     let [a, b, c] = stats.bounds_min;
     let [d, e, f] = stats.bounds_max;
-    outln!(o, 
+    outln!(
+        o,
         "  bounds               ({a:.1}, {b:.1}, {c:.1}) .. ({d:.1}, {e:.1}, {f:.1}) m"
     );
-    outln!(o, 
+    outln!(
+        o,
         "  memory               {} (models and textures, instance records)",
         sylva_core::format_bytes(stats.memory_bytes)
     );
-    outln!(o, 
+    outln!(
+        o,
         "  sun                  elevation {:.1}°, azimuth {:.1}°",
         scene.sun.elevation_deg(),
         scene.sun.azimuth_deg()
     );
     let cam = &scene.camera;
-    outln!(o, 
+    outln!(
+        o,
         "  camera               {}×{}, {} ray(s)/pixel, fov {}°, at {:?} looking at {:?}",
         cam.width,
         cam.height,
@@ -167,14 +183,26 @@ fn info(name: &str, json: bool) -> anyhow::Result<()> {
         cam.position.to_array(),
         cam.look_at.to_array()
     );
-    outln!(o, "  lb                   grid {}, preset {}", scene.lb.grid, scene.lb.preset);
+    outln!(
+        o,
+        "  lb                   grid {}, preset {}",
+        scene.lb.grid,
+        scene.lb.preset
+    );
     outln!(o);
-    outln!(o, 
+    outln!(
+        o,
         "  {:<18} {:<18} {:>9} {:>11} {:>11} {:>11}",
-        "model", "species", "instances", "triangles", "leaf", "wood"
+        "model",
+        "species",
+        "instances",
+        "triangles",
+        "leaf",
+        "wood"
     );
     for m in &stats.models {
-        outln!(o, 
+        outln!(
+            o,
             "  {:<18} {:<18} {:>9} {:>11} {:>11} {:>11}",
             m.name,
             m.species,

@@ -86,16 +86,21 @@ fn list(json: bool) -> anyhow::Result<()> {
         outln!(o, "{}", serde_json::to_string_pretty(&v)?);
         return emit(&o);
     }
-    outln!(o, 
+    outln!(
+        o,
         "{:<18} {:>11} {:>13} {:>8}  source",
-        "species", "triangles", "paper", "height"
+        "species",
+        "triangles",
+        "paper",
+        "height"
     );
     for (s, tris, size) in &rows {
         let paper = s
             .reference_triangles
             .map(|r| thousands(r as u64))
             .unwrap_or_else(|| "-".into());
-        outln!(o, 
+        outln!(
+            o,
             "{:<18} {:>11} {:>13} {:>7.1}m  {}",
             s.name,
             thousands(*tris as u64),
@@ -147,7 +152,8 @@ fn show(name: &str, json: bool, xml: bool) -> anyhow::Result<()> {
         return emit(&o);
     }
     outln!(o, "species {} ({})", s.name, s.source);
-    outln!(o, 
+    outln!(
+        o,
         "  triangles   {} ({} leaf, {} wood){}",
         thousands(mesh.triangle_count() as u64),
         thousands(leaf as u64),
@@ -157,13 +163,21 @@ fn show(name: &str, json: bool, xml: bool) -> anyhow::Result<()> {
             .unwrap_or_default()
     );
     let size = b.size();
-    outln!(o, 
+    outln!(
+        o,
         "  size        {:.1} × {:.1} × {:.1} m (x × y × z)",
-        size.x, size.y, size.z
+        size.x,
+        size.y,
+        size.z
     );
-    outln!(o, 
+    outln!(
+        o,
         "  leaves      {:?}, sRGB {:?}; bark {:?}, sRGB {:?}; seed {}",
-        s.leaf_outline, s.leaf_color, s.bark_pattern, s.bark_color, s.seed
+        s.leaf_outline,
+        s.leaf_color,
+        s.bark_pattern,
+        s.bark_color,
+        s.seed
     );
     outln!(o, "  parameters (Arbaro names):");
     for (k, v) in s.params.entries() {

@@ -164,7 +164,8 @@ impl Tree<'_> {
     /// Whether a point lies inside the pruning envelope.
     fn inside_envelope(&self, pt: Vec3) -> bool {
         let g = &self.p.general;
-        let h = (pt.y as f64 - g.base_size * self.scale_tree) / (self.scale_tree * (1.0 - g.base_size)).max(1e-9);
+        let h = (pt.y as f64 - g.base_size * self.scale_tree)
+            / (self.scale_tree * (1.0 - g.base_size)).max(1e-9);
         let r = ((pt.x * pt.x + pt.z * pt.z) as f64).sqrt() / self.scale_tree;
         h <= 1.0 && r <= g.prune_width * envelope(h.max(0.0), self.p) + 1e-9
     }
@@ -211,7 +212,16 @@ impl<'t, 'a> Grower<'t, 'a> {
             split_error: 0.0,
             child_rotation: self.rng.range(0.0, 360.0),
         };
-        self.walk(stem, stem.origin, stem.rot, 0, true, total_children, carries_leaves, &mut state)
+        self.walk(
+            stem,
+            stem.origin,
+            stem.rot,
+            0,
+            true,
+            total_children,
+            carries_leaves,
+            &mut state,
+        )
     }
 
     /// Grows `stem` from segment `seg_start` at `pos`/`rot` to its tip; clones recurse.
@@ -274,7 +284,16 @@ impl<'t, 'a> Grower<'t, 'a> {
                         };
                         let tilted = rot * Quat::from_rotation_x(angle_split.to_radians() as f32);
                         let clone_rot = Quat::from_rotation_y(az.to_radians() as f32) * tilted;
-                        self.walk(stem, pos, clone_rot, seg, false, total_children, carries_leaves, state)?;
+                        self.walk(
+                            stem,
+                            pos,
+                            clone_rot,
+                            seg,
+                            false,
+                            total_children,
+                            carries_leaves,
+                            state,
+                        )?;
                     }
                     return Ok(());
                 }
@@ -451,7 +470,8 @@ impl<'t, 'a> Grower<'t, 'a> {
             let want = (Vec3::Y - axis * axis.y).normalize_or_zero();
             if want != Vec3::ZERO {
                 let angle = normal.cross(want).dot(axis).atan2(normal.dot(want));
-                rot = (Quat::from_axis_angle(axis, angle * p.general.leaf_bend as f32) * rot).normalize();
+                rot = (Quat::from_axis_angle(axis, angle * p.general.leaf_bend as f32) * rot)
+                    .normalize();
             }
         }
         let axis = rot * Vec3::Y;
@@ -494,7 +514,11 @@ impl<'t, 'a> Grower<'t, 'a> {
                 } else {
                     r
                 };
-                m.push_vertex(*center + radial * rr, radial, [around * s as f32 / sides as f32, v]);
+                m.push_vertex(
+                    *center + radial * rr,
+                    radial,
+                    [around * s as f32 / sides as f32, v],
+                );
             }
         }
         let row = sides as u32 + 1;
@@ -527,7 +551,11 @@ pub fn generate(params: &Params, seed: u64) -> Result<Mesh, GenerateError> {
 }
 
 /// [`generate`] with an explicit triangle budget.
-pub fn generate_with_limit(params: &Params, seed: u64, max_triangles: usize) -> Result<Mesh, GenerateError> {
+pub fn generate_with_limit(
+    params: &Params,
+    seed: u64,
+    max_triangles: usize,
+) -> Result<Mesh, GenerateError> {
     params.validate()?;
     let g = &params.general;
     let mut rng = Rng::derive(seed, u64::MAX);
@@ -585,10 +613,13 @@ pub fn generate_with_limit(params: &Params, seed: u64, max_triangles: usize) -> 
         let part = part.as_ref().map_err(Clone::clone)?;
         total += part.triangle_count();
         if total > max_triangles {
-            return Err(GenerateError::TooManyTriangles { limit: max_triangles });
+            return Err(GenerateError::TooManyTriangles {
+                limit: max_triangles,
+            });
         }
     }
-    mesh.positions.reserve(parts.iter().flatten().map(|m| m.vertex_count()).sum());
+    mesh.positions
+        .reserve(parts.iter().flatten().map(|m| m.vertex_count()).sum());
     for part in parts.into_iter().flatten() {
         mesh.append(&part);
     }

@@ -259,7 +259,10 @@ mod tests {
         assert_eq!(p.get("2DownAngle"), Some(-45.0));
         assert_eq!(p.get("0Length"), Some(1.0));
         assert_eq!(p.get("BaseSize"), Some(0.25));
-        assert_eq!(p.entries().len(), GENERAL_SPECS.len() + 4 * LEVEL_SPECS.len());
+        assert_eq!(
+            p.entries().len(),
+            GENERAL_SPECS.len() + 4 * LEVEL_SPECS.len()
+        );
     }
 
     #[test]
@@ -273,9 +276,15 @@ mod tests {
             p.set("4Length", 1.0),
             Err(ParamError::Unknown("4Length".into()))
         );
-        assert!(matches!(p.set("BaseSize", 1.5), Err(ParamError::OutOfRange { name, .. }) if name == "BaseSize"));
-        assert!(matches!(p.set("Levels", 2.5), Err(ParamError::NotInteger { name, .. }) if name == "Levels"));
-        assert!(matches!(p.set("1Curve", f64::NAN), Err(ParamError::NotFinite { name, .. }) if name == "1Curve"));
+        assert!(
+            matches!(p.set("BaseSize", 1.5), Err(ParamError::OutOfRange { name, .. }) if name == "BaseSize")
+        );
+        assert!(
+            matches!(p.set("Levels", 2.5), Err(ParamError::NotInteger { name, .. }) if name == "Levels")
+        );
+        assert!(
+            matches!(p.set("1Curve", f64::NAN), Err(ParamError::NotFinite { name, .. }) if name == "1Curve")
+        );
         // A rejected value leaves the old one.
         assert_eq!(p.general.base_size, 0.25);
         p.levels[1].branches = 1e9;
