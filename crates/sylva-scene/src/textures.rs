@@ -61,7 +61,8 @@ impl LeafOutline {
                     return petiole(ax, y);
                 }
                 let yy = (y - 0.02) / 0.97;
-                let w = (PI * yy.powf(0.75)).sin().max(0.0).powf(0.8);
+                // Widest below the middle, tapering to a pointed tip.
+                let w = (PI * yy.powf(0.75)).sin().max(0.0).powf(0.8) * (1.0 - 0.5 * yy.powi(3));
                 let teeth = 1.0 - 0.07 * (yy * 22.0 * PI).sin().abs() * (1.0 - yy * 0.5);
                 ax < 0.95 * w * teeth || petiole(ax, y)
             }
@@ -96,10 +97,10 @@ impl LeafOutline {
                 let oy = 0.1;
                 let leaflets: [(f32, f32); 5] = [
                     (0.0, 0.88),
-                    (0.6, 0.8),
-                    (-0.6, 0.8),
-                    (1.25, 0.58),
-                    (-1.25, 0.58),
+                    (0.72, 0.8),
+                    (-0.72, 0.8),
+                    (1.4, 0.6),
+                    (-1.4, 0.6),
                 ];
                 let (dx, dy) = (x * 0.5, y - oy);
                 leaflets.iter().any(|&(a, len)| {
@@ -107,7 +108,7 @@ impl LeafOutline {
                     let across = dx * a.cos() - dy * a.sin();
                     let t = along / len;
                     (0.04..1.0).contains(&t)
-                        && across.abs() < 0.2 * len * (PI * t.powf(0.8)).sin().powf(0.9)
+                        && across.abs() < 0.15 * len * (PI * t.powf(0.8)).sin().powf(0.9)
                 }) || (y < oy && ax < 0.04)
             }
             Needles => {
