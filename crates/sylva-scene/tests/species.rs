@@ -156,3 +156,25 @@ fn taper_flare_and_zscale_shape_the_trunk() {
     let leafy = weber_penn::generate(&p, 1).unwrap();
     assert_eq!(leafy.triangles_with_material(LEAF), 100);
 }
+
+#[test]
+fn pruning_envelope_narrows_the_crown() {
+    let mut p = Species::builtin("red_maple").unwrap().params;
+    let wide = weber_penn::generate(&p, 3).unwrap().bounds().size();
+    p.set("PruneRatio", 1.0).unwrap();
+    p.set("PruneWidth", 0.2).unwrap();
+    let pruned = weber_penn::generate(&p, 3).unwrap().bounds().size();
+    assert!(pruned.x < 0.8 * wide.x, "{pruned} vs {wide}");
+    // Leaf distribution shape matters: conical (0) puts fewer leaves near the base than
+    // cylindrical (3).
+    p.set("PruneRatio", 0.0).unwrap();
+    p.set("LeafDistrib", 0.0).unwrap();
+    let conical = weber_penn::generate(&p, 3)
+        .unwrap()
+        .triangles_with_material(LEAF);
+    p.set("LeafDistrib", 3.0).unwrap();
+    let cylindrical = weber_penn::generate(&p, 3)
+        .unwrap()
+        .triangles_with_material(LEAF);
+    assert!(conical < cylindrical, "{conical} vs {cylindrical}");
+}

@@ -191,7 +191,11 @@ impl<'t, 'a> Grower<'t, 'a> {
             let pos = if stem.level == 0 {
                 1.0
             } else {
-                shape_ratio(4, stem.offset / stem.parent_length, tree.p)
+                shape_ratio(
+                    tree.p.general.leaf_distrib as u32,
+                    stem.offset / stem.parent_length,
+                    tree.p,
+                )
             };
             tree.p.general.leaves.abs() * pos * tree.p.general.leaf_quality
         } else {
