@@ -178,3 +178,58 @@ fn pruning_envelope_narrows_the_crown() {
         .triangles_with_material(LEAF);
     assert!(conical < cylindrical, "{conical} vs {cylindrical}");
 }
+
+mod any_valid_parameters {
+    use proptest::prelude::*;
+    use sylva_scene::weber_penn::{self, GenerateError, Params, GENERAL_SPECS, LEVEL_SPECS};
+
+    /// A value inside `spec`'s range (whole where the parameter is), biased to moderate sizes
+    /// for counts so most cases finish under the budget.
+    fn value(spec: &weber_penn::ParamSpec, u: f64) -> f64 {
+        let (lo, hi) = match spec.name {
+            "Branches" => (0.0, 60.0),
+            "Leaves" => (0.0, 80.0),
+            "CurveRes" => (1.0, 12.0),
+            "Scale" if spec.min > 0.0 && spec.max == 1000.0 => (0.5, 3.0),
+            _ => (spec.min, spec.max),
+        };
+        let v = lo + (hi - lo) * u;
+        if spec.integer {
+            v.round().clamp(spec.min, spec.max)
+        } else {
+            v
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        /// Any in-range parameter set gives a valid mesh or a budget error, never a panic or
+        /// non-finite geometry.
+        #[test]
+        fn valid_mesh_or_budget_error(
+            general in proptest::collection::vec(0.0f64..1.0, GENERAL_SPECS.len()),
+            levels in proptest::collection::vec(0.0f64..1.0, 4 * LEVEL_SPECS.len()),
+            seed in 0u64..1000,
+        ) {
+            let mut p = Params::default();
+            for (spec, u) in GENERAL_SPECS.iter().zip(&general) {
+                let v = match spec.name {
+                    "Scale" => 1.0 + 20.0 * u,
+                    _ => value(spec, *u),
+                };
+                p.set(spec.name, v).unwrap();
+            }
+            for l in 0..4 {
+                for (k, spec) in LEVEL_SPECS.iter().enumerate() {
+                    let v = value(spec, levels[l * LEVEL_SPECS.len() + k]);
+                    p.set(&format!("{l}{}", spec.name), v).unwrap();
+                }
+            }
+            match weber_penn::generate_with_limit(&p, seed, 300_000) {
+                Ok(mesh) => prop_assert!(mesh.validate(2).is_ok(), "{:?}", mesh.validate(2)),
+                Err(GenerateError::TooManyTriangles { limit }) => prop_assert_eq!(limit, 300_000),
+                Err(e) => prop_assert!(false, "unexpected error {e}"),
+            }
+        }
+    }
+}
