@@ -57,17 +57,24 @@ pub fn shape_ratio(shape: u32, ratio: f64, p: &Params) -> f64 {
     }
 }
 
-/// The pruning envelope's relative width at relative height `h` above the base (0..1).
+/// The pruning envelope's relative width at relative height `h` above the base (0..1), in
+/// [0, 1]: widest (1) at `PruneWidthPeak`. Clamped because negative `PrunePower*` values
+/// would otherwise grow without bound towards the ends.
 fn envelope(h: f64, p: &Params) -> f64 {
     let g = &p.general;
     if !(0.0..=1.0).contains(&h) {
         return 0.0;
     }
     let peak = g.prune_width_peak;
-    if h < peak {
+    let w = if h < peak {
         (h / peak.max(1e-9)).powf(g.prune_power_high)
     } else {
         ((1.0 - h) / (1.0 - peak).max(1e-9)).powf(g.prune_power_low)
+    };
+    if w.is_finite() {
+        w.clamp(0.0, 1.0)
+    } else {
+        1.0
     }
 }
 
@@ -110,6 +117,10 @@ struct Tree<'a> {
     max_triangles: usize,
     /// Triangles emitted by all growers so far: stops runaway trees early on any thread.
     emitted: AtomicUsize,
+    /// Stem walks started plus level-1 stems queued. Every walk that does not split emits at
+    /// least 6 triangles and at least half the walks do not split, so the final triangle count
+    /// is at least 1.5 × this: a bound that catches split cascades before they emit anything.
+    stem_work: AtomicUsize,
 }
 
 /// Grows stems into one mesh with one random stream.
@@ -175,7 +186,10 @@ impl<'t, 'a> Grower<'t, 'a> {
     fn check_budget(&self) -> Result<(), GenerateError> {
         // The running total only grows, so exceeding it early implies the final count would:
         // the outcome does not depend on thread timing.
-        if self.tree.emitted.load(Ordering::Relaxed) > self.tree.max_triangles {
+        let work_bound = self.tree.stem_work.load(Ordering::Relaxed) as f64 * 1.5;
+        if self.tree.emitted.load(Ordering::Relaxed) > self.tree.max_triangles
+            || work_bound > self.tree.max_triangles as f64
+        {
             return Err(GenerateError::TooManyTriangles {
                 limit: self.tree.max_triangles,
             });
@@ -242,6 +256,8 @@ impl<'t, 'a> Grower<'t, 'a> {
         state: &mut WalkState,
     ) -> Result<(), GenerateError> {
         let tree = self.tree;
+        tree.stem_work.fetch_add(1, Ordering::Relaxed);
+        self.check_budget()?;
         let p = tree.p;
         let lp = &p.levels[stem.level];
         let res = lp.curve_res as usize;
@@ -339,6 +355,12 @@ impl<'t, 'a> Grower<'t, 'a> {
                 total_children / res as f64
             };
             let want = share + state.child_error;
+            if !(want < tree.max_triangles as f64) {
+                // Also catches NaN: no stem may carry more children than the budget.
+                return Err(GenerateError::TooManyTriangles {
+                    limit: tree.max_triangles,
+                });
+            }
             let count = want.round().max(0.0);
             state.child_error = want - count;
             let count = count as usize;
@@ -451,7 +473,11 @@ impl<'t, 'a> Grower<'t, 'a> {
             length_child_max,
         };
         match self.deferred.as_mut() {
-            Some(list) if level == 1 => list.push(seed),
+            Some(list) if level == 1 => {
+                tree.stem_work.fetch_add(1, Ordering::Relaxed);
+                list.push(seed);
+                self.check_budget()?;
+            }
             _ => self.grow(&seed)?,
         }
         Ok(())
@@ -578,6 +604,7 @@ pub fn generate_with_limit(
         leaf_width: (g.leaf_scale * g.leaf_scale_x / quality) as f32,
         max_triangles,
         emitted: AtomicUsize::new(0),
+        stem_work: AtomicUsize::new(0),
     };
     let trunk = StemSeed {
         level: 0,
