@@ -355,8 +355,8 @@ impl<'t, 'a> Grower<'t, 'a> {
                 total_children / res as f64
             };
             let want = share + state.child_error;
-            if !(want < tree.max_triangles as f64) {
-                // Also catches NaN: no stem may carry more children than the budget.
+            if want.is_nan() || want >= tree.max_triangles as f64 {
+                // No stem may carry more children than the budget.
                 return Err(GenerateError::TooManyTriangles {
                     limit: tree.max_triangles,
                 });
