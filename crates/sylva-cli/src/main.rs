@@ -26,11 +26,15 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Inspect scenes: `sylva scene info SCENE [--json]`, `sylva scene list`, `sylva scene source`.
+    Scene(commands::scene::SceneArgs),
+    /// The species library: `sylva species list`, `sylva species show NAME`.
+    Species(commands::species::SpeciesArgs),
     /// Lattice-Boltzmann lighting: solve a grid, describe grid files.
     Lb(commands::lb::LbArgs),
     /// Plane-parallel scattering in slabs (paper 003): radiance, Tables 1 and 2.
     Spp(commands::spp::SppArgs),
-    /// Measure speed on this machine (LB solver against copy bandwidth, ...).
+    /// Measure speed on this machine (LB solver against copy bandwidth, scene building).
     Bench(commands::bench::BenchArgs),
 }
 
@@ -50,6 +54,8 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Lb(a) => commands::lb::run(a),
         Command::Spp(a) => commands::spp::run(a),
+        Command::Scene(a) => commands::scene::run(a),
+        Command::Species(a) => commands::species::run(a),
         Command::Bench(a) => commands::bench::run(a),
     };
     commands::finish(result)

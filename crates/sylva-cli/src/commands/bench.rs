@@ -21,6 +21,8 @@ enum BenchCommand {
     /// The LB solver on one colour of a dense medium (every site collides), against this
     /// machine's copy bandwidth measured in the same run.
     Lb(BenchLbArgs),
+    /// Generating each built-in species and building a scene's models and instances.
+    Scene(super::bench_scene::BenchSceneArgs),
 }
 
 #[derive(Args)]
@@ -61,6 +63,7 @@ struct LbBench {
 pub fn run(args: BenchArgs) -> Result<()> {
     match args.command {
         BenchCommand::Lb(a) => bench_lb(a),
+        BenchCommand::Scene(a) => super::bench_scene::run(a),
     }
 }
 

@@ -18,6 +18,9 @@ pub fn finish(result: anyhow::Result<()>) -> ExitCode {
 }
 
 pub mod bench;
+pub mod bench_scene;
 pub mod lb;
 pub mod progress;
+pub mod scene;
+pub mod species;
 pub mod spp;

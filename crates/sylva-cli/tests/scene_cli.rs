@@ -1,0 +1,73 @@
+//! `sylva scene` and `sylva species` as a user runs them.
+
+use std::process::Command;
+
+fn sylva(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .args(args)
+        .output()
+        .expect("run sylva");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn scene_info_json_has_the_counts() {
+    let (ok, out, err) = sylva(&["scene", "info", "catalpa", "--json"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["instances"], 1);
+    let unique = v["unique_triangles"].as_u64().unwrap();
+    assert_eq!(v["instanced_triangles"].as_u64().unwrap(), unique);
+    assert!((140_000..=171_000).contains(&unique), "{unique}");
+    assert_eq!(v["camera"]["resolution"], serde_json::json!([512, 512]));
+    assert_eq!(v["lb"]["preset"], "leaf");
+}
+
+#[test]
+fn scene_errors_name_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bad.toml");
+    std::fs::write(&path, "[lb]\ngrid = 64\nsmoothness = 2\n").unwrap();
+    let (ok, _, err) = sylva(&["scene", "info", path.to_str().unwrap()]);
+    assert!(!ok);
+    assert!(
+        err.contains("bad.toml: line 3") && err.contains("smoothness"),
+        "{err}"
+    );
+    let (ok, _, err) = sylva(&["scene", "info", "no_such_scene"]);
+    assert!(!ok);
+    assert!(err.contains("no_such_scene"), "{err}");
+}
+
+#[test]
+fn species_list_and_show() {
+    let (ok, out, err) = sylva(&["species", "list"]);
+    assert!(ok, "{err}");
+    for name in ["red_maple", "american_beech", "pine", "dogrose"] {
+        assert!(out.contains(name), "{out}");
+    }
+    assert!(out.contains("496,719"), "{out}");
+    let (ok, out, err) = sylva(&["species", "show", "pine", "--json"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["params"]["Shape"], 0.0);
+    assert!(v["triangles"].as_u64().unwrap() > 100_000);
+    let (ok, _, err) = sylva(&["species", "show", "baobab"]);
+    assert!(!ok && err.contains("baobab"), "{err}");
+}
+
+#[test]
+fn species_xml_round_trips_through_show() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ok, xml, err) = sylva(&["species", "show", "dogrose", "--xml"]);
+    assert!(ok, "{err}");
+    let path = dir.path().join("rose.xml");
+    std::fs::write(&path, xml).unwrap();
+    let (ok, out, err) = sylva(&["species", "show", path.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    assert!(out.contains("species dogrose"), "{out}");
+}

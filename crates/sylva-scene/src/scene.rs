@@ -1,0 +1,915 @@
+//! Scene files (TOML) and built scenes.
+//!
+//! A [`SceneDesc`] is a parsed and checked scene file (no geometry yet); [`SceneDesc::build`]
+//! generates each unique model once and places the instances, which only reference models:
+//! a forest of 962 trees holds 5 meshes.
+//!
+//! Every error names its origin (file path or built-in scene) and, where it has one, the line.
+
+use crate::arbaro::{self, ArbaroError};
+use crate::builtin_scenes;
+use crate::layout::{self, Amount, Area, LayoutError, Occupancy, ScatterSpec};
+use crate::mesh::{Aabb, Model};
+use crate::species::{normalize_name, Species, BUILTIN_NAMES};
+use crate::weber_penn::GenerateError;
+use glam::{Affine3A, Quat, Vec3};
+use rayon::prelude::*;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+use sylva_core::Sun;
+use toml::Spanned;
+
+/// LB presets a scene may name (the LB crate defines their values).
+pub const LB_PRESETS: &[&str] = &["leaf", "dogrose", "cloud", "pmma"];
+
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    #[error("{path}: cannot read scene file: {source}")]
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
+    #[error("no scene file '{0}' and no built-in scene of that name (built-in scenes: {builtins})", builtins = builtin_scenes::NAMES.join(", "))]
+    NotFound(String),
+    /// Syntax, unknown keys, wrong types and bad values.
+    #[error("{origin}{}: {message}", line.map(|l| format!(": line {l}")).unwrap_or_default())]
+    Invalid {
+        origin: String,
+        line: Option<usize>,
+        message: String,
+    },
+    #[error("{origin}: line {line}: model '{model}': {source}")]
+    Arbaro {
+        origin: String,
+        line: usize,
+        model: String,
+        source: ArbaroError,
+    },
+    #[error("{origin}: model '{model}': {source}")]
+    Generate {
+        origin: String,
+        model: String,
+        source: GenerateError,
+    },
+    #[error("{origin}: line {line}: instances of '{model}': {source}")]
+    Layout {
+        origin: String,
+        line: usize,
+        model: String,
+        source: LayoutError,
+    },
+}
+
+// ---------- the file as written ----------
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawScene {
+    name: Option<String>,
+    #[serde(default)]
+    models: Vec<Spanned<RawModel>>,
+    #[serde(default)]
+    instances: Vec<Spanned<RawInstance>>,
+    ground: Option<Spanned<RawGround>>,
+    sun: Option<Spanned<RawSun>>,
+    sky: Option<Spanned<RawSky>>,
+    camera: Option<Spanned<RawCamera>>,
+    lb: Option<Spanned<RawLb>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawModel {
+    name: String,
+    species: Option<String>,
+    arbaro: Option<String>,
+    mesh: Option<String>,
+    seed: Option<u64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawArea {
+    min: [f32; 2],
+    max: [f32; 2],
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawInstance {
+    model: String,
+    // Explicit placement.
+    position: Option<[f32; 3]>,
+    rotation: Option<f32>,
+    scale: Option<f32>,
+    // Generator.
+    count: Option<u32>,
+    density: Option<f64>,
+    area: Option<RawArea>,
+    min_spacing: Option<f32>,
+    random_rotation: Option<bool>,
+    scale_jitter: Option<f32>,
+    seed: Option<u64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawGround {
+    enabled: Option<bool>,
+    size: Option<[f32; 2]>,
+    color: Option<[f32; 3]>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSun {
+    direction: Option<[f64; 3]>,
+    elevation: Option<f64>,
+    azimuth: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSky {
+    color: [f32; 3],
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawCamera {
+    position: Option<[f32; 3]>,
+    look_at: Option<[f32; 3]>,
+    fov: Option<f32>,
+    resolution: Option<[u32; 2]>,
+    rays_per_pixel: Option<u32>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLb {
+    grid: Option<u32>,
+    preset: Option<String>,
+}
+
+// ---------- checked description ----------
+
+/// Where a model's geometry comes from.
+#[derive(Debug, Clone)]
+pub enum ModelSource {
+    /// A built-in species or one read from an Arbaro file: grown by the generator.
+    Species(Box<Species>),
+}
+
+#[derive(Debug, Clone)]
+pub struct ModelDesc {
+    /// The name instances use.
+    pub name: String,
+    pub source: ModelSource,
+    pub line: usize,
+}
+
+#[derive(Debug, Clone)]
+pub enum Placement {
+    Explicit {
+        position: Vec3,
+        rotation_deg: f32,
+        scale: f32,
+    },
+    Scatter(ScatterSpec),
+}
+
+#[derive(Debug, Clone)]
+pub struct InstanceDesc {
+    /// Index into [`SceneDesc::models`].
+    pub model: usize,
+    pub placement: Placement,
+    pub line: usize,
+}
+
+/// The ground plane y = 0: a `size[0]` × `size[1]` rectangle centred on the origin.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Ground {
+    pub enabled: bool,
+    /// Extent along x and z in metres; `None` in a description means "cover the instances".
+    pub size: Option<[f32; 2]>,
+    /// Linear RGB.
+    pub color: [f32; 3],
+}
+
+/// Pinhole camera; +y is up.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    pub position: Vec3,
+    pub look_at: Vec3,
+    /// Vertical field of view in degrees.
+    pub fov_deg: f32,
+    pub width: u32,
+    pub height: u32,
+    pub rays_per_pixel: u32,
+}
+
+/// What the LB lighting of a scene uses.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct LbSettings {
+    /// Cells along each model's longest edge.
+    pub grid: u32,
+    /// One of [`LB_PRESETS`].
+    pub preset: String,
+}
+
+impl Default for LbSettings {
+    fn default() -> Self {
+        LbSettings {
+            grid: 128,
+            preset: "leaf".into(),
+        }
+    }
+}
+
+/// A parsed, checked scene file; [`SceneDesc::build`] makes the geometry.
+#[derive(Debug, Clone)]
+pub struct SceneDesc {
+    pub name: String,
+    /// The file path, or `built-in scene 'NAME'`.
+    pub origin: String,
+    pub models: Vec<ModelDesc>,
+    pub instances: Vec<InstanceDesc>,
+    pub ground: Ground,
+    pub sun: Sun,
+    /// Linear RGB radiance of the sky.
+    pub sky_color: [f32; 3],
+    /// `None` position: frame the scene's bounds when it is built.
+    pub camera: CameraDesc,
+    pub lb: LbSettings,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraDesc {
+    pub position: Option<Vec3>,
+    pub look_at: Option<Vec3>,
+    pub fov_deg: f32,
+    pub width: u32,
+    pub height: u32,
+    pub rays_per_pixel: u32,
+}
+
+/// One placed plant: a model reference and a transform (rotation about +y, uniform scale,
+/// translation). Geometry is never copied.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Instance {
+    /// Index into [`Scene::models`].
+    pub model: u32,
+    pub position: Vec3,
+    pub rotation_deg: f32,
+    pub scale: f32,
+}
+
+impl Instance {
+    /// Model space → world space.
+    pub fn transform(&self) -> Affine3A {
+        Affine3A::from_scale_rotation_translation(
+            Vec3::splat(self.scale),
+            Quat::from_rotation_y(self.rotation_deg.to_radians()),
+            self.position,
+        )
+    }
+
+    /// World bounds of `model` under this instance's transform.
+    pub fn world_bounds(&self, model: &Model) -> Aabb {
+        let t = self.transform();
+        let mut b = Aabb::EMPTY;
+        for c in model.bounds.corners() {
+            b.grow(t.transform_point3(c));
+        }
+        b
+    }
+}
+
+/// A built scene: unique models, instances referencing them, and the lighting and view.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    pub name: String,
+    pub origin: String,
+    pub models: Vec<Model>,
+    /// The species each model was grown from, index for index.
+    pub species: Vec<Species>,
+    pub instances: Vec<Instance>,
+    pub ground: Ground,
+    pub sun: Sun,
+    pub sky_color: [f32; 3],
+    pub camera: Camera,
+    pub lb: LbSettings,
+}
+
+/// Per-model line of [`SceneStats`].
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ModelStats {
+    pub name: String,
+    pub species: String,
+    pub instances: usize,
+    pub triangles: usize,
+    pub leaf_triangles: usize,
+    pub wood_triangles: usize,
+    pub memory_bytes: u64,
+}
+
+/// What `sylva scene info` reports.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct SceneStats {
+    pub name: String,
+    pub instances: usize,
+    pub unique_triangles: usize,
+    pub instanced_triangles: u64,
+    pub bounds_min: [f32; 3],
+    pub bounds_max: [f32; 3],
+    /// Bytes of model geometry and textures plus instance records.
+    pub memory_bytes: u64,
+    pub models: Vec<ModelStats>,
+}
+
+fn line_of(text: &str, offset: usize) -> usize {
+    text[..offset.min(text.len())].matches('\n').count() + 1
+}
+
+fn finite3(v: [f32; 3]) -> bool {
+    v.iter().all(|x| x.is_finite())
+}
+
+impl SceneDesc {
+    /// A scene by file path, or a built-in scene by name when no such file exists.
+    pub fn load(name_or_path: &str) -> Result<SceneDesc, SceneError> {
+        let path = Path::new(name_or_path);
+        if path.exists() {
+            return SceneDesc::load_file(path);
+        }
+        match builtin_scenes::source(name_or_path) {
+            Some(text) => SceneDesc::parse(text, &format!("built-in scene '{name_or_path}'"), None),
+            None => Err(SceneError::NotFound(name_or_path.to_string())),
+        }
+    }
+
+    pub fn load_file(path: &Path) -> Result<SceneDesc, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        SceneDesc::parse(&text, &path.display().to_string(), Some(&dir))
+    }
+
+    /// Parses and checks scene TOML. Relative model files resolve against `base_dir`
+    /// (the current directory when `None`).
+    pub fn parse(
+        text: &str,
+        origin: &str,
+        base_dir: Option<&Path>,
+    ) -> Result<SceneDesc, SceneError> {
+        let invalid = |line: Option<usize>, message: String| SceneError::Invalid {
+            origin: origin.to_string(),
+            line,
+            message,
+        };
+        let raw: RawScene = toml::from_str(text).map_err(|e| {
+            let line = e.span().map(|s| line_of(text, s.start));
+            invalid(line, e.message().trim().to_string())
+        })?;
+        let line = |s: std::ops::Range<usize>| line_of(text, s.start);
+
+        // Models.
+        let mut models: Vec<ModelDesc> = Vec::new();
+        for m in &raw.models {
+            let l = line(m.span());
+            let m = m.get_ref();
+            if models.iter().any(|o| o.name == m.name) {
+                return Err(invalid(
+                    Some(l),
+                    format!("model '{}' is defined twice", m.name),
+                ));
+            }
+            let sources = [m.species.is_some(), m.arbaro.is_some(), m.mesh.is_some()];
+            if sources.iter().filter(|&&s| s).count() != 1 {
+                return Err(invalid(
+                    Some(l),
+                    format!(
+                        "model '{}' needs exactly one of 'species', 'arbaro' or 'mesh'",
+                        m.name
+                    ),
+                ));
+            }
+            let species = if let Some(name) = &m.species {
+                let mut s = Species::builtin(name).ok_or_else(|| {
+                    invalid(
+                        Some(l),
+                        format!(
+                            "model '{}': unknown species '{name}' (built-in species: {})",
+                            m.name,
+                            BUILTIN_NAMES.join(", ")
+                        ),
+                    )
+                })?;
+                if let Some(seed) = m.seed {
+                    s.seed = seed;
+                }
+                s
+            } else if let Some(file) = &m.arbaro {
+                let p: PathBuf = match base_dir {
+                    Some(d) => d.join(file),
+                    None => PathBuf::from(file),
+                };
+                let a = arbaro::load_file(&p).map_err(|source| SceneError::Arbaro {
+                    origin: origin.to_string(),
+                    line: l,
+                    model: m.name.clone(),
+                    source,
+                })?;
+                let seed = m.seed.or(a.seed).unwrap_or(0);
+                Species::from_params(
+                    &normalize_name(&a.name),
+                    a.params,
+                    seed,
+                    p.display().to_string(),
+                )
+            } else {
+                return Err(invalid(
+                    Some(l),
+                    format!(
+                        "model '{}': importing mesh files ('{}') is not supported yet; use 'species' or 'arbaro'",
+                        m.name,
+                        m.mesh.as_deref().unwrap_or_default()
+                    ),
+                ));
+            };
+            models.push(ModelDesc {
+                name: m.name.clone(),
+                source: ModelSource::Species(Box::new(species)),
+                line: l,
+            });
+        }
+
+        // Instances.
+        let mut instances = Vec::new();
+        for (k, inst) in raw.instances.iter().enumerate() {
+            let l = line(inst.span());
+            let i = inst.get_ref();
+            let model = models
+                .iter()
+                .position(|m| m.name == i.model)
+                .ok_or_else(|| {
+                    invalid(
+                        Some(l),
+                        format!(
+                            "instance refers to model '{}', which no [[models]] entry defines",
+                            i.model
+                        ),
+                    )
+                })?;
+            let scale = i.scale.unwrap_or(1.0);
+            if !(scale.is_finite() && scale > 0.0) {
+                return Err(invalid(
+                    Some(l),
+                    format!("scale must be a positive number, got {scale}"),
+                ));
+            }
+            let placement = if let Some(position) = i.position {
+                let generator_keys = [
+                    ("count", i.count.is_some()),
+                    ("density", i.density.is_some()),
+                    ("area", i.area.is_some()),
+                    ("min_spacing", i.min_spacing.is_some()),
+                    ("random_rotation", i.random_rotation.is_some()),
+                    ("scale_jitter", i.scale_jitter.is_some()),
+                    ("seed", i.seed.is_some()),
+                ];
+                if let Some((key, _)) = generator_keys.iter().find(|(_, set)| *set) {
+                    return Err(invalid(
+                        Some(l),
+                        format!("an instance with 'position' is placed explicitly; '{key}' belongs to a generator"),
+                    ));
+                }
+                let rotation_deg = i.rotation.unwrap_or(0.0);
+                if !finite3(position) || !rotation_deg.is_finite() {
+                    return Err(invalid(
+                        Some(l),
+                        "position and rotation must be finite".into(),
+                    ));
+                }
+                Placement::Explicit {
+                    position: Vec3::from_array(position),
+                    rotation_deg,
+                    scale,
+                }
+            } else {
+                if i.rotation.is_some() {
+                    return Err(invalid(
+                        Some(l),
+                        "'rotation' needs 'position'; a generator uses 'random_rotation'".into(),
+                    ));
+                }
+                let amount = match (i.count, i.density) {
+                    (Some(c), None) => Amount::Count(c as usize),
+                    (None, Some(d)) => Amount::PerSquareMetre(d),
+                    _ => {
+                        return Err(invalid(
+                            Some(l),
+                            "an instance needs 'position', or a generator with exactly one of 'count' or 'density'".into(),
+                        ))
+                    }
+                };
+                let area = i.area.as_ref().ok_or_else(|| {
+                    invalid(
+                        Some(l),
+                        "a generator needs 'area = { min = [x, z], max = [x, z] }'".into(),
+                    )
+                })?;
+                Placement::Scatter(ScatterSpec {
+                    amount,
+                    area: Area {
+                        min: area.min,
+                        max: area.max,
+                    },
+                    min_spacing: i.min_spacing.unwrap_or(0.0),
+                    random_rotation: i.random_rotation.unwrap_or(true),
+                    scale,
+                    scale_jitter: i.scale_jitter.unwrap_or(0.0),
+                    seed: i.seed.unwrap_or(k as u64 + 1),
+                })
+            };
+            instances.push(InstanceDesc {
+                model,
+                placement,
+                line: l,
+            });
+        }
+
+        // Ground.
+        let ground = match &raw.ground {
+            None => Ground {
+                enabled: true,
+                size: None,
+                color: [0.20, 0.17, 0.12],
+            },
+            Some(g) => {
+                let l = line(g.span());
+                let g = g.get_ref();
+                if let Some(s) = g.size {
+                    if !s.iter().all(|v| v.is_finite() && *v > 0.0) {
+                        return Err(invalid(
+                            Some(l),
+                            format!("ground size {s:?} must be positive"),
+                        ));
+                    }
+                }
+                let color = g.color.unwrap_or([0.20, 0.17, 0.12]);
+                if !color.iter().all(|c| c.is_finite() && *c >= 0.0) {
+                    return Err(invalid(
+                        Some(l),
+                        format!("ground color {color:?} must be ≥ 0"),
+                    ));
+                }
+                Ground {
+                    enabled: g.enabled.unwrap_or(true),
+                    size: g.size,
+                    color,
+                }
+            }
+        };
+
+        // Sun.
+        let sun = match &raw.sun {
+            None => Sun::default(),
+            Some(s) => {
+                let l = line(s.span());
+                let s = s.get_ref();
+                let r = match (s.direction, s.elevation, s.azimuth) {
+                    (Some(d), None, None) => Sun::from_direction(d[0], d[1], d[2]),
+                    (None, Some(e), Some(a)) => Sun::from_angles(e, a),
+                    _ => {
+                        return Err(invalid(
+                            Some(l),
+                            "sun needs either 'direction' or both 'elevation' and 'azimuth'".into(),
+                        ))
+                    }
+                };
+                r.map_err(|e| invalid(Some(l), e.to_string()))?
+            }
+        };
+
+        let sky_color = match &raw.sky {
+            None => [0.55, 0.70, 0.95],
+            Some(s) => {
+                let c = s.get_ref().color;
+                if !c.iter().all(|v| v.is_finite() && *v >= 0.0) {
+                    return Err(invalid(
+                        Some(line(s.span())),
+                        format!("sky color {c:?} must be ≥ 0"),
+                    ));
+                }
+                c
+            }
+        };
+
+        let camera = match &raw.camera {
+            None => CameraDesc {
+                position: None,
+                look_at: None,
+                fov_deg: 45.0,
+                width: 640,
+                height: 360,
+                rays_per_pixel: 1,
+            },
+            Some(c) => {
+                let l = line(c.span());
+                let c = c.get_ref();
+                let fov = c.fov.unwrap_or(45.0);
+                if !(fov > 0.0 && fov < 180.0) {
+                    return Err(invalid(
+                        Some(l),
+                        format!("camera fov {fov} must be in (0, 180) degrees"),
+                    ));
+                }
+                let [w, h] = c.resolution.unwrap_or([640, 360]);
+                if !(1..=16384).contains(&w) || !(1..=16384).contains(&h) {
+                    return Err(invalid(
+                        Some(l),
+                        format!("camera resolution {w}×{h} must be 1 to 16384 per side"),
+                    ));
+                }
+                let rpp = c.rays_per_pixel.unwrap_or(1);
+                if !(1..=1024).contains(&rpp) {
+                    return Err(invalid(
+                        Some(l),
+                        format!("rays_per_pixel {rpp} must be 1 to 1024"),
+                    ));
+                }
+                if c.position.is_some() != c.look_at.is_some() {
+                    return Err(invalid(
+                        Some(l),
+                        "camera needs both 'position' and 'look_at' (or neither)".into(),
+                    ));
+                }
+                if let (Some(p), Some(t)) = (c.position, c.look_at) {
+                    if !finite3(p) || !finite3(t) || p == t {
+                        return Err(invalid(
+                            Some(l),
+                            "camera position and look_at must be finite and differ".into(),
+                        ));
+                    }
+                }
+                CameraDesc {
+                    position: c.position.map(Vec3::from_array),
+                    look_at: c.look_at.map(Vec3::from_array),
+                    fov_deg: fov,
+                    width: w,
+                    height: h,
+                    rays_per_pixel: rpp,
+                }
+            }
+        };
+
+        let lb = match &raw.lb {
+            None => LbSettings::default(),
+            Some(s) => {
+                let l = line(s.span());
+                let s = s.get_ref();
+                let grid = s.grid.unwrap_or(128);
+                if !(4..=2048).contains(&grid) {
+                    return Err(invalid(
+                        Some(l),
+                        format!("lb grid {grid} must be 4 to 2048"),
+                    ));
+                }
+                let preset = s.preset.clone().unwrap_or_else(|| "leaf".into());
+                if !LB_PRESETS.contains(&preset.as_str()) {
+                    return Err(invalid(
+                        Some(l),
+                        format!(
+                            "unknown lb preset '{preset}' (presets: {})",
+                            LB_PRESETS.join(", ")
+                        ),
+                    ));
+                }
+                LbSettings { grid, preset }
+            }
+        };
+
+        Ok(SceneDesc {
+            name: raw.name.unwrap_or_else(|| {
+                Path::new(origin)
+                    .file_stem()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_else(|| "scene".into())
+            }),
+            origin: origin.to_string(),
+            models,
+            instances,
+            ground,
+            sun,
+            sky_color,
+            camera,
+            lb,
+        })
+    }
+
+    /// Grows each unique model (in parallel, results in file order) and places the instances.
+    pub fn build(&self) -> Result<Scene, SceneError> {
+        let species: Vec<Species> = self
+            .models
+            .iter()
+            .map(|m| match &m.source {
+                ModelSource::Species(s) => (**s).clone(),
+            })
+            .collect();
+        let models: Vec<Model> = species
+            .par_iter()
+            .zip(&self.models)
+            .map(|(s, d)| {
+                let mut model = s.build_model().map_err(|source| SceneError::Generate {
+                    origin: self.origin.clone(),
+                    model: d.name.clone(),
+                    source,
+                })?;
+                model.name = d.name.clone();
+                Ok(model)
+            })
+            .collect::<Result<_, SceneError>>()?;
+        let instances = self.place_instances()?;
+        let mut scene = Scene {
+            name: self.name.clone(),
+            origin: self.origin.clone(),
+            models,
+            species,
+            instances,
+            ground: self.ground,
+            sun: self.sun,
+            sky_color: self.sky_color,
+            camera: Camera {
+                position: Vec3::ZERO,
+                look_at: Vec3::Z,
+                fov_deg: self.camera.fov_deg,
+                width: self.camera.width,
+                height: self.camera.height,
+                rays_per_pixel: self.camera.rays_per_pixel,
+            },
+            lb: self.lb.clone(),
+        };
+        let bounds = scene.instance_bounds();
+        if scene.ground.size.is_none() {
+            // Cover the instances with a margin, centred on the origin.
+            let half = if bounds.is_empty() {
+                Vec3::splat(10.0)
+            } else {
+                bounds.min.abs().max(bounds.max.abs())
+            };
+            scene.ground.size = Some([2.0 * half.x + 20.0, 2.0 * half.z + 20.0]);
+        }
+        match (self.camera.position, self.camera.look_at) {
+            (Some(p), Some(t)) => {
+                scene.camera.position = p;
+                scene.camera.look_at = t;
+            }
+            _ => {
+                let (p, t) = frame(&bounds, self.camera.fov_deg);
+                scene.camera.position = p;
+                scene.camera.look_at = t;
+            }
+        }
+        Ok(scene)
+    }
+
+    /// Instance transforms only (no geometry); deterministic for the file's seeds.
+    pub fn place_instances(&self) -> Result<Vec<Instance>, SceneError> {
+        let cell = self
+            .instances
+            .iter()
+            .filter_map(|i| match &i.placement {
+                Placement::Scatter(s) => Some(s.min_spacing),
+                _ => None,
+            })
+            .fold(1.0f32, f32::max);
+        let mut occupied = Occupancy::new(cell);
+        let mut out = Vec::new();
+        for inst in &self.instances {
+            match &inst.placement {
+                Placement::Explicit {
+                    position,
+                    rotation_deg,
+                    scale,
+                } => {
+                    occupied.insert(position.x, position.z);
+                    out.push(Instance {
+                        model: inst.model as u32,
+                        position: *position,
+                        rotation_deg: *rotation_deg,
+                        scale: *scale,
+                    });
+                }
+                Placement::Scatter(spec) => {
+                    let placed = layout::scatter(spec, &mut occupied).map_err(|source| {
+                        SceneError::Layout {
+                            origin: self.origin.clone(),
+                            line: inst.line,
+                            model: self.models[inst.model].name.clone(),
+                            source,
+                        }
+                    })?;
+                    out.extend(placed.into_iter().map(|p| Instance {
+                        model: inst.model as u32,
+                        position: Vec3::new(p.x, 0.0, p.z),
+                        rotation_deg: p.rotation_deg,
+                        scale: p.scale,
+                    }));
+                }
+            }
+        }
+        Ok(out)
+    }
+}
+
+/// A camera looking at `bounds` from the -z side, slightly above, so it fits in `fov_deg`.
+fn frame(bounds: &Aabb, fov_deg: f32) -> (Vec3, Vec3) {
+    if bounds.is_empty() {
+        return (Vec3::new(0.0, 2.0, -10.0), Vec3::new(0.0, 1.0, 0.0));
+    }
+    let center = (bounds.min + bounds.max) * 0.5;
+    let radius = (bounds.size().length() * 0.5).max(0.5);
+    let dist = radius / (0.5 * fov_deg.to_radians()).tan().max(1e-3);
+    let dir = Vec3::new(0.0, 0.35, -1.0).normalize();
+    (center + dir * dist, center)
+}
+
+impl Scene {
+    /// A built-in scene or scene file by name, built.
+    pub fn load(name_or_path: &str) -> Result<Scene, SceneError> {
+        SceneDesc::load(name_or_path)?.build()
+    }
+
+    /// World bounds of all instances (the ground excluded).
+    pub fn instance_bounds(&self) -> Aabb {
+        self.instances.iter().fold(Aabb::EMPTY, |b, i| {
+            b.union(&i.world_bounds(&self.models[i.model as usize]))
+        })
+    }
+
+    /// Iterates (instance, its model).
+    pub fn instances_with_models(&self) -> impl Iterator<Item = (&Instance, &Model)> {
+        self.instances
+            .iter()
+            .map(|i| (i, &self.models[i.model as usize]))
+    }
+
+    pub fn unique_triangles(&self) -> usize {
+        self.models.iter().map(Model::triangle_count).sum()
+    }
+
+    pub fn instanced_triangles(&self) -> u64 {
+        self.instances
+            .iter()
+            .map(|i| self.models[i.model as usize].triangle_count() as u64)
+            .sum()
+    }
+
+    /// Model geometry and textures plus instance records.
+    pub fn memory_bytes(&self) -> u64 {
+        self.models.iter().map(Model::memory_bytes).sum::<u64>()
+            + (self.instances.capacity() * std::mem::size_of::<Instance>()) as u64
+    }
+
+    pub fn stats(&self) -> SceneStats {
+        let b = self.instance_bounds();
+        let (min, max) = if b.is_empty() {
+            ([0.0; 3], [0.0; 3])
+        } else {
+            (b.min.to_array(), b.max.to_array())
+        };
+        SceneStats {
+            name: self.name.clone(),
+            instances: self.instances.len(),
+            unique_triangles: self.unique_triangles(),
+            instanced_triangles: self.instanced_triangles(),
+            bounds_min: min,
+            bounds_max: max,
+            memory_bytes: self.memory_bytes(),
+            models: self
+                .models
+                .iter()
+                .enumerate()
+                .map(|(k, m)| {
+                    let leaf = m.mesh.triangles_with_material(crate::weber_penn::LEAF);
+                    ModelStats {
+                        name: m.name.clone(),
+                        species: self.species[k].name.clone(),
+                        instances: self
+                            .instances
+                            .iter()
+                            .filter(|i| i.model as usize == k)
+                            .count(),
+                        triangles: m.triangle_count(),
+                        leaf_triangles: leaf,
+                        wood_triangles: m.triangle_count() - leaf,
+                        memory_bytes: m.memory_bytes(),
+                    }
+                })
+                .collect(),
+        }
+    }
+}
