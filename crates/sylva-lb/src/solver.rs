@@ -8,7 +8,9 @@ use thiserror::Error;
 use crate::alloc::AlignedBuf;
 use crate::collision::{Omega, ReducedOmega};
 use crate::grid::{DensityGrid, Dims, LightingGrid};
-use crate::kernel::{process_row, row_targets, stream_shell_row, KernelIsa, RowParams, WideOmega};
+use crate::kernel::{
+    process_row, row_targets, run_stride, stream_shell_row, CubicOmega, KernelIsa, RowParams,
+};
 use crate::lattice::{unit, Q};
 use crate::params::{ColourParams, MediumParams, ParamError};
 
@@ -147,7 +149,8 @@ pub struct Flows {
 /// three-colour result.
 pub fn memory_needed(dims: Dims) -> u64 {
     let n = dims.sites() as u64;
-    2 * Q as u64 * n * 4 + n * 4 + 3 * n * 4
+    let state = (dims.nx * dims.ny * Q * run_stride(dims.nz)) as u64 * 4;
+    2 * state + n * 4 + 3 * n * 4
 }
 
 /// A raw pointer the planes of a step share; each (row, direction) run of the next state has
@@ -173,8 +176,8 @@ pub struct Lattice {
     codes: Vec<f32>,
     states: [AlignedBuf; 2],
     current: usize,
-    green: WideOmega,
-    brown: WideOmega,
+    green: CubicOmega,
+    brown: CubicOmega,
     dense_green: Omega,
     dense_brown: Omega,
     keep_f0_green: f32,
@@ -218,14 +221,14 @@ impl Lattice {
         let wood = ColourParams { g: -1.0, ..p };
         let dense_green = Omega::new(&p);
         let dense_brown = Omega::new(&wood);
-        let len = dims.sites() * Q;
+        let len = dims.nx * dims.ny * Q * run_stride(dims.nz);
         let mut lattice = Lattice {
             dims,
             codes,
             states: [AlignedBuf::zeroed(len), AlignedBuf::zeroed(len)],
             current: 0,
-            green: WideOmega::new(&ReducedOmega::new(&dense_green)),
-            brown: WideOmega::new(&ReducedOmega::new(&dense_brown)),
+            green: CubicOmega::new(&ReducedOmega::new(&dense_green)),
+            brown: CubicOmega::new(&ReducedOmega::new(&dense_brown)),
             dense_green,
             dense_brown,
             keep_f0_green: if medium.zero_f0_on_green { 0.0 } else { 1.0 },
@@ -243,15 +246,16 @@ impl Lattice {
         self.boundary = boundary;
         let dims = self.dims;
         let nz = dims.nz;
+        let stride = run_stride(nz);
         for state in &mut self.states {
             state
-                .par_chunks_mut(Q * nz)
+                .par_chunks_mut(Q * stride)
                 .enumerate()
                 .for_each(|(row, block)| {
                     let (x, y) = (row / dims.ny, row % dims.ny);
                     let whole_row = x == 0 || y == 0 || x == dims.nx - 1 || y == dims.ny - 1;
                     for m in 0..Q {
-                        let run = &mut block[m * nz..(m + 1) * nz];
+                        let run = &mut block[m * stride + 1..m * stride + 1 + nz];
                         let v = boundary.values[m];
                         if whole_row {
                             run.fill(v);
@@ -283,7 +287,7 @@ impl Lattice {
     /// State index of `f_m` at (x, y, z).
     #[inline]
     pub fn state_index(&self, x: usize, y: usize, z: usize, m: usize) -> usize {
-        ((x * self.dims.ny + y) * Q + m) * self.dims.nz + z
+        ((x * self.dims.ny + y) * Q + m) * run_stride(self.dims.nz) + 1 + z
     }
 
     /// `f_m` at (x, y, z) in the current state.
@@ -307,11 +311,12 @@ impl Lattice {
         let nz = dims.nz;
         let state = &self.states[self.current];
         let mut out = vec![0.0f32; dims.sites()];
+        let stride = run_stride(nz);
         out.par_chunks_mut(nz)
-            .zip(state.par_chunks(Q * nz))
+            .zip(state.par_chunks(Q * stride))
             .for_each(|(o, block)| {
                 for m in 0..Q {
-                    for (acc, v) in o.iter_mut().zip(&block[m * nz..(m + 1) * nz]) {
+                    for (acc, v) in o.iter_mut().zip(&block[m * stride + 1..]) {
                         *acc += v;
                     }
                 }
@@ -324,6 +329,7 @@ impl Lattice {
     pub fn step(&mut self) -> f64 {
         let dims = self.dims;
         let (nx, ny, nz) = (dims.nx, dims.ny, dims.nz);
+        let block_len = Q * run_stride(nz);
         let (a, b) = self.states.split_at_mut(1);
         let (src, dst) = if self.current == 0 {
             (&a[0], &mut b[0])
@@ -348,11 +354,13 @@ impl Lattice {
                     let mut plane_total = 0.0f64;
                     for y in 0..ny {
                         let row = x * ny + y;
-                        let block = &src[row * Q * nz..(row + 1) * Q * nz];
+                        let block = &src[row * block_len..(row + 1) * block_len];
                         // Fetch the next row's 19 runs while this one computes: the hardware
                         // prefetchers lose track of 19 interleaved runs per row.
                         if y + 1 < ny {
-                            crate::kernel::prefetch(&src[(row + 1) * Q * nz..(row + 2) * Q * nz]);
+                            crate::kernel::prefetch(
+                                &src[(row + 1) * block_len..(row + 2) * block_len],
+                            );
                         }
                         // SAFETY: `block` holds the row's 19 runs; each (row, m) run of `dst` is
                         // written by exactly one source row, so planes never write the same floats.
@@ -539,8 +547,8 @@ pub fn solve_lighting(
                 let p = medium.colours[c];
                 l.dense_green = Omega::new(&p);
                 l.dense_brown = Omega::new(&ColourParams { g: -1.0, ..p });
-                l.green = WideOmega::new(&ReducedOmega::new(&l.dense_green));
-                l.brown = WideOmega::new(&ReducedOmega::new(&l.dense_brown));
+                l.green = CubicOmega::new(&ReducedOmega::new(&l.dense_green));
+                l.brown = CubicOmega::new(&ReducedOmega::new(&l.dense_brown));
                 l.reset(boundary);
                 l
             }
