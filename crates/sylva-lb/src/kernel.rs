@@ -472,29 +472,29 @@ impl KernelIsa {
     }
 }
 
-/// The targets of interior row (x, y): run `m` of row `(x + cx, y + cy)` in `dst`, shifted
-/// by `cz` so that index k of the result row lands at `k + cz`; the sink where that row is on
-/// the shell.
+/// The targets of row y of a plane: run `m` of row `y + cy` in target plane `planes[cx + 1]`
+/// (the planes at x - 1, x, x + 1 of the next state, each a `ny × 19` block of padded runs),
+/// shifted by `cz` so that index k of the result row lands at `k + cz`; the sink where the
+/// target plane (null) or row is on the shell.
 ///
 /// # Safety
-/// `dst` must point at a state of `nx * ny * 19 * nz` floats, (x, y) be interior, and `sink`
-/// be valid for `nz + 2` floats (a run with its padding).
+/// Non-null planes must hold `ny * 19` padded runs; `sink` must be valid for `nz + 2` floats.
 pub unsafe fn row_targets(
-    dst: *mut f32,
+    planes: [*mut f32; 3],
     sink: *mut f32,
-    dims: (usize, usize, usize),
-    x: usize,
+    ny: usize,
+    nz: usize,
     y: usize,
 ) -> RowTargets {
-    let (nx, ny, nz) = dims;
     let mut run = [sink; Q];
     for (m, c) in C.iter().enumerate() {
-        let tx = (x as isize + c[0] as isize) as usize;
+        let plane = planes[(c[0] + 1) as usize];
         let ty = (y as isize + c[1] as isize) as usize;
         // Run data starts one float into its padded run (and the sink's first float), so
         // the -1 shift stays inside the allocation.
-        run[m] = if tx >= 1 && ty >= 1 && tx <= nx - 2 && ty <= ny - 2 {
-            dst.add(((tx * ny + ty) * Q + m) * run_stride(nz) + 1)
+        run[m] = if !plane.is_null() && ty >= 1 && ty <= ny - 2 {
+            plane
+                .add((ty * Q + m) * run_stride(nz) + 1)
                 .offset(c[2] as isize)
         } else {
             sink.add(1).offset(c[2] as isize)
@@ -523,25 +523,25 @@ pub unsafe fn process_row(
     }
 }
 
-/// Streams a shell row (boundary values, no collision) into its interior neighbours;
+/// Streams a shell row (boundary values, no collision) into its interior neighbours in the
+/// target planes (as in [`row_targets`]);
 /// writes that would land on the shell are dropped (002 §3: inflow into the boundary is
 /// ignored).
 ///
 /// # Safety
-/// `dst` must point at a state of `nx * ny * 19 * nz` floats, and no other thread may write
-/// the (row, direction) runs this row streams into: each one has exactly one source row.
+/// Non-null planes must hold `ny * 19` padded runs, and no other thread may write the (row,
+/// direction) runs this row streams into: each one has exactly one source row.
 pub unsafe fn stream_shell_row(
     block: &[f32],
-    dst: *mut f32,
-    dims: (usize, usize, usize),
-    x: usize,
+    planes: [*mut f32; 3],
+    ny: usize,
+    nz: usize,
     y: usize,
 ) {
-    let (nx, ny, nz) = dims;
     for (m, c) in C.iter().enumerate() {
-        let tx = x as isize + c[0] as isize;
+        let plane = planes[(c[0] + 1) as usize];
         let ty = y as isize + c[1] as isize;
-        if tx < 1 || ty < 1 || tx > nx as isize - 2 || ty > ny as isize - 2 {
+        if plane.is_null() || ty < 1 || ty > ny as isize - 2 {
             continue;
         }
         let cz = c[2] as isize;
@@ -551,9 +551,9 @@ pub unsafe fn stream_shell_row(
         if z_lo >= z_hi {
             continue;
         }
-        let row = ((tx as usize * ny + ty as usize) * Q + m) * run_stride(nz) + 1;
+        let run = (ty as usize * Q + m) * run_stride(nz) + 1;
         let from = block.as_ptr().add(m * run_stride(nz) + 1 + z_lo);
-        let to = dst.add(row + (z_lo as isize + cz) as usize);
+        let to = plane.add(run + (z_lo as isize + cz) as usize);
         std::ptr::copy_nonoverlapping(from, to, z_hi - z_lo);
     }
 }
