@@ -1,17 +1,16 @@
-//! A small deterministic random generator (SplitMix64): the same seed gives the same tree on
-//! every platform and thread count, without depending on an external crate's stream stability.
+//! The generators' random stream: the same seed gives the same tree on every platform and
+//! thread count.
 
-/// SplitMix64 stream.
+use sylva_core::SplitMix64;
+
+/// The scene generators' stream: [`SplitMix64`] with their own seeding, plus the ranges Weber &
+/// Penn's parameters use.
 #[derive(Debug, Clone)]
-pub struct Rng {
-    state: u64,
-}
+pub struct Rng(SplitMix64);
 
 impl Rng {
     pub fn new(seed: u64) -> Rng {
-        Rng {
-            state: seed ^ 0x9E37_79B9_7F4A_7C15,
-        }
+        Rng(SplitMix64::new(seed ^ 0x9E37_79B9_7F4A_7C15))
     }
 
     /// A child stream for sub-task `index`: independent of how many values the parent drew
@@ -23,16 +22,12 @@ impl Rng {
     }
 
     pub fn next_u64(&mut self) -> u64 {
-        self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        self.0.next_u64()
     }
 
     /// Uniform in [0, 1).
     pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+        self.0.next_f64()
     }
 
     /// Uniform in [lo, hi).

@@ -26,7 +26,6 @@ pub mod full;
 pub mod monte_carlo;
 pub mod phase;
 pub mod quadrature;
-pub mod rng;
 pub mod slab;
 pub mod spp;
 pub mod tables;

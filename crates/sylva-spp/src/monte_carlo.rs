@@ -7,10 +7,10 @@
 
 use crate::error::SppError;
 use crate::phase::hg_inverse_cdf;
-use crate::rng::SplitMix64;
 use crate::slab::Slab;
 use rayon::prelude::*;
 use serde::Serialize;
+use sylva_core::SplitMix64;
 
 /// Photons per chunk (the unit of parallel work and of seeding).
 const CHUNK: u64 = 16_384;

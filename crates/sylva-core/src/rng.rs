@@ -1,4 +1,5 @@
-//! A small seeded generator (SplitMix64) so Monte Carlo results depend only on the seed.
+//! A small seeded generator (SplitMix64): results depend only on the seed, on every platform
+//! and thread count, without relying on an external crate's stream stability.
 
 /// SplitMix64 (Steele, Lea, Flood 2014): 64-bit state, passes BigCrush, and any seed (zero
 /// included) is a good one, which makes per-chunk seeding trivial.
