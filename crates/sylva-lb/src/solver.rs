@@ -190,8 +190,6 @@ pub struct Lattice {
     keep_f0_brown: f32,
     isa: KernelIsa,
     boundary: Boundary,
-    /// Total interior density of the current state (computed by the last step).
-    last_total: f64,
 }
 
 impl Lattice {
@@ -242,7 +240,6 @@ impl Lattice {
             keep_f0_brown: if medium.zero_f0_on_brown { 0.0 } else { 1.0 },
             isa: KernelIsa::detect(),
             boundary,
-            last_total: 0.0,
         };
         lattice.reset(boundary);
         Ok(lattice)
@@ -285,7 +282,6 @@ impl Lattice {
             fill(block, y == 0 || y == dims.ny - 1);
         }
         self.current = 0;
-        self.last_total = 0.0;
     }
 
     /// Chooses the portable kernel even where AVX2 exists (for comparisons).
@@ -442,9 +438,7 @@ impl Lattice {
             .collect();
         self.states = states;
         self.current ^= 1;
-        let total = totals.iter().sum();
-        self.last_total = total;
-        total
+        totals.iter().sum()
     }
 
     /// Advances two steps in one sweep over memory (temporal blocking) and returns the
@@ -545,9 +539,7 @@ impl Lattice {
         }
         self.states[self.current] = state;
         self.ring = ring;
-        let (t0, t1) = (first.iter().sum(), second.iter().sum());
-        self.last_total = t1;
-        (t0, t1)
+        (first.iter().sum(), second.iter().sum())
     }
 
     /// Advances one step with a direct scalar implementation of eq. 2 in f64 (the dense Ω,

@@ -4,7 +4,6 @@ use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
 use serde::Serialize;
 use sylva_lb::bandwidth::copy_bandwidth_gbs;
-use sylva_lb::kernel::KernelIsa;
 use sylva_lb::lattice::Q;
 use sylva_lb::{Boundary, DensityGrid, Dims, Lattice, Preset, SolveOptions};
 
@@ -118,7 +117,7 @@ fn bench_lb(a: BenchLbArgs) -> Result<()> {
         copy_gbs,
         ratio: effective_gbs / copy_gbs,
         threads: rayon::current_num_threads(),
-        kernel: KernelIsa::detect().name(),
+        kernel: lattice.kernel().name(),
         runs,
     };
     if a.json {
