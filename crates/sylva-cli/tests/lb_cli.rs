@@ -1,19 +1,9 @@
 //! `sylva lb` and `sylva bench lb` as a user runs them.
 
 use std::path::Path;
-use std::process::Command;
 
-fn sylva(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_sylva"))
-        .args(args)
-        .output()
-        .expect("run sylva");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+mod common;
+use common::sylva;
 
 /// A 14×12×10 raw f32 medium: a half-dense ball.
 fn write_raw(path: &Path) {

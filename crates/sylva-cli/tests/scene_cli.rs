@@ -1,18 +1,7 @@
 //! `sylva scene` and `sylva species` as a user runs them.
 
-use std::process::Command;
-
-fn sylva(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_sylva"))
-        .args(args)
-        .output()
-        .expect("run sylva");
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+mod common;
+use common::sylva;
 
 #[test]
 fn scene_info_json_has_the_counts() {

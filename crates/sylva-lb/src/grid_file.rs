@@ -291,8 +291,7 @@ impl GridFile {
             path: path.into(),
             source,
         };
-        let mut file = std::fs::File::open(path).map_err(io)?;
-        let (header, mut crc) = read_header(path, &mut file)?;
+        let (mut file, header, mut crc) = open_grid(path)?;
         let payload_len = header.file_bytes - HEADER_LEN as u64 - header.metadata_bytes as u64;
         sylva_core::check_memory(
             &format!("reading {}", path.display()),
@@ -362,6 +361,17 @@ fn metadata_text(meta: &[(String, String)]) -> String {
     meta.iter()
         .map(|(k, v)| format!("{}={}\n", k.replace(['=', '\n'], "_"), v.replace('\n', " ")))
         .collect()
+}
+
+/// Opens a grid file and checks its header and metadata; the file is left at the payload and
+/// the CRC has consumed everything before it.
+fn open_grid(path: &Path) -> Result<(std::fs::File, GridHeader, crc32fast::Hasher), GridFileError> {
+    let mut file = std::fs::File::open(path).map_err(|source| GridFileError::Io {
+        path: path.into(),
+        source,
+    })?;
+    let (header, crc) = read_header(path, &mut file)?;
+    Ok((file, header, crc))
 }
 
 /// Reads and checks the header and metadata, leaving `file` at the payload.
@@ -501,12 +511,11 @@ fn read_up_to(file: &mut std::fs::File, buf: &mut [u8]) -> std::io::Result<usize
 /// Reads only the header and metadata (for `sylva lb info`); the checksum is verified too,
 /// which reads the payload once without keeping it.
 pub fn read_header_verified(path: &Path) -> Result<GridHeader, GridFileError> {
+    let (mut file, header, mut crc) = open_grid(path)?;
     let io = |source| GridFileError::Io {
         path: path.into(),
         source,
     };
-    let mut file = std::fs::File::open(path).map_err(io)?;
-    let (header, mut crc) = read_header(path, &mut file)?;
     let mut buf = vec![0u8; 1 << 20];
     loop {
         let n = file.read(&mut buf).map_err(io)?;

@@ -168,6 +168,30 @@ impl Direction {
     }
 }
 
+/// Closed-form single-scattered radiance at depth `z` in direction `dir` for σ_t = 1, albedo
+/// `albedo`, HG asymmetry `g`, thickness `w`, sun cosine `mu0`:
+/// `ω p(s, s0) ∫ e^{-z'/mu0} e^{-|z - z'| / |mu|} dz' / |mu|`. The first-order (low-albedo)
+/// reference the full and refined models are tested against.
+#[cfg(test)]
+pub(crate) fn single_scatter_reference(
+    albedo: f64,
+    g: f64,
+    w: f64,
+    mu0: f64,
+    z: f64,
+    dir: Direction,
+) -> f64 {
+    let q = 1.0 / mu0;
+    let s = 1.0 / dir.mu.abs();
+    let path = if dir.mu > 0.0 {
+        ((-q * z).exp() - (-s * z).exp()) / (s - q)
+    } else {
+        (-q * z).exp() * (1.0 - (-(q + s) * (w - z)).exp()) / (q + s)
+    };
+    let s0 = Direction { mu: mu0, phi: 0.0 };
+    albedo * crate::phase::henyey_greenstein(g, dir.cos_angle_to(&s0)) * path * s
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

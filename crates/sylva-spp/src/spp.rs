@@ -325,18 +325,10 @@ mod tests {
         let albedo = 1e-4;
         let (w, mu0) = (2.0, 0.6f64);
         let model = SppModel::new(Slab::new(1.0, albedo, 0.5, w, mu0).unwrap()).unwrap();
-        let q = 1.0 / mu0;
-        let s0 = Direction { mu: mu0, phi: 0.0 };
         for &z in &[0.4, 1.5] {
             for &(mu, phi) in &[(0.3, 0.0), (0.9, 2.0), (-0.5, 0.5), (-0.95, 3.1)] {
                 let dir = Direction::new(mu, phi).unwrap();
-                let s = 1.0 / f64::abs(mu);
-                let path = if mu > 0.0 {
-                    ((-q * z).exp() - (-s * z).exp()) / (s - q)
-                } else {
-                    (-q * z).exp() * (1.0 - (-(q + s) * (w - z)).exp()) / (q + s)
-                };
-                let want = albedo * henyey_greenstein(0.5, dir.cos_angle_to(&s0)) * path * s;
+                let want = crate::slab::single_scatter_reference(albedo, 0.5, w, mu0, z, dir);
                 let refined = model.refined_radiance(z, dir).unwrap();
                 assert!(
                     (refined / want - 1.0).abs() < 1e-3,
