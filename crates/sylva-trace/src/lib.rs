@@ -1,0 +1,23 @@
+//! The ray-tracing core of sylva (SPEC §2, paper 000 §3-4): what the renderer asks "what
+//! does this ray hit first?" and "is this point in the sun?".
+//!
+//! * [`ray`]: [`Ray`], [`Hit`], the slab test and Möller-Trumbore with its edge rule.
+//! * [`kdtree`]: SAH kd-trees (binned, exact triangle clipping, parallel and deterministic
+//!   build, 8-byte nodes) and the short-stack traversal of 000 Fig. 1 with kd-restart.
+//! * [`model`]: one model's tree plus triangle and alpha data; the alpha rule for leaves.
+//! * [`scene`]: [`SceneAccel`], the two levels (instances over models) and the ground.
+//! * [`camera`]: [`PinholeCamera`], primary rays from a scene's camera.
+//!
+//! Shading, images and the `sylva render` command live elsewhere; see `docs/trace.md`.
+
+pub mod camera;
+pub mod kdtree;
+pub mod model;
+pub mod ray;
+pub mod scene;
+
+pub use camera::PinholeCamera;
+pub use kdtree::{KdTree, TraceStats, TraversalConfig, TreeStats, DEFAULT_STACK_SIZE, MAX_DEPTH};
+pub use model::{AlphaMask, ModelAccel};
+pub use ray::{intersect_triangle, ray_box, Hit, Ray, TriangleData};
+pub use scene::{AccelMemory, SceneAccel, TraceError, TraceInstance};

@@ -1,0 +1,432 @@
+//! One model's acceleration structure: its SAH kd-tree over triangles, precomputed
+//! Möller-Trumbore data, and what the alpha test needs (per-triangle texture coordinates and
+//! an opacity bitmask per leaf texture).
+//!
+//! # Alpha rule
+//!
+//! A triangle whose material is a leaf ([`MaterialKind::Leaf`]) with a texture is
+//! alpha-tested: at the hit's interpolated texture coordinates, the nearest texel (the
+//! texture's own wrap mode, exactly [`Texture::alpha`]) must have alpha ≥ 0.5 (byte ≥ 128).
+//! A hit on a transparent texel is discarded inside the leaf loop and the traversal goes on,
+//! so the ray is never re-traced from the hit. Wood and untextured leaves are opaque.
+
+use crate::kdtree::{Clip, KdTree, TraceStats, TraversalConfig};
+use crate::ray::{intersect_triangle, inverse_dir, TriangleData};
+use glam::{Vec2, Vec3};
+use std::sync::Arc;
+use sylva_scene::{Aabb, MaterialKind, Model, Texture, Wrap};
+
+/// Opacity of a texture as one bit per texel: `Texture::alpha(u, v) >= 0.5` without
+/// converting texels to floats.
+#[derive(Debug, Clone)]
+pub struct AlphaMask {
+    width: u32,
+    height: u32,
+    wrap: Wrap,
+    bits: Vec<u64>,
+}
+
+impl AlphaMask {
+    pub fn new(tex: &Texture) -> AlphaMask {
+        let n = tex.pixels.len();
+        let mut bits = vec![0u64; n.div_ceil(64)];
+        for (i, p) in tex.pixels.iter().enumerate() {
+            if p[3] >= 128 {
+                bits[i / 64] |= 1 << (i % 64);
+            }
+        }
+        AlphaMask {
+            width: tex.width,
+            height: tex.height,
+            wrap: tex.wrap,
+            bits,
+        }
+    }
+
+    fn index(i: i64, n: u32, wrap: Wrap) -> u32 {
+        match wrap {
+            Wrap::Repeat => i.rem_euclid(n as i64) as u32,
+            Wrap::Clamp => i.clamp(0, n as i64 - 1) as u32,
+        }
+    }
+
+    /// Same texel as `Texture::sample(u, v, Filter::Nearest)`.
+    #[inline]
+    pub fn opaque(&self, u: f32, v: f32) -> bool {
+        let (u, v) = if u.is_finite() && v.is_finite() {
+            (u, v)
+        } else {
+            (0.0, 0.0)
+        };
+        let x = Self::index(
+            (u * self.width as f32).floor() as i64,
+            self.width,
+            self.wrap,
+        );
+        let y = Self::index(
+            (v * self.height as f32).floor() as i64,
+            self.height,
+            self.wrap,
+        );
+        let i = (y * self.width + x) as usize;
+        self.bits[i / 64] >> (i % 64) & 1 == 1
+    }
+
+    pub fn memory_bytes(&self) -> u64 {
+        self.bits.capacity() as u64 * 8
+    }
+}
+
+/// Precomputed triangle plus its alpha entry (`u32::MAX`: opaque).
+#[derive(Debug, Clone, Copy)]
+#[repr(C)]
+struct Tri {
+    data: TriangleData,
+    alpha: u32,
+}
+
+/// Texture coordinates of an alpha-tested triangle's corners and its mask.
+#[derive(Debug, Clone, Copy)]
+struct AlphaTri {
+    uv: [Vec2; 3],
+    mask: u32,
+}
+
+/// The closest candidate so far: `(t, instance, triangle)` ordered lexicographically.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Best {
+    pub t: f32,
+    pub instance: u32,
+    pub triangle: u32,
+    pub u: f32,
+    pub v: f32,
+}
+
+/// A model ready for ray queries.
+#[derive(Debug, Clone)]
+pub struct ModelAccel {
+    tree: KdTree,
+    tris: Vec<Tri>,
+    alpha: Vec<AlphaTri>,
+    masks: Vec<AlphaMask>,
+}
+
+struct TriClip<'a> {
+    positions: &'a [[f32; 3]],
+    indices: &'a [[u32; 3]],
+}
+
+impl TriClip<'_> {
+    fn corners(&self, i: usize) -> [Vec3; 3] {
+        self.indices[i].map(|k| Vec3::from_array(self.positions[k as usize]))
+    }
+}
+
+impl Clip for TriClip<'_> {
+    fn count(&self) -> usize {
+        self.indices.len()
+    }
+
+    fn bounds(&self, i: usize) -> Option<Aabb> {
+        let [a, b, c] = self.corners(i);
+        if TriangleData::new(a, b, c).is_degenerate() {
+            return None;
+        }
+        Some(Aabb {
+            min: a.min(b).min(c),
+            max: a.max(b).max(c),
+        })
+    }
+
+    fn clip(&self, i: usize, bx: &Aabb) -> Option<Aabb> {
+        clip_triangle(self.corners(i), bx)
+    }
+}
+
+/// Bounds of the triangle's part inside `bx` (Sutherland-Hodgman against the six planes),
+/// widened so that rounding never loses a sliver and the widened triangle test (see
+/// [`crate::ray`]) never hits outside the bounds.
+pub fn clip_triangle(tri: [Vec3; 3], bx: &Aabb) -> Option<Aabb> {
+    let mut poly: [Vec3; 9] = [Vec3::ZERO; 9];
+    let mut tmp: [Vec3; 9] = [Vec3::ZERO; 9];
+    poly[..3].copy_from_slice(&tri);
+    let mut n = 3usize;
+    for axis in 0..3 {
+        for (plane, keep_above) in [(bx.min[axis], true), (bx.max[axis], false)] {
+            let inside = |p: Vec3| {
+                if keep_above {
+                    p[axis] >= plane
+                } else {
+                    p[axis] <= plane
+                }
+            };
+            let mut m = 0usize;
+            for k in 0..n {
+                let p = poly[k];
+                let q = poly[(k + 1) % n];
+                let (pi, qi) = (inside(p), inside(q));
+                if pi {
+                    tmp[m] = p;
+                    m += 1;
+                }
+                if pi != qi {
+                    let s = (plane - p[axis]) / (q[axis] - p[axis]);
+                    let mut x = p + (q - p) * s;
+                    x[axis] = plane;
+                    tmp[m] = x;
+                    m += 1;
+                }
+            }
+            n = m;
+            if n == 0 {
+                return None;
+            }
+            poly[..n].copy_from_slice(&tmp[..n]);
+        }
+    }
+    let mut b = Aabb::EMPTY;
+    for p in &poly[..n] {
+        b.grow(*p);
+    }
+    // Rounding of the clipped corners (relative to the coordinates) plus the widening of
+    // the triangle test (relative to the triangle), so every hit point lies in the bounds.
+    let size = (tri[0].max(tri[1]).max(tri[2]) - tri[0].min(tri[1]).min(tri[2])).max_element();
+    let mag = b.min.abs().max(b.max.abs()).max_element();
+    let slack = 4e-7 * mag + 2.0 * crate::ray::BARY_EPS * size;
+    b.min -= Vec3::splat(slack);
+    b.max += Vec3::splat(slack);
+    Some(b)
+}
+
+impl ModelAccel {
+    /// Builds the kd-tree over the model's triangles (in parallel, deterministic).
+    pub fn build(model: &Model) -> ModelAccel {
+        let mesh = &model.mesh;
+        let clip = TriClip {
+            positions: &mesh.positions,
+            indices: &mesh.indices,
+        };
+        let tree = KdTree::build(&clip);
+        let mut masks = Vec::new();
+        let mut mask_of: Vec<Option<u32>> = Vec::new();
+        for m in &model.materials {
+            let textured_leaf = m.kind == MaterialKind::Leaf && m.texture.is_some();
+            mask_of.push(textured_leaf.then(|| {
+                masks.push(AlphaMask::new(m.texture.as_ref().map(Arc::as_ref).unwrap()));
+                masks.len() as u32 - 1
+            }));
+        }
+        let mut alpha = Vec::new();
+        let tris = (0..mesh.indices.len())
+            .map(|i| {
+                let [a, b, c] = clip.corners(i);
+                let mat = mesh.material_ids.get(i).copied().unwrap_or(0) as usize;
+                let a_idx = match mask_of.get(mat).copied().flatten() {
+                    Some(mask) => {
+                        let uv = mesh.indices[i].map(|k| {
+                            Vec2::from_array(mesh.uvs.get(k as usize).copied().unwrap_or([0.0; 2]))
+                        });
+                        alpha.push(AlphaTri { uv, mask });
+                        alpha.len() as u32 - 1
+                    }
+                    None => u32::MAX,
+                };
+                Tri {
+                    data: TriangleData::new(a, b, c),
+                    alpha: a_idx,
+                }
+            })
+            .collect();
+        ModelAccel {
+            tree,
+            tris,
+            alpha,
+            masks,
+        }
+    }
+
+    pub fn tree(&self) -> &KdTree {
+        &self.tree
+    }
+
+    pub fn bounds(&self) -> Aabb {
+        self.tree.bounds()
+    }
+
+    /// Bytes of the tree, the triangle data and the alpha data (the mesh itself excluded).
+    pub fn memory_bytes(&self) -> u64 {
+        self.tree.memory_bytes()
+            + (self.tris.capacity() * std::mem::size_of::<Tri>()
+                + self.alpha.capacity() * std::mem::size_of::<AlphaTri>()) as u64
+            + self.masks.iter().map(AlphaMask::memory_bytes).sum::<u64>()
+    }
+
+    /// Model-space geometric normal `e1 × e2` of triangle `i` (not normalised).
+    pub fn triangle_normal(&self, triangle: u32) -> Vec3 {
+        let d = &self.tris[triangle as usize].data;
+        d.e1.cross(d.e2)
+    }
+
+    /// Does the alpha test let a hit at barycentrics (u, v) on triangle `tri` stand?
+    #[inline]
+    fn passes_alpha(&self, alpha: u32, u: f32, v: f32) -> bool {
+        if alpha == u32::MAX {
+            return true;
+        }
+        let a = &self.alpha[alpha as usize];
+        let uv = a.uv[0] * (1.0 - u - v) + a.uv[1] * u + a.uv[2] * v;
+        self.masks[a.mask as usize].opaque(uv.x, uv.y)
+    }
+
+    /// Whether triangle `i` (at barycentrics u, v) is opaque under the alpha rule; `true` for
+    /// opaque materials. For reference implementations and tests.
+    pub fn is_opaque_at(&self, triangle: u32, u: f32, v: f32) -> bool {
+        self.passes_alpha(self.tris[triangle as usize].alpha, u, v)
+    }
+
+    /// Closest hit in model space, improving `best` (ties: lower triangle id).
+    #[inline]
+    #[allow(clippy::too_many_arguments)] // the hot path, called per instance a ray meets
+    pub(crate) fn closest(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        instance: u32,
+        best: &mut Best,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+    ) {
+        let inv = inverse_dir(dir);
+        let (mut tests, mut rejects) = (0u64, 0u64);
+        self.tree
+            .traverse(origin, inv, t_min, best.t, cfg, stats, |prims| {
+                tests += prims.len() as u64;
+                for &p in prims {
+                    let tri = &self.tris[p as usize];
+                    if let Some((t, u, v)) =
+                        intersect_triangle(origin, dir, &tri.data, t_min, best.t)
+                    {
+                        if t == best.t && (instance, p) >= (best.instance, best.triangle) {
+                            continue;
+                        }
+                        if !self.passes_alpha(tri.alpha, u, v) {
+                            rejects += 1;
+                            continue;
+                        }
+                        *best = Best {
+                            t,
+                            instance,
+                            triangle: p,
+                            u,
+                            v,
+                        };
+                    }
+                }
+                best.t
+            });
+        stats.triangle_tests += tests;
+        stats.alpha_rejects += rejects;
+    }
+
+    /// Any opaque hit with `t_min < t ≤ t_max`, in model space.
+    #[inline]
+    pub(crate) fn any(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+    ) -> bool {
+        let inv = inverse_dir(dir);
+        let mut found = false;
+        let (mut tests, mut rejects) = (0u64, 0u64);
+        self.tree
+            .traverse(origin, inv, t_min, t_max, cfg, stats, |prims| {
+                for &p in prims {
+                    tests += 1;
+                    let tri = &self.tris[p as usize];
+                    if let Some((_, u, v)) =
+                        intersect_triangle(origin, dir, &tri.data, t_min, t_max)
+                    {
+                        if self.passes_alpha(tri.alpha, u, v) {
+                            found = true;
+                            return f32::NEG_INFINITY;
+                        }
+                        rejects += 1;
+                    }
+                }
+                f32::INFINITY
+            });
+        stats.triangle_tests += tests;
+        stats.alpha_rejects += rejects;
+        found
+    }
+
+    /// Closest hit of a model-space ray on this model alone (instance id 0).
+    pub fn closest_hit(
+        &self,
+        ray: &crate::Ray,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+    ) -> Option<crate::Hit> {
+        stats.rays += 1;
+        if !ray.is_valid() {
+            return None;
+        }
+        let mut best = Best {
+            t: ray.t_max,
+            instance: u32::MAX,
+            triangle: u32::MAX,
+            u: 0.0,
+            v: 0.0,
+        };
+        self.closest(ray.origin, ray.dir, ray.t_min, 0, &mut best, cfg, stats);
+        (best.instance != u32::MAX).then_some(crate::Hit {
+            t: best.t,
+            instance: best.instance,
+            triangle: best.triangle,
+            u: best.u,
+            v: best.v,
+        })
+    }
+
+    /// Whether a model-space ray hits this model anywhere in its interval.
+    pub fn any_hit(&self, ray: &crate::Ray, cfg: TraversalConfig, stats: &mut TraceStats) -> bool {
+        stats.rays += 1;
+        ray.is_valid() && self.any(ray.origin, ray.dir, ray.t_min, ray.t_max, cfg, stats)
+    }
+
+    /// Reference: every triangle tested, same rules (for tests).
+    pub fn brute_closest_hit(&self, ray: &crate::Ray) -> Option<crate::Hit> {
+        let mut best: Option<crate::Hit> = None;
+        for (i, tri) in self.tris.iter().enumerate() {
+            let t_max = best.map_or(ray.t_max, |b| b.t);
+            if let Some((t, u, v)) =
+                intersect_triangle(ray.origin, ray.dir, &tri.data, ray.t_min, t_max)
+            {
+                if best.is_some_and(|b| t == b.t) || !self.passes_alpha(tri.alpha, u, v) {
+                    continue; // equal t: the earlier (lower) id stands
+                }
+                best = Some(crate::Hit {
+                    t,
+                    instance: 0,
+                    triangle: i as u32,
+                    u,
+                    v,
+                });
+            }
+        }
+        best
+    }
+
+    /// Reference any-hit: every triangle tested.
+    pub fn brute_any_hit(&self, ray: &crate::Ray) -> bool {
+        self.tris.iter().any(|tri| {
+            intersect_triangle(ray.origin, ray.dir, &tri.data, ray.t_min, ray.t_max)
+                .is_some_and(|(_, u, v)| self.passes_alpha(tri.alpha, u, v))
+        })
+    }
+}

@@ -1,0 +1,412 @@
+//! The two-level structure of a scene: one [`ModelAccel`] per unique model, a top-level SAH
+//! kd-tree over the instances' world-space boxes, and the ground plane.
+//!
+//! A ray reaching an instance in a top-level leaf is carried into model space by the
+//! instance's inverse affine transform without renormalising its direction, so `t` is the
+//! same number at both levels and hits of different instances compare directly. An instance
+//! is tested over the ray's whole remaining interval (not only the leaf's), so one that spans
+//! several leaves is tested once per leaf at most and a hit found early is never lost.
+
+use crate::kdtree::{Clip, KdTree, TraceStats, TraversalConfig, TreeStats};
+use crate::model::{Best, ModelAccel};
+use crate::ray::{inverse_dir, Hit, Ray};
+use glam::{Affine3A, Vec3};
+use rayon::prelude::*;
+use sylva_scene::{Aabb, Instance, Model, Scene};
+
+#[derive(Debug, thiserror::Error)]
+pub enum TraceError {
+    #[error("instance {instance} refers to model {model}, but the scene has {models} models")]
+    BadModel {
+        instance: usize,
+        model: u32,
+        models: usize,
+    },
+    #[error("instance {instance}: transform is not invertible or not finite (scale {scale}, position {position:?})")]
+    BadTransform {
+        instance: usize,
+        scale: f32,
+        position: [f32; 3],
+    },
+    #[error("model '{name}': {triangles} triangles exceed the kd-tree's limit of 2^30")]
+    TooLarge { name: String, triangles: usize },
+    #[error(transparent)]
+    Memory(#[from] sylva_core::MemoryError),
+    #[error("camera: {0}")]
+    Camera(String),
+}
+
+/// The last few instances a ray was tested against (instances span several top-level
+/// leaves, and kd-restarts revisit leaves).
+struct Mailbox {
+    ids: [u32; 8],
+    next: usize,
+}
+
+impl Mailbox {
+    fn new() -> Mailbox {
+        Mailbox {
+            ids: [u32::MAX; 8],
+            next: 0,
+        }
+    }
+
+    /// `false` when `id` was seen recently.
+    #[inline(always)]
+    fn insert(&mut self, id: u32) -> bool {
+        if self.ids.contains(&id) {
+            return false;
+        }
+        self.ids[self.next] = id;
+        self.next = (self.next + 1) & 7;
+        true
+    }
+}
+
+/// An instance as the tracer sees it.
+#[derive(Debug, Clone, Copy)]
+pub struct TraceInstance {
+    pub model: u32,
+    pub to_world: Affine3A,
+    pub to_model: Affine3A,
+    pub world_bounds: Aabb,
+}
+
+/// Bytes held by a [`SceneAccel`], by part.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct AccelMemory {
+    /// Model kd-trees, triangle data and alpha data (all models).
+    pub models: u64,
+    /// Top-level tree and instance records.
+    pub top: u64,
+}
+
+impl AccelMemory {
+    pub fn total(&self) -> u64 {
+        self.models + self.top
+    }
+}
+
+/// A scene ready for ray queries.
+#[derive(Debug, Clone)]
+pub struct SceneAccel {
+    models: Vec<ModelAccel>,
+    instances: Vec<TraceInstance>,
+    top: KdTree,
+    /// Half extents (x, z) of the ground rectangle on y = 0, when there is one.
+    ground: Option<[f32; 2]>,
+}
+
+struct InstanceClip<'a>(&'a [TraceInstance]);
+
+impl Clip for InstanceClip<'_> {
+    fn count(&self) -> usize {
+        self.0.len()
+    }
+
+    fn bounds(&self, i: usize) -> Option<Aabb> {
+        let b = self.0[i].world_bounds;
+        (!b.is_empty()).then_some(b)
+    }
+
+    fn clip(&self, i: usize, bx: &Aabb) -> Option<Aabb> {
+        let b = self.0[i].world_bounds;
+        let c = Aabb {
+            min: b.min.max(bx.min),
+            max: b.max.min(bx.max),
+        };
+        (!c.is_empty()).then_some(c)
+    }
+}
+
+/// Bytes a model's structure will take, roughly (for the memory check).
+fn estimate_bytes(triangles: usize) -> u64 {
+    // Triangle data 40 B, ~2 references of 4 B, ~1 node of 8 B per triangle, build scratch.
+    triangles as u64 * (40 + 8 + 8 + 2 * 28)
+}
+
+impl SceneAccel {
+    /// Builds the scene's structures: the models in parallel, then the top level.
+    pub fn build(scene: &Scene) -> Result<SceneAccel, TraceError> {
+        let ground = scene
+            .ground
+            .enabled
+            .then(|| scene.ground.size.map(|s| [0.5 * s[0], 0.5 * s[1]]))
+            .flatten();
+        SceneAccel::from_parts(&scene.models, &scene.instances, ground)
+    }
+
+    /// Builds from models and instances; `ground` is the half extents (x, z) of a ground
+    /// rectangle on y = 0 centred on the origin.
+    pub fn from_parts(
+        models: &[Model],
+        instances: &[Instance],
+        ground: Option<[f32; 2]>,
+    ) -> Result<SceneAccel, TraceError> {
+        for m in models {
+            if m.triangle_count() >= 1 << 30 {
+                return Err(TraceError::TooLarge {
+                    name: m.name.clone(),
+                    triangles: m.triangle_count(),
+                });
+            }
+        }
+        let total: usize = models.iter().map(Model::triangle_count).sum();
+        sylva_core::check_memory("kd-trees of the scene's models", estimate_bytes(total))?;
+        let built: Vec<ModelAccel> = models.par_iter().map(ModelAccel::build).collect();
+        let mut inst = Vec::with_capacity(instances.len());
+        for (k, i) in instances.iter().enumerate() {
+            let Some(m) = built.get(i.model as usize) else {
+                return Err(TraceError::BadModel {
+                    instance: k,
+                    model: i.model,
+                    models: models.len(),
+                });
+            };
+            let to_world = i.transform();
+            let to_model = to_world.inverse();
+            let finite = to_world.matrix3.is_finite()
+                && to_world.translation.is_finite()
+                && to_model.matrix3.is_finite()
+                && to_model.translation.is_finite()
+                && i.scale > 0.0;
+            if !finite {
+                return Err(TraceError::BadTransform {
+                    instance: k,
+                    scale: i.scale,
+                    position: i.position.to_array(),
+                });
+            }
+            let mb = m.bounds();
+            let mut wb = Aabb::EMPTY;
+            if !mb.is_empty() {
+                for c in mb.corners() {
+                    wb.grow(to_world.transform_point3(c));
+                }
+            }
+            inst.push(TraceInstance {
+                model: i.model,
+                to_world,
+                to_model,
+                world_bounds: wb,
+            });
+        }
+        let top = KdTree::build(&InstanceClip(&inst));
+        Ok(SceneAccel {
+            models: built,
+            instances: inst,
+            top,
+            ground,
+        })
+    }
+
+    pub fn models(&self) -> &[ModelAccel] {
+        &self.models
+    }
+
+    pub fn instances(&self) -> &[TraceInstance] {
+        &self.instances
+    }
+
+    pub fn top_stats(&self) -> TreeStats {
+        self.top.stats()
+    }
+
+    pub fn ground(&self) -> Option<[f32; 2]> {
+        self.ground
+    }
+
+    pub fn memory(&self) -> AccelMemory {
+        AccelMemory {
+            models: self.models.iter().map(ModelAccel::memory_bytes).sum(),
+            top: self.top.memory_bytes()
+                + (self.instances.capacity() * std::mem::size_of::<TraceInstance>()) as u64,
+        }
+    }
+
+    /// `t` where the ray meets the ground rectangle with `t_min < t ≤ ray.t_max`.
+    pub fn ground_hit(&self, ray: &Ray) -> Option<f32> {
+        self.ground_t(ray, ray.t_max)
+    }
+
+    fn ground_t(&self, ray: &Ray, t_max: f32) -> Option<f32> {
+        let [hx, hz] = self.ground?;
+        if ray.dir.y == 0.0 {
+            return None;
+        }
+        let t = -ray.origin.y / ray.dir.y;
+        let p = ray.at(t);
+        (t > ray.t_min && t <= t_max && p.x.abs() <= hx && p.z.abs() <= hz).then_some(t)
+    }
+
+    /// The closest hit with `t_min < t ≤ t_max` (ties: lowest instance, then triangle; the
+    /// ground loses ties), or `None`. Invalid rays (see [`Ray::is_valid`]) hit nothing.
+    pub fn closest_hit(
+        &self,
+        ray: &Ray,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+    ) -> Option<Hit> {
+        stats.rays += 1;
+        if !ray.is_valid() {
+            return None;
+        }
+        let mut best = Best {
+            t: ray.t_max,
+            instance: u32::MAX,
+            triangle: u32::MAX,
+            u: 0.0,
+            v: 0.0,
+        };
+        if let Some(t) = self.ground_t(ray, ray.t_max) {
+            let p = ray.at(t);
+            best = Best {
+                t,
+                instance: Hit::GROUND,
+                triangle: 0,
+                u: p.x,
+                v: p.z,
+            };
+        }
+        let (o, d) = (ray.origin, ray.dir);
+        let mut visits = 0u64;
+        let mut mailbox = Mailbox::new();
+        let mut inner = TraceStats::default();
+        self.top
+            .traverse(o, inverse_dir(d), ray.t_min, best.t, cfg, stats, |prims| {
+                for &i in prims {
+                    // An instance met in an earlier leaf was already tested over the whole
+                    // interval.
+                    if !mailbox.insert(i) {
+                        continue;
+                    }
+                    visits += 1;
+                    let inst = &self.instances[i as usize];
+                    let mo = inst.to_model.transform_point3(o);
+                    let md = inst.to_model.transform_vector3(d);
+                    self.models[inst.model as usize]
+                        .closest(mo, md, ray.t_min, i, &mut best, cfg, &mut inner);
+                }
+                best.t
+            });
+        *stats += inner;
+        stats.instance_visits += visits;
+        // `triangle == MAX` marks "nothing yet" (the ground has triangle 0).
+        if best.triangle == u32::MAX {
+            return None;
+        }
+        Some(Hit {
+            t: best.t,
+            instance: best.instance,
+            triangle: best.triangle,
+            u: best.u,
+            v: best.v,
+        })
+    }
+
+    /// Whether anything opaque lies on the ray with `t_min < t ≤ t_max` (shadow rays).
+    pub fn any_hit(&self, ray: &Ray, cfg: TraversalConfig, stats: &mut TraceStats) -> bool {
+        stats.rays += 1;
+        if !ray.is_valid() {
+            return false;
+        }
+        if self.ground_t(ray, ray.t_max).is_some() {
+            return true;
+        }
+        let (o, d) = (ray.origin, ray.dir);
+        let mut found = false;
+        let mut visits = 0u64;
+        let mut mailbox = Mailbox::new();
+        let mut inner = TraceStats::default();
+        self.top.traverse(
+            o,
+            inverse_dir(d),
+            ray.t_min,
+            ray.t_max,
+            cfg,
+            stats,
+            |prims| {
+                for &i in prims {
+                    if !mailbox.insert(i) {
+                        continue;
+                    }
+                    visits += 1;
+                    let inst = &self.instances[i as usize];
+                    let mo = inst.to_model.transform_point3(o);
+                    let md = inst.to_model.transform_vector3(d);
+                    if self.models[inst.model as usize]
+                        .any(mo, md, ray.t_min, ray.t_max, cfg, &mut inner)
+                    {
+                        found = true;
+                        return f32::NEG_INFINITY;
+                    }
+                }
+                f32::INFINITY
+            },
+        );
+        *stats += inner;
+        stats.instance_visits += visits;
+        found
+    }
+
+    /// Reference closest hit: every triangle of every instance, in model space with the same
+    /// arithmetic as the trees (so results are bit-identical), same tie rule.
+    pub fn brute_closest_hit(&self, ray: &Ray) -> Option<Hit> {
+        if !ray.is_valid() {
+            return None;
+        }
+        let mut best = self.ground_t(ray, ray.t_max).map(|t| {
+            let p = ray.at(t);
+            Hit {
+                t,
+                instance: Hit::GROUND,
+                triangle: 0,
+                u: p.x,
+                v: p.z,
+            }
+        });
+        for (k, inst) in self.instances.iter().enumerate() {
+            let local = Ray {
+                origin: inst.to_model.transform_point3(ray.origin),
+                dir: inst.to_model.transform_vector3(ray.dir),
+                ..*ray
+            };
+            if let Some(mut h) = self.models[inst.model as usize].brute_closest_hit(&local) {
+                h.instance = k as u32;
+                if best.is_none_or(|b| h.precedes(&b)) {
+                    best = Some(h);
+                }
+            }
+        }
+        best
+    }
+
+    /// Reference any-hit: every triangle of every instance.
+    pub fn brute_any_hit(&self, ray: &Ray) -> bool {
+        if !ray.is_valid() {
+            return false;
+        }
+        self.ground_t(ray, ray.t_max).is_some()
+            || self.instances.iter().any(|inst| {
+                let local = Ray {
+                    origin: inst.to_model.transform_point3(ray.origin),
+                    dir: inst.to_model.transform_vector3(ray.dir),
+                    ..*ray
+                };
+                self.models[inst.model as usize].brute_any_hit(&local)
+            })
+    }
+
+    /// World-space geometric normal of a hit's triangle (unnormalised sign follows the
+    /// triangle's winding), for offsetting secondary rays. `Vec3::Y` for the ground.
+    pub fn geometric_normal(&self, hit: &Hit) -> Vec3 {
+        if hit.is_ground() {
+            return Vec3::Y;
+        }
+        let inst = &self.instances[hit.instance as usize];
+        let n = self.models[inst.model as usize].triangle_normal(hit.triangle);
+        // Normals transform by the inverse transpose; for rotation + uniform scale that is
+        // the rotation itself.
+        inst.to_world.transform_vector3(n).normalize_or_zero()
+    }
+}

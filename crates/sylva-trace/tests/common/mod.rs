@@ -1,0 +1,95 @@
+//! Scenes and rays shared by the tracer's tests.
+#![allow(dead_code)]
+
+use glam::Vec3;
+use std::sync::Arc;
+use sylva_core::SplitMix64;
+use sylva_scene::{Material, MaterialKind, Mesh, Model, Texture, Wrap};
+use sylva_trace::Ray;
+
+pub fn rng(seed: u64) -> SplitMix64 {
+    SplitMix64::new(seed)
+}
+
+pub fn uniform(r: &mut SplitMix64, lo: f32, hi: f32) -> f32 {
+    lo + (hi - lo) * r.next_f64() as f32
+}
+
+pub fn unit(r: &mut SplitMix64) -> Vec3 {
+    loop {
+        let v = Vec3::new(
+            uniform(r, -1.0, 1.0),
+            uniform(r, -1.0, 1.0),
+            uniform(r, -1.0, 1.0),
+        );
+        let l = v.length();
+        if l > 0.05 && l <= 1.0 {
+            return v / l;
+        }
+    }
+}
+
+pub fn wood() -> Material {
+    Material {
+        name: "wood".into(),
+        kind: MaterialKind::Wood,
+        base_color: [0.4, 0.3, 0.2],
+        texture: None,
+        two_sided: false,
+    }
+}
+
+/// `n` random triangles in the cube [-1, 1]³ (sizes mixed, some thin slivers, some tiny),
+/// one opaque material.
+pub fn soup(n: usize, seed: u64) -> Model {
+    let mut r = rng(seed);
+    let mut m = Mesh::default();
+    for i in 0..n {
+        let c = Vec3::new(
+            uniform(&mut r, -1.0, 1.0),
+            uniform(&mut r, -1.0, 1.0),
+            uniform(&mut r, -1.0, 1.0),
+        );
+        let size = match i % 4 {
+            0 => 0.02,
+            1 => 0.1,
+            2 => 0.4,
+            _ => 0.004,
+        };
+        let a = m.push_vertex(c + unit(&mut r) * size, Vec3::Y, [0.0, 0.0]);
+        let b = m.push_vertex(c + unit(&mut r) * size, Vec3::Y, [1.0, 0.0]);
+        let d = m.push_vertex(c + unit(&mut r) * size, Vec3::Y, [0.0, 1.0]);
+        m.push_triangle(a, b, d, 0);
+    }
+    Model::new("soup", m, vec![wood()])
+}
+
+/// A random ray starting outside or inside the cube [-s, s]³, aimed near the origin.
+pub fn random_ray(r: &mut SplitMix64, s: f32) -> Ray {
+    let o = unit(r) * uniform(r, 0.0, 2.5 * s);
+    let target = Vec3::new(uniform(r, -s, s), uniform(r, -s, s), uniform(r, -s, s));
+    let d = (target - o).normalize_or(Vec3::X);
+    Ray::new(o, d)
+}
+
+/// An `n`×`n` checkerboard RGBA texture; squares with (i + j) even are opaque.
+pub fn checker_texture(n: u32) -> Texture {
+    Texture::from_fn(n, n, Wrap::Clamp, |u, v| {
+        let (i, j) = ((u * n as f32) as u32, (v * n as f32) as u32);
+        if (i + j) % 2 == 0 {
+            [20, 200, 20, 255]
+        } else {
+            [0, 0, 0, 0]
+        }
+    })
+}
+
+pub fn leaf_material(tex: Texture) -> Material {
+    Material {
+        name: "leaf".into(),
+        kind: MaterialKind::Leaf,
+        base_color: [0.1, 0.6, 0.1],
+        texture: Some(Arc::new(tex)),
+        two_sided: true,
+    }
+}

@@ -1,0 +1,233 @@
+//! The kd-trees against brute force: random triangle soups, a generated tree, instanced
+//! scenes; short stacks against the unbounded stack; restarts; determinism.
+
+mod common;
+
+use common::*;
+use glam::Vec3;
+use std::sync::OnceLock;
+use sylva_scene::{Instance, Model, Species};
+use sylva_trace::{Hit, ModelAccel, Ray, SceneAccel, TraceStats, TraversalConfig};
+
+fn red_maple() -> &'static Model {
+    static M: OnceLock<Model> = OnceLock::new();
+    M.get_or_init(|| {
+        Species::builtin("red_maple")
+            .expect("built-in species")
+            .build_model()
+            .expect("red maple generates")
+    })
+}
+
+fn red_maple_accel() -> &'static ModelAccel {
+    static A: OnceLock<ModelAccel> = OnceLock::new();
+    A.get_or_init(|| ModelAccel::build(red_maple()))
+}
+
+fn same(a: Option<Hit>, b: Option<Hit>) -> bool {
+    match (a, b) {
+        (None, None) => true,
+        (Some(a), Some(b)) => {
+            a.t == b.t && a.instance == b.instance && a.triangle == b.triangle && a.u == b.u
+        }
+        _ => false,
+    }
+}
+
+#[test]
+fn soup_closest_and_any_hit_equal_brute_force() {
+    for (n, seed) in [(1, 1), (7, 2), (60, 3), (2000, 4)] {
+        let model = soup(n, seed);
+        let accel = ModelAccel::build(&model);
+        let mut r = rng(100 + seed);
+        let mut hits = 0;
+        for k in 0..3000 {
+            let mut ray = random_ray(&mut r, 1.0);
+            if k % 3 == 0 {
+                ray.t_max = uniform(&mut r, 0.5, 3.0); // segments, as shadow rays use
+            }
+            let mut st = TraceStats::default();
+            let kd = accel.closest_hit(&ray, TraversalConfig::default(), &mut st);
+            let bf = accel.brute_closest_hit(&ray);
+            assert!(
+                same(kd, bf),
+                "n={n} ray {k} {ray:?}: kd {kd:?} brute {bf:?}"
+            );
+            assert_eq!(
+                accel.any_hit(&ray, TraversalConfig::default(), &mut st),
+                bf.is_some(),
+                "any-hit n={n} ray {k}"
+            );
+            hits += bf.is_some() as usize;
+        }
+        if n >= 60 {
+            assert!(hits > 300, "too few hits ({hits}) to mean anything");
+        }
+    }
+}
+
+#[test]
+fn tree_closest_hit_equals_brute_force_and_short_stacks_equal_unbounded() {
+    let model = red_maple();
+    let accel = red_maple_accel();
+    let b = model.bounds;
+    let (c, ext) = ((b.min + b.max) * 0.5, (b.max - b.min).max_element() * 0.5);
+    let mut r = rng(7);
+    let mut hits = 0;
+    let mut restarts = [0u64; 3];
+    for k in 0..300 {
+        let mut ray = random_ray(&mut r, ext);
+        ray.origin += c;
+        let bf = accel.brute_closest_hit(&ray);
+        let mut st = TraceStats::default();
+        let unb = accel.closest_hit(&ray, TraversalConfig::UNBOUNDED, &mut st);
+        assert_eq!(st.restarts, 0, "unbounded stack never restarts");
+        assert!(same(unb, bf), "ray {k}: kd {unb:?} brute {bf:?}");
+        for (j, size) in [1usize, 2, 5].into_iter().enumerate() {
+            let mut st = TraceStats::default();
+            let cfg = TraversalConfig::with_stack(size);
+            let h = accel.closest_hit(&ray, cfg, &mut st);
+            assert!(same(h, unb), "stack {size}, ray {k}");
+            assert_eq!(accel.any_hit(&ray, cfg, &mut st), bf.is_some());
+            restarts[j] += st.restarts;
+        }
+        hits += bf.is_some() as usize;
+    }
+    assert!(hits > 100, "{hits} hits");
+    // A stack of 1 on a tree of depth ~30 must drop entries and restart.
+    assert!(
+        restarts[0] > 0 && restarts[0] >= restarts[2],
+        "{restarts:?}"
+    );
+}
+
+#[test]
+fn instanced_scene_equals_flattened_brute_force() {
+    // Two models, six instances with rotations, scales and overlaps, and a ground.
+    let models = vec![soup(300, 11), soup(150, 12)];
+    let mut instances = Vec::new();
+    for k in 0..6 {
+        instances.push(Instance {
+            model: (k % 2) as u32,
+            position: Vec3::new(
+                k as f32 * 0.9 - 2.0,
+                1.0 + 0.1 * k as f32,
+                (k % 3) as f32 * 0.5,
+            ),
+            rotation_deg: 37.0 * k as f32,
+            scale: 0.6 + 0.25 * k as f32,
+        });
+    }
+    let accel = SceneAccel::from_parts(&models, &instances, Some([4.0, 4.0])).unwrap();
+    // Flattened world-space triangle soup.
+    let mut world: Vec<(u32, u32, [Vec3; 3])> = Vec::new();
+    for (k, inst) in instances.iter().enumerate() {
+        let x = inst.transform();
+        let m = &models[inst.model as usize].mesh;
+        for (t, tri) in m.indices.iter().enumerate() {
+            let p = tri.map(|i| x.transform_point3(Vec3::from_array(m.positions[i as usize])));
+            world.push((k as u32, t as u32, p));
+        }
+    }
+    let mut r = rng(5);
+    let mut tree_hits = 0;
+    for k in 0..1500 {
+        let mut ray = random_ray(&mut r, 3.0);
+        ray.origin += Vec3::new(0.0, 1.5, 0.0);
+        let mut st = TraceStats::default();
+        let kd = accel.closest_hit(&ray, TraversalConfig::default(), &mut st);
+        // Same arithmetic per instance: identical.
+        assert!(same(kd, accel.brute_closest_hit(&ray)), "ray {k}");
+        assert_eq!(
+            accel.any_hit(&ray, TraversalConfig::default(), &mut st),
+            accel.brute_any_hit(&ray)
+        );
+        // World space: equal up to rounding.
+        let mut flat: Option<(f32, u32, u32)> = None;
+        for &(i, t, [a, b, c]) in &world {
+            if let Some((th, _, _)) = sylva_trace::ray::intersect_triangle_vertices(&ray, a, b, c) {
+                if flat.is_none_or(|f| th < f.0) {
+                    flat = Some((th, i, t));
+                }
+            }
+        }
+        let ground = accel.ground_hit(&ray);
+        let flat = match (flat, ground) {
+            (Some(f), Some(g)) if g < f.0 => Some((g, Hit::GROUND, 0)),
+            (None, Some(g)) => Some((g, Hit::GROUND, 0)),
+            (f, _) => f,
+        };
+        match (kd, flat) {
+            (None, None) => {}
+            (Some(h), Some(f)) => {
+                assert!(
+                    (h.t - f.0).abs() <= 1e-4 * (1.0 + f.0),
+                    "ray {k}: {h:?} {f:?}"
+                );
+                // Different triangles only where two candidates are equally near.
+                if (h.instance, h.triangle) != (f.1, f.2) {
+                    assert!(
+                        (h.t - f.0).abs() <= 1e-5 * (1.0 + f.0),
+                        "ray {k}: {h:?} {f:?}"
+                    );
+                }
+                tree_hits += !h.is_ground() as usize;
+            }
+            (a, b) => panic!("ray {k}: kd {a:?} flattened {b:?}"),
+        }
+    }
+    assert!(tree_hits > 200, "{tree_hits}");
+}
+
+#[test]
+fn build_and_results_are_deterministic_across_thread_counts() {
+    let model = soup(5000, 21);
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap()
+        .install(|| ModelAccel::build(&model));
+    let two = rayon::ThreadPoolBuilder::new()
+        .num_threads(3)
+        .build()
+        .unwrap()
+        .install(|| ModelAccel::build(&model));
+    assert_eq!(one.tree().stats(), two.tree().stats());
+    let mut r = rng(9);
+    for _ in 0..500 {
+        let ray = random_ray(&mut r, 1.0);
+        let mut s1 = TraceStats::default();
+        let mut s2 = TraceStats::default();
+        let a = one.closest_hit(&ray, TraversalConfig::default(), &mut s1);
+        let b = two.closest_hit(&ray, TraversalConfig::default(), &mut s2);
+        assert!(same(a, b));
+        assert_eq!(s1, s2, "same work, same tree");
+    }
+}
+
+#[test]
+fn tree_statistics_are_sane() {
+    let accel = red_maple_accel();
+    let s = accel.tree().stats();
+    assert_eq!(s.primitives, red_maple().triangle_count());
+    assert!(s.references >= s.primitives);
+    assert!(s.max_depth <= sylva_trace::MAX_DEPTH);
+    assert_eq!(s.nodes, 2 * s.leaves - 1, "a binary tree");
+    // Every triangle is referenced by at least one leaf: rays at each triangle's centroid
+    // along its normal find it (or something at the same distance).
+    let model = red_maple();
+    let mut st = TraceStats::default();
+    for (i, tri) in model.mesh.indices.iter().enumerate().step_by(97) {
+        let p = tri.map(|k| Vec3::from_array(model.mesh.positions[k as usize]));
+        let n = (p[1] - p[0]).cross(p[2] - p[0]);
+        if n.length() < 1e-12 {
+            continue;
+        }
+        let c = (p[0] + p[1] + p[2]) / 3.0;
+        let n = n.normalize();
+        let ray = Ray::segment(c + n * 1e-3, -n, 0.0, 2e-3);
+        let kd = accel.closest_hit(&ray, TraversalConfig::default(), &mut st);
+        let bf = accel.brute_closest_hit(&ray);
+        assert!(same(kd, bf), "triangle {i}");
+    }
+}
