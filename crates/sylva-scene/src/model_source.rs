@@ -162,7 +162,9 @@ mod tests {
         assert_eq!(rose.name, "rose");
         let e = load_scene_model(&demo, None).unwrap_err().to_string();
         assert!(e.contains("maple, pine, rose"), "{e}");
-        let e = load_scene_model(&demo, Some("oak")).unwrap_err().to_string();
+        let e = load_scene_model(&demo, Some("oak"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("'oak'") && e.contains("maple"), "{e}");
     }
 }

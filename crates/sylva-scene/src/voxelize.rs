@@ -192,10 +192,7 @@ impl SubcellMasks {
                 if any == 0 {
                     (0.0, 0.0)
                 } else {
-                    (
-                        any as f32 / SUBCELLS as f32,
-                        wood as f32 / any as f32,
-                    )
+                    (any as f32 / SUBCELLS as f32, wood as f32 / any as f32)
                 }
             })
             .unzip();
@@ -326,14 +323,15 @@ pub fn voxelize_masks(
         .par_iter()
         .zip(mesh.material_ids.par_iter())
         .with_min_len(1024)
-        .for_each(|(t, &m)| {
+        .for_each_init(Scratch::default, |scratch, (t, &m)| {
             let rule = &rules[m as usize];
             if matches!(rule, Rule::Invisible) {
                 return;
             }
             let v = t.map(|i| placement.to_sub(mesh.positions[i as usize]));
+            let Scratch { masks, poly } = scratch;
             match rule {
-                Rule::Solid { wood } => target.rasterize(&v, *wood, |_| true),
+                Rule::Solid { wood } => target.rasterize(&v, *wood, false, masks, |_| true),
                 Rule::Alpha(cov) => {
                     let (w, h) = (cov.width as f64, cov.height as f64);
                     let uv = t.map(|i| {
@@ -342,10 +340,13 @@ pub fn voxelize_masks(
                     });
                     match cov.triangle_state(&uv) {
                         Some(false) => {}
-                        Some(true) => target.rasterize(&v, false, |_| true),
-                        None => target.rasterize(&v, false, |corner| {
-                            cov.piece_is_opaque(&v, &uv, corner)
-                        }),
+                        Some(true) => target.rasterize(&v, false, false, masks, |_| true),
+                        None => {
+                            let tri = AlphaTriangle::new(&v, &uv);
+                            target.rasterize(&v, false, true, masks, |corner| {
+                                cov.piece_is_opaque(&tri, corner, poly)
+                            })
+                        }
                     }
                 }
                 Rule::Invisible => unreachable!("returned above"),
@@ -355,6 +356,28 @@ pub fn voxelize_masks(
         placement: *placement,
         bits: cells.into_iter().map(AtomicU64::into_inner).collect(),
     })
+}
+
+/// Per-thread buffers, reused from triangle to triangle.
+#[derive(Default)]
+struct Scratch {
+    /// Masks of the cells in the current triangle's cell box.
+    masks: Vec<u32>,
+    poly: ClipBuffers,
+}
+
+/// `floor` without a libm call (the baseline x86-64 target has no SSE4.1 `roundsd`); exact
+/// for |x| < 2⁶³, which [`GridPlacement`] and [`texel_box`] guarantee.
+#[inline]
+fn floor(x: f64) -> i64 {
+    let t = x as i64;
+    t - ((t as f64) > x) as i64
+}
+
+#[inline]
+fn ceil(x: f64) -> i64 {
+    let t = x as i64;
+    t + ((t as f64) < x) as i64
 }
 
 /// The cell masks being filled.
@@ -368,51 +391,119 @@ struct Target<'a> {
 
 impl Target<'_> {
     /// Sets the bits of every sub-cell the triangle `v` (sub-cell coordinates) meets and for
-    /// which `keep(min corner)` holds.
-    fn rasterize(&self, v: &[DVec3; 3], wood: bool, keep: impl Fn(DVec3) -> bool) {
+    /// which `keep(min corner)` holds; with `skip_counted` (leaves only), sub-cells already
+    /// counted are not offered to `keep`.
+    ///
+    /// Walks the columns of sub-cells along the axis the triangle's normal is closest to:
+    /// columns the triangle's projection misses are skipped whole, and in the others only the
+    /// sub-cells the plane can reach are tested (at most four, usually one or two).
+    fn rasterize(
+        &self,
+        v: &[DVec3; 3],
+        wood: bool,
+        skip_counted: bool,
+        masks: &mut Vec<u32>,
+        mut keep: impl FnMut(DVec3) -> bool,
+    ) {
         let tmin = v[0].min(v[1]).min(v[2]);
         let tmax = v[0].max(v[1]).max(v[2]);
         // Closed boxes: sub-cell k = [k, k + 1] meets [tmin, tmax] iff tmin - 1 ≤ k ≤ tmax.
-        let s0 = [0, 1, 2].map(|a| ((tmin[a].ceil() as i64) - 1).max(self.lo[a]));
-        let s1 = [0, 1, 2].map(|a| (tmax[a].floor() as i64).min(self.hi[a]));
+        let s0 = [0, 1, 2].map(|a| (ceil(tmin[a]) - 1).max(self.lo[a]));
+        let s1 = [0, 1, 2].map(|a| floor(tmax[a]).min(self.hi[a]));
         if (0..3).any(|a| s0[a] > s1[a]) {
             return;
         }
-        let test = OverlapTest::new(v);
         let sub = SUB as i64;
-        let shift = if wood { 32 } else { 0 };
-        for cx in s0[0] / sub..=s1[0] / sub {
-            for cy in s0[1] / sub..=s1[1] / sub {
-                for cz in s0[2] / sub..=s1[2] / sub {
-                    let c = [cx, cy, cz];
-                    let r0 = [0, 1, 2].map(|a| s0[a].max(c[a] * sub));
-                    let r1 = [0, 1, 2].map(|a| s1[a].min(c[a] * sub + sub - 1));
-                    let mut mask = 0u32;
-                    for sx in r0[0]..=r1[0] {
-                        for sy in r0[1]..=r1[1] {
-                            for sz in r0[2]..=r1[2] {
-                                let p = DVec3::new(sx as f64, sy as f64, sz as f64);
-                                if test.overlaps(p) && keep(p) {
-                                    mask |= subcell_bit(
-                                        (sx - c[0] * sub) as usize,
-                                        (sy - c[1] * sub) as usize,
-                                        (sz - c[2] * sub) as usize,
-                                    );
-                                }
-                            }
-                        }
-                    }
-                    if mask != 0 {
-                        let bits = (mask as u64) | ((mask as u64) << shift);
-                        let cell =
-                            &self.cells[self.dims.index(cx as usize, cy as usize, cz as usize)];
-                        // Most cells are met by many triangles: skip the write when the bits
-                        // are there already, so cores do not fight over the cache line.
-                        if cell.load(Ordering::Relaxed) & bits != bits {
-                            cell.fetch_or(bits, Ordering::Relaxed);
-                        }
-                    }
+        let c0 = s0.map(|s| s / sub);
+        let c1 = s1.map(|s| s / sub);
+        let ce = [0, 1, 2].map(|a| (c1[a] - c0[a] + 1) as usize);
+        masks.clear();
+        masks.resize(ce[0] * ce[1] * ce[2], 0);
+        let test = OverlapTest::new(v);
+        let n = test.n;
+        // Column axis d and the projection (a, b) across it, as OverlapTest numbers them.
+        let (k, a, b, d) = if n.z.abs() >= n.x.abs() && n.z.abs() >= n.y.abs() {
+            (0, 0, 1, 2)
+        } else if n.x.abs() >= n.y.abs() {
+            (1, 1, 2, 0)
+        } else {
+            (2, 2, 0, 1)
+        };
+        let (others, nd) = ([(k + 1) % 3, (k + 2) % 3], n[d]);
+        let offset = n.dot(v[0]);
+        for ia in s0[a]..=s1[a] {
+            for ib in s0[b]..=s1[b] {
+                let (pa, pb) = (ia as f64, ib as f64);
+                if !test.edges(k, pa, pb) {
+                    continue;
                 }
+                // The plane's extent along d over the column's cross-section, widened a
+                // little so rounding can only add candidates (the exact test follows).
+                let (mut d0, mut d1) = (s0[d], s1[d]);
+                if nd != 0.0 {
+                    let base = (offset - n[a] * pa - n[b] * pb) / nd;
+                    let (da, db) = (-n[a] / nd, -n[b] / nd);
+                    let lo = base + da.min(0.0) + db.min(0.0);
+                    let hi = base + da.max(0.0) + db.max(0.0);
+                    let eps = 1e-9 * (1.0 + lo.abs().max(hi.abs()));
+                    d0 = d0.max(ceil(lo - eps) - 1);
+                    d1 = d1.min(floor(hi + eps));
+                }
+                for id in d0..=d1 {
+                    let mut s = [0i64; 3];
+                    s[a] = ia;
+                    s[b] = ib;
+                    s[d] = id;
+                    let p = DVec3::new(s[0] as f64, s[1] as f64, s[2] as f64);
+                    if !(test.plane(p)
+                        && test.edges_at(others[0], p)
+                        && test.edges_at(others[1], p))
+                    {
+                        continue;
+                    }
+                    let c = s.map(|x| x / sub);
+                    let bit = subcell_bit(
+                        (s[0] - c[0] * sub) as usize,
+                        (s[1] - c[1] * sub) as usize,
+                        (s[2] - c[2] * sub) as usize,
+                    );
+                    // A leaf adds nothing to a sub-cell already counted (by anything): skip
+                    // its costly texture test there. The final masks, an OR over all
+                    // triangles, are the same whatever order the triangles come in.
+                    if skip_counted {
+                        let cell = self.dims.index(c[0] as usize, c[1] as usize, c[2] as usize);
+                        if self.cells[cell].load(Ordering::Relaxed) as u32 & bit != 0 {
+                            continue;
+                        }
+                    }
+                    if !keep(p) {
+                        continue;
+                    }
+                    let local = (((c[0] - c0[0]) as usize * ce[1]) + (c[1] - c0[1]) as usize)
+                        * ce[2]
+                        + (c[2] - c0[2]) as usize;
+                    masks[local] |= bit;
+                }
+            }
+        }
+        let shift = if wood { 32 } else { 0 };
+        for (local, &mask) in masks.iter().enumerate() {
+            if mask == 0 {
+                continue;
+            }
+            let cz = local % ce[2];
+            let cy = (local / ce[2]) % ce[1];
+            let cx = local / (ce[2] * ce[1]);
+            let bits = (mask as u64) | ((mask as u64) << shift);
+            let cell = &self.cells[self.dims.index(
+                c0[0] as usize + cx,
+                c0[1] as usize + cy,
+                c0[2] as usize + cz,
+            )];
+            // Most cells are met by many triangles: skip the write when the bits are there
+            // already, so cores do not fight over the cache line.
+            if cell.load(Ordering::Relaxed) & bits != bits {
+                cell.fetch_or(bits, Ordering::Relaxed);
             }
         }
     }
@@ -430,6 +521,9 @@ struct OverlapTest {
     edges: [[(f64, f64, f64); 3]; 3],
 }
 
+/// The axes of projection `k` of [`OverlapTest`]: xy, yz, zx.
+const PROJ: [(usize, usize); 3] = [(0, 1), (1, 2), (2, 0)];
+
 impl OverlapTest {
     fn new(v: &[DVec3; 3]) -> OverlapTest {
         let e = [v[1] - v[0], v[2] - v[1], v[0] - v[2]];
@@ -445,10 +539,10 @@ impl OverlapTest {
         // With n·axis = 0 the projection is a segment; either sign then gives edges of both
         // orientations, which is the segment's own test, so ≥ 0 is a safe choice.
         let sign = |x: f64| if x >= 0.0 { 1.0 } else { -1.0 };
+        let orient = [sign(n.z), sign(n.x), sign(n.y)];
         let mut edges = [[(0.0, 0.0, 0.0); 3]; 3];
-        // Projection axes (a, b) with the normal component that orients them.
-        let proj = [(0usize, 1usize, sign(n.z)), (1, 2, sign(n.x)), (2, 0, sign(n.y))];
-        for (k, &(a, b, s)) in proj.iter().enumerate() {
+        for (k, &(a, b)) in PROJ.iter().enumerate() {
+            let s = orient[k];
             for i in 0..3 {
                 let (na, nb) = (-e[i][b] * s, e[i][a] * s);
                 let d = -(na * v[i][a] + nb * v[i][b]) + na.max(0.0) + nb.max(0.0);
@@ -458,23 +552,26 @@ impl OverlapTest {
         OverlapTest { n, d1, d2, edges }
     }
 
-    /// Does the triangle meet the closed unit box with min corner `p`?
+    /// Does the triangle's plane meet the closed unit box with min corner `p`?
     #[inline]
-    fn overlaps(&self, p: DVec3) -> bool {
+    fn plane(&self, p: DVec3) -> bool {
         let np = self.n.dot(p);
         let (a, b) = (np + self.d1, np + self.d2);
-        if (a < 0.0 && b < 0.0) || (a > 0.0 && b > 0.0) {
-            return false;
-        }
-        let axes = [(p.x, p.y), (p.y, p.z), (p.z, p.x)];
-        for (k, &(pa, pb)) in axes.iter().enumerate() {
-            for &(na, nb, d) in &self.edges[k] {
-                if na * pa + nb * pb + d < 0.0 {
-                    return false;
-                }
-            }
-        }
-        true
+        !((a < 0.0 && b < 0.0) || (a > 0.0 && b > 0.0))
+    }
+
+    /// Does projection `k` of the triangle meet the unit square at `(pa, pb)`?
+    #[inline]
+    fn edges(&self, k: usize, pa: f64, pb: f64) -> bool {
+        self.edges[k]
+            .iter()
+            .all(|&(na, nb, d)| na * pa + nb * pb + d >= 0.0)
+    }
+
+    #[inline]
+    fn edges_at(&self, k: usize, p: DVec3) -> bool {
+        let (a, b) = PROJ[k];
+        self.edges(k, p[a], p[b])
     }
 }
 
@@ -522,6 +619,7 @@ impl TextureCoverage {
     }
 
     /// Texel index ranges (inclusive, at most two) that unwrapped indices `i0..=i1` sample.
+    #[inline]
     fn ranges(&self, i0: i64, i1: i64, n: usize) -> ([(usize, usize); 2], usize) {
         let n = n as i64;
         match self.wrap {
@@ -544,6 +642,7 @@ impl TextureCoverage {
     }
 
     /// Opaque texels and all texels sampled by unwrapped texel rectangle `[i0, i1] × [j0, j1]`.
+    #[inline]
     fn count(&self, i0: i64, i1: i64, j0: i64, j1: i64) -> (u64, u64) {
         let (xs, nx) = self.ranges(i0, i1, self.width);
         let (ys, ny) = self.ranges(j0, j1, self.height);
@@ -573,21 +672,34 @@ impl TextureCoverage {
         }
     }
 
-    /// Does the piece of triangle `v` (sub-cell units, texture coordinates `uv` in texel units)
-    /// inside the unit box at `corner` sample an opaque texel?
-    fn piece_is_opaque(&self, v: &[DVec3; 3], uv: &[[f64; 2]; 3], corner: DVec3) -> bool {
-        let mut poly = Poly::default();
-        for k in 0..3 {
-            poly.push([v[k].x, v[k].y, v[k].z, uv[k][0], uv[k][1]]);
-        }
-        for axis in 0..3 {
-            let lo = corner[axis];
-            if !poly.clip(|p| p[axis] - lo) || !poly.clip(|p| lo + 1.0 - p[axis]) {
-                return poly.overflowed && self.opaque > 0;
+    /// Does the piece of `tri` inside the closed unit box at `corner` sample an opaque
+    /// texel?
+    fn piece_is_opaque(&self, tri: &AlphaTriangle, corner: DVec3, buf: &mut ClipBuffers) -> bool {
+        // Texture coordinates are affine on the triangle's plane, so over the box they lie in
+        // an interval per coordinate; where the texels of that superset of the piece's texture
+        // box are all opaque or all transparent, the answer is known without clipping (the
+        // piece is not empty: the caller's overlap test said so).
+        if let Some((u0, u1, v0, v1)) = tri.uv_range(corner) {
+            let (opaque, all) = self.count(floor(u0), floor(u1), floor(v0), floor(v1));
+            if opaque == 0 {
+                return false;
+            }
+            if opaque == all {
+                return true;
             }
         }
-        let pts: Vec<[f64; 2]> = poly.pts[..poly.len].iter().map(|p| [p[3], p[4]]).collect();
-        self.polygon_is_opaque(&pts)
+        match buf.clip_to_box(&tri.vertices, corner) {
+            Some(piece) => {
+                let mut pts = [[0.0; 2]; ClipBuffers::CAP];
+                for (p, q) in pts.iter_mut().zip(piece) {
+                    *p = [q[3], q[4]];
+                }
+                self.polygon_is_opaque(&pts[..piece.len()])
+            }
+            // Nothing left (the triangle only grazes the box and rounding lost the contact),
+            // or too many vertices (impossible for a convex piece): decide conservatively.
+            None => buf.overflowed && self.opaque > 0,
+        }
     }
 
     /// Does convex polygon `pts` (texel units) sample an opaque texel?
@@ -607,8 +719,15 @@ impl TextureCoverage {
         let n = pts.len() as f64;
         let cu = pts.iter().map(|p| p[0]).sum::<f64>() / n;
         let cv = pts.iter().map(|p| p[1]).sum::<f64>() / n;
-        let (ci, cj) = (cu.floor() as i64, cv.floor() as i64);
+        let (ci, cj) = (floor(cu), floor(cv));
         if self.count(ci, ci, cj, cj).0 > 0 {
+            return true;
+        }
+        // And the vertices.
+        if pts.iter().any(|p| {
+            let (i, j) = (floor(p[0]), floor(p[1]));
+            self.count(i, i, j, j).0 > 0
+        }) {
             return true;
         }
         if j1 - j0 >= MAX_ROWS {
@@ -616,11 +735,7 @@ impl TextureCoverage {
         }
         for j in j0..=j1 {
             if let Some((ulo, uhi)) = strip_extent(pts, j as f64, j as f64 + 1.0) {
-                if self
-                    .count(ulo.floor() as i64, uhi.floor() as i64, j, j)
-                    .0
-                    > 0
-                {
+                if self.count(floor(ulo), floor(uhi), j, j).0 > 0 {
                     return true;
                 }
             }
@@ -629,10 +744,75 @@ impl TextureCoverage {
     }
 }
 
+/// A textured leaf triangle: vertices with texture coordinates (texel units), and texture
+/// coordinates as affine functions of position on its plane, `u(x) = g_u · x + c_u`.
+struct AlphaTriangle {
+    vertices: [[f64; 5]; 3],
+    /// `(g_u, c_u, g_v, c_v)`; `None` for a degenerate triangle.
+    affine: Option<(DVec3, f64, DVec3, f64)>,
+    /// The triangle's texel-unit box: (u_min, u_max, v_min, v_max).
+    uv_box: (f64, f64, f64, f64),
+}
+
+impl AlphaTriangle {
+    fn new(v: &[DVec3; 3], uv: &[[f64; 2]; 3]) -> AlphaTriangle {
+        let (e1, e2) = (v[1] - v[0], v[2] - v[0]);
+        let (a, b, c) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+        let det = a * c - b * b;
+        // g = α e1 + β e2 with g·e1 = Δ1, g·e2 = Δ2: the in-plane gradient.
+        let affine = (det > 1e-12 * a * c).then(|| {
+            let grad = |d1: f64, d2: f64| {
+                let (al, be) = ((c * d1 - b * d2) / det, (a * d2 - b * d1) / det);
+                e1 * al + e2 * be
+            };
+            let gu = grad(uv[1][0] - uv[0][0], uv[2][0] - uv[0][0]);
+            let gv = grad(uv[1][1] - uv[0][1], uv[2][1] - uv[0][1]);
+            (gu, uv[0][0] - gu.dot(v[0]), gv, uv[0][1] - gv.dot(v[0]))
+        });
+        let (us, vs) = (uv.map(|p| p[0]), uv.map(|p| p[1]));
+        AlphaTriangle {
+            vertices: std::array::from_fn(|k| [v[k].x, v[k].y, v[k].z, uv[k][0], uv[k][1]]),
+            affine,
+            uv_box: (
+                us[0].min(us[1]).min(us[2]),
+                us[0].max(us[1]).max(us[2]),
+                vs[0].min(vs[1]).min(vs[2]),
+                vs[0].max(vs[1]).max(vs[2]),
+            ),
+        }
+    }
+
+    /// A box in texel units holding the texture coordinates of every point of the triangle
+    /// inside the unit box at `corner`: interval arithmetic on the affine map over the box,
+    /// widened for rounding, cut to the triangle's own box.
+    fn uv_range(&self, corner: DVec3) -> Option<(f64, f64, f64, f64)> {
+        let (gu, cu, gv, cv) = self.affine?;
+        let range = |g: DVec3, c: f64| {
+            let base = g.dot(corner) + c;
+            let lo = base + g.x.min(0.0) + g.y.min(0.0) + g.z.min(0.0);
+            let hi = base + g.x.max(0.0) + g.y.max(0.0) + g.z.max(0.0);
+            let eps = 1e-9 * (1.0 + lo.abs().max(hi.abs()));
+            (lo - eps, hi + eps)
+        };
+        let (u0, u1) = range(gu, cu);
+        let (v0, v1) = range(gv, cv);
+        let b = self.uv_box;
+        let r = (u0.max(b.0), u1.min(b.1), v0.max(b.2), v1.min(b.3));
+        // Bounded so the conversion to texel indices cannot overflow.
+        let ok = [r.0, r.1, r.2, r.3].iter().all(|x| x.is_finite()) && r.0 <= r.1 && r.2 <= r.3;
+        ok.then_some((
+            r.0.clamp(-1e15, 1e15),
+            r.1.clamp(-1e15, 1e15),
+            r.2.clamp(-1e15, 1e15),
+            r.3.clamp(-1e15, 1e15),
+        ))
+    }
+}
+
 /// Unwrapped texel index box `(i0, i1, j0, j1)` of points in texel units. Coordinates are
 /// clamped far outside any texture so the conversion to integers cannot overflow.
 fn texel_box(pts: &[[f64; 2]]) -> (i64, i64, i64, i64) {
-    let f = |x: f64| x.clamp(-1e15, 1e15).floor() as i64;
+    let f = |x: f64| floor(x.clamp(-1e15, 1e15));
     let (mut u0, mut u1, mut v0, mut v1) = (
         f64::INFINITY,
         f64::NEG_INFINITY,
@@ -671,60 +851,67 @@ fn strip_extent(pts: &[[f64; 2]], lo: f64, hi: f64) -> Option<(f64, f64)> {
     (a <= b).then_some((a, b))
 }
 
-/// A small convex polygon of (x, y, z, u, v) vertices, clipped in place.
-struct Poly {
-    pts: [[f64; 5]; Poly::CAP],
-    len: usize,
+/// Two polygon buffers of (x, y, z, u, v) vertices for clipping a triangle to a box
+/// (Sutherland-Hodgman), reused so clipping allocates and zeroes nothing.
+pub struct ClipBuffers {
+    bufs: [[[f64; 5]; ClipBuffers::CAP]; 2],
     overflowed: bool,
 }
 
-impl Default for Poly {
+impl Default for ClipBuffers {
     fn default() -> Self {
-        Poly {
-            pts: [[0.0; 5]; Poly::CAP],
-            len: 0,
+        ClipBuffers {
+            bufs: [[[0.0; 5]; ClipBuffers::CAP]; 2],
             overflowed: false,
         }
     }
 }
 
-impl Poly {
+impl ClipBuffers {
     /// A triangle clipped by six planes has at most 9 vertices; the rest is headroom.
     const CAP: usize = 16;
 
-    fn push(&mut self, p: [f64; 5]) -> bool {
-        if self.len == Self::CAP {
-            self.overflowed = true;
-            return false;
-        }
-        self.pts[self.len] = p;
-        self.len += 1;
-        true
-    }
-
-    /// Keeps the part where `dist ≥ 0` (Sutherland-Hodgman); false when nothing is left or the
-    /// buffer overflowed.
-    fn clip(&mut self, dist: impl Fn(&[f64; 5]) -> f64) -> bool {
-        let src = std::mem::take(self);
-        let n = src.len;
-        for k in 0..n {
-            let (p, q) = (src.pts[k], src.pts[(k + 1) % n]);
-            let (dp, dq) = (dist(&p), dist(&q));
-            if dp >= 0.0 && !self.push(p) {
-                return false;
-            }
-            if (dp > 0.0 && dq < 0.0) || (dp < 0.0 && dq > 0.0) {
-                let t = dp / (dp - dq);
-                let mut r = [0.0; 5];
-                for c in 0..5 {
-                    r[c] = p[c] + (q[c] - p[c]) * t;
+    /// The part of triangle `tri` inside the closed unit box at `corner`; `None` when nothing
+    /// is left (or the buffer overflowed, recorded in `overflowed`).
+    fn clip_to_box(&mut self, tri: &[[f64; 5]; 3], corner: DVec3) -> Option<&[[f64; 5]]> {
+        self.overflowed = false;
+        let [a, b] = &mut self.bufs;
+        a[..3].copy_from_slice(tri);
+        let (mut src, mut dst) = (a, b);
+        let mut len = 3;
+        for axis in 0..3 {
+            for (sign, off) in [(1.0, corner[axis]), (-1.0, corner[axis] + 1.0)] {
+                let dist = |p: &[f64; 5]| sign * (p[axis] - off);
+                // Planes the polygon lies inside are the common case for small triangles.
+                if src[..len].iter().all(|p| dist(p) >= 0.0) {
+                    continue;
                 }
-                if !self.push(r) {
-                    return false;
+                let mut out = 0;
+                for k in 0..len {
+                    let (p, q) = (src[k], src[(k + 1) % len]);
+                    let (dp, dq) = (dist(&p), dist(&q));
+                    if out + 2 > Self::CAP {
+                        self.overflowed = true;
+                        return None;
+                    }
+                    if dp >= 0.0 {
+                        dst[out] = p;
+                        out += 1;
+                    }
+                    if (dp > 0.0 && dq < 0.0) || (dp < 0.0 && dq > 0.0) {
+                        let t = dp / (dp - dq);
+                        dst[out] = std::array::from_fn(|c| p[c] + (q[c] - p[c]) * t);
+                        out += 1;
+                    }
                 }
+                if out == 0 {
+                    return None;
+                }
+                len = out;
+                std::mem::swap(&mut src, &mut dst);
             }
         }
-        self.len > 0
+        Some(&src[..len])
     }
 }
 

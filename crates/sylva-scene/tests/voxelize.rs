@@ -150,7 +150,11 @@ fn flat_model_gets_one_interior_cell_across_and_sits_in_its_middle_layer() {
     for x in 0..5 {
         for z in 0..5 {
             let i = g.dims.index(x, 1, z);
-            let want = if g.dims.on_shell(x, 1, z) { 0.0 } else { 1.0 / 3.0 };
+            let want = if g.dims.on_shell(x, 1, z) {
+                0.0
+            } else {
+                1.0 / 3.0
+            };
             assert_eq!(g.density[i], want, "({x}, 1, {z})");
         }
     }
@@ -203,10 +207,7 @@ fn box_surface_fills_shell_cells_and_leaves_the_inside_empty() {
         for y in 0..8 {
             for z in 0..8 {
                 let i = d.index(x, y, z);
-                let faces = [x, y, z]
-                    .iter()
-                    .filter(|&&c| c == 1 || c == 6)
-                    .count();
+                let faces = [x, y, z].iter().filter(|&&c| c == 1 || c == 6).count();
                 // The touched layer of each face; 27 minus the sub-cells in none of them.
                 let want = if d.on_shell(x, y, z) {
                     0
@@ -358,10 +359,11 @@ fn polygon_meets_square(pts: &[[f64; 2]], k: f64, l: f64) -> bool {
     }
     axes.iter().all(|a| {
         let proj = |s: &[[f64; 2]]| {
-            s.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
-                let d = p[0] * a[0] + p[1] * a[1];
-                (lo.min(d), hi.max(d))
-            })
+            s.iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                    let d = p[0] * a[0] + p[1] * a[1];
+                    (lo.min(d), hi.max(d))
+                })
         };
         let (a0, a1) = proj(pts);
         let (b0, b1) = proj(&sq);
@@ -392,7 +394,13 @@ fn reference_masks(model: &Model, p: &GridPlacement) -> Vec<u64> {
                         let (w, h) = (tex.width as f64, tex.height as f64);
                         let tri: [[f64; 5]; 3] = std::array::from_fn(|k| {
                             let uv = mesh.uvs[t[k] as usize];
-                            [v[k][0], v[k][1], v[k][2], uv[0] as f64 * w, uv[1] as f64 * h]
+                            [
+                                v[k][0],
+                                v[k][1],
+                                v[k][2],
+                                uv[0] as f64 * w,
+                                uv[1] as f64 * h,
+                            ]
                         });
                         let poly: Vec<[f64; 2]> = reference_clip(tri, lo)
                             .iter()
@@ -509,7 +517,10 @@ fn agrees_with_brute_force_on_random_meshes() {
 
 #[test]
 fn same_grid_on_one_and_two_threads() {
-    let model = Species::builtin("red_maple").unwrap().build_model().unwrap();
+    let model = Species::builtin("red_maple")
+        .unwrap()
+        .build_model()
+        .unwrap();
     let opts = VoxelizeOptions {
         grid: 48,
         alpha_test: true,
@@ -575,7 +586,10 @@ fn bad_input_is_refused_with_a_reason() {
     let i = point.push_vertex(Vec3::ONE, Vec3::Y, [0.0, 0.0]);
     point.push_triangle(i, i, i, WOOD);
     let e = voxelize(&Model::new("dot", point, materials(None)), &opts(32)).unwrap_err();
-    assert!(matches!(e, VoxelizeError::ZeroExtent(ref n) if n == "dot"), "{e}");
+    assert!(
+        matches!(e, VoxelizeError::ZeroExtent(ref n) if n == "dot"),
+        "{e}"
+    );
 
     let mut mesh = quad();
     mesh.material_ids[0] = 7;
