@@ -147,7 +147,7 @@ impl GridPlacement {
     }
 
     /// Model-space point → sub-cell coordinates (sub-cell `k` spans `[k, k + 1]`).
-    fn to_sub(&self, p: [f32; 3]) -> DVec3 {
+    fn sub_coords(&self, p: [f32; 3]) -> DVec3 {
         let inv = SUB as f64 / self.cell;
         DVec3::new(
             (p[0] as f64 - self.origin[0]) * inv,
@@ -328,7 +328,7 @@ pub fn voxelize_masks(
             if matches!(rule, Rule::Invisible) {
                 return;
             }
-            let v = t.map(|i| placement.to_sub(mesh.positions[i as usize]));
+            let v = t.map(|i| placement.sub_coords(mesh.positions[i as usize]));
             let Scratch { masks, poly } = scratch;
             match rule {
                 Rule::Solid { wood } => target.rasterize(&v, *wood, false, masks, |_| true),
