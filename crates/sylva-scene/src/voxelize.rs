@@ -430,7 +430,13 @@ impl Target<'_> {
             (2, 2, 0, 1)
         };
         let (others, nd) = ([(k + 1) % 3, (k + 2) % 3], n[d]);
-        let offset = n.dot(v[0]);
+        // The plane as d = base + ka·a + kb·b (when nd ≠ 0), divided once per triangle.
+        let (base, ka, kb) = if nd != 0.0 {
+            (n.dot(v[0]) / nd, -n[a] / nd, -n[b] / nd)
+        } else {
+            (0.0, 0.0, 0.0)
+        };
+        let (ka_lo, ka_hi, kb_lo, kb_hi) = (ka.min(0.0), ka.max(0.0), kb.min(0.0), kb.max(0.0));
         for ia in s0[a]..=s1[a] {
             for ib in s0[b]..=s1[b] {
                 let (pa, pb) = (ia as f64, ib as f64);
@@ -441,10 +447,8 @@ impl Target<'_> {
                 // little so rounding can only add candidates (the exact test follows).
                 let (mut d0, mut d1) = (s0[d], s1[d]);
                 if nd != 0.0 {
-                    let base = (offset - n[a] * pa - n[b] * pb) / nd;
-                    let (da, db) = (-n[a] / nd, -n[b] / nd);
-                    let lo = base + da.min(0.0) + db.min(0.0);
-                    let hi = base + da.max(0.0) + db.max(0.0);
+                    let at = base + ka * pa + kb * pb;
+                    let (lo, hi) = (at + ka_lo + kb_lo, at + ka_hi + kb_hi);
                     let eps = 1e-9 * (1.0 + lo.abs().max(hi.abs()));
                     d0 = d0.max(ceil(lo - eps) - 1);
                     d1 = d1.min(floor(hi + eps));
