@@ -30,6 +30,9 @@ enum Command {
     Scene(commands::scene::SceneArgs),
     /// The species library: `sylva species list`, `sylva species show NAME`.
     Species(commands::species::SpeciesArgs),
+    /// Turn a model (species name or Arbaro file) into an LB density grid (.sgrid) and a
+    /// preview: `sylva voxelize red_maple --grid 128 -o maple.sgrid`.
+    Voxelize(commands::voxelize::VoxelizeArgs),
     /// Lattice-Boltzmann lighting: solve a grid, describe grid files.
     Lb(commands::lb::LbArgs),
     /// Plane-parallel scattering in slabs (paper 003): radiance, Tables 1 and 2.
@@ -53,6 +56,7 @@ fn main() -> std::process::ExitCode {
     }
     let result = match cli.command {
         Command::Lb(a) => commands::lb::run(a),
+        Command::Voxelize(a) => commands::voxelize::run(a),
         Command::Spp(a) => commands::spp::run(a),
         Command::Scene(a) => commands::scene::run(a),
         Command::Species(a) => commands::species::run(a),

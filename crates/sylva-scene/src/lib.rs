@@ -6,22 +6,28 @@
 //!   bark textures; [`Species::build_model`] gives a [`Model`].
 //! * [`scene`]: the TOML scene file and [`Scene`], the built forest: unique models plus
 //!   instances that reference them; [`builtin_scenes`] holds the papers' scenes.
+//! * [`voxelize`]: a model's triangles → the LB density grid (000 §4.2); [`model_source`]
+//!   resolves a model named on the command line (species name or model file).
 
 pub mod arbaro;
 pub mod builtin_scenes;
 pub mod layout;
 pub mod material;
 pub mod mesh;
+pub mod model_source;
 pub mod rng;
 pub mod scene;
 pub mod species;
 pub mod texture;
 pub mod textures;
+pub mod voxelize;
 pub mod weber_penn;
 
 pub use material::{Material, MaterialKind};
 pub use mesh::{Aabb, Mesh, Model};
+pub use model_source::{load_model, ModelSourceError};
 pub use scene::{Camera, Instance, LbSettings, Scene, SceneDesc, SceneError};
 
 pub use species::Species;
 pub use texture::{Filter, Texture, Wrap};
+pub use voxelize::{voxelize, VoxelizeError, VoxelizeOptions};

@@ -22,6 +22,8 @@ enum BenchCommand {
     Lb(BenchLbArgs),
     /// Generating each built-in species and building a scene's models and instances.
     Scene(super::bench_scene::BenchSceneArgs),
+    /// Voxelizing a model into its LB density grid (default: american_beech at 128).
+    Voxelize(super::bench_voxel::BenchVoxelArgs),
 }
 
 #[derive(Args)]
@@ -63,6 +65,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     match args.command {
         BenchCommand::Lb(a) => bench_lb(a),
         BenchCommand::Scene(a) => super::bench_scene::run(a),
+        BenchCommand::Voxelize(a) => super::bench_voxel::run(a),
     }
 }
 

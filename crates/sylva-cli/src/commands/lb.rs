@@ -13,6 +13,8 @@ use sylva_lb::{
     solve_lighting, Boundary, ColourParams, DensityGrid, Dims, Element, GridFile, MediumParams,
     Preset, SolveOptions,
 };
+use sylva_scene::model_source::load_scene_model;
+use sylva_scene::SceneDesc;
 
 use super::progress::bar;
 
@@ -50,15 +52,27 @@ struct Source {
     /// --raw-dims and --raw-type.
     #[arg(long, value_name = "FILE", requires_all = ["raw_dims"])]
     raw: Option<PathBuf>,
+    /// A model, voxelized first (`sylva voxelize`) with --grid sites along its longest edge:
+    /// a built-in species name or an Arbaro species file (.xml).
+    #[arg(long, value_name = "SPEC")]
+    model: Option<String>,
+    /// A scene (file or built-in name): one of its models (--scene-model) voxelized with the
+    /// scene's [lb] grid and lit with its preset, unless --grid or --preset say otherwise.
+    #[arg(long, value_name = "SCENE")]
+    scene: Option<String>,
 }
 
 #[derive(Args)]
 pub struct SolveArgs {
     #[command(flatten)]
     source: Source,
-    /// Grid size for --shape: N for N³ or NXxNYxNZ.
-    #[arg(long, default_value = "128")]
-    grid: String,
+    /// Grid size: for --shape N (an N³ grid) or NXxNYxNZ; for --model and --scene N, the
+    /// sites along the model's longest edge (default 128, or the scene's [lb] grid).
+    #[arg(long)]
+    grid: Option<String>,
+    /// With --scene: the name of the model to light (needed when the scene has several).
+    #[arg(long, value_name = "NAME", requires = "scene")]
+    scene_model: Option<String>,
     /// Dimensions of a --raw file: NXxNYxNZ.
     #[arg(long, value_name = "NXxNYxNZ")]
     raw_dims: Option<String>,
@@ -74,9 +88,10 @@ pub struct SolveArgs {
     /// Sun azimuth in degrees from +x towards +z (default 30).
     #[arg(long, allow_negative_numbers = true)]
     azimuth: Option<f64>,
-    /// Parameter preset: leaf (000 Table 1), dogrose (002 Table 1), cloud, pmma.
-    #[arg(long, default_value = "leaf")]
-    preset: String,
+    /// Parameter preset: leaf (000 Table 1), dogrose (002 Table 1), cloud, pmma (default
+    /// leaf, or the scene's [lb] preset with --scene).
+    #[arg(long)]
+    preset: Option<String>,
     /// Absorption σ_a: one value for all colours or R,G,B (overrides the preset).
     #[arg(long, value_name = "V|R,G,B")]
     sigma_a: Option<String>,
@@ -152,8 +167,8 @@ pub fn parse_sun(sun: Option<&str>, elevation: Option<f64>, azimuth: Option<f64>
     })
 }
 
-fn medium(a: &SolveArgs) -> Result<MediumParams> {
-    let mut m = Preset::parse(&a.preset)?.params();
+fn medium(a: &SolveArgs, preset: &str) -> Result<MediumParams> {
+    let mut m = Preset::parse(preset)?.params();
     if let Some(s) = &a.sigma_a {
         let v = per_colour("sigma-a", s)?;
         for (colour, value) in m.colours.iter_mut().zip(v) {
@@ -192,8 +207,39 @@ fn parse_dims(s: &str, what: &str) -> Result<Dims> {
     }
 }
 
+/// `--grid` as the N of a model grid.
+fn model_grid_n(grid: &str) -> Result<usize> {
+    grid.trim().parse().with_context(|| {
+        format!("--grid '{grid}': a model's grid is one number, the sites along its longest edge")
+    })
+}
+
 /// Loads the medium and names it for default output paths.
-fn load_source(a: &SolveArgs) -> Result<(DensityGrid, String)> {
+fn load_source(a: &SolveArgs, scene: Option<&SceneDesc>) -> Result<(DensityGrid, String)> {
+    if let Some(spec) = &a.source.model {
+        let n = model_grid_n(a.grid.as_deref().unwrap_or("128"))?;
+        let v = super::voxelize::load_and_voxelize(spec, n, true)?;
+        println!(
+            "voxelized {}: {}",
+            v.name,
+            super::voxelize::summary(&v.grid)
+        );
+        return Ok((v.grid, super::voxelize::sanitize(&v.name)));
+    }
+    if let Some(scene) = scene {
+        let n = match &a.grid {
+            Some(g) => model_grid_n(g)?,
+            None => scene.lb.grid as usize,
+        };
+        let model = load_scene_model(scene, a.scene_model.as_deref())?;
+        let spec = format!("{}: {}", scene.name, model.name);
+        let v = super::voxelize::voxelize_model(&model, &spec, n, true)?;
+        println!("voxelized {spec}: {}", super::voxelize::summary(&v.grid));
+        return Ok((
+            v.grid,
+            super::voxelize::sanitize(&format!("{}-{}", scene.name, model.name)),
+        ));
+    }
     if let Some(path) = &a.source.input {
         let grid = GridFile::read(path)?.into_density(path)?;
         let name = path
@@ -210,7 +256,7 @@ fn load_source(a: &SolveArgs) -> Result<(DensityGrid, String)> {
     let Some(shape) = Shape::parse(shape_name) else {
         bail!("unknown shape '{shape_name}': expected sphere, cube or crown");
     };
-    let dims = parse_dims(&a.grid, "--grid")?;
+    let dims = parse_dims(a.grid.as_deref().unwrap_or("128"), "--grid")?;
     sylva_core::check_memory(
         &format!("an LB solve on a {dims} grid"),
         sylva_lb::solver::memory_needed(dims) + dims.sites() as u64 * 8,
@@ -249,13 +295,20 @@ fn read_raw(path: &Path, dims: Dims, ty: &str) -> Result<DensityGrid> {
 }
 
 fn solve(a: SolveArgs) -> Result<()> {
-    let m = medium(&a)?;
+    // The scene file is read first (cheap): its [lb] preset decides the parameters.
+    let scene = a.source.scene.as_deref().map(SceneDesc::load).transpose()?;
+    let preset = match (&a.preset, &scene) {
+        (Some(p), _) => p.clone(),
+        (None, Some(s)) => s.lb.preset.clone(),
+        (None, None) => "leaf".to_string(),
+    };
+    let m = medium(&a, &preset)?;
     let sun = parse_sun(a.sun.as_deref(), a.elevation, a.azimuth)?;
     if !(a.intensity.is_finite() && a.intensity > 0.0) {
         bail!("--intensity {} must be a positive number", a.intensity);
     }
     let t0 = Instant::now();
-    let (grid, name) = load_source(&a)?;
+    let (grid, name) = load_source(&a, scene.as_ref())?;
     let dims = grid.dims;
     let load_s = t0.elapsed().as_secs_f64();
     let opts = match (a.steps, a.tolerance) {
@@ -281,7 +334,7 @@ fn solve(a: SolveArgs) -> Result<()> {
     let d = sun.travel();
     println!(
         "lighting {name}: {dims} grid, {occupied} occupied sites (mean density {mean:.4}), preset {}, sun elevation {:.1}° azimuth {:.1}°",
-        a.preset,
+        preset,
         sun.elevation_deg(),
         sun.azimuth_deg()
     );
@@ -327,7 +380,7 @@ fn solve(a: SolveArgs) -> Result<()> {
     }
     let metadata = vec![
         ("source".to_string(), name.clone()),
-        ("preset".to_string(), a.preset.clone()),
+        ("preset".to_string(), preset.clone()),
         (
             "sun_to".to_string(),
             format!(

@@ -19,8 +19,10 @@ pub fn finish(result: anyhow::Result<()>) -> ExitCode {
 
 pub mod bench;
 pub mod bench_scene;
+pub mod bench_voxel;
 pub mod lb;
 pub mod progress;
 pub mod scene;
 pub mod species;
 pub mod spp;
+pub mod voxelize;

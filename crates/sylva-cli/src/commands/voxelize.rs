@@ -1,0 +1,185 @@
+//! `sylva voxelize`: a model → its LB density grid (.sgrid) and a PNG preview; also the model
+//! loading and voxelizing that `sylva lb solve --model/--scene` shares.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::Args;
+use sylva_lb::preview::write_density_preview;
+use sylva_lb::{DensityGrid, Element, GridFile};
+use sylva_scene::voxelize::{voxelize, VoxelizeOptions, DEFAULT_GRID};
+use sylva_scene::Model;
+
+use super::progress::bar;
+
+#[derive(Args)]
+pub struct VoxelizeArgs {
+    /// The model: a built-in species name (see `sylva species list`) or an Arbaro species file
+    /// (.xml).
+    model: String,
+    /// Output density grid (default sylva-out/<model>-<N>.sgrid).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Sites along the model's longest edge, the boundary shell included: the N of an
+    /// N³-class grid. The other edges get as many sites as the model's shape needs.
+    #[arg(long, default_value_t = DEFAULT_GRID)]
+    grid: usize,
+    /// Store the grid as f16 (half the size; densities are multiples of 1/27, so f16 keeps
+    /// them to 3 significant digits).
+    #[arg(long)]
+    f16: bool,
+    /// Preview image: three central slices, leaf density green, wood brown (default: the
+    /// output path with .png).
+    #[arg(long)]
+    png: Option<PathBuf>,
+    /// Count leaf triangles wherever they are, ignoring the transparent parts of their
+    /// textures.
+    #[arg(long)]
+    no_alpha: bool,
+}
+
+/// A voxelized model and what was spent making it.
+pub struct Voxelized {
+    pub grid: DensityGrid,
+    /// The model's name.
+    pub name: String,
+    pub metadata: Vec<(String, String)>,
+    pub triangles: usize,
+    /// Cell edge in model units.
+    pub cell: f32,
+    pub load_s: f64,
+    pub voxelize_s: f64,
+}
+
+/// Voxelizes `model` (named `spec` on the command line) with `n` sites along its longest edge,
+/// with a progress bar; the metadata records where the grid came from.
+pub fn voxelize_model(model: &Model, spec: &str, n: usize, alpha_test: bool) -> Result<Voxelized> {
+    let t = Instant::now();
+    let pb = bar(1, "voxelize");
+    pb.set_message(format!("{} triangles", model.triangle_count()));
+    let grid = voxelize(
+        model,
+        &VoxelizeOptions {
+            grid: n,
+            alpha_test,
+        },
+    )
+    .with_context(|| format!("voxelizing '{spec}'"))?;
+    pb.finish_and_clear();
+    let voxelize_s = t.elapsed().as_secs_f64();
+    let b = model.bounds;
+    let v3 = |v: [f32; 3]| format!("{},{},{}", v[0], v[1], v[2]);
+    let cell = (grid.bounds.max[0] - grid.bounds.min[0]) / (grid.dims.nx - 1) as f32;
+    let metadata = vec![
+        ("model".to_string(), model.name.clone()),
+        ("source".to_string(), spec.to_string()),
+        ("grid_n".to_string(), n.to_string()),
+        ("triangles".to_string(), model.triangle_count().to_string()),
+        ("model_min".to_string(), v3(b.min.to_array())),
+        ("model_max".to_string(), v3(b.max.to_array())),
+        ("cell_size".to_string(), cell.to_string()),
+        ("subcells".to_string(), "3x3x3".to_string()),
+        ("alpha_test".to_string(), alpha_test.to_string()),
+    ];
+    Ok(Voxelized {
+        grid,
+        name: model.name.clone(),
+        metadata,
+        triangles: model.triangle_count(),
+        cell,
+        load_s: 0.0,
+        voxelize_s,
+    })
+}
+
+/// Loads `spec` (species name or model file) with a progress bar and voxelizes it.
+pub fn load_and_voxelize(spec: &str, n: usize, alpha_test: bool) -> Result<Voxelized> {
+    let t = Instant::now();
+    let model = load_model_with_bar(spec)?;
+    let load_s = t.elapsed().as_secs_f64();
+    let mut v = voxelize_model(&model, spec, n, alpha_test)?;
+    v.load_s = load_s;
+    Ok(v)
+}
+
+/// [`sylva_scene::load_model`] under a progress bar.
+pub fn load_model_with_bar(spec: &str) -> Result<Model> {
+    let pb = bar(1, "model");
+    pb.set_message(format!("loading {spec}"));
+    let model = sylva_scene::load_model(spec)?;
+    pb.finish_and_clear();
+    Ok(model)
+}
+
+/// Sites with density > 0 whose wood fraction exceeds `threshold` (brown sites in the LB).
+pub fn wood_sites(g: &DensityGrid, threshold: f32) -> usize {
+    g.density
+        .iter()
+        .zip(&g.wood)
+        .filter(|(&d, &w)| d > 0.0 && w > threshold)
+        .count()
+}
+
+/// One line describing a density grid: size, occupancy, mean density, brown sites.
+pub fn summary(g: &DensityGrid) -> String {
+    let (mean, occupied) = g.occupancy();
+    format!(
+        "{} grid, {occupied} occupied sites ({:.1} %), mean density {mean:.4} ({:.4} over occupied sites), {} wood sites (wood fraction > 0.5)",
+        g.dims,
+        100.0 * occupied as f64 / g.dims.sites() as f64,
+        mean * g.dims.sites() as f64 / occupied.max(1) as f64,
+        wood_sites(g, 0.5)
+    )
+}
+
+/// A model name usable in a file name.
+pub fn sanitize(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+pub fn run(a: VoxelizeArgs) -> Result<()> {
+    let t0 = Instant::now();
+    let v = load_and_voxelize(&a.model, a.grid, !a.no_alpha)?;
+    let name = sanitize(&v.name);
+    let output = a
+        .output
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("sylva-out/{name}-{}.sgrid", a.grid)));
+    let png = a
+        .png
+        .clone()
+        .unwrap_or_else(|| output.with_extension("png"));
+    let mut file = GridFile::from_density(&v.grid, v.metadata.clone());
+    if a.f16 {
+        file.element = Element::F16;
+    }
+    file.write(&output)?;
+    write_density_preview(&v.grid, &png)
+        .with_context(|| format!("cannot write {}", png.display()))?;
+    let b = v.grid.bounds;
+    println!("voxelized {name}: {} triangles", v.triangles);
+    println!("  {}", summary(&v.grid));
+    println!(
+        "  site centres span ({:.3}, {:.3}, {:.3}) .. ({:.3}, {:.3}, {:.3}), cell {}",
+        b.min[0], b.min[1], b.min[2], b.max[0], b.max[1], b.max[2], v.cell
+    );
+    println!(
+        "  time: model {:.3} s, voxelize {:.3} s ({:.1} M triangles/s, {} threads), total {:.3} s",
+        v.load_s,
+        v.voxelize_s,
+        v.triangles as f64 / v.voxelize_s / 1e6,
+        rayon::current_num_threads(),
+        t0.elapsed().as_secs_f64()
+    );
+    println!("wrote {} and {}", output.display(), png.display());
+    Ok(())
+}
