@@ -6,9 +6,11 @@
 //!   bark textures; [`Species::build_model`] gives a [`Model`].
 //! * [`scene`]: the TOML scene file and [`Scene`], the built forest: unique models plus
 //!   instances that reference them; [`builtin_scenes`] holds the papers' scenes.
+//! * [`import`]: users' own models from OBJ and glTF files ([`load_mesh_file`]).
 
 pub mod arbaro;
 pub mod builtin_scenes;
+pub mod import;
 pub mod layout;
 pub mod material;
 pub mod mesh;
@@ -19,6 +21,7 @@ pub mod texture;
 pub mod textures;
 pub mod weber_penn;
 
+pub use import::{load_mesh_file, ImportError, ImportOptions};
 pub use material::{Material, MaterialKind};
 pub use mesh::{Aabb, Mesh, Model};
 pub use scene::{Camera, Instance, LbSettings, Scene, SceneDesc, SceneError};
