@@ -47,7 +47,9 @@ pub(super) fn load(path: &Path) -> Result<RawModel, ImportError> {
         raw: RawModel::default(),
     };
 
-    let roots: Vec<gltf::Node> = match document.default_scene().or_else(|| document.scenes().next())
+    let roots: Vec<gltf::Node> = match document
+        .default_scene()
+        .or_else(|| document.scenes().next())
     {
         Some(scene) => scene.nodes().collect(),
         None => {
@@ -62,8 +64,11 @@ pub(super) fn load(path: &Path) -> Result<RawModel, ImportError> {
     };
     // Depth first with an explicit stack: deep hierarchies cannot overflow the call stack.
     let mut visited = vec![false; document.nodes().len()];
-    let mut stack: Vec<(gltf::Node, Mat4)> =
-        roots.into_iter().rev().map(|n| (n, Mat4::IDENTITY)).collect();
+    let mut stack: Vec<(gltf::Node, Mat4)> = roots
+        .into_iter()
+        .rev()
+        .map(|n| (n, Mat4::IDENTITY))
+        .collect();
     while let Some((node, parent)) = stack.pop() {
         let el = format!("nodes[{}]", node.index());
         if std::mem::replace(&mut visited[node.index()], true) {
@@ -317,7 +322,12 @@ impl<'a> Ctx<'a> {
             }
         };
         // Checks that `n` elements of `size` bytes, `stride` apart from `start`, fit in a view.
-        let fits = |view: &gltf::buffer::View, start: usize, stride: usize, n: usize, size: usize, part: &str| {
+        let fits = |view: &gltf::buffer::View,
+                    start: usize,
+                    stride: usize,
+                    n: usize,
+                    size: usize,
+                    part: &str| {
             if n == 0 {
                 return Ok(());
             }
@@ -392,7 +402,11 @@ impl<'a> Ctx<'a> {
                     ));
                 }
                 for c in 0..comps {
-                    f(target, c, decode(&vb[vals.offset() + k * esize + c * csize..]));
+                    f(
+                        target,
+                        c,
+                        decode(&vb[vals.offset() + k * esize + c * csize..]),
+                    );
                 }
             }
         }
@@ -407,7 +421,12 @@ impl<'a> Ctx<'a> {
     ) -> Result<Vec<[f32; N]>, ImportError> {
         let el = format!("accessors[{}] ({what})", acc.index());
         let comps = acc.dimensions().multiplicity();
-        if comps != N || !matches!(acc.dimensions(), Dimensions::Scalar | Dimensions::Vec2 | Dimensions::Vec3 | Dimensions::Vec4) {
+        if comps != N
+            || !matches!(
+                acc.dimensions(),
+                Dimensions::Scalar | Dimensions::Vec2 | Dimensions::Vec3 | Dimensions::Vec4
+            )
+        {
             return Err(self.err(
                 el,
                 format!("has type {:?}, expected {N} components", acc.dimensions()),
@@ -426,7 +445,10 @@ impl<'a> Ctx<'a> {
     fn indices(&self, acc: &gltf::Accessor, what: &str) -> Result<Vec<u32>, ImportError> {
         let el = format!("accessors[{}] ({what})", acc.index());
         if acc.dimensions() != Dimensions::Scalar
-            || !matches!(acc.data_type(), DataType::U8 | DataType::U16 | DataType::U32)
+            || !matches!(
+                acc.data_type(),
+                DataType::U8 | DataType::U16 | DataType::U32
+            )
         {
             return Err(self.err(
                 el,
@@ -514,7 +536,10 @@ impl<'a> Ctx<'a> {
                 if let Some(k) = idx.iter().position(|&i| i as usize >= n) {
                     return Err(self.err(
                         format!("accessors[{}] (indices of {el})", a.index()),
-                        format!("index {} at position {k} is out of range: {n} vertices", idx[k]),
+                        format!(
+                            "index {} at position {k} is out of range: {n} vertices",
+                            idx[k]
+                        ),
                     ));
                 }
                 idx
@@ -641,8 +666,7 @@ impl<'a> Ctx<'a> {
             slot.textured = true;
             slot.tex_coord = info.tex_coord();
             if let Some(tt) = info.extension_value("KHR_texture_transform") {
-                let (uv, set) =
-                    texture_transform(tt).map_err(|msg| self.err(&el, msg))?;
+                let (uv, set) = texture_transform(tt).map_err(|msg| self.err(&el, msg))?;
                 slot.uv = uv;
                 if let Some(s) = set {
                     slot.tex_coord = s;
@@ -719,7 +743,9 @@ fn texture_transform(v: &serde_json::Value) -> Result<([f32; 6], Option<u32>), S
                 Some(x) if x.len() == 2 && x.iter().all(|f| f.is_some_and(f32::is_finite)) => {
                     Ok([x[0].expect("checked"), x[1].expect("checked")])
                 }
-                _ => Err(format!("KHR_texture_transform.{key} must be two numbers, got {a}")),
+                _ => Err(format!(
+                    "KHR_texture_transform.{key} must be two numbers, got {a}"
+                )),
             },
         }
     };
@@ -736,7 +762,9 @@ fn texture_transform(v: &serde_json::Value) -> Result<([f32; 6], Option<u32>), S
         Some(x) => Some(
             x.as_u64()
                 .and_then(|s| u32::try_from(s).ok())
-                .ok_or_else(|| format!("KHR_texture_transform.texCoord must be an index, got {x}"))?,
+                .ok_or_else(|| {
+                    format!("KHR_texture_transform.texCoord must be an index, got {x}")
+                })?,
         ),
     };
     // The extension's T · R · S with R = [[cos, sin], [−sin, cos]].
@@ -795,7 +823,10 @@ mod tests {
         assert_eq!(set, None);
         // uv (1, 0): scaled (2, 0), rotated by R = [[0, 1], [-1, 0]] → (0, -2), offset.
         let (u, w) = (a * 1.0 + b * 0.0 + c, d * 1.0 + e * 0.0 + f);
-        assert!((u - 0.5).abs() < 1e-6 && (w - (-2.0 + 0.25)).abs() < 1e-6, "{u} {w}");
+        assert!(
+            (u - 0.5).abs() < 1e-6 && (w - (-2.0 + 0.25)).abs() < 1e-6,
+            "{u} {w}"
+        );
         // uv (0, 1): scaled (0, 3) → (3, 0).
         let (u, w) = (b + c, e + f);
         assert!((u - 3.5).abs() < 1e-6 && (w - 0.25).abs() < 1e-6, "{u} {w}");

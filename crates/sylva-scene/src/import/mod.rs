@@ -401,7 +401,9 @@ pub(crate) fn decode_image_keep_alpha_info(
     file: &Path,
     what: &str,
 ) -> Result<(image::RgbaImage, bool), ImportError> {
-    let bad = |e: &dyn std::fmt::Display| ImportError::at(file, what, format!("cannot decode image: {e}"));
+    let bad = |e: &dyn std::fmt::Display| {
+        ImportError::at(file, what, format!("cannot decode image: {e}"))
+    };
     let reader = || {
         image::ImageReader::new(std::io::Cursor::new(bytes))
             .with_guessed_format()
@@ -409,7 +411,11 @@ pub(crate) fn decode_image_keep_alpha_info(
     };
     let (w, h) = reader()?.into_dimensions().map_err(|e| bad(&e))?;
     if w == 0 || h == 0 {
-        return Err(ImportError::at(file, what, format!("image is empty ({w}×{h})")));
+        return Err(ImportError::at(
+            file,
+            what,
+            format!("image is empty ({w}×{h})"),
+        ));
     }
     sylva_core::check_memory(
         &format!("texture {what} ({w}×{h})"),
@@ -475,9 +481,8 @@ pub(crate) fn read_referenced(
     file: &Path,
     what: &str,
 ) -> Result<Vec<u8>, ImportError> {
-    std::fs::read(path).map_err(|e| {
-        ImportError::at(file, what, format!("cannot read {}: {e}", path.display()))
-    })
+    std::fs::read(path)
+        .map_err(|e| ImportError::at(file, what, format!("cannot read {}: {e}", path.display())))
 }
 
 #[cfg(test)]
@@ -503,14 +508,12 @@ mod tests {
             for byte in 0..=255u8 {
                 let a = byte as f32 / 255.0;
                 let out = remap_alpha(a, cutoff);
-                assert_eq!(
-                    out >= 128,
-                    a >= cutoff,
-                    "a {a} cutoff {cutoff} -> {out}"
-                );
+                assert_eq!(out >= 128, a >= cutoff, "a {a} cutoff {cutoff} -> {out}");
             }
             // Monotonic.
-            let outs: Vec<u8> = (0..=255).map(|b| remap_alpha(b as f32 / 255.0, cutoff)).collect();
+            let outs: Vec<u8> = (0..=255)
+                .map(|b| remap_alpha(b as f32 / 255.0, cutoff))
+                .collect();
             assert!(outs.windows(2).all(|w| w[0] <= w[1]), "cutoff {cutoff}");
         }
     }

@@ -38,7 +38,10 @@ pub(super) fn load(path: &Path) -> Result<RawModel, ImportError> {
         });
     }
     for (line, name) in &scan.usemtl {
-        if !libs.iter().any(|l| l.materials.iter().any(|m| m.name == *name)) {
+        if !libs
+            .iter()
+            .any(|l| l.materials.iter().any(|m| m.name == *name))
+        {
             let known = if libs.is_empty() {
                 "the file has no mtllib".to_string()
             } else {
@@ -123,7 +126,8 @@ pub(super) fn load(path: &Path) -> Result<RawModel, ImportError> {
         let has_normals = mesh.normals.len() == 3 * n;
         let has_uvs = mesh.texcoords.len() == 2 * n;
         for i in 0..n {
-            raw.positions.push(Vec3::from_slice(&mesh.positions[3 * i..3 * i + 3]));
+            raw.positions
+                .push(Vec3::from_slice(&mesh.positions[3 * i..3 * i + 3]));
             raw.normals.push(if has_normals {
                 Vec3::from_slice(&mesh.normals[3 * i..3 * i + 3])
             } else {
@@ -150,7 +154,9 @@ fn read_text(
     referenced: Option<(usize, &str)>,
 ) -> Result<String, ImportError> {
     let bytes = match referenced {
-        None => std::fs::read(p).map_err(|e| ImportError::whole(file, format!("cannot read: {e}")))?,
+        None => {
+            std::fs::read(p).map_err(|e| ImportError::whole(file, format!("cannot read: {e}")))?
+        }
         Some((line, what)) => read_referenced(p, file, &format!("line {line}: {what}"))?,
     };
     String::from_utf8(bytes).map_err(|e| {
@@ -191,7 +197,11 @@ fn rest(line: &str) -> &str {
 
 fn parse_f32(tok: &str, file: &Path, line: usize, what: &str) -> Result<f32, ImportError> {
     let v: f32 = tok.parse().map_err(|_| {
-        ImportError::at(file, format!("line {line}"), format!("bad number '{tok}' in {what}"))
+        ImportError::at(
+            file,
+            format!("line {line}"),
+            format!("bad number '{tok}' in {what}"),
+        )
     })?;
     if !v.is_finite() {
         return Err(ImportError::at(
@@ -230,8 +240,13 @@ fn scan_obj(text: &str, file: &Path) -> Result<ObjScan, ImportError> {
                     if c < 3 {
                         xyz[c] = v;
                     }
-                    if c == 3 && args.len() == 4 && (v == 0.0 || !xyz.map(|x| x / v).iter().all(|x| x.is_finite())) {
-                        return Err(at(format!("vertex weight w = {tok} makes x/w, y/w, z/w not finite")));
+                    if c == 3
+                        && args.len() == 4
+                        && (v == 0.0 || !xyz.map(|x| x / v).iter().all(|x| x.is_finite()))
+                    {
+                        return Err(at(format!(
+                            "vertex weight w = {tok} makes x/w, y/w, z/w not finite"
+                        )));
                     }
                 }
                 nv += 1;
@@ -292,21 +307,35 @@ fn scan_obj(text: &str, file: &Path) -> Result<ObjScan, ImportError> {
                     "bad face vertex '{tok}' (expected v, v/vt, v//vn or v/vt/vn)"
                 )));
             }
-            let kinds = [("vertex", nv, cv), ("texture coordinate", nvt, cvt), ("normal", nvn, cvn)];
+            let kinds = [
+                (["vertex", "vertices"], nv, cv),
+                (["texture coordinate", "texture coordinates"], nvt, cvt),
+                (["normal", "normals"], nvn, cvn),
+            ];
             for (p, part) in parts.iter().enumerate() {
                 if part.is_empty() {
                     continue;
                 }
                 let (what, total, so_far) = kinds[p];
                 let i: i64 = part.parse().map_err(|_| {
-                    at(format!("bad face index '{part}' in '{tok}' (an integer ≠ 0 is expected)"))
+                    at(format!(
+                        "bad face index '{part}' in '{tok}' (an integer ≠ 0 is expected)"
+                    ))
                 })?;
                 // Negative indices count back from the last one defined so far.
-                let (resolved, defined) = if i < 0 { (so_far as i64 + i + 1, so_far) } else { (i, total) };
+                let (resolved, defined) = if i < 0 {
+                    (so_far as i64 + i + 1, so_far)
+                } else {
+                    (i, total)
+                };
                 if i == 0 || resolved < 1 || resolved > defined as i64 {
                     return Err(at(format!(
-                        "face index {i} in '{tok}' is out of range: {defined} {what}{} defined{}",
-                        if defined == 1 { " is" } else { "s are" },
+                        "face index {i} in '{tok}' is out of range: {defined} {} defined{}",
+                        if defined == 1 {
+                            format!("{} is", what[0])
+                        } else {
+                            format!("{} are", what[1])
+                        },
                         if i < 0 { " before this line" } else { "" }
                     )));
                 }
@@ -372,7 +401,10 @@ fn scan_mtl(text: &str, file: &Path) -> Result<Vec<MtlInfo>, ImportError> {
             "Ka" | "Kd" | "Ks" | "Ke" => {
                 need_material(&out)?;
                 if args.len() != 3 {
-                    return Err(at(format!("{key} needs 3 numbers (r g b), got {}", args.len())));
+                    return Err(at(format!(
+                        "{key} needs 3 numbers (r g b), got {}",
+                        args.len()
+                    )));
                 }
                 for tok in &args {
                     let v = parse_f32(tok, file, l, key)?;
@@ -457,11 +489,7 @@ fn build_material(
     // Loads a map; returns the texture, whether the image had alpha, and its element name.
     let load_map = |arg: &str, key: &str, line: Option<usize>| {
         let r = parse_texture_ref(arg);
-        let what = format!(
-            "line {}: {key} '{}'",
-            line.unwrap_or(info.line),
-            r.file
-        );
+        let what = format!("line {}: {key} '{}'", line.unwrap_or(info.line), r.file);
         if r.file.is_empty() {
             return Err(ImportError::at(&lib.path, what, "no file name"));
         }
