@@ -58,7 +58,7 @@ pub enum SceneError {
         origin: String,
         line: usize,
         model: String,
-        source: ImportError,
+        source: Box<ImportError>,
     },
     #[error("{origin}: line {line}: instances of '{model}': {source}")]
     Layout {
@@ -810,7 +810,7 @@ impl SceneDesc {
                             origin: self.origin.clone(),
                             line: d.line,
                             model: d.name.clone(),
-                            source,
+                            source: Box::new(source),
                         })?,
                 };
                 model.name = d.name.clone();

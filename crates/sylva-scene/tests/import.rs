@@ -499,7 +499,7 @@ impl Doc {
     }
 
     fn view(&mut self, bytes: &[u8]) -> usize {
-        while self.bin.len() % 4 != 0 {
+        while !self.bin.len().is_multiple_of(4) {
             self.bin.push(0);
         }
         let off = self.bin.len();
@@ -572,11 +572,11 @@ impl Doc {
     fn write_glb(mut self, dir: &Path, name: &str) -> PathBuf {
         self.json["buffers"] = json!([self.buffer_json(None)]);
         let mut js = serde_json::to_vec(&self.json).unwrap();
-        while js.len() % 4 != 0 {
+        while !js.len().is_multiple_of(4) {
             js.push(b' ');
         }
         let mut bin = self.bin;
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         let total = 12 + 8 + js.len() + 8 + bin.len();

@@ -548,7 +548,7 @@ impl<'a> Ctx<'a> {
         };
         let tris: Vec<[u32; 3]> = match prim.mode() {
             Mode::Triangles => {
-                if idx.len() % 3 != 0 {
+                if !idx.len().is_multiple_of(3) {
                     return Err(self.err(
                         &el,
                         format!("{} indices are not a whole number of triangles", idx.len()),
