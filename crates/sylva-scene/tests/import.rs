@@ -415,7 +415,7 @@ fn obj_errors_name_file_line_and_problem() {
     // Vertices but no faces.
     let (e, p) = obj_error(&format!("{v3}l 1 2\n"));
     assert!(
-        e.starts_with(&p.display().to_string()) && e.contains("the mesh is empty: no triangles"),
+        e.starts_with(&p.display().to_string()) && e.contains("the mesh is empty: it has no triangles"),
         "{e}"
     );
 }
@@ -980,7 +980,7 @@ fn gltf_errors_name_file_element_and_problem() {
     let mut doc = hierarchy_doc();
     doc.json["scenes"] = json!([{"nodes": []}]);
     let p = doc.write_data_uri(d, "empty.gltf");
-    check(&p, "", "the mesh is empty: no triangles");
+    check(&p, "", "the mesh is empty: it has no triangles");
 }
 
 // ---------- scenes ----------

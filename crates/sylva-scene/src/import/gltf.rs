@@ -268,6 +268,46 @@ impl<'a> Ctx<'a> {
         &self.buffers[v.buffer().index()][v.offset()..v.offset() + v.length()]
     }
 
+    /// Checks that `n` elements of `size` bytes, `stride` apart from `start`, fit in `view`.
+    fn fits(
+        &self,
+        el: &str,
+        view: &gltf::buffer::View,
+        start: usize,
+        stride: usize,
+        n: usize,
+        size: usize,
+    ) -> Result<(), ImportError> {
+        if n == 0 {
+            return Ok(());
+        }
+        let end = stride
+            .checked_mul(n - 1)
+            .and_then(|x| x.checked_add(start))
+            .and_then(|x| x.checked_add(size));
+        match end {
+            Some(e) if e <= view.length() => Ok(()),
+            _ => Err(self.err(
+                el,
+                format!(
+                    "{n} elements of {size} bytes from byte {start} (stride {stride}) run past the end of bufferViews[{}], which is {} bytes long",
+                    view.index(),
+                    view.length()
+                ),
+            )),
+        }
+    }
+
+    /// Checks an accessor's ranges before anything is allocated for it.
+    fn check_accessor(&self, acc: &gltf::Accessor, el: &str) -> Result<(), ImportError> {
+        let esize = acc.data_type().size() * acc.dimensions().multiplicity();
+        if let Some(view) = acc.view() {
+            let stride = view.stride().unwrap_or(esize).max(esize);
+            self.fits(el, &view, acc.offset(), stride, acc.count(), esize)?;
+        }
+        Ok(())
+    }
+
     /// Visits every (element, component, value) of an accessor, sparse substitutions last;
     /// integer components are normalised when the accessor says so.
     fn visit(
@@ -321,32 +361,6 @@ impl<'a> Ctx<'a> {
                 DataType::F32 => f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64,
             }
         };
-        // Checks that `n` elements of `size` bytes, `stride` apart from `start`, fit in a view.
-        let fits = |view: &gltf::buffer::View,
-                    start: usize,
-                    stride: usize,
-                    n: usize,
-                    size: usize,
-                    part: &str| {
-            if n == 0 {
-                return Ok(());
-            }
-            let end = stride
-                .checked_mul(n - 1)
-                .and_then(|x| x.checked_add(start))
-                .and_then(|x| x.checked_add(size));
-            match end {
-                Some(e) if e <= view.length() => Ok(()),
-                _ => Err(self.err(
-                    format!("{el}{part}"),
-                    format!(
-                        "{n} elements of {size} bytes from byte {start} (stride {stride}) run past the end of bufferViews[{}], which is {} bytes long",
-                        view.index(),
-                        view.length()
-                    ),
-                )),
-            }
-        };
         match acc.view() {
             Some(view) => {
                 let stride = view.stride().unwrap_or(esize);
@@ -359,7 +373,7 @@ impl<'a> Ctx<'a> {
                         ),
                     ));
                 }
-                fits(&view, acc.offset(), stride, count, esize, "")?;
+                self.fits(&el, &view, acc.offset(), stride, count, esize)?;
                 let data = self.view_bytes(&view);
                 for i in 0..count {
                     let base = acc.offset() + i * stride;
@@ -382,10 +396,24 @@ impl<'a> Ctx<'a> {
             let idx = sparse.indices();
             let isize = idx.index_type().size();
             let iview = idx.view();
-            fits(&iview, idx.offset(), isize, n, isize, ".sparse.indices")?;
+            self.fits(
+                &format!("{el}.sparse.indices"),
+                &iview,
+                idx.offset(),
+                isize,
+                n,
+                isize,
+            )?;
             let vals = sparse.values();
             let vview = vals.view();
-            fits(&vview, vals.offset(), esize, n, esize, ".sparse.values")?;
+            self.fits(
+                &format!("{el}.sparse.values"),
+                &vview,
+                vals.offset(),
+                esize,
+                n,
+                esize,
+            )?;
             let ib = self.view_bytes(&iview);
             let vb = self.view_bytes(&vview);
             for k in 0..n {
@@ -432,6 +460,7 @@ impl<'a> Ctx<'a> {
                 format!("has type {:?}, expected {N} components", acc.dimensions()),
             ));
         }
+        self.check_accessor(acc, &el)?;
         sylva_core::check_memory(&el, acc.count() as u64 * N as u64 * 4)
             .map_err(|e| self.err(&el, e.to_string()))?;
         let mut out = vec![[0f32; N]; acc.count()];
@@ -459,6 +488,7 @@ impl<'a> Ctx<'a> {
                 ),
             ));
         }
+        self.check_accessor(acc, &el)?;
         sylva_core::check_memory(&el, acc.count() as u64 * 4)
             .map_err(|e| self.err(&el, e.to_string()))?;
         let mut out = vec![0u32; acc.count()];

@@ -195,10 +195,7 @@ impl RawModel {
         if triangles.is_empty() {
             return Err(ImportError::whole(
                 file,
-                format!(
-                    "the mesh is empty: no triangles ({} vertices read)",
-                    positions.len()
-                ),
+                "the mesh is empty: it has no triangles",
             ));
         }
         debug_assert_eq!(positions.len(), normals.len());
@@ -391,12 +388,12 @@ pub(crate) fn decode_image(
     file: &Path,
     what: &str,
 ) -> Result<image::RgbaImage, ImportError> {
-    let (img, _) = decode_image_keep_alpha_info(bytes, file, what)?;
+    let (img, _) = decode_image_with_alpha(bytes, file, what)?;
     Ok(img)
 }
 
 /// As [`decode_image`], also telling whether the image has an alpha channel.
-pub(crate) fn decode_image_keep_alpha_info(
+pub(crate) fn decode_image_with_alpha(
     bytes: &[u8],
     file: &Path,
     what: &str,

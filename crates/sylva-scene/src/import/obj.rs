@@ -8,11 +8,9 @@
 //! directory. OBJ's v runs up the image, sylva's down: v is flipped.
 
 use super::{
-    decode_image_keep_alpha_info, read_referenced, tint, to_texture, ImportError, RawMaterial,
-    RawModel,
+    decode_image_with_alpha, read_referenced, tint, to_texture, ImportError, RawMaterial, RawModel,
 };
 use crate::texture::{Texture, Wrap};
-use crate::textures::srgb_to_linear;
 use glam::Vec3;
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
@@ -495,7 +493,7 @@ fn build_material(
         }
         let p = resolve(dir, &r.file);
         let bytes = read_referenced(&p, &lib.path, &what)?;
-        let (img, has_alpha) = decode_image_keep_alpha_info(&bytes, &lib.path, &what)?;
+        let (img, has_alpha) = decode_image_with_alpha(&bytes, &lib.path, &what)?;
         let wrap = if r.clamp { Wrap::Clamp } else { Wrap::Repeat };
         Ok((to_texture(&img, wrap), has_alpha))
     };
@@ -546,13 +544,7 @@ fn build_material(
         }
         raw.alpha_mask = true;
     }
-    if texture.is_none() {
-        // Kd is linear; keep it as it is.
-        raw.color = kd.unwrap_or(DEFAULT_GREY);
-    } else if let Some(t) = &texture {
-        // An untextured fallback colour: the texture's mean.
-        raw.color = t.mean_opaque_color().map(srgb_to_linear);
-    }
+    // With a texture, the material's base colour becomes the texture's mean (see `finish`).
     raw.texture = texture;
     Ok(raw)
 }
