@@ -415,7 +415,8 @@ fn obj_errors_name_file_line_and_problem() {
     // Vertices but no faces.
     let (e, p) = obj_error(&format!("{v3}l 1 2\n"));
     assert!(
-        e.starts_with(&p.display().to_string()) && e.contains("the mesh is empty: it has no triangles"),
+        e.starts_with(&p.display().to_string())
+            && e.contains("the mesh is empty: it has no triangles"),
         "{e}"
     );
 }
