@@ -211,73 +211,90 @@ fn parse_f32(tok: &str, file: &Path, line: usize, what: &str) -> Result<f32, Imp
     Ok(v)
 }
 
-/// Checks every statement tobj will read; returns the material references.
+/// Checks every statement tobj will read; returns the material references. Allocation-free
+/// per line: a model has millions of them.
 fn scan_obj(text: &str, file: &Path) -> Result<ObjScan, ImportError> {
-    let mut scan = ObjScan::default();
+    // Absolute indices may point at vertices defined later: count them all first.
     let (mut nv, mut nvt, mut nvn) = (0usize, 0usize, 0usize);
-    // Faces are checked at the end: absolute indices may point at later vertices.
-    let mut faces: Vec<(usize, usize, usize, usize, Vec<&str>)> = Vec::new();
+    for line in text.lines() {
+        match line.split_whitespace().next() {
+            Some("v") => nv += 1,
+            Some("vt") => nvt += 1,
+            Some("vn") => nvn += 1,
+            _ => {}
+        }
+    }
+    let totals = [nv, nvt, nvn];
+    let mut so_far = [0usize; 3];
+    let mut scan = ObjScan::default();
     for (k, line) in text.lines().enumerate() {
         let l = k + 1;
         let at = |m: String| ImportError::at(file, format!("line {l}"), m);
         let mut words = line.split_whitespace();
         let Some(key) = words.next() else { continue };
-        let args: Vec<&str> = words.collect();
         match key {
             "v" => {
                 // x y z, x y z w, or x y z r g b.
-                if !matches!(args.len(), 3 | 4 | 6) {
+                let mut vals = [0f32; 7];
+                let mut n = 0;
+                for tok in words {
+                    if n == vals.len() {
+                        n += 1;
+                        break;
+                    }
+                    vals[n] = parse_f32(tok, file, l, "vertex")?;
+                    n += 1;
+                }
+                if !matches!(n, 3 | 4 | 6) {
                     return Err(at(format!(
-                        "a vertex needs 3 coordinates (then a w or an r g b colour), got {} values",
-                        args.len()
+                        "a vertex needs 3 coordinates (then a w or an r g b colour), got {n} values"
                     )));
                 }
-                let mut xyz = [0f32; 3];
-                for (c, tok) in args.iter().enumerate() {
-                    let v = parse_f32(tok, file, l, "vertex")?;
-                    if c < 3 {
-                        xyz[c] = v;
-                    }
-                    if c == 3
-                        && args.len() == 4
-                        && (v == 0.0 || !xyz.map(|x| x / v).iter().all(|x| x.is_finite()))
-                    {
-                        return Err(at(format!(
-                            "vertex weight w = {tok} makes x/w, y/w, z/w not finite"
-                        )));
-                    }
-                }
-                nv += 1;
-            }
-            "vt" => {
-                if !(2..=3).contains(&args.len()) {
+                if n == 4
+                    && (vals[3] == 0.0 || !vals[..3].iter().all(|x| (x / vals[3]).is_finite()))
+                {
                     return Err(at(format!(
-                        "a texture coordinate needs u and v, got {} values",
-                        args.len()
+                        "vertex weight w = {} makes x/w, y/w, z/w not finite",
+                        vals[3]
                     )));
                 }
-                for tok in &args {
-                    parse_f32(tok, file, l, "texture coordinate")?;
-                }
-                nvt += 1;
+                so_far[0] += 1;
             }
-            "vn" => {
-                if args.len() != 3 {
-                    return Err(at(format!("a normal needs 3 numbers, got {}", args.len())));
+            "vt" | "vn" => {
+                let (what, range) = if key == "vt" {
+                    ("texture coordinate", 2..=3)
+                } else {
+                    ("normal", 3..=3)
+                };
+                let mut n = 0;
+                for tok in words {
+                    parse_f32(tok, file, l, what)?;
+                    n += 1;
                 }
-                for tok in &args {
-                    parse_f32(tok, file, l, "normal")?;
+                if !range.contains(&n) {
+                    return Err(at(if key == "vt" {
+                        format!("a texture coordinate needs u and v, got {n} values")
+                    } else {
+                        format!("a normal needs 3 numbers, got {n}")
+                    }));
                 }
-                nvn += 1;
+                so_far[if key == "vt" { 1 } else { 2 }] += 1;
             }
             "f" => {
-                if args.len() < 3 {
-                    return Err(at(format!(
-                        "a face needs at least 3 vertices, got {}",
-                        args.len()
-                    )));
+                let mut n = 0;
+                let mut uses_vt = None;
+                for tok in words {
+                    n += 1;
+                    let has_vt = check_face_vertex(tok, &totals, &so_far).map_err(at)?;
+                    if *uses_vt.get_or_insert(has_vt) != has_vt {
+                        return Err(at(
+                            "face mixes vertices with and without texture coordinates".into(),
+                        ));
+                    }
                 }
-                faces.push((l, nv, nvt, nvn, args));
+                if n < 3 {
+                    return Err(at(format!("a face needs at least 3 vertices, got {n}")));
+                }
             }
             "mtllib" | "usemtl" => {
                 let name = rest(line);
@@ -295,58 +312,51 @@ fn scan_obj(text: &str, file: &Path) -> Result<ObjScan, ImportError> {
             _ => {}
         }
     }
-    for (l, cv, cvt, cvn, args) in faces {
-        let at = |m: String| ImportError::at(file, format!("line {l}"), m);
-        let mut uses_vt = None;
-        for tok in args {
-            let parts: Vec<&str> = tok.split('/').collect();
-            if parts.len() > 3 || parts[0].is_empty() {
-                return Err(at(format!(
-                    "bad face vertex '{tok}' (expected v, v/vt, v//vn or v/vt/vn)"
-                )));
-            }
-            let kinds = [
-                (["vertex", "vertices"], nv, cv),
-                (["texture coordinate", "texture coordinates"], nvt, cvt),
-                (["normal", "normals"], nvn, cvn),
-            ];
-            for (p, part) in parts.iter().enumerate() {
-                if part.is_empty() {
-                    continue;
-                }
-                let (what, total, so_far) = kinds[p];
-                let i: i64 = part.parse().map_err(|_| {
-                    at(format!(
-                        "bad face index '{part}' in '{tok}' (an integer ≠ 0 is expected)"
-                    ))
-                })?;
-                // Negative indices count back from the last one defined so far.
-                let (resolved, defined) = if i < 0 {
-                    (so_far as i64 + i + 1, so_far)
+    Ok(scan)
+}
+
+/// Checks one face vertex (`v`, `v/vt`, `v//vn`, `v/vt/vn`) against the vertices, texture
+/// coordinates and normals defined in the file (`totals`) and before this line (`so_far`,
+/// for negative indices). Returns whether it has a texture coordinate.
+fn check_face_vertex(tok: &str, totals: &[usize; 3], so_far: &[usize; 3]) -> Result<bool, String> {
+    const WHAT: [[&str; 2]; 3] = [
+        ["vertex", "vertices"],
+        ["texture coordinate", "texture coordinates"],
+        ["normal", "normals"],
+    ];
+    let mut has_vt = false;
+    for (p, part) in tok.split('/').enumerate() {
+        if p > 2 || (p == 0 && part.is_empty()) {
+            return Err(format!(
+                "bad face vertex '{tok}' (expected v, v/vt, v//vn or v/vt/vn)"
+            ));
+        }
+        if part.is_empty() {
+            continue;
+        }
+        has_vt |= p == 1;
+        let i: i64 = part.parse().map_err(|_| {
+            format!("bad face index '{part}' in '{tok}' (an integer ≠ 0 is expected)")
+        })?;
+        // Negative indices count back from the last one defined so far.
+        let (resolved, defined) = if i < 0 {
+            (so_far[p] as i64 + i + 1, so_far[p])
+        } else {
+            (i, totals[p])
+        };
+        if i == 0 || resolved < 1 || resolved > defined as i64 {
+            return Err(format!(
+                "face index {i} in '{tok}' is out of range: {defined} {} defined{}",
+                if defined == 1 {
+                    format!("{} is", WHAT[p][0])
                 } else {
-                    (i, total)
-                };
-                if i == 0 || resolved < 1 || resolved > defined as i64 {
-                    return Err(at(format!(
-                        "face index {i} in '{tok}' is out of range: {defined} {} defined{}",
-                        if defined == 1 {
-                            format!("{} is", what[0])
-                        } else {
-                            format!("{} are", what[1])
-                        },
-                        if i < 0 { " before this line" } else { "" }
-                    )));
-                }
-            }
-            let has_vt = parts.len() > 1 && !parts[1].is_empty();
-            if *uses_vt.get_or_insert(has_vt) != has_vt {
-                return Err(at(
-                    "face mixes vertices with and without texture coordinates".into(),
-                ));
-            }
+                    format!("{} are", WHAT[p][1])
+                },
+                if i < 0 { " before this line" } else { "" }
+            ));
         }
     }
-    Ok(scan)
+    Ok(has_vt)
 }
 
 #[derive(Debug)]
