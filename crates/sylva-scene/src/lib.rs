@@ -8,9 +8,11 @@
 //!   instances that reference them; [`builtin_scenes`] holds the papers' scenes.
 //! * [`voxelize`]: a model's triangles → the LB density grid (000 §4.2); [`model_source`]
 //!   resolves a model named on the command line (species name or model file).
+//! * [`import`]: users' own models from OBJ and glTF files ([`load_mesh_file`]).
 
 pub mod arbaro;
 pub mod builtin_scenes;
+pub mod import;
 pub mod layout;
 pub mod material;
 pub mod mesh;
@@ -23,6 +25,7 @@ pub mod textures;
 pub mod voxelize;
 pub mod weber_penn;
 
+pub use import::{load_mesh_file, ImportError, ImportOptions};
 pub use material::{Material, MaterialKind};
 pub use mesh::{Aabb, Mesh, Model};
 pub use model_source::{load_model, ModelSourceError};

@@ -1,17 +1,18 @@
 //! Resolving a model named on the command line: a built-in species name, or a model file chosen
-//! by its extension (`.xml`: an Arbaro species, grown by the generator); and picking one model
-//! of a scene.
+//! by its extension (`.xml`: an Arbaro species, grown by the generator; `.obj`, `.gltf`, `.glb`:
+//! a mesh read by [`crate::import`]); and picking one model of a scene.
 
 use std::path::Path;
 
 use crate::arbaro::{self, ArbaroError};
+use crate::import::{self, ImportError, ImportOptions};
 use crate::mesh::Model;
 use crate::scene::{ModelSource, SceneDesc};
 use crate::species::{normalize_name, Species, BUILTIN_NAMES};
 use crate::weber_penn::GenerateError;
 
 /// Model file extensions [`load_model`] reads, lower case.
-pub const MODEL_FILE_EXTENSIONS: &[&str] = &["xml"];
+pub const MODEL_FILE_EXTENSIONS: &[&str] = &["xml", "obj", "gltf", "glb"];
 
 #[derive(Debug, thiserror::Error)]
 pub enum ModelSourceError {
@@ -21,6 +22,8 @@ pub enum ModelSourceError {
     UnsupportedFormat { path: String, ext: String },
     #[error(transparent)]
     Arbaro(#[from] ArbaroError),
+    #[error(transparent)]
+    Import(#[from] Box<ImportError>),
     #[error("{origin}: {source}")]
     Generate {
         origin: String,
@@ -72,6 +75,9 @@ pub fn load_model(spec: &str) -> Result<Model, ModelSourceError> {
                 );
                 grow(&species, spec)
             }
+            "obj" | "gltf" | "glb" => {
+                Ok(import::load_mesh_file(path, &ImportOptions::default()).map_err(Box::new)?)
+            }
             _ => Err(ModelSourceError::UnsupportedFormat {
                 path: spec.to_string(),
                 ext,
@@ -112,6 +118,9 @@ pub fn load_scene_model(scene: &SceneDesc, name: Option<&str>) -> Result<Model, 
     let origin = format!("{}: model '{}'", scene.origin, desc.name);
     let mut model = match &desc.source {
         ModelSource::Species(s) => grow(s, &origin)?,
+        ModelSource::Mesh { path, options } => {
+            import::load_mesh_file(path, options).map_err(Box::new)?
+        }
     };
     model.name = desc.name.clone();
     Ok(model)

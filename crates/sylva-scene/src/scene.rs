@@ -8,6 +8,7 @@
 
 use crate::arbaro::{self, ArbaroError};
 use crate::builtin_scenes;
+use crate::import::{self, ImportError, ImportOptions, UpAxis};
 use crate::layout::{self, Amount, Area, LayoutError, Occupancy, ScatterSpec};
 use crate::mesh::{Aabb, Model};
 use crate::species::{normalize_name, Species, BUILTIN_NAMES};
@@ -51,6 +52,14 @@ pub enum SceneError {
         model: String,
         source: GenerateError,
     },
+    /// An imported mesh file that cannot be read; `source` names the file and element.
+    #[error("{origin}: line {line}: model '{model}': {source}")]
+    Import {
+        origin: String,
+        line: usize,
+        model: String,
+        source: Box<ImportError>,
+    },
     #[error("{origin}: line {line}: instances of '{model}': {source}")]
     Layout {
         origin: String,
@@ -85,6 +94,11 @@ struct RawModel {
     arbaro: Option<String>,
     mesh: Option<String>,
     seed: Option<u64>,
+    // Imported meshes only.
+    leaf_materials: Option<Vec<String>>,
+    wood_materials: Option<Vec<String>>,
+    scale: Option<f32>,
+    up: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -158,6 +172,11 @@ struct RawLb {
 pub enum ModelSource {
     /// A built-in species or one read from an Arbaro file: grown by the generator.
     Species(Box<Species>),
+    /// A mesh file (OBJ, glTF, GLB) read by [`import::load_mesh_file`].
+    Mesh {
+        path: PathBuf,
+        options: ImportOptions,
+    },
 }
 
 #[derive(Debug, Clone)]
@@ -291,8 +310,10 @@ pub struct Scene {
     pub name: String,
     pub origin: String,
     pub models: Vec<Model>,
-    /// The species each model was grown from, index for index.
-    pub species: Vec<Species>,
+    /// The species each model was grown from, index for index; `None` for imported meshes.
+    pub species: Vec<Option<Species>>,
+    /// The file each imported model was read from, index for index; `None` for species.
+    pub mesh_files: Vec<Option<PathBuf>>,
     pub instances: Vec<Instance>,
     pub ground: Ground,
     pub sun: Sun,
@@ -305,6 +326,7 @@ pub struct Scene {
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct ModelStats {
     pub name: String,
+    /// The species name, or the file name of an imported mesh.
     pub species: String,
     pub instances: usize,
     pub triangles: usize,
@@ -387,6 +409,20 @@ impl SceneDesc {
                 ));
             }
             let sources = [m.species.is_some(), m.arbaro.is_some(), m.mesh.is_some()];
+            if m.mesh.is_none() {
+                let import_keys = [
+                    ("leaf_materials", m.leaf_materials.is_some()),
+                    ("wood_materials", m.wood_materials.is_some()),
+                    ("scale", m.scale.is_some()),
+                    ("up", m.up.is_some()),
+                ];
+                if let Some((key, _)) = import_keys.iter().find(|(_, set)| *set) {
+                    return Err(invalid(
+                        Some(l),
+                        format!("model '{}': '{key}' applies to imported meshes ('mesh = \"file\"') only", m.name),
+                    ));
+                }
+            }
             if sources.iter().filter(|&&s| s).count() != 1 {
                 return Err(invalid(
                     Some(l),
@@ -396,7 +432,7 @@ impl SceneDesc {
                     ),
                 ));
             }
-            let species = if let Some(name) = &m.species {
+            let source = if let Some(name) = &m.species {
                 let mut s = Species::builtin(name).ok_or_else(|| {
                     invalid(
                         Some(l),
@@ -410,7 +446,7 @@ impl SceneDesc {
                 if let Some(seed) = m.seed {
                     s.seed = seed;
                 }
-                s
+                ModelSource::Species(Box::new(s))
             } else if let Some(file) = &m.arbaro {
                 let p: PathBuf = match base_dir {
                     Some(d) => d.join(file),
@@ -423,25 +459,61 @@ impl SceneDesc {
                     source,
                 })?;
                 let seed = m.seed.or(a.seed).unwrap_or(0);
-                Species::from_params(
+                ModelSource::Species(Box::new(Species::from_params(
                     &normalize_name(&a.name),
                     a.params,
                     seed,
                     p.display().to_string(),
-                )
+                )))
             } else {
-                return Err(invalid(
-                    Some(l),
-                    format!(
-                        "model '{}': importing mesh files ('{}') is not supported yet; use 'species' or 'arbaro'",
-                        m.name,
-                        m.mesh.as_deref().unwrap_or_default()
-                    ),
-                ));
+                let file = m.mesh.as_deref().unwrap_or_default();
+                let path: PathBuf = match base_dir {
+                    Some(d) => d.join(file),
+                    None => PathBuf::from(file),
+                };
+                let bad =
+                    |message: String| invalid(Some(l), format!("model '{}': {message}", m.name));
+                if m.seed.is_some() {
+                    return Err(bad(
+                        "'seed' applies to grown models; a mesh file is fixed".into()
+                    ));
+                }
+                if !import::is_mesh_file(&path) {
+                    return Err(bad(format!(
+                        "mesh '{file}': unknown format (readable: .{})",
+                        import::EXTENSIONS.join(", .")
+                    )));
+                }
+                if !path.is_file() {
+                    return Err(bad(format!(
+                        "mesh '{file}': no such file ({})",
+                        path.display()
+                    )));
+                }
+                let scale = m.scale.unwrap_or(1.0);
+                if !(scale.is_finite() && scale > 0.0) {
+                    return Err(bad(format!("scale must be a positive number, got {scale}")));
+                }
+                let up = match m.up.as_deref().map(str::to_ascii_lowercase).as_deref() {
+                    None | Some("y") => UpAxis::Y,
+                    Some("z") => UpAxis::Z,
+                    Some(other) => {
+                        return Err(bad(format!("up = '{other}': expected \"y\" or \"z\"")))
+                    }
+                };
+                ModelSource::Mesh {
+                    path,
+                    options: ImportOptions {
+                        leaf_materials: m.leaf_materials.clone().unwrap_or_default(),
+                        wood_materials: m.wood_materials.clone().unwrap_or_default(),
+                        scale,
+                        up,
+                    },
+                }
             };
             models.push(ModelDesc {
                 name: m.name.clone(),
-                source: ModelSource::Species(Box::new(species)),
+                source,
                 line: l,
             });
         }
@@ -710,24 +782,37 @@ impl SceneDesc {
         })
     }
 
-    /// Grows each unique model (in parallel, results in file order) and places the instances.
+    /// Grows or imports each unique model (in parallel, results in file order) and places
+    /// the instances.
     pub fn build(&self) -> Result<Scene, SceneError> {
-        let species: Vec<Species> = self
+        let species: Vec<Option<Species>> = self
             .models
             .iter()
             .map(|m| match &m.source {
-                ModelSource::Species(s) => (**s).clone(),
+                ModelSource::Species(s) => Some((**s).clone()),
+                ModelSource::Mesh { .. } => None,
             })
             .collect();
-        let models: Vec<Model> = species
+        let models: Vec<Model> = self
+            .models
             .par_iter()
-            .zip(&self.models)
-            .map(|(s, d)| {
-                let mut model = s.build_model().map_err(|source| SceneError::Generate {
-                    origin: self.origin.clone(),
-                    model: d.name.clone(),
-                    source,
-                })?;
+            .map(|d| {
+                let mut model = match &d.source {
+                    ModelSource::Species(s) => {
+                        s.build_model().map_err(|source| SceneError::Generate {
+                            origin: self.origin.clone(),
+                            model: d.name.clone(),
+                            source,
+                        })?
+                    }
+                    ModelSource::Mesh { path, options } => import::load_mesh_file(path, options)
+                        .map_err(|source| SceneError::Import {
+                            origin: self.origin.clone(),
+                            line: d.line,
+                            model: d.name.clone(),
+                            source: Box::new(source),
+                        })?,
+                };
                 model.name = d.name.clone();
                 Ok(model)
             })
@@ -738,6 +823,14 @@ impl SceneDesc {
             origin: self.origin.clone(),
             models,
             species,
+            mesh_files: self
+                .models
+                .iter()
+                .map(|m| match &m.source {
+                    ModelSource::Mesh { path, .. } => Some(path.clone()),
+                    ModelSource::Species(_) => None,
+                })
+                .collect(),
             instances,
             ground: self.ground,
             sun: self.sun,
@@ -894,10 +987,23 @@ impl Scene {
                 .iter()
                 .enumerate()
                 .map(|(k, m)| {
-                    let leaf = m.mesh.triangles_with_material(crate::weber_penn::LEAF);
+                    let leaf = m
+                        .mesh
+                        .material_ids
+                        .iter()
+                        .filter(|&&id| m.materials[id as usize].is_leaf())
+                        .count();
+                    let species = match (&self.species[k], &self.mesh_files[k]) {
+                        (Some(s), _) => s.name.clone(),
+                        (None, Some(p)) => p
+                            .file_name()
+                            .map(|f| f.to_string_lossy().into_owned())
+                            .unwrap_or_default(),
+                        (None, None) => String::new(),
+                    };
                     ModelStats {
                         name: m.name.clone(),
-                        species: self.species[k].name.clone(),
+                        species,
                         instances: self
                             .instances
                             .iter()

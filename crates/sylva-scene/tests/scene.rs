@@ -92,8 +92,16 @@ fn bad_values_are_explained() {
         ),
         ("[[models]]\nname = \"a\"\n", "exactly one of"),
         (
-            "[[models]]\nname = \"a\"\nmesh = \"tree.obj\"\n",
-            "not supported yet",
+            "[[models]]\nname = \"a\"\nmesh = \"no/such/tree.obj\"\n",
+            "mesh 'no/such/tree.obj': no such file",
+        ),
+        (
+            "[[models]]\nname = \"a\"\nmesh = \"tree.fbx\"\n",
+            "unknown format (readable: .obj, .gltf, .glb)",
+        ),
+        (
+            "[[models]]\nname = \"a\"\nspecies = \"pine\"\nleaf_materials = [\"*\"]\n",
+            "'leaf_materials' applies to imported meshes",
         ),
         (
             "[[instances]]\nmodel = \"nope\"\ncount = 3\n",
@@ -172,7 +180,7 @@ fn arbaro_models_resolve_relative_to_the_scene_file() {
     .unwrap();
     let s = Scene::load(path.to_str().unwrap()).unwrap();
     assert_eq!(s.name, "forest");
-    assert_eq!(s.species[0].name, "quaking_aspen");
+    assert_eq!(s.species[0].as_ref().unwrap().name, "quaking_aspen");
     assert_eq!(s.instances.len(), 50);
     let m = &s.models[0];
     assert!(m.triangle_count() > 1000);
@@ -240,7 +248,10 @@ fn every_builtin_scene_parses_and_places() {
     assert_eq!((canopy.camera.width, canopy.camera.height), (512, 512));
     let catalpa = Scene::load("catalpa").unwrap();
     assert_eq!(catalpa.instances.len(), 1);
-    assert_eq!(catalpa.species[0].name, "southern_catalpa");
+    assert_eq!(
+        catalpa.species[0].as_ref().unwrap().name,
+        "southern_catalpa"
+    );
 }
 
 #[test]
