@@ -280,7 +280,7 @@ impl GpuContext {
         let usage = wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST;
         let a = self.buffer("copy-a", bytes, usage)?;
         let b = self.buffer("copy-b", bytes, usage)?;
-        let copies = 8;
+        let copies = 4;
         let batch = || -> Result<f64, GpuError> {
             let mut enc = self
                 .device

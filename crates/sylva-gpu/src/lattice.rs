@@ -351,9 +351,9 @@ impl<'c> GpuLattice<'c> {
                     }),
                 },
             ];
-            for p in 0..parts {
-                e.push(whole(3 + p as u32, &states[from][p]));
-                e.push(whole(3 + (parts + p) as u32, &states[1 - from][p]));
+            for (p, (src, dst)) in states[from].iter().zip(&states[1 - from]).enumerate() {
+                e.push(whole(3 + p as u32, src));
+                e.push(whole(3 + (parts + p) as u32, dst));
             }
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("step"),
@@ -375,8 +375,8 @@ impl<'c> GpuLattice<'c> {
         let gather_pipeline = pipeline("gather", &gather_module, &gather_bgl);
         let gather_group = |from: usize| {
             let mut e = vec![whole(0, &params), whole(1, &out)];
-            for p in 0..parts {
-                e.push(whole(2 + p as u32, &states[from][p]));
+            for (p, src) in states[from].iter().enumerate() {
+                e.push(whole(2 + p as u32, src));
             }
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("gather"),
