@@ -131,6 +131,55 @@ impl CubicOmega {
             kappa: w(od_same - 2.0 * od_half),
         }
     }
+
+    /// The 19 scalar coefficients in [`CubicOmega::COEFFICIENT_NAMES`] order, for kernels
+    /// outside this crate (the GPU backend uploads them instead of re-deriving Ω).
+    pub fn coefficients(&self) -> [f32; 19] {
+        [
+            self.o00[0],
+            self.o0q[0],
+            self.op0_axial[0],
+            self.op0_diagonal[0],
+            self.a0[0],
+            self.alpha[0],
+            self.b1[0],
+            self.minus_beta[0],
+            self.c0[0],
+            self.gamma[0],
+            self.d_half_even[0],
+            self.delta[0],
+            self.epsilon[0],
+            self.minus_epsilon[0],
+            self.odd_axial[0],
+            self.odd_b[0],
+            self.odd_c[0],
+            self.odd_d_half[0],
+            self.kappa[0],
+        ]
+    }
+
+    /// Names of [`CubicOmega::coefficients`], in order.
+    pub const COEFFICIENT_NAMES: [&'static str; 19] = [
+        "o00",
+        "o0q",
+        "op0_axial",
+        "op0_diagonal",
+        "a0",
+        "alpha",
+        "b1",
+        "minus_beta",
+        "c0",
+        "gamma",
+        "d_half_even",
+        "delta",
+        "epsilon",
+        "minus_epsilon",
+        "odd_axial",
+        "odd_b",
+        "odd_c",
+        "odd_d_half",
+        "kappa",
+    ];
 }
 
 /// Per-colour constants of the collision.

@@ -44,6 +44,14 @@ struct BenchLbArgs {
     /// (streaming only, the memory-traffic floor).
     #[arg(long, default_value = "dense", value_parser = ["dense", "empty"])]
     medium: String,
+    /// Where the solver runs: cpu, gpu (the best adapter, a software one such as lavapipe
+    /// included) or auto (a hardware GPU if present, else the CPU). On the GPU, copy_gbs is
+    /// the GPU's buffer-copy bandwidth.
+    #[arg(long, value_enum, default_value = "auto")]
+    device: super::device::DeviceArg,
+    /// GPU state storage: f32 or f16.
+    #[arg(long, value_enum, default_value = "f32")]
+    precision: super::device::PrecisionArg,
 }
 
 #[derive(Serialize)]
@@ -57,8 +65,13 @@ struct LbBench {
     copy_gbs: f64,
     ratio: f64,
     threads: usize,
-    kernel: &'static str,
+    kernel: String,
     runs: Vec<f64>,
+    /// "cpu" or "gpu".
+    device: &'static str,
+    /// The GPU adapter's name (absent on the CPU).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    adapter: Option<String>,
 }
 
 pub fn run(args: BenchArgs) -> Result<()> {
@@ -84,7 +97,7 @@ fn bench_lb(a: BenchLbArgs) -> Result<()> {
     }
     let medium = Preset::Cloud.params();
     let boundary = Boundary::sun([0.3, -0.9, 0.3], 1.0);
-    let mut lattice = Lattice::new(&grid, &medium, 0, boundary)?;
+    let backend = super::device::Backend::open(a.device, a.precision)?;
     let opts = SolveOptions {
         max_steps: a.steps,
         tolerance: None,
@@ -95,20 +108,46 @@ fn bench_lb(a: BenchLbArgs) -> Result<()> {
         bar((a.steps * a.repeats) as u64, "bench lb")
     };
     let mut runs = Vec::with_capacity(a.repeats);
-    for r in 0..a.repeats {
-        lattice.reset(boundary);
-        let report = lattice.run(&opts, &mut |s, _| pb.set_position((r * a.steps + s) as u64))?;
-        runs.push(report.seconds);
-    }
+    let (kernel, copy_gbs, bytes_per_update) = match &backend {
+        super::device::Backend::Cpu => {
+            let mut lattice = Lattice::new(&grid, &medium, 0, boundary)?;
+            for r in 0..a.repeats {
+                lattice.reset(boundary);
+                let report =
+                    lattice.run(&opts, &mut |s, _| pb.set_position((r * a.steps + s) as u64))?;
+                runs.push(report.seconds);
+            }
+            // Copy bandwidth on a buffer far larger than the last-level cache, in the same
+            // run. Each update reads and writes the 19 f32 of a site and reads its density.
+            (
+                lattice.kernel().name().to_string(),
+                copy_bandwidth_gbs(256 << 20, 7),
+                2 * Q * 4 + 4,
+            )
+        }
+        super::device::Backend::Gpu { ctx, precision } => {
+            let mut lattice =
+                sylva_gpu::GpuLattice::new(ctx, &grid, &medium, 0, boundary, *precision)?;
+            for r in 0..a.repeats {
+                lattice.reset(boundary)?;
+                let report =
+                    lattice.run(&opts, &mut |s, _| pb.set_position((r * a.steps + s) as u64))?;
+                runs.push(report.seconds);
+            }
+            drop(lattice);
+            // Device-to-device copies of 256 MiB buffers (far beyond any GPU cache), as on the CPU.
+            (
+                format!("wgsl-{}", precision.name()),
+                ctx.copy_bandwidth_gbs(256 << 20, 5)?,
+                precision.bytes_per_update() as usize,
+            )
+        }
+    };
     pb.finish_and_clear();
-    // Copy bandwidth on a buffer far larger than the last-level cache, in the same run.
-    let copy_gbs = copy_bandwidth_gbs(256 << 20, 7);
     let mut sorted = runs.clone();
     sorted.sort_by(f64::total_cmp);
     let seconds = sorted[sorted.len() / 2];
     let mlups = dims.sites() as f64 * a.steps as f64 / seconds / 1e6;
-    // Each update reads and writes the 19 f32 of a site and reads its f32 density.
-    let bytes_per_update = 2 * Q * 4 + 4;
     let effective_gbs = mlups * 1e6 * bytes_per_update as f64 / 1e9;
     let b = LbBench {
         grid: dims.to_string().replace('×', "x"),
@@ -120,15 +159,19 @@ fn bench_lb(a: BenchLbArgs) -> Result<()> {
         copy_gbs,
         ratio: effective_gbs / copy_gbs,
         threads: rayon::current_num_threads(),
-        kernel: lattice.kernel().name(),
+        kernel,
         runs,
+        device: backend.device(),
+        adapter: backend.adapter(),
     };
     if a.json {
         println!("{}", serde_json::to_string(&b)?);
     } else {
         println!(
-            "LB solver, {} grid, {} steps, one colour, {} threads, {} kernel",
-            b.grid, b.steps, b.threads, b.kernel
+            "LB solver, {} grid, {} steps, one colour, {}",
+            b.grid,
+            b.steps,
+            backend.describe()
         );
         println!(
             "  runs (s):        {}",
@@ -143,8 +186,13 @@ fn bench_lb(a: BenchLbArgs) -> Result<()> {
         println!("  bytes/update:    {}", b.bytes_per_update);
         println!("  effective:       {:.2} GB/s", b.effective_gbs);
         println!(
-            "  copy bandwidth:  {:.2} GB/s (read + write, same run)",
-            b.copy_gbs
+            "  copy bandwidth:  {:.2} GB/s (read + write, same run{})",
+            b.copy_gbs,
+            if b.device == "gpu" {
+                ", GPU buffer copies"
+            } else {
+                ""
+            }
         );
         println!("  ratio:           {:.2}", b.ratio);
     }

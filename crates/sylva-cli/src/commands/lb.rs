@@ -10,8 +10,8 @@ use sylva_lb::grid_file::{read_header_verified, GridKind};
 use sylva_lb::preview::write_lighting_preview;
 use sylva_lb::shapes::Shape;
 use sylva_lb::{
-    solve_lighting, Boundary, ColourParams, DensityGrid, Dims, Element, GridFile, MediumParams,
-    Preset, SolveOptions,
+    Boundary, ColourParams, DensityGrid, Dims, Element, GridFile, MediumParams, Preset,
+    SolveOptions,
 };
 use sylva_scene::model_source::load_scene_model;
 use sylva_scene::SceneDesc;
@@ -130,6 +130,13 @@ pub struct SolveArgs {
     /// Store the lighting grid as f16 (half the size).
     #[arg(long)]
     f16: bool,
+    /// Where the solver runs: cpu, gpu (the best adapter, a software one such as lavapipe
+    /// included) or auto (a hardware GPU if present, else the CPU).
+    #[arg(long, value_enum, default_value = "auto")]
+    device: super::device::DeviceArg,
+    /// GPU state storage: f32, or f16 (half the memory traffic, ~3e-4 relative error).
+    #[arg(long, value_enum, default_value = "f32")]
+    precision: super::device::PrecisionArg,
 }
 
 pub fn run(args: LbArgs) -> Result<()> {
@@ -338,10 +345,11 @@ fn solve(a: SolveArgs) -> Result<()> {
         sun.elevation_deg(),
         sun.azimuth_deg()
     );
+    let backend = super::device::Backend::open(a.device, a.precision)?;
     let pb = bar(3 * opts.max_steps as u64, "LB solve");
     let mut last_colour = usize::MAX;
     let t1 = Instant::now();
-    let (lighting, reports) = solve_lighting(
+    let (lighting, reports) = backend.solve_lighting(
         &grid,
         &m,
         Boundary::sun([d.x, d.y, d.z], a.intensity),
@@ -362,7 +370,6 @@ fn solve(a: SolveArgs) -> Result<()> {
     )?;
     pb.finish_and_clear();
     let solve_s = t1.elapsed().as_secs_f64();
-    let kernel = sylva_lb::kernel::KernelIsa::detect();
     for (c, r) in reports.iter().enumerate() {
         let p: &ColourParams = &m.colours[c];
         println!(
@@ -412,10 +419,9 @@ fn solve(a: SolveArgs) -> Result<()> {
     write_lighting_preview(&lighting, &png)
         .with_context(|| format!("cannot write {}", png.display()))?;
     println!(
-        "total {:.2} s (setup {load_s:.2} s, solve {solve_s:.2} s, kernel {}, {} threads)",
+        "total {:.2} s (setup {load_s:.2} s, solve {solve_s:.2} s, {})",
         t0.elapsed().as_secs_f64(),
-        kernel.name(),
-        rayon::current_num_threads()
+        backend.describe()
     );
     println!("wrote {} and {}", output.display(), png.display());
     Ok(())

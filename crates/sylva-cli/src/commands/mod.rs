@@ -20,6 +20,7 @@ pub fn finish(result: anyhow::Result<()>) -> ExitCode {
 pub mod bench;
 pub mod bench_scene;
 pub mod bench_voxel;
+pub mod device;
 pub mod lb;
 pub mod progress;
 pub mod scene;

@@ -1,0 +1,137 @@
+//! `--device` for `sylva lb solve` and `sylva bench lb`. GPU runs use any adapter (lavapipe
+//! in CI); where none exists the GPU halves print why and pass.
+
+mod common;
+use common::sylva;
+use sylva_gpu::{AdapterChoice, ContextOptions, GpuContext, GpuError};
+
+/// Whether any adapter exists (software ones included), and whether it has SHADER_F16.
+fn adapter() -> Option<bool> {
+    match GpuContext::new(&ContextOptions::new(AdapterChoice::Any)) {
+        Ok(ctx) => Some(ctx.supports_f16()),
+        Err(e @ GpuError::NoAdapter { .. }) => {
+            eprintln!("skipping GPU CLI test: {e}");
+            None
+        }
+        Err(e) => panic!("{e}"),
+    }
+}
+
+#[test]
+fn gpu_and_cpu_write_the_same_lighting_grid() {
+    let Some(_) = adapter() else {
+        // Without an adapter `--device gpu` must say so instead of falling back silently.
+        let (ok, _, err) = sylva(&["lb", "solve", "--device", "gpu", "--grid", "8"]);
+        assert!(!ok);
+        assert!(err.contains("no GPU adapter"), "{err}");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let mut grids = Vec::new();
+    for device in ["cpu", "gpu"] {
+        let out = dir.path().join(format!("{device}.sgrid"));
+        let (ok, stdout, err) = sylva(&[
+            "lb",
+            "solve",
+            "--shape",
+            "crown",
+            "--grid",
+            "16x14x12",
+            "--preset",
+            "dogrose",
+            "--device",
+            device,
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        assert!(stdout.contains("32 steps, stop: step limit"), "{stdout}");
+        if device == "gpu" {
+            assert!(stdout.contains("GPU "), "{stdout}");
+            assert!(stdout.contains("f32 state"), "{stdout}");
+        } else {
+            assert!(stdout.contains("CPU, kernel"), "{stdout}");
+        }
+        grids.push(sylva_lb::GridFile::read(&out).unwrap());
+    }
+    let (cpu, gpu) = (&grids[0], &grids[1]);
+    assert_eq!(cpu.channels.len(), 3);
+    for (c, g) in cpu.channels.iter().zip(&gpu.channels) {
+        let scale = c.iter().fold(0.0f32, |m, &v| m.max(v));
+        assert!(scale > 0.0);
+        for (a, b) in c.iter().zip(g) {
+            assert!(
+                (a - b).abs() <= 1e-5 * a.abs().max(1e-3 * scale),
+                "{a} vs {b}"
+            );
+        }
+    }
+}
+
+#[test]
+fn bench_lb_on_the_gpu_reports_the_adapter() {
+    let Some(f16) = adapter() else { return };
+    let mut precisions = vec![("f32", 156)];
+    if f16 {
+        precisions.push(("f16", 80));
+    }
+    for (precision, bytes) in precisions {
+        let (ok, out, err) = sylva(&[
+            "bench",
+            "lb",
+            "--device",
+            "gpu",
+            "--precision",
+            precision,
+            "--grid",
+            "12",
+            "--steps",
+            "4",
+            "--repeats",
+            "1",
+            "--json",
+        ]);
+        assert!(ok, "{err}");
+        let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+        assert_eq!(v["device"], "gpu");
+        assert!(!v["adapter"].as_str().unwrap().is_empty(), "{out}");
+        assert_eq!(v["kernel"], format!("wgsl-{precision}"));
+        assert_eq!(v["bytes_per_update"], bytes);
+        let (mlups, eff, copy, ratio) = (
+            v["mlups"].as_f64().unwrap(),
+            v["effective_gbs"].as_f64().unwrap(),
+            v["copy_gbs"].as_f64().unwrap(),
+            v["ratio"].as_f64().unwrap(),
+        );
+        assert!(mlups > 0.0 && copy > 0.0);
+        assert!((eff - mlups * bytes as f64 / 1000.0).abs() < 1e-6 * eff.max(1.0));
+        assert!((ratio - eff / copy).abs() < 1e-9);
+    }
+}
+
+#[test]
+fn cpu_runs_name_themselves_and_refuse_f16() {
+    let (ok, out, err) = sylva(&[
+        "bench",
+        "lb",
+        "--device",
+        "cpu",
+        "--grid",
+        "8",
+        "--steps",
+        "2",
+        "--repeats",
+        "1",
+        "--json",
+    ]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["device"], "cpu");
+    assert!(v.get("adapter").is_none(), "{out}");
+    let (ok, _, err) = sylva(&["bench", "lb", "--device", "cpu", "--precision", "f16"]);
+    assert!(!ok);
+    assert!(
+        err.contains("--precision f16 is a GPU state format"),
+        "{err}"
+    );
+}
