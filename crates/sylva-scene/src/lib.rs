@@ -6,9 +6,12 @@
 //!   bark textures; [`Species::build_model`] gives a [`Model`].
 //! * [`scene`]: the TOML scene file and [`Scene`], the built forest: unique models plus
 //!   instances that reference them; [`builtin_scenes`] holds the papers' scenes.
+//! * [`export`]: a scene as OBJ (flattened) or as a Mitsuba 3 scene (instanced), to check
+//!   sylva against a path tracer.
 
 pub mod arbaro;
 pub mod builtin_scenes;
+pub mod export;
 pub mod layout;
 pub mod material;
 pub mod mesh;

@@ -19,6 +19,7 @@ pub fn finish(result: anyhow::Result<()>) -> ExitCode {
 
 pub mod bench;
 pub mod bench_scene;
+pub mod export;
 pub mod lb;
 pub mod progress;
 pub mod scene;
