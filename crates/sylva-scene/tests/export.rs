@@ -318,6 +318,9 @@ fn mitsuba_xml_is_consistent_with_its_files_and_the_scene() {
     assert!(grey.pixels().zip(&tex.pixels).all(|(g, t)| g.0[0] == t[3]));
 }
 
+/// A face as 0-based v/vt/vn triples, with its material.
+type Face = ([[usize; 3]; 3], String);
+
 /// The parts of an OBJ this test reads: per object its vertices (v, vt, vn lines in order) and
 /// faces with their material.
 #[derive(Default)]
@@ -326,7 +329,7 @@ struct Obj {
     vt: Vec<[f32; 2]>,
     vn: Vec<[f32; 3]>,
     /// (object name, first vertex index (0-based), faces as 0-based v/vt/vn triples, material).
-    objects: Vec<(String, usize, Vec<([[usize; 3]; 3], String)>)>,
+    objects: Vec<(String, usize, Vec<Face>)>,
     mtllib: String,
 }
 
