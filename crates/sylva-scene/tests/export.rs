@@ -118,7 +118,11 @@ fn mitsuba_xml_is_consistent_with_its_files_and_the_scene() {
     let out = tmp.path().join("mi");
     let opts = mitsuba::MitsubaOptions::for_scene(&scene);
     let mut calls = Vec::new();
-    let written = mitsuba::write(&scene, &out, &opts, &mut |n| calls.push(n)).unwrap();
+    let written = mitsuba::write(&scene, &out, &opts, &mut |n| {
+        calls.push(n);
+        true
+    })
+    .unwrap();
     assert_eq!(calls, [1, 2]);
     assert_eq!(written.triangles, scene.instanced_triangles() + 2);
     for f in &written.files {
@@ -371,7 +375,11 @@ fn obj_reads_back_to_the_instanced_scene() {
     let scene = small_scene(tmp.path());
     let out = tmp.path().join("obj");
     let mut last = 0;
-    let written = obj::write(&scene, &out, &mut |n| last = n).unwrap();
+    let written = obj::write(&scene, &out, &mut |n| {
+        last = n;
+        true
+    })
+    .unwrap();
     assert_eq!(last, scene.instances.len() as u64);
     let o = read_obj(&out.join(obj::OBJ_FILE));
     assert_eq!(o.mtllib, obj::MTL_FILE);
@@ -488,7 +496,7 @@ fn output_does_not_depend_on_the_thread_count() {
             .num_threads(threads)
             .build()
             .unwrap()
-            .install(|| obj::write(&scene, &dir, &mut |_| {}).unwrap());
+            .install(|| obj::write(&scene, &dir, &mut |_| true).unwrap());
         fs::read(dir.join(obj::OBJ_FILE)).unwrap()
     };
     let one = run(1, "t1");
@@ -506,7 +514,7 @@ fn untextured_two_sided_and_bad_input() {
     scene.models[0].materials[0].two_sided = true;
     let out = tmp.path().join("plain");
     let opts = mitsuba::MitsubaOptions::for_scene(&scene);
-    mitsuba::write(&scene, &out, &opts, &mut |_| {}).unwrap();
+    mitsuba::write(&scene, &out, &opts, &mut |_| true).unwrap();
     let text = fs::read_to_string(out.join(mitsuba::XML_FILE)).unwrap();
     let doc = roxmltree::Document::parse(&text).unwrap();
     let wood = doc
@@ -522,7 +530,7 @@ fn untextured_two_sided_and_bad_input() {
         .all(|n| n.attribute("id") != Some("ground")));
     // Only the placed model is written.
     assert!(!text.contains("model-rose_b"));
-    let w = obj::write(&scene, &tmp.path().join("plain_obj"), &mut |_| {}).unwrap();
+    let w = obj::write(&scene, &tmp.path().join("plain_obj"), &mut |_| true).unwrap();
     assert_eq!(w.triangles, scene.instanced_triangles());
     let mtl = fs::read_to_string(tmp.path().join("plain_obj").join(obj::MTL_FILE)).unwrap();
     assert!(!mtl.contains("newmtl ground"));
@@ -531,23 +539,42 @@ fn untextured_two_sided_and_bad_input() {
     // A file where the directory should be.
     let file = tmp.path().join("taken");
     fs::write(&file, "x").unwrap();
-    let e = obj::write(&scene, &file, &mut |_| {}).unwrap_err();
+    let e = obj::write(&scene, &file, &mut |_| true).unwrap_err();
     assert!(matches!(e, ExportError::NotADirectory(_)), "{e}");
     assert!(e.to_string().contains("taken"), "{e}");
 
     // Bad options are refused before anything is written.
     let mut bad = opts;
     bad.leaf_diff_trans = 2.5;
-    let e = mitsuba::write(&scene, &tmp.path().join("bad"), &bad, &mut |_| {}).unwrap_err();
+    let e = mitsuba::write(&scene, &tmp.path().join("bad"), &bad, &mut |_| true).unwrap_err();
     assert!(e.to_string().contains("2.5"), "{e}");
     assert!(!tmp.path().join("bad").exists());
 
     // A defective model is reported by name, not written.
     scene.models[0].mesh.material_ids[0] = 7;
-    let e = obj::write(&scene, &tmp.path().join("broken"), &mut |_| {}).unwrap_err();
+    let e = obj::write(&scene, &tmp.path().join("broken"), &mut |_| true).unwrap_err();
     let msg = e.to_string();
     assert!(
         msg.contains("rose a") && msg.contains("material id 7"),
         "{msg}"
     );
+}
+
+#[test]
+fn cancelling_leaves_no_partial_file() {
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = small_scene(tmp.path());
+    let dir = tmp.path().join("cancel");
+    let e = obj::write(&scene, &dir, &mut |n| n < 1).unwrap_err();
+    assert!(matches!(e, ExportError::Cancelled), "{e}");
+    let names: Vec<String> = fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(!names.iter().any(|n| n.contains("scene.obj")), "{names:?}");
+    let dir = tmp.path().join("cancel_mi");
+    let opts = mitsuba::MitsubaOptions::for_scene(&scene);
+    let e = mitsuba::write(&scene, &dir, &opts, &mut |_| false).unwrap_err();
+    assert!(matches!(e, ExportError::Cancelled), "{e}");
+    assert!(!dir.join(mitsuba::XML_FILE).exists());
 }

@@ -2,6 +2,7 @@
 //! check sylva against a path tracer (Mitsuba 3). See `docs/export.md`.
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -59,9 +60,34 @@ pub fn leaf_diff_trans(preset: &str) -> Result<f32> {
     Ok((1.0 + g).clamp(0.0, 2.0) as f32)
 }
 
+/// Set by Ctrl-C during an export: the writers stop at their next progress report, and the
+/// atomic writer removes the partial file (a 50 GB temporary OBJ would otherwise stay).
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+#[cfg(unix)]
+extern "C" fn on_interrupt(_: libc::c_int) {
+    INTERRUPTED.store(true, Ordering::Relaxed);
+}
+
+fn catch_interrupt() {
+    #[cfg(unix)]
+    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+    unsafe {
+        libc::signal(
+            libc::SIGINT,
+            on_interrupt as extern "C" fn(libc::c_int) as libc::sighandler_t,
+        );
+    }
+}
+
+fn keep_going() -> bool {
+    !INTERRUPTED.load(Ordering::Relaxed)
+}
+
 pub fn run(args: ExportArgs) -> Result<()> {
     // Fail on a bad output directory before the (possibly long) scene build.
     export::prepare_dir(&args.output)?;
+    catch_interrupt();
     let t0 = Instant::now();
     let scene = Scene::load(&args.scene)?;
     let triangles = scene.instanced_triangles();
@@ -82,7 +108,10 @@ pub fn run(args: ExportArgs) -> Result<()> {
                 }
             }
             let pb = bar(scene.instances.len() as u64, "instances");
-            let r = obj::write(&scene, &args.output, &mut |n| pb.set_position(n));
+            let r = obj::write(&scene, &args.output, &mut |n| {
+                pb.set_position(n);
+                keep_going()
+            });
             pb.finish_and_clear();
             r?
         }
@@ -101,7 +130,10 @@ pub fn run(args: ExportArgs) -> Result<()> {
                     .with_context(|| format!("LB preset of scene '{}'", scene.name))?,
             };
             let pb = bar(scene.models.len() as u64, "models");
-            let r = mitsuba::write(&scene, &args.output, &opts, &mut |n| pb.set_position(n));
+            let r = mitsuba::write(&scene, &args.output, &opts, &mut |n| {
+                pb.set_position(n);
+                keep_going()
+            });
             pb.finish_and_clear();
             r?
         }

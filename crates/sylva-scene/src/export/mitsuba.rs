@@ -302,13 +302,27 @@ fn far_clip(scene: &Scene) -> f32 {
     (2.0 * far).max(1e4)
 }
 
-/// Writes `scene.xml`, the PLY meshes and the textures into `dir` (created if needed).
-/// `progress(n)` is called with the number of models written so far.
+/// Bytes of the PLY files of the models in `written` (exact: header aside, 32 bytes a vertex
+/// and 13 a face).
+fn ply_bytes(scene: &Scene, written: &[bool]) -> u64 {
+    scene
+        .models
+        .iter()
+        .zip(written)
+        .filter(|(_, w)| **w)
+        .map(|(m, _)| 32 * m.mesh.vertex_count() as u64 + 13 * m.triangle_count() as u64 + 4096)
+        .sum()
+}
+
+/// Writes `scene.xml`, the PLY meshes and the textures into `dir` (created if needed), after
+/// checking that the disk has room. `progress(n)` is called with the number of models written
+/// so far; returning `false` cancels the export ([`ExportError::Cancelled`]) before
+/// `scene.xml` is written.
 pub fn write(
     scene: &Scene,
     dir: &Path,
     opts: &MitsubaOptions,
-    progress: &mut dyn FnMut(u64),
+    progress: &mut dyn FnMut(u64) -> bool,
 ) -> Result<Exported, ExportError> {
     opts.validate()?;
     validate_models(&scene.models)?;
@@ -324,6 +338,11 @@ pub fn write(
                 && scene.instances.iter().any(|i| i.model as usize == k)
         })
         .collect();
+    super::check_disk_space(
+        dir,
+        ply_bytes(scene, &written) + 200 * scene.instances.len() as u64,
+        super::available_disk_bytes(dir),
+    )?;
 
     for (t, stem) in textures.unique(&scene.models) {
         let rel = PathBuf::from(TEXTURE_DIR).join(format!("{stem}.png"));
@@ -459,7 +478,9 @@ pub fn write(
     for (k, model) in scene.models.iter().enumerate() {
         if !written[k] {
             done += 1;
-            progress(done);
+            if !progress(done) {
+                return Err(ExportError::Cancelled);
+            }
             continue;
         }
         let _ = writeln!(
@@ -488,7 +509,9 @@ pub fn write(
         }
         let _ = writeln!(x, "    </shape>");
         done += 1;
-        progress(done);
+        if !progress(done) {
+            return Err(ExportError::Cancelled);
+        }
     }
     x.push('\n');
 

@@ -38,6 +38,19 @@ pub enum ExportError {
     UnknownFormat(String),
     #[error("invalid export option: {0}")]
     Option(String),
+    #[error(
+        "{}: the export needs about {} but only {} is free there",
+        dir.display(),
+        sylva_core::format_bytes(*.needed),
+        sylva_core::format_bytes(*.available)
+    )]
+    DiskSpace {
+        dir: PathBuf,
+        needed: u64,
+        available: u64,
+    },
+    #[error("export cancelled")]
+    Cancelled,
 }
 
 impl ExportError {
@@ -112,6 +125,43 @@ pub fn prepare_dir(dir: &Path) -> Result<(), ExportError> {
         return Err(ExportError::NotADirectory(dir.to_path_buf()));
     }
     std::fs::create_dir_all(dir).map_err(|e| ExportError::io(dir, e))
+}
+
+/// Bytes free to this user on the file system holding `dir`; `None` where unknown.
+pub fn available_disk_bytes(dir: &Path) -> Option<u64> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::ffi::OsStrExt;
+        let c = std::ffi::CString::new(dir.as_os_str().as_bytes()).ok()?;
+        let mut st: libc::statvfs = unsafe { std::mem::zeroed() };
+        // SAFETY: `c` is a valid NUL-terminated path and `st` a writable statvfs.
+        if unsafe { libc::statvfs(c.as_ptr(), &mut st) } != 0 {
+            return None;
+        }
+        Some(st.f_bavail as u64 * st.f_frsize as u64)
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = dir;
+        None
+    }
+}
+
+/// Refuses a write of about `needed` bytes into `dir` when the disk has less free (with a
+/// 1 % margin); unknown free space lets it through.
+pub fn check_disk_space(
+    dir: &Path,
+    needed: u64,
+    available: Option<u64>,
+) -> Result<(), ExportError> {
+    match available {
+        Some(available) if needed + needed / 100 > available => Err(ExportError::DiskSpace {
+            dir: dir.to_path_buf(),
+            needed,
+            available,
+        }),
+        _ => Ok(()),
+    }
 }
 
 /// Writes `path` atomically, streaming through `fill`; errors name the file.
@@ -331,6 +381,24 @@ mod tests {
         assert_eq!("mitsuba".parse::<Format>().unwrap(), Format::Mitsuba);
         let e = "gltf".parse::<Format>().unwrap_err().to_string();
         assert!(e.contains("gltf") && e.contains("obj, mitsuba"), "{e}");
+    }
+
+    #[test]
+    fn disk_space_check() {
+        let d = Path::new("/out");
+        assert!(check_disk_space(d, 1000, Some(2000)).is_ok());
+        assert!(check_disk_space(d, 1000, None).is_ok());
+        let e = check_disk_space(d, 3 << 30, Some(1 << 30))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("/out") && e.contains("3.0 GiB") && e.contains("1.0 GiB"),
+            "{e}"
+        );
+        // The margin: exactly the free space is not enough.
+        assert!(check_disk_space(d, 1000, Some(1000)).is_err());
+        let free = available_disk_bytes(&std::env::temp_dir());
+        assert!(free.is_some_and(|b| b > 0) || cfg!(not(unix)));
     }
 
     #[test]

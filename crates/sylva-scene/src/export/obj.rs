@@ -181,15 +181,18 @@ pub fn estimate_size(scene: &Scene) -> u64 {
     total
 }
 
-/// Writes `scene.obj`, `scene.mtl` and the textures into `dir` (created if needed).
-/// `progress(n)` is called with the number of instances written so far.
+/// Writes `scene.obj`, `scene.mtl` and the textures into `dir` (created if needed), after
+/// checking that the disk has room for the estimated size. `progress(n)` is called with the
+/// number of instances written so far; returning `false` cancels the export
+/// ([`ExportError::Cancelled`]) and leaves no partial `scene.obj` behind.
 pub fn write(
     scene: &Scene,
     dir: &Path,
-    progress: &mut dyn FnMut(u64),
+    progress: &mut dyn FnMut(u64) -> bool,
 ) -> Result<Exported, ExportError> {
     validate_models(&scene.models)?;
     super::prepare_dir(dir)?;
+    super::check_disk_space(dir, estimate_size(scene), super::available_disk_bytes(dir))?;
     let prep = prepare(scene);
     let mat_stems = material_stems(&scene.models);
     let textures = TextureFiles::new(&scene.models, &mat_stems);
@@ -263,7 +266,8 @@ pub fn write(
         largest * threads as u64 * 2,
     )?;
     let obj_path = dir.join(OBJ_FILE);
-    write_file(&obj_path, |w| {
+    let mut cancelled = false;
+    let result = write_file(&obj_path, |w| {
         writeln!(
             w,
             "# sylva scene '{}' ({}), flattened: {} instances, {} triangles plus the ground",
@@ -321,10 +325,17 @@ pub fn write(
                 w.write_all(buf)?;
             }
             done += chunk.len() as u64;
-            progress(done);
+            if !progress(done) {
+                cancelled = true;
+                return Err(io::Error::other("cancelled"));
+            }
         }
         Ok(())
-    })?;
+    });
+    if cancelled {
+        return Err(ExportError::Cancelled);
+    }
+    result?;
     out.add(dir, PathBuf::from(OBJ_FILE))?;
     out.triangles = scene.instanced_triangles()
         + if super::ground_quad(scene).is_some() {
