@@ -262,8 +262,9 @@ fn mitsuba_xml_is_consistent_with_its_files_and_the_scene() {
             .find(|n| n.has_tag_name("integrator"))
             .unwrap()
             .attribute("type"),
-        Some("path")
+        Some("volpath")
     );
+    assert_eq!(named(root, "integer", "max_depth"), "-1");
 
     // Lights: the sun along the direction light travels, 6500 K; the sky's colour.
     let emitter = |ty: &str| {

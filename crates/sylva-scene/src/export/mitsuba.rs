@@ -13,6 +13,7 @@
 //! | ground | `rectangle` on y = 0 with a `diffuse` of the ground colour |
 //! | camera | `perspective`, `lookat` with up = +y, `fov_axis` = `y` (sylva's fov is vertical), the same width, height |
 //! | rays per pixel | `independent` sampler's `sample_count` (the `spp` default, `-Dspp=N` overrides) |
+//! | — | `volpath` integrator: unlike `path`, its shadow rays pass through a mask's transparent texels (null transmission), so leaves cast leaf-shaped shadows rather than quad-shaped ones |
 //!
 //! PLY texture coordinates are sylva's as they are: Mitsuba's PLY loader and bitmap texture
 //! both put v = 0 at the image's first (top) row, as sylva does.
@@ -41,8 +42,9 @@ pub const TEXTURE_DIR: &str = "textures";
 pub struct MitsubaOptions {
     /// Samples per pixel, the XML's `spp` default (render with `-Dspp=N` to change it).
     pub spp: u32,
-    /// The path integrator's `max_depth` (a mask pass-through counts as a bounce); -1 is
-    /// unbounded. The XML's `max_depth` default.
+    /// The `volpath` integrator's `max_depth`: scattering events (passes through transparent
+    /// texels do not count); -1 is unbounded, ended by Russian roulette. The XML's
+    /// `max_depth` default.
     pub max_depth: i32,
     /// Irradiance of the sun on a surface facing it, as luminance; its colour is a 6500 K
     /// black body. π makes a white Lambertian surface facing the sun as bright as sylva's
@@ -54,13 +56,12 @@ pub struct MitsubaOptions {
 }
 
 impl MitsubaOptions {
-    /// The scene's samples per pixel, unbounded path length with Russian roulette kept in
-    /// check by a 64-bounce cap, a sun of irradiance π, leaves that reflect and transmit
-    /// alike.
+    /// The scene's samples per pixel, unbounded paths (an unbiased reference), a sun of
+    /// irradiance π, leaves that reflect and transmit alike.
     pub fn for_scene(scene: &Scene) -> MitsubaOptions {
         MitsubaOptions {
             spp: scene.camera.rays_per_pixel,
-            max_depth: 64,
+            max_depth: -1,
             sun_irradiance: std::f32::consts::PI,
             leaf_diff_trans: 1.0,
         }
@@ -378,7 +379,7 @@ pub fn write(
     );
     let _ = writeln!(
         x,
-        "    <integrator type=\"path\">\n        <integer name=\"max_depth\" value=\"$max_depth\"/>\n    </integrator>\n"
+        "    <!-- volpath, not path: its shadow rays see through the leaves' transparent texels. -->\n    <integrator type=\"volpath\">\n        <integer name=\"max_depth\" value=\"$max_depth\"/>\n    </integrator>\n"
     );
 
     // Camera: sylva's fov is vertical; lookat with +y up.
