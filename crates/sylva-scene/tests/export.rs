@@ -529,8 +529,10 @@ fn untextured_two_sided_and_bad_input() {
     assert!(doc
         .descendants()
         .all(|n| n.attribute("id") != Some("ground")));
-    // Only the placed model is written.
+    // Only the placed model is written, with its textures alone.
     assert!(!text.contains("model-rose_b"));
+    assert!(!out.join("textures/rose_b_leaf.png").exists());
+    assert!(out.join("textures/rose_a_leaf.png").exists());
     let w = obj::write(&scene, &tmp.path().join("plain_obj"), &mut |_| true).unwrap();
     assert_eq!(w.triangles, scene.instanced_triangles());
     let mtl = fs::read_to_string(tmp.path().join("plain_obj").join(obj::MTL_FILE)).unwrap();

@@ -345,7 +345,19 @@ pub fn write(
         super::available_disk_bytes(dir),
     )?;
 
+    // Textures of the written models only.
+    let needed: std::collections::HashSet<&str> = scene
+        .models
+        .iter()
+        .zip(&written)
+        .filter(|(_, w)| **w)
+        .flat_map(|(m, _)| m.materials.iter().filter_map(|mat| mat.texture.as_ref()))
+        .map(|t| textures.stem(t))
+        .collect();
     for (t, stem) in textures.unique(&scene.models) {
+        if !needed.contains(stem.as_str()) {
+            continue;
+        }
         let rel = PathBuf::from(TEXTURE_DIR).join(format!("{stem}.png"));
         write_png(&dir.join(&rel), t, PngChannels::Rgb)?;
         out.add(dir, rel)?;
@@ -493,7 +505,9 @@ pub fn write(
             if tris.is_empty() {
                 continue;
             }
-            let rel = PathBuf::from(MESH_DIR).join(format!("{}.ply", mat_stems[k][j]));
+            // Forward slashes: the XML is read on any system.
+            let name = format!("{MESH_DIR}/{}.ply", mat_stems[k][j]);
+            let rel = PathBuf::from(&name);
             write_ply(
                 &dir.join(&rel),
                 model,
@@ -504,7 +518,7 @@ pub fn write(
             let _ = writeln!(
                 x,
                 "        <shape type=\"ply\">\n            <string name=\"filename\" value=\"{}\"/>\n            <ref id=\"bsdf-{}\"/>\n        </shape>",
-                rel.display(),
+                name,
                 mat_stems[k][j]
             );
         }
