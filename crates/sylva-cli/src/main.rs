@@ -37,6 +37,9 @@ enum Command {
     Lb(commands::lb::LbArgs),
     /// Plane-parallel scattering in slabs (paper 003): radiance, Tables 1 and 2.
     Spp(commands::spp::SppArgs),
+    /// Write a scene for other renderers: OBJ (flattened) or Mitsuba 3 (instanced), e.g.
+    /// `sylva export demo --format mitsuba -o out/`.
+    Export(commands::export::ExportArgs),
     /// Measure speed on this machine (LB solver against copy bandwidth, scene building).
     Bench(commands::bench::BenchArgs),
 }
@@ -61,6 +64,7 @@ fn main() -> std::process::ExitCode {
         Command::Scene(a) => commands::scene::run(a),
         Command::Species(a) => commands::species::run(a),
         Command::Bench(a) => commands::bench::run(a),
+        Command::Export(a) => commands::export::run(a),
     };
     commands::finish(result)
 }

@@ -8,15 +8,18 @@
 //! * Files are written atomically with [`atomic_write`]: a temporary file beside the target,
 //!   then a rename, so a crash never leaves a half-written cache or image.
 //! * Large allocations are checked first with [`check_memory`].
+//! * Light colours are linear sRGB; [`blackbody_rgb`] gives a black body's (the sun is 6500 K).
 //! * Randomness comes from [`SplitMix64`], seeded per task so results do not depend on the
 //!   thread count.
 
 mod atomic;
+pub mod colour;
 mod memory;
 mod rng;
 mod sun;
 
 pub use atomic::{atomic_write, atomic_write_with};
+pub use colour::{blackbody_rgb, try_blackbody_rgb, SUN_TEMPERATURE_K};
 pub use memory::{available_memory_bytes, check_memory, format_bytes, MemoryError};
 pub use rng::SplitMix64;
 pub use sun::{Sun, SunError};

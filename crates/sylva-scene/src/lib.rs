@@ -9,9 +9,12 @@
 //! * [`voxelize`]: a model's triangles → the LB density grid (000 §4.2); [`model_source`]
 //!   resolves a model named on the command line (species name or model file).
 //! * [`import`]: users' own models from OBJ and glTF files ([`load_mesh_file`]).
+//! * [`export`]: a scene as OBJ (flattened) or as a Mitsuba 3 scene (instanced), to check
+//!   sylva against a path tracer.
 
 pub mod arbaro;
 pub mod builtin_scenes;
+pub mod export;
 pub mod import;
 pub mod layout;
 pub mod material;

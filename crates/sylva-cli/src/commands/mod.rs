@@ -21,6 +21,7 @@ pub mod bench;
 pub mod bench_scene;
 pub mod bench_voxel;
 pub mod device;
+pub mod export;
 pub mod lb;
 pub mod progress;
 pub mod scene;

@@ -1,0 +1,160 @@
+//! `sylva export SCENE --format obj|mitsuba -o DIR`: a scene for other renderers, chiefly to
+//! check sylva against a path tracer (Mitsuba 3). See `docs/export.md`.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::Args;
+use sylva_core::format_bytes;
+use sylva_scene::export::{self, mitsuba, obj, Format};
+use sylva_scene::Scene;
+
+use super::progress::bar;
+use super::scene::thousands;
+
+#[derive(Args)]
+pub struct ExportArgs {
+    /// A scene file (TOML) or a built-in scene: demo, beech, catalpa, canopy.
+    pub scene: String,
+    /// `obj`: the flattened scene (every instance in world space) as one OBJ + MTL + PNG
+    /// textures, ground included. `mitsuba`: a Mitsuba 3 scene.xml that keeps the instancing
+    /// (one binary PLY per model and material), with sun, sky, ground, camera and integrator.
+    #[arg(long, short = 'f', value_name = "FORMAT")]
+    pub format: Format,
+    /// Output directory; created if missing, files of the same name in it are replaced.
+    #[arg(long, short = 'o', value_name = "DIR")]
+    pub output: PathBuf,
+    /// Mitsuba: samples per pixel written as the XML's `spp` default (default: the scene's
+    /// rays_per_pixel; `mitsuba -Dspp=N` overrides it when rendering).
+    #[arg(long, value_name = "N")]
+    pub spp: Option<u32>,
+    /// Mitsuba: the path integrator's max_depth (-1: unbounded; a pass through a leaf's
+    /// transparent texel counts as a bounce).
+    #[arg(
+        long,
+        default_value_t = 64,
+        allow_negative_numbers = true,
+        value_name = "N"
+    )]
+    pub max_depth: i32,
+    /// Mitsuba: the sun's irradiance on a surface facing it (its colour is a 6500 K black
+    /// body). The default π lights a white Lambertian surface facing the sun to radiance 1,
+    /// like sylva's local shading with a sun of intensity 1.
+    #[arg(long, value_name = "E")]
+    pub sun_irradiance: Option<f32>,
+    /// Mitsuba: leaf diffuse transmission, principledthin's diff_trans in [0, 2] (0 reflect
+    /// only, 1 reflect and transmit alike, 2 transmit only). Default: 1 + g of the scene's LB
+    /// preset (luminance-weighted), since g = (T - R) / (T + R) gives T / (R + T) = (1 + g) / 2.
+    #[arg(long, value_name = "F")]
+    pub leaf_transmission: Option<f32>,
+}
+
+/// `diff_trans` from the LB preset: g = (T − R)/(T + R) per colour (SPEC §1), weighted by the
+/// luminance of each sRGB primary since Mitsuba's parameter is one number.
+pub fn leaf_diff_trans(preset: &str) -> Result<f32> {
+    let p = sylva_lb::Preset::parse(preset)?.params();
+    let w = [0.2126, 0.7152, 0.0722];
+    let g: f64 = p.colours.iter().zip(w).map(|(c, w)| c.g * w).sum();
+    Ok((1.0 + g).clamp(0.0, 2.0) as f32)
+}
+
+/// Set by Ctrl-C during an export: the writers stop at their next progress report, and the
+/// atomic writer removes the partial file (a 50 GB temporary OBJ would otherwise stay).
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+#[cfg(unix)]
+extern "C" fn on_interrupt(_: libc::c_int) {
+    INTERRUPTED.store(true, Ordering::Relaxed);
+}
+
+fn catch_interrupt() {
+    #[cfg(unix)]
+    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
+    unsafe {
+        libc::signal(
+            libc::SIGINT,
+            on_interrupt as extern "C" fn(libc::c_int) as libc::sighandler_t,
+        );
+    }
+}
+
+fn keep_going() -> bool {
+    !INTERRUPTED.load(Ordering::Relaxed)
+}
+
+pub fn run(args: ExportArgs) -> Result<()> {
+    // Fail on a bad output directory before the (possibly long) scene build.
+    export::prepare_dir(&args.output)?;
+    catch_interrupt();
+    let t0 = Instant::now();
+    let scene = Scene::load(&args.scene)?;
+    let triangles = scene.instanced_triangles();
+    eprintln!(
+        "scene '{}': {} instances, {} instanced triangles (built in {:.1} s)",
+        scene.name,
+        thousands(scene.instances.len() as u64),
+        thousands(triangles),
+        t0.elapsed().as_secs_f64()
+    );
+    let t1 = Instant::now();
+    let written = match args.format {
+        Format::Obj => {
+            if obj::is_large(triangles) {
+                let estimate = obj::estimate_size(&scene);
+                if let Some(w) = obj::size_warning(triangles, estimate) {
+                    eprintln!("warning: {w}");
+                }
+            }
+            let pb = bar(scene.instances.len() as u64, "instances");
+            let r = obj::write(&scene, &args.output, &mut |n| {
+                pb.set_position(n);
+                keep_going()
+            });
+            pb.finish_and_clear();
+            r?
+        }
+        Format::Mitsuba => {
+            let mut opts = mitsuba::MitsubaOptions::for_scene(&scene);
+            if let Some(spp) = args.spp {
+                opts.spp = spp;
+            }
+            opts.max_depth = args.max_depth;
+            if let Some(e) = args.sun_irradiance {
+                opts.sun_irradiance = e;
+            }
+            opts.leaf_diff_trans = match args.leaf_transmission {
+                Some(f) => f,
+                None => leaf_diff_trans(&scene.lb.preset)
+                    .with_context(|| format!("LB preset of scene '{}'", scene.name))?,
+            };
+            let pb = bar(scene.models.len() as u64, "models");
+            let r = mitsuba::write(&scene, &args.output, &opts, &mut |n| {
+                pb.set_position(n);
+                keep_going()
+            });
+            pb.finish_and_clear();
+            r?
+        }
+    };
+    println!(
+        "wrote {} files, {}, {} triangles, to {} in {:.1} s",
+        written.files.len(),
+        format_bytes(written.bytes),
+        thousands(written.triangles),
+        args.output.display(),
+        t1.elapsed().as_secs_f64()
+    );
+    match args.format {
+        Format::Obj => println!(
+            "  {}",
+            args.output.join(obj::OBJ_FILE).display()
+        ),
+        Format::Mitsuba => println!(
+            "  render: mitsuba -m scalar_rgb -o render.exr {}   (pip install mitsuba; see docs/export.md)",
+            args.output.join(mitsuba::XML_FILE).display()
+        ),
+    }
+    Ok(())
+}
