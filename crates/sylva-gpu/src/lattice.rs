@@ -11,14 +11,13 @@
 
 use std::borrow::Cow;
 use std::num::NonZeroU64;
-use std::time::Instant;
 
 use sylva_lb::collision::{Omega, ReducedOmega};
 use sylva_lb::kernel::CubicOmega;
 use sylva_lb::lattice::Q;
 use sylva_lb::{
-    Boundary, ColourParams, DensityGrid, Dims, LightingGrid, MediumParams, SolveError,
-    SolveOptions, SolveReport, StopReason,
+    Boundary, ColourParams, DensityGrid, Dims, LightingGrid, MediumParams, RunMonitor, SolveError,
+    SolveOptions, SolveReport,
 };
 
 use crate::context::GpuContext;
@@ -604,42 +603,19 @@ impl<'c> GpuLattice<'c> {
         progress: &mut dyn FnMut(usize, f64),
     ) -> Result<SolveReport, GpuError> {
         validate_options(opts)?;
-        let start = Instant::now();
-        let mut previous = f64::NAN;
-        let mut residual = f64::INFINITY;
-        let mut steps = 0;
-        let mut stop = StopReason::StepLimit;
-        while steps < opts.max_steps {
-            let left = opts.max_steps - steps;
-            let n = if opts.tolerance.is_some() {
-                left.min(2)
-            } else {
-                left.min(self.max_batch)
-            };
-            let totals = self.advance(n)?;
+        let mut monitor = RunMonitor::new(opts);
+        while monitor.steps_left() > 0 {
             // With a tolerance, the CPU checks after each pair (or the last single step);
             // batches without one are checked never, so grouping does not matter.
-            let mut converged = false;
-            for total in totals {
-                steps += 1;
-                if previous.is_finite() {
-                    residual = (total - previous).abs() / total.abs().max(f64::MIN_POSITIVE);
-                }
-                previous = total;
-                progress(steps, residual);
-                converged |= opts.tolerance.is_some_and(|tol| residual < tol);
-            }
-            if converged {
-                stop = StopReason::Converged;
-                break;
-            }
+            let n = if opts.tolerance.is_some() {
+                monitor.steps_left().min(2)
+            } else {
+                monitor.steps_left().min(self.max_batch)
+            };
+            let totals = self.advance(n)?;
+            monitor.record(&totals, progress);
         }
-        Ok(SolveReport {
-            steps,
-            stop,
-            residual,
-            seconds: start.elapsed().as_secs_f64(),
-        })
+        Ok(monitor.report())
     }
 
     /// Σ_m f_m per site of the current state (the CPU's `site_totals`).

@@ -24,5 +24,6 @@ pub use grid::{Bounds, DensityGrid, Dims, GridError, LightingGrid};
 pub use grid_file::{Element, GridFile, GridFileError, GridKind};
 pub use params::{ColourParams, MediumParams, ParamError, Preset};
 pub use solver::{
-    solve_lighting, Boundary, Flows, Lattice, SolveError, SolveOptions, SolveReport, StopReason,
+    solve_lighting, Boundary, Flows, Lattice, RunMonitor, SolveError, SolveOptions, SolveReport,
+    StopReason,
 };

@@ -127,6 +127,70 @@ pub struct SolveReport {
     pub seconds: f64,
 }
 
+/// The run-length rule every backend shares, so that the CPU and the GPU stop after the same
+/// step: the relative change of the total density per step, against `opts.tolerance`.
+#[derive(Debug, Clone)]
+pub struct RunMonitor {
+    tolerance: Option<f64>,
+    max_steps: usize,
+    previous: f64,
+    residual: f64,
+    steps: usize,
+    converged: bool,
+    start: Instant,
+}
+
+impl RunMonitor {
+    pub fn new(opts: &SolveOptions) -> RunMonitor {
+        RunMonitor {
+            tolerance: opts.tolerance,
+            max_steps: opts.max_steps,
+            previous: f64::NAN,
+            residual: f64::INFINITY,
+            steps: 0,
+            converged: false,
+            start: Instant::now(),
+        }
+    }
+
+    /// Steps still allowed; 0 once the run has converged.
+    pub fn steps_left(&self) -> usize {
+        if self.converged {
+            0
+        } else {
+            self.max_steps - self.steps
+        }
+    }
+
+    /// Records the totals of a batch of steps (each the total of the state a step started
+    /// from), calling `progress(step, residual)` for each. A batch is checked as a whole, so a
+    /// backend that advances two steps at a time stops after the pair.
+    pub fn record(&mut self, totals: &[f64], progress: &mut dyn FnMut(usize, f64)) {
+        for &total in totals {
+            self.steps += 1;
+            if self.previous.is_finite() {
+                self.residual = (total - self.previous).abs() / total.abs().max(f64::MIN_POSITIVE);
+            }
+            self.previous = total;
+            progress(self.steps, self.residual);
+            self.converged |= self.tolerance.is_some_and(|tol| self.residual < tol);
+        }
+    }
+
+    pub fn report(&self) -> SolveReport {
+        SolveReport {
+            steps: self.steps,
+            stop: if self.converged {
+                StopReason::Converged
+            } else {
+                StopReason::StepLimit
+            },
+            residual: self.residual,
+            seconds: self.start.elapsed().as_secs_f64(),
+        }
+    }
+}
+
 impl SolveReport {
     /// Million lattice-site updates per second.
     pub fn mlups(&self, dims: Dims) -> f64 {
@@ -641,42 +705,19 @@ impl Lattice {
         progress: &mut dyn FnMut(usize, f64),
     ) -> Result<SolveReport, SolveError> {
         opts.validate()?;
-        let start = Instant::now();
-        let mut previous = f64::NAN;
-        let mut residual = f64::INFINITY;
-        let mut steps = 0;
-        let mut stop = StopReason::StepLimit;
-        while steps < opts.max_steps {
+        let mut monitor = RunMonitor::new(opts);
+        while monitor.steps_left() > 0 {
             // Two steps per sweep over memory where two remain. Each step reports the total
             // of the state it started from, so the change over the previous step is known
             // one step late; that is all the monitor needs.
-            let totals = if opts.max_steps - steps >= 2 {
+            if monitor.steps_left() >= 2 {
                 let (a, b) = self.step_pair();
-                vec![a, b]
+                monitor.record(&[a, b], progress);
             } else {
-                vec![self.step()]
-            };
-            let mut converged = false;
-            for total in totals {
-                steps += 1;
-                if previous.is_finite() {
-                    residual = (total - previous).abs() / total.abs().max(f64::MIN_POSITIVE);
-                }
-                previous = total;
-                progress(steps, residual);
-                converged |= opts.tolerance.is_some_and(|tol| residual < tol);
-            }
-            if converged {
-                stop = StopReason::Converged;
-                break;
+                monitor.record(&[self.step()], progress);
             }
         }
-        Ok(SolveReport {
-            steps,
-            stop,
-            residual,
-            seconds: start.elapsed().as_secs_f64(),
-        })
+        Ok(monitor.report())
     }
 }
 
