@@ -6,6 +6,10 @@
 //! same number at both levels and hits of different instances compare directly. An instance
 //! is tested over the ray's whole remaining interval (not only the leaf's), so one that spans
 //! several leaves is tested once per leaf at most and a hit found early is never lost.
+//!
+//! Instance boxes are tight ([`ModelAccel::world_bounds`]); in a top-level leaf every
+//! instance's world box is slab-tested before its transform, and the ones the ray meets are
+//! entered nearest first, stopping at the first that starts beyond the closest hit.
 
 use crate::kdtree::{Clip, KdTree, TraceStats, TraversalConfig, TreeStats};
 use crate::model::{Best, ModelAccel};
