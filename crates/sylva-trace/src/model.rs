@@ -12,7 +12,7 @@
 
 use crate::kdtree::{Clip, KdTree, TraceStats, TraversalConfig};
 use crate::ray::{intersect_triangle, inverse_dir, TriangleData};
-use glam::{Vec2, Vec3};
+use glam::{Affine3A, Vec2, Vec3};
 use std::sync::Arc;
 use sylva_scene::{Aabb, MaterialKind, Model, Texture, Wrap};
 
@@ -106,6 +106,9 @@ pub(crate) struct Best {
 #[derive(Debug, Clone)]
 pub struct ModelAccel {
     tree: KdTree,
+    /// Corners of a prism containing every vertex: the convex hull of the vertices' (x, z)
+    /// at the lowest and at the highest y (see [`ModelAccel::world_bounds`]).
+    hull: Vec<Vec3>,
     tris: Vec<Tri>,
     alpha: Vec<AlphaTri>,
     masks: Vec<AlphaMask>,
@@ -198,6 +201,64 @@ pub fn clip_triangle(tri: [Vec3; 3], bx: &Aabb) -> Option<Aabb> {
     Some(b)
 }
 
+/// Corners of the prism `hull(x, z) × [y_min, y_max]` over the vertices that triangles use
+/// (Andrew's monotone chain; collinear points dropped). Empty for a model without triangles.
+fn hull_prism(positions: &[[f32; 3]], indices: &[[u32; 3]]) -> Vec<Vec3> {
+    let mut used = vec![false; positions.len()];
+    for t in indices {
+        for &k in t {
+            if let Some(u) = used.get_mut(k as usize) {
+                *u = true;
+            }
+        }
+    }
+    let (mut y0, mut y1) = (f32::INFINITY, f32::NEG_INFINITY);
+    let mut pts: Vec<[f32; 2]> = Vec::new();
+    for (p, _) in positions
+        .iter()
+        .zip(&used)
+        .filter(|(p, u)| **u && p.iter().all(|c| c.is_finite()))
+    {
+        y0 = y0.min(p[1]);
+        y1 = y1.max(p[1]);
+        pts.push([p[0], p[2]]);
+    }
+    if pts.is_empty() {
+        return Vec::new();
+    }
+    pts.sort_unstable_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    pts.dedup();
+    // f64 cross products of f32 differences: the sign is right for any realistic model.
+    let cross = |o: [f32; 2], a: [f32; 2], b: [f32; 2]| {
+        (a[0] as f64 - o[0] as f64) * (b[1] as f64 - o[1] as f64)
+            - (a[1] as f64 - o[1] as f64) * (b[0] as f64 - o[0] as f64)
+    };
+    let mut hull: Vec<[f32; 2]> = Vec::with_capacity(64);
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &[f32; 2]>> = if pass == 0 {
+            Box::new(pts.iter())
+        } else {
+            Box::new(pts.iter().rev())
+        };
+        for &p in iter {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(p);
+        }
+        hull.pop(); // the chain's last point starts the other chain
+    }
+    if hull.is_empty() {
+        hull.push(pts[0]);
+    }
+    hull.iter()
+        .flat_map(|&[x, z]| [Vec3::new(x, y0, z), Vec3::new(x, y1, z)])
+        .collect()
+}
+
 impl ModelAccel {
     /// Builds the kd-tree over the model's triangles (in parallel, deterministic).
     pub fn build(model: &Model) -> ModelAccel {
@@ -239,10 +300,39 @@ impl ModelAccel {
             .collect();
         ModelAccel {
             tree,
+            hull: hull_prism(&mesh.positions, &mesh.indices),
             tris,
             alpha,
             masks,
         }
+    }
+
+    /// Corners of the prism (convex hull of the vertices' x, z times their y range) that
+    /// [`ModelAccel::world_bounds`] transforms.
+    pub fn hull_points(&self) -> &[Vec3] {
+        &self.hull
+    }
+
+    /// World box of the model under `to_world`, containing every transformed vertex and
+    /// the widened triangle test's margin. The hull prism is convex and contains the
+    /// model, so its transformed corners bound the transformed model for any affine map;
+    /// for the instances' rotations about y it is exact up to the margin (the rotated
+    /// model box's corners over-state a tree turned by 45° by up to √2 per axis).
+    pub fn world_bounds(&self, to_world: &Affine3A) -> Aabb {
+        let mut b = Aabb::EMPTY;
+        for &p in &self.hull {
+            b.grow(to_world.transform_point3(p));
+        }
+        if b.is_empty() {
+            return b;
+        }
+        // Rounding of the transform (relative to the coordinates) plus the widening of the
+        // triangle test (relative to the model), as in `clip_triangle`.
+        let mag = b.min.abs().max(b.max.abs()).max_element();
+        let slack = 4e-7 * mag + 2.0 * crate::ray::BARY_EPS * (b.max - b.min).max_element();
+        b.min -= Vec3::splat(slack);
+        b.max += Vec3::splat(slack);
+        b
     }
 
     pub fn tree(&self) -> &KdTree {
@@ -256,7 +346,8 @@ impl ModelAccel {
     /// Bytes of the tree, the triangle data and the alpha data (the mesh itself excluded).
     pub fn memory_bytes(&self) -> u64 {
         self.tree.memory_bytes()
-            + (self.tris.capacity() * std::mem::size_of::<Tri>()
+            + (self.hull.capacity() * std::mem::size_of::<Vec3>()
+                + self.tris.capacity() * std::mem::size_of::<Tri>()
                 + self.alpha.capacity() * std::mem::size_of::<AlphaTri>()) as u64
             + self.masks.iter().map(AlphaMask::memory_bytes).sum::<u64>()
     }

@@ -6,10 +6,14 @@
 //! same number at both levels and hits of different instances compare directly. An instance
 //! is tested over the ray's whole remaining interval (not only the leaf's), so one that spans
 //! several leaves is tested once per leaf at most and a hit found early is never lost.
+//!
+//! Instance boxes are tight ([`ModelAccel::world_bounds`]); in a top-level leaf every
+//! instance's world box is slab-tested before its transform, and the ones the ray meets are
+//! entered nearest first, stopping at the first that starts beyond the closest hit.
 
 use crate::kdtree::{Clip, KdTree, TraceStats, TraversalConfig, TreeStats};
 use crate::model::{Best, ModelAccel};
-use crate::ray::{inverse_dir, Hit, Ray};
+use crate::ray::{inverse_dir, ray_box, Hit, Ray};
 use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 use sylva_scene::{Aabb, Instance, Model, Scene};
@@ -63,6 +67,10 @@ impl Mailbox {
     }
 }
 
+/// Instances of one top-level leaf that closest-hit queries order by entry distance (more
+/// are entered in leaf order first).
+const SORTED_INSTANCES: usize = 16;
+
 /// An instance as the tracer sees it.
 #[derive(Debug, Clone, Copy)]
 pub struct TraceInstance {
@@ -92,6 +100,9 @@ impl AccelMemory {
 pub struct SceneAccel {
     models: Vec<ModelAccel>,
     instances: Vec<TraceInstance>,
+    /// The instances' world boxes again, packed (24 B each, the whole scene's fit in L1/L2):
+    /// every instance in a top-level leaf is tested against its box before its transform.
+    boxes: Vec<[Vec3; 2]>,
     top: KdTree,
     /// Half extents (x, z) of the ground rectangle on y = 0, when there is one.
     ground: Option<[f32; 2]>,
@@ -177,24 +188,22 @@ impl SceneAccel {
                     position: i.position.to_array(),
                 });
             }
-            let mb = m.bounds();
-            let mut wb = Aabb::EMPTY;
-            if !mb.is_empty() {
-                for c in mb.corners() {
-                    wb.grow(to_world.transform_point3(c));
-                }
-            }
             inst.push(TraceInstance {
                 model: i.model,
                 to_world,
                 to_model,
-                world_bounds: wb,
+                world_bounds: m.world_bounds(&to_world),
             });
         }
         let top = KdTree::build(&InstanceClip(&inst));
+        let boxes = inst
+            .iter()
+            .map(|i| [i.world_bounds.min, i.world_bounds.max])
+            .collect();
         Ok(SceneAccel {
             models: built,
             instances: inst,
+            boxes,
             top,
             ground,
         })
@@ -220,7 +229,9 @@ impl SceneAccel {
         AccelMemory {
             models: self.models.iter().map(ModelAccel::memory_bytes).sum(),
             top: self.top.memory_bytes()
-                + (self.instances.capacity() * std::mem::size_of::<TraceInstance>()) as u64,
+                + (self.instances.capacity() * std::mem::size_of::<TraceInstance>()
+                    + self.boxes.capacity() * std::mem::size_of::<[Vec3; 2]>())
+                    as u64,
         }
     }
 
@@ -269,23 +280,39 @@ impl SceneAccel {
             };
         }
         let (o, d) = (ray.origin, ray.dir);
+        let inv_d = inverse_dir(d);
         let mut visits = 0u64;
         let mut mailbox = Mailbox::new();
         let mut inner = TraceStats::default();
         self.top
-            .traverse(o, inverse_dir(d), ray.t_min, best.t, cfg, stats, |prims| {
-                for &i in prims {
+            .traverse(o, inv_d, ray.t_min, best.t, cfg, stats, |prims| {
+                let mut enter = |i: u32, best: &mut Best| {
                     // An instance met in an earlier leaf was already tested over the whole
                     // interval.
                     if !mailbox.insert(i) {
-                        continue;
+                        return;
                     }
                     visits += 1;
                     let inst = &self.instances[i as usize];
                     let mo = inst.to_model.transform_point3(o);
                     let md = inst.to_model.transform_vector3(d);
                     self.models[inst.model as usize]
-                        .closest(mo, md, ray.t_min, i, &mut best, cfg, &mut inner);
+                        .closest(mo, md, ray.t_min, i, best, cfg, &mut inner);
+                };
+                // Only instances whose box the ray meets before the closest hit (the leaf's
+                // region is larger than the ray's path through a box), nearest entry first:
+                // a near tree's hit then cuts the far ones' traversals short or skips them.
+                let mut cand = [(0f32, 0u32); SORTED_INSTANCES];
+                let t_max = best.t;
+                let n = self.entries(prims, o, inv_d, ray.t_min, t_max, &mut cand, |i| {
+                    enter(i, &mut best)
+                });
+                for &(t0, i) in &cand[..n] {
+                    // Equal entry still enters: a hit at exactly `best.t` may win the tie.
+                    if t0 > best.t {
+                        break;
+                    }
+                    enter(i, &mut best);
                 }
                 best.t
             });
@@ -314,39 +341,82 @@ impl SceneAccel {
             return true;
         }
         let (o, d) = (ray.origin, ray.dir);
+        let inv_d = inverse_dir(d);
         let mut found = false;
         let mut visits = 0u64;
         let mut mailbox = Mailbox::new();
         let mut inner = TraceStats::default();
-        self.top.traverse(
-            o,
-            inverse_dir(d),
-            ray.t_min,
-            ray.t_max,
-            cfg,
-            stats,
-            |prims| {
-                for &i in prims {
-                    if !mailbox.insert(i) {
-                        continue;
+        self.top
+            .traverse(o, inv_d, ray.t_min, ray.t_max, cfg, stats, |prims| {
+                let mut enter = |i: u32| {
+                    if found || !mailbox.insert(i) {
+                        return;
                     }
                     visits += 1;
                     let inst = &self.instances[i as usize];
                     let mo = inst.to_model.transform_point3(o);
                     let md = inst.to_model.transform_vector3(d);
-                    if self.models[inst.model as usize]
-                        .any(mo, md, ray.t_min, ray.t_max, cfg, &mut inner)
-                    {
-                        found = true;
-                        return f32::NEG_INFINITY;
-                    }
+                    found = self.models[inst.model as usize]
+                        .any(mo, md, ray.t_min, ray.t_max, cfg, &mut inner);
+                };
+                // Nearest box first: a shadow ray starts inside its own tree's box, the most
+                // likely occluder.
+                let mut cand = [(0f32, 0u32); SORTED_INSTANCES];
+                let n = self.entries(prims, o, inv_d, ray.t_min, ray.t_max, &mut cand, &mut enter);
+                for &(_, i) in &cand[..n] {
+                    enter(i);
                 }
-                f32::INFINITY
-            },
-        );
+                if found {
+                    f32::NEG_INFINITY
+                } else {
+                    f32::INFINITY
+                }
+            });
         *stats += inner;
         stats.instance_visits += visits;
         found
+    }
+
+    /// The instances of a top-level leaf whose world box the ray meets within
+    /// `[t_min, t_max]`: the first [`SORTED_INSTANCES`] go into `cand` as `(entry t, id)`,
+    /// sorted by entry (stable, so ties keep leaf order); any further ones are handed to
+    /// `overflow` at once. Returns how many went into `cand`.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)] // the hot path, called per top-level leaf
+    fn entries(
+        &self,
+        prims: &[u32],
+        o: Vec3,
+        inv_d: Vec3,
+        t_min: f32,
+        t_max: f32,
+        cand: &mut [(f32, u32); SORTED_INSTANCES],
+        mut overflow: impl FnMut(u32),
+    ) -> usize {
+        let mut n = 0;
+        for &i in prims {
+            let [bmin, bmax] = self.boxes[i as usize];
+            let Some((t0, _)) = ray_box(o, inv_d, bmin, bmax, t_min, t_max) else {
+                continue;
+            };
+            if n < SORTED_INSTANCES {
+                cand[n] = (t0, i);
+                n += 1;
+            } else {
+                overflow(i);
+            }
+        }
+        // Insertion sort: leaves hold a handful of instances.
+        for k in 1..n {
+            let x = cand[k];
+            let mut j = k;
+            while j > 0 && cand[j - 1].0 > x.0 {
+                cand[j] = cand[j - 1];
+                j -= 1;
+            }
+            cand[j] = x;
+        }
+        n
     }
 
     /// Reference closest hit: every triangle of every instance, in model space with the same

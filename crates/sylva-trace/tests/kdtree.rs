@@ -102,6 +102,58 @@ fn tree_closest_hit_equals_brute_force_and_short_stacks_equal_unbounded() {
 }
 
 #[test]
+fn crowded_top_level_leaves_equal_brute_force() {
+    // 40 instances piled on nearly the same spot: the top-level leaves hold more instances
+    // than the closest-hit query sorts by entry (16), so the overflow path runs too; a
+    // duplicate pair (same model and transform) makes exact ties between instances.
+    let models = vec![soup(120, 21), soup(80, 22)];
+    let mut instances = Vec::new();
+    let mut r = rng(23);
+    for k in 0..40 {
+        instances.push(Instance {
+            model: (k % 2) as u32,
+            position: Vec3::new(
+                uniform(&mut r, -0.3, 0.3),
+                1.0 + uniform(&mut r, -0.3, 0.3),
+                uniform(&mut r, -0.3, 0.3),
+            ),
+            rotation_deg: uniform(&mut r, 0.0, 360.0),
+            scale: uniform(&mut r, 0.5, 1.5),
+        });
+    }
+    instances.push(instances[7]);
+    let accel = SceneAccel::from_parts(&models, &instances, Some([4.0, 4.0])).unwrap();
+    let top = accel.top_stats();
+    // On average more than 16 per non-empty leaf: some leaf overflows the sorted array.
+    assert!(
+        top.references > 16 * (top.leaves - top.empty_leaves),
+        "{top:?}"
+    );
+    let mut r = rng(24);
+    let (mut hits, mut dup_wins) = (0, 0);
+    for k in 0..800 {
+        let mut ray = random_ray(&mut r, 2.0);
+        ray.origin += Vec3::new(0.0, 1.0, 0.0);
+        if k % 4 == 0 {
+            ray.t_max = uniform(&mut r, 0.5, 3.0);
+        }
+        for cfg in [TraversalConfig::default(), TraversalConfig::UNBOUNDED] {
+            let mut st = TraceStats::default();
+            let kd = accel.closest_hit(&ray, cfg, &mut st);
+            assert!(same(kd, accel.brute_closest_hit(&ray)), "ray {k}");
+            assert_eq!(accel.any_hit(&ray, cfg, &mut st), accel.brute_any_hit(&ray));
+            if let Some(h) = kd {
+                hits += !h.is_ground() as usize;
+                // The copy of instance 7 never wins: ties go to the lower instance.
+                dup_wins += (h.instance == 40) as usize;
+            }
+        }
+    }
+    assert!(hits > 300, "{hits}");
+    assert_eq!(dup_wins, 0);
+}
+
+#[test]
 fn instanced_scene_equals_flattened_brute_force() {
     // Two models, six instances with rotations, scales and overlaps, and a ground.
     let models = vec![soup(300, 11), soup(150, 12)];

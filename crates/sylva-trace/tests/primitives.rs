@@ -380,6 +380,90 @@ fn bad_cameras_are_errors() {
     }
 }
 
+/// Box of the transformed vertices that triangles use.
+fn vertex_box(model: &Model, m: &glam::Affine3A) -> Aabb {
+    let mut b = Aabb::EMPTY;
+    for t in &model.mesh.indices {
+        for &k in t {
+            b.grow(m.transform_point3(Vec3::from_array(model.mesh.positions[k as usize])));
+        }
+    }
+    b
+}
+
+#[test]
+fn instance_world_bounds_are_tight_and_contain_every_vertex() {
+    let mut r = rng(77);
+    for seed in 0..4 {
+        let model = soup(300, 90 + seed);
+        let accel = ModelAccel::build(&model);
+        // The hull prism holds every vertex and is a small set.
+        let hull = accel.hull_points();
+        assert!(hull.len() >= 6 && hull.len() <= 2 * 900, "{}", hull.len());
+        for _ in 0..25 {
+            let inst = Instance {
+                model: 0,
+                position: Vec3::new(
+                    uniform(&mut r, -100.0, 100.0),
+                    uniform(&mut r, -5.0, 5.0),
+                    uniform(&mut r, -100.0, 100.0),
+                ),
+                rotation_deg: uniform(&mut r, -360.0, 360.0),
+                scale: uniform(&mut r, 0.1, 10.0),
+            };
+            let m = inst.transform();
+            let wb = accel.world_bounds(&m);
+            let exact = vertex_box(&model, &m);
+            // Contains every transformed vertex ...
+            assert!(
+                exact.min.cmpge(wb.min).all() && exact.max.cmple(wb.max).all(),
+                "{exact:?} not in {wb:?}"
+            );
+            // ... is exact up to the margin for rotations about y (the corner box of the
+            // rotated model box is not: it is what this replaced) ...
+            let ext = (exact.max - exact.min).max_element();
+            let tol = 1e-4 * ext + 1e-5 * exact.max.abs().max(exact.min.abs()).max_element();
+            assert!(
+                (wb.min - exact.min).max_element() <= tol
+                    && (wb.max - exact.max).max_element() <= tol,
+                "{wb:?} vs {exact:?}"
+            );
+            // ... and never larger than the old corner box.
+            let mut corner = Aabb::EMPTY;
+            for c in accel.bounds().corners() {
+                corner.grow(m.transform_point3(c));
+            }
+            assert!(wb.min.cmpge(corner.min - tol).all() && wb.max.cmple(corner.max + tol).all());
+        }
+        // Any affine map (tilted rotation, non-uniform scale): still contains every vertex.
+        for _ in 0..25 {
+            let m = glam::Affine3A::from_scale_rotation_translation(
+                Vec3::new(
+                    uniform(&mut r, 0.1, 4.0),
+                    uniform(&mut r, 0.1, 4.0),
+                    uniform(&mut r, 0.1, 4.0),
+                ),
+                glam::Quat::from_axis_angle(unit(&mut r), uniform(&mut r, -3.0, 3.0)),
+                Vec3::new(uniform(&mut r, -50.0, 50.0), 0.0, 0.0),
+            );
+            let wb = accel.world_bounds(&m);
+            let exact = vertex_box(&model, &m);
+            assert!(
+                exact.min.cmpge(wb.min).all() && exact.max.cmple(wb.max).all(),
+                "{exact:?} not in {wb:?}"
+            );
+        }
+    }
+    // A model without triangles has empty bounds.
+    let empty = Model {
+        mesh: Mesh::default(),
+        ..soup(1, 1)
+    };
+    assert!(ModelAccel::build(&empty)
+        .world_bounds(&glam::Affine3A::IDENTITY)
+        .is_empty());
+}
+
 #[test]
 fn instance_transforms_round_trip_and_keep_t() {
     let model = soup(200, 31);
@@ -412,12 +496,14 @@ fn instance_transforms_round_trip_and_keep_t() {
                 "{p} {back}"
             );
         }
-        // World bounds contain every transformed vertex.
+        // World bounds contain every transformed vertex (no tolerance: the margin is
+        // built in).
         for v in &model.mesh.positions {
             let w = ti.to_world.transform_point3(Vec3::from_array(*v));
             assert!(
-                w.cmpge(ti.world_bounds.min - 1e-4).all()
-                    && w.cmple(ti.world_bounds.max + 1e-4).all()
+                w.cmpge(ti.world_bounds.min).all() && w.cmple(ti.world_bounds.max).all(),
+                "{w} outside {:?}",
+                ti.world_bounds
             );
         }
         // A world-space hit lies on the world-space triangle at the same t.
