@@ -1,0 +1,202 @@
+//! Reinhard et al.'s global tone-mapping operator (2002, eqs. 1-4; paper 000 §4.1) and sRGB
+//! encoding.
+//!
+//! World luminance `L_w` is scaled by `key / L̄_w`, where `L̄_w` is the log-average luminance;
+//! the scaled `L` is compressed by `L_d = L (1 + L / L_white²) / (1 + L)`, so `L_white` (in
+//! scaled units) maps exactly to 1. Colours keep their ratios: `rgb_d = rgb · L_d / L_w`.
+
+use sylva_core::colour::luminance;
+
+/// `δ` of the log average: keeps black pixels from sending the average to zero.
+const LOG_DELTA: f64 = 1e-6;
+
+/// Parameters of the global operator.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ToneMap {
+    /// The key `a`: the scaled luminance the log-average maps to (0.18: "middle grey").
+    pub key: f32,
+    /// `L_white` in scaled units; `None` uses the largest scaled luminance of the image, so
+    /// nothing burns out.
+    pub white: Option<f32>,
+}
+
+impl Default for ToneMap {
+    fn default() -> Self {
+        ToneMap {
+            key: 0.18,
+            white: None,
+        }
+    }
+}
+
+/// What the operator measured on an image.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ToneStats {
+    pub log_average: f32,
+    pub white: f32,
+}
+
+/// `exp(mean(ln(δ + L)))` over the pixels, in f64 so large images add up exactly enough.
+pub fn log_average_luminance(pixels: &[[f32; 3]]) -> f32 {
+    if pixels.is_empty() {
+        return 0.0;
+    }
+    let sum: f64 = pixels
+        .iter()
+        .map(|p| (LOG_DELTA + luminance(*p).max(0.0) as f64).ln())
+        .sum();
+    (sum / pixels.len() as f64).exp() as f32
+}
+
+impl ToneMap {
+    /// Checks the parameters: a clear message rather than a black or NaN image.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.key.is_finite() && self.key > 0.0) {
+            return Err(format!("tone-mapping key {} must be positive", self.key));
+        }
+        if let Some(w) = self.white {
+            if !(w.is_finite() && w > 0.0) {
+                return Err(format!("tone-mapping white point {w} must be positive"));
+            }
+        }
+        Ok(())
+    }
+
+    /// Linear HDR pixels → display-linear pixels in [0, 1].
+    pub fn apply(&self, pixels: &[[f32; 3]]) -> (Vec<[f32; 3]>, ToneStats) {
+        let log_average = log_average_luminance(pixels);
+        let scale = if log_average > 0.0 {
+            self.key / log_average
+        } else {
+            1.0
+        };
+        let white = self.white.unwrap_or_else(|| {
+            pixels
+                .iter()
+                .map(|p| luminance(*p) * scale)
+                .fold(0.0f32, f32::max)
+                .max(f32::MIN_POSITIVE)
+        });
+        let inv_white2 = 1.0 / (white * white);
+        let out = pixels
+            .iter()
+            .map(|p| {
+                let lw = luminance(*p);
+                if !(lw > 0.0) {
+                    return [0.0; 3];
+                }
+                let l = lw * scale;
+                let ld = l * (1.0 + l * inv_white2) / (1.0 + l);
+                let k = ld / lw;
+                p.map(|c| (c * k).clamp(0.0, 1.0))
+            })
+            .collect();
+        (out, ToneStats { log_average, white })
+    }
+}
+
+/// The sRGB transfer function (IEC 61966-2-1) on a display-linear value in [0, 1].
+pub fn srgb_encode(x: f32) -> f32 {
+    let x = x.clamp(0.0, 1.0);
+    if x <= 0.003_130_8 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// Display-linear [0, 1] → 8-bit sRGB, rounded to nearest.
+pub fn srgb8(rgb: [f32; 3]) -> [u8; 3] {
+    rgb.map(|c| (srgb_encode(c) * 255.0).round() as u8)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: f32, b: f32, tol: f32) -> bool {
+        (a - b).abs() <= tol * b.abs().max(1e-6)
+    }
+
+    #[test]
+    fn log_average_of_two_values_is_their_geometric_mean() {
+        // Grey pixels: luminance equals the value.
+        let px = [[0.02f32; 3], [2.0; 3]];
+        let want = (0.02f64 * 2.0).sqrt() as f32;
+        assert!(close(log_average_luminance(&px), want, 1e-4));
+    }
+
+    #[test]
+    fn uniform_image_maps_to_key_compressed() {
+        // L̄ = L, so every scaled luminance is the key a; with white = a (the maximum),
+        // L_d = a (1 + a / a²) / (1 + a) = 1.
+        let px = vec![[3.0f32; 3]; 16];
+        let (out, st) = ToneMap::default().apply(&px);
+        assert!(close(st.white, 0.18, 1e-5));
+        assert!(out.iter().all(|p| p.iter().all(|&c| close(c, 1.0, 1e-5))));
+        // With an explicit white of 1: L_d = a (1 + a) / (1 + a) = a.
+        let tm = ToneMap {
+            key: 0.18,
+            white: Some(1.0),
+        };
+        let (out, _) = tm.apply(&px);
+        assert!(out.iter().all(|p| p.iter().all(|&c| close(c, 0.18, 1e-5))));
+    }
+
+    #[test]
+    fn two_level_image_matches_the_closed_form() {
+        let (lo, hi) = (0.1f32, 10.0f32);
+        let px = [[lo; 3], [hi; 3]];
+        let tm = ToneMap {
+            key: 0.36,
+            white: Some(2.0),
+        };
+        let (out, st) = tm.apply(&px);
+        let avg = (lo * hi).sqrt();
+        assert!(close(st.log_average, avg, 1e-4));
+        for (p, lw) in out.iter().zip([lo, hi]) {
+            let l = 0.36 * lw / avg;
+            let ld = l * (1.0 + l / 4.0) / (1.0 + l);
+            assert!(close(p[0], ld.min(1.0), 1e-4), "{} vs {}", p[0], ld);
+        }
+    }
+
+    #[test]
+    fn hue_is_kept_and_black_stays_black() {
+        let px = [[0.5f32, 0.25, 0.125], [1.0, 1.0, 1.0]];
+        let (out, _) = ToneMap::default().apply(&px);
+        assert!(out[0][0] < 1.0);
+        assert!(close(out[0][1] / out[0][0], 0.5, 1e-5));
+        assert!(close(out[0][2] / out[0][0], 0.25, 1e-5));
+        let (out, _) = ToneMap::default().apply(&[[0.0; 3], [1.0, 0.5, 0.2]]);
+        assert_eq!(out[0], [0.0; 3]);
+        assert!(out.iter().flatten().all(|&c| (0.0..=1.0).contains(&c)));
+    }
+
+    #[test]
+    fn srgb_known_values() {
+        assert_eq!(srgb8([0.0, 1.0, 0.5]), [0, 255, 188]);
+        assert!(close(srgb_encode(0.5), 0.735_357, 1e-5));
+        // The two pieces meet at the threshold.
+        let t = 0.003_130_8f32;
+        assert!((12.92 * t - (1.055 * t.powf(1.0 / 2.4) - 0.055)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn bad_parameters_are_named() {
+        let e = ToneMap {
+            key: f32::NAN,
+            white: None,
+        }
+        .validate()
+        .unwrap_err();
+        assert!(e.contains("key"));
+        assert!(ToneMap {
+            key: 0.18,
+            white: Some(-1.0)
+        }
+        .validate()
+        .unwrap_err()
+        .contains("white"));
+    }
+}
