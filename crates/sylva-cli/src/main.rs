@@ -40,6 +40,9 @@ enum Command {
     /// Write a scene for other renderers: OBJ (flattened) or Mitsuba 3 (instanced), e.g.
     /// `sylva export demo --format mitsuba -o out/`.
     Export(commands::export::ExportArgs),
+    /// Render a scene (default: the built-in demo) to sylva-out/<scene>.png: sunlight, shadows,
+    /// light through leaves and LB indirect light, e.g. `sylva render beech --rpp 4 --hdr`.
+    Render(commands::render::RenderArgs),
     /// Measure speed on this machine (LB solver against copy bandwidth, scene building).
     Bench(commands::bench::BenchArgs),
 }
@@ -65,6 +68,7 @@ fn main() -> std::process::ExitCode {
         Command::Species(a) => commands::species::run(a),
         Command::Bench(a) => commands::bench::run(a),
         Command::Export(a) => commands::export::run(a),
+        Command::Render(a) => commands::render::run(a),
     };
     commands::finish(result)
 }

@@ -62,14 +62,10 @@ impl ToneMap {
         Ok(())
     }
 
-    /// Linear HDR pixels → display-linear pixels in [0, 1].
-    pub fn apply(&self, pixels: &[[f32; 3]]) -> (Vec<[f32; 3]>, ToneStats) {
+    /// What the operator measures on `pixels`: the log-average and the white point.
+    pub fn measure(&self, pixels: &[[f32; 3]]) -> ToneStats {
         let log_average = log_average_luminance(pixels);
-        let scale = if log_average > 0.0 {
-            self.key / log_average
-        } else {
-            1.0
-        };
+        let scale = self.scale(log_average);
         let white = self.white.unwrap_or_else(|| {
             pixels
                 .iter()
@@ -77,8 +73,29 @@ impl ToneMap {
                 .fold(0.0f32, f32::max)
                 .max(f32::MIN_POSITIVE)
         });
-        let inv_white2 = 1.0 / (white * white);
-        let out = pixels
+        ToneStats { log_average, white }
+    }
+
+    fn scale(&self, log_average: f32) -> f32 {
+        if log_average > 0.0 {
+            self.key / log_average
+        } else {
+            1.0
+        }
+    }
+
+    /// Linear HDR pixels → display-linear pixels in [0, 1].
+    pub fn apply(&self, pixels: &[[f32; 3]]) -> (Vec<[f32; 3]>, ToneStats) {
+        let stats = self.measure(pixels);
+        (self.apply_with(pixels, stats), stats)
+    }
+
+    /// Maps with the statistics of another image, so that several images (the comparison
+    /// modes) share one exposure.
+    pub fn apply_with(&self, pixels: &[[f32; 3]], stats: ToneStats) -> Vec<[f32; 3]> {
+        let scale = self.scale(stats.log_average);
+        let inv_white2 = 1.0 / (stats.white * stats.white);
+        pixels
             .iter()
             .map(|p| {
                 let lw = luminance(*p);
@@ -90,8 +107,7 @@ impl ToneMap {
                 let k = ld / lw;
                 p.map(|c| (c * k).clamp(0.0, 1.0))
             })
-            .collect();
-        (out, ToneStats { log_average, white })
+            .collect()
     }
 }
 

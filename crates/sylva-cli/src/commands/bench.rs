@@ -24,6 +24,9 @@ enum BenchCommand {
     Scene(super::bench_scene::BenchSceneArgs),
     /// Voxelizing a model into its LB density grid (default: american_beech at 128).
     Voxelize(super::bench_voxel::BenchVoxelArgs),
+    /// Rendering a scene's view: acceleration build, frame time at 1 and 4 rays per pixel,
+    /// primary and shadow rays per second, memory (default scene: demo; try beech, catalpa).
+    Trace(super::bench_trace::BenchTraceArgs),
 }
 
 #[derive(Args)]
@@ -79,6 +82,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
         BenchCommand::Lb(a) => bench_lb(a),
         BenchCommand::Scene(a) => super::bench_scene::run(a),
         BenchCommand::Voxelize(a) => super::bench_voxel::run(a),
+        BenchCommand::Trace(a) => super::bench_trace::run(a),
     }
 }
 

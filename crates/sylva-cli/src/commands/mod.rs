@@ -19,11 +19,13 @@ pub fn finish(result: anyhow::Result<()>) -> ExitCode {
 
 pub mod bench;
 pub mod bench_scene;
+pub mod bench_trace;
 pub mod bench_voxel;
 pub mod device;
 pub mod export;
 pub mod lb;
 pub mod progress;
+pub mod render;
 pub mod scene;
 pub mod species;
 pub mod spp;

@@ -1,0 +1,151 @@
+//! `sylva bench trace SCENE`: acceleration build time and frame time (primary rays, shadow
+//! rays, shading) at 1 and 4 rays per pixel, with LB lighting from the cache.
+
+use anyhow::Result;
+use sylva_render::FrameTimings;
+
+use super::bench_scene::{median, peak_rss_bytes};
+use super::render::{prepare, FrameArgs};
+use super::scene::emit;
+
+#[derive(clap::Args, Debug)]
+pub struct BenchTraceArgs {
+    #[command(flatten)]
+    pub frame: FrameArgs,
+    /// Timed frames per rays-per-pixel setting (after one untimed warm-up); medians reported.
+    #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub runs: u32,
+    /// Without LB lighting (local light only): no precompute on a cold cache.
+    #[arg(long)]
+    pub no_lb: bool,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Medians over runs of one rays-per-pixel setting.
+struct Measured {
+    rpp: u32,
+    frame: f64,
+    primary: f64,
+    shadow: f64,
+    shading: f64,
+    mrays: f64,
+    primary_mrays: f64,
+    shadow_mrays: f64,
+    timings: FrameTimings,
+    restarts: u64,
+}
+
+impl Measured {
+    fn json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "rays_per_pixel": self.rpp,
+            "frame_seconds": self.frame,
+            "primary_seconds": self.primary,
+            "shadow_seconds": self.shadow,
+            "shading_seconds": self.shading,
+            "mrays_per_second": self.mrays,
+            "primary_mrays_per_second": self.primary_mrays,
+            "shadow_mrays_per_second": self.shadow_mrays,
+            "primary_rays": self.timings.primary_rays,
+            "shadow_rays": self.timings.shadow_rays,
+            "restarts": self.restarts,
+        })
+    }
+}
+
+pub fn run(a: BenchTraceArgs) -> Result<()> {
+    let p = prepare(&a.frame, !a.no_lb, false)?;
+    let renderer = p.renderer();
+    let mut results = Vec::new();
+    for rpp in [1u32, 4] {
+        let settings = p.settings(rpp, a.frame.seed);
+        renderer.render(&settings, &|_| {})?;
+        let mut frames = Vec::new();
+        for _ in 0..a.runs {
+            let f = renderer.render(&settings, &|_| {})?;
+            frames.push(f);
+        }
+        let med = |g: &dyn Fn(&FrameTimings) -> f64| {
+            median(frames.iter().map(|f| g(&f.timings)).collect())
+        };
+        let t = frames[0].timings;
+        let m = Measured {
+            rpp,
+            frame: med(&|t| t.frame_seconds()),
+            primary: med(&|t| t.primary_seconds),
+            shadow: med(&|t| t.shadow_seconds),
+            shading: med(&|t| t.shading_seconds),
+            mrays: med(&|t| t.mrays_per_second()),
+            primary_mrays: med(&|t| t.primary_rays as f64 / t.primary_seconds * 1e-6),
+            shadow_mrays: med(&|t| t.shadow_rays as f64 / t.shadow_seconds.max(1e-12) * 1e-6),
+            timings: t,
+            restarts: frames[0].stats.restarts,
+        };
+        results.push(m);
+    }
+    let mem = p.accel.memory();
+    let threads = rayon::current_num_threads();
+    let one = &results[0];
+    if a.json {
+        let mut v = one.json();
+        let o = v.as_object_mut().expect("object");
+        o.insert("scene".into(), p.scene.name.clone().into());
+        o.insert("width".into(), p.width.into());
+        o.insert("height".into(), p.height.into());
+        o.insert("threads".into(), threads.into());
+        o.insert("runs".into(), a.runs.into());
+        o.insert("stack_size".into(), p.traversal.stack_size.into());
+        o.insert("lb".into(), (!a.no_lb).into());
+        o.insert("accel_build_seconds".into(), p.accel_seconds.into());
+        o.insert("lb_seconds".into(), p.lb_seconds.into());
+        o.insert("rpp4".into(), results[1].json());
+        o.insert(
+            "memory".into(),
+            serde_json::json!({
+                "unique_models": p.scene.models.len(),
+                "instances": p.scene.instances.len(),
+                "instanced_triangles": p.scene.instanced_triangles(),
+                "scene_bytes": p.scene.memory_bytes(),
+                "kd_models_bytes": mem.models,
+                "kd_top_bytes": mem.top,
+                "lighting_bytes": p.lighting_bytes(),
+                "peak_rss_bytes": peak_rss_bytes(),
+            }),
+        );
+        return emit(&format!("{}\n", serde_json::to_string_pretty(&v)?));
+    }
+    let mut o = String::new();
+    o += &format!(
+        "{} at {}x{}, {threads} threads, stack {}, LB {}; medians of {} runs\n",
+        p.scene.name,
+        p.width,
+        p.height,
+        p.traversal.stack_size,
+        if a.no_lb { "off" } else { "on" },
+        a.runs
+    );
+    o += &format!(
+        "acceleration build {:.3} s; LB lighting {:.3} s (cache)\n",
+        p.accel_seconds, p.lb_seconds
+    );
+    for m in &results {
+        o += &format!(
+            "{} ray/pixel: frame {:.3} s (primary {:.3}, shadow {:.3}, shading {:.3}); {:.2} Mrays/s (primary {:.2}, shadow {:.2}); {} kd-restarts\n",
+            m.rpp, m.frame, m.primary, m.shadow, m.shading, m.mrays, m.primary_mrays, m.shadow_mrays, m.restarts
+        );
+    }
+    o += &format!(
+        "memory: {} models ({} instances of {} triangles); scene {}, kd-trees {} + top {}, LB grids {}, peak RSS {}\n",
+        p.scene.models.len(),
+        p.scene.instances.len(),
+        p.scene.instanced_triangles(),
+        sylva_core::format_bytes(p.scene.memory_bytes()),
+        sylva_core::format_bytes(mem.models),
+        sylva_core::format_bytes(mem.top),
+        sylva_core::format_bytes(p.lighting_bytes()),
+        peak_rss_bytes().map(sylva_core::format_bytes).unwrap_or_else(|| "n/a".into()),
+    );
+    emit(&o)
+}

@@ -1,0 +1,594 @@
+//! The frame: primary rays, shadow rays and shading over 8×8 tiles on rayon, in bands of image
+//! rows so memory stays bounded, and the comparison modes of paper 000 Fig. 2.
+//!
+//! Every pixel's samples depend only on the pixel, the sample index and the seed, so a frame is
+//! bit-identical for any thread count.
+
+use std::time::Instant;
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use sylva_core::colour::luminance;
+use sylva_core::SplitMix64;
+use sylva_scene::Scene;
+use sylva_trace::{Hit, PinholeCamera, Ray, SceneAccel, TraceError, TraceStats, TraversalConfig};
+
+use crate::lighting::ModelLighting;
+use crate::shade::{
+    local_light, needs_shadow_ray, shade_materials, Radiance, ShadeMaterial, ShadingParams,
+    SurfacePoint,
+};
+
+/// Tile edge in pixels.
+pub const TILE: u32 = 8;
+/// Samples held at once (hits and shading inputs): about 100 MB.
+const BAND_SAMPLES: usize = 1 << 21;
+
+/// The four images of paper 000 Fig. 2.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// Local sunlight plus LB indirect light.
+    Full,
+    /// Local sunlight only.
+    Local,
+    /// Local sunlight plus a constant ambient whose image mean luminance equals the full one.
+    Ambient,
+    /// The LB indirect light alone (texture-modulated); escaped rays are black.
+    Lb,
+}
+
+impl Mode {
+    pub const ALL: [Mode; 4] = [Mode::Full, Mode::Local, Mode::Ambient, Mode::Lb];
+
+    pub fn parse(s: &str) -> Option<Mode> {
+        Some(match s {
+            "full" => Mode::Full,
+            "local" => Mode::Local,
+            "ambient" => Mode::Ambient,
+            "lb" => Mode::Lb,
+            _ => return None,
+        })
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Full => "full",
+            Mode::Local => "local",
+            Mode::Ambient => "ambient",
+            Mode::Lb => "lb",
+        }
+    }
+
+    /// Whether the mode needs the LB lighting grids.
+    pub fn needs_lb(self) -> bool {
+        self != Mode::Local
+    }
+}
+
+/// What a frame is rendered with.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderSettings {
+    pub width: u32,
+    pub height: u32,
+    /// Samples per pixel, averaged (box filter) before tone mapping. 1: the pixel centre;
+    /// 4: a 2×2 grid; a square k²: jittered k×k strata; otherwise jittered random positions.
+    pub rays_per_pixel: u32,
+    /// Seed of the jitter.
+    pub seed: u64,
+    pub traversal: TraversalConfig,
+    pub shading: ShadingParams,
+}
+
+/// Wall time and ray counts of a frame's passes.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FrameTimings {
+    pub primary_seconds: f64,
+    pub shadow_seconds: f64,
+    pub shading_seconds: f64,
+    pub primary_rays: u64,
+    pub shadow_rays: u64,
+}
+
+impl FrameTimings {
+    pub fn trace_seconds(&self) -> f64 {
+        self.primary_seconds + self.shadow_seconds
+    }
+
+    pub fn frame_seconds(&self) -> f64 {
+        self.primary_seconds + self.shadow_seconds + self.shading_seconds
+    }
+
+    /// Primary and shadow rays per second of tracing, in millions.
+    pub fn mrays_per_second(&self) -> f64 {
+        (self.primary_rays + self.shadow_rays) as f64 / self.trace_seconds().max(1e-12) * 1e-6
+    }
+}
+
+/// A rendered frame: per pixel the parts the modes combine, averaged over the samples.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    pub width: u32,
+    pub height: u32,
+    pub pixels: Vec<Radiance>,
+    pub timings: FrameTimings,
+    pub stats: TraceStats,
+}
+
+/// Mean luminance of linear pixels (f64 sum in pixel order: deterministic).
+pub fn mean_luminance(pixels: &[[f32; 3]]) -> f64 {
+    if pixels.is_empty() {
+        return 0.0;
+    }
+    pixels.iter().map(|p| luminance(*p) as f64).sum::<f64>() / pixels.len() as f64
+}
+
+impl Frame {
+    /// The constant ambient of [`Mode::Ambient`]: `c` with `mean L(local + sky + c · albedo) =
+    /// mean L(full)`. Luminance is linear, so `c = mean L(indirect) / mean L(albedo)`.
+    pub fn matched_ambient(&self) -> f32 {
+        let sum = |f: fn(&Radiance) -> Vec3| {
+            self.pixels
+                .iter()
+                .map(|r| luminance(f(r).to_array()) as f64)
+                .sum::<f64>()
+        };
+        let albedo = sum(|r| r.albedo);
+        if albedo > 0.0 {
+            (sum(|r| r.indirect) / albedo) as f32
+        } else {
+            0.0
+        }
+    }
+
+    /// The linear HDR image of `mode`.
+    pub fn compose(&self, mode: Mode) -> Vec<[f32; 3]> {
+        let ambient = if mode == Mode::Ambient {
+            self.matched_ambient()
+        } else {
+            0.0
+        };
+        self.pixels
+            .iter()
+            .map(|r| {
+                let c = match mode {
+                    Mode::Full => r.local + r.indirect + r.sky,
+                    Mode::Local => r.local + r.sky,
+                    Mode::Ambient => r.local + r.sky + r.albedo * ambient,
+                    Mode::Lb => r.indirect,
+                };
+                c.to_array()
+            })
+            .collect()
+    }
+}
+
+/// Sub-pixel position of sample `s` of `n` in pixel `pixel`.
+fn sample_offset(n: u32, s: u32, pixel: u64, seed: u64) -> Vec2 {
+    if n == 1 {
+        return Vec2::splat(0.5);
+    }
+    if n == 4 {
+        return Vec2::new(0.25 + 0.5 * (s % 2) as f32, 0.25 + 0.5 * (s / 2) as f32);
+    }
+    let mut rng = SplitMix64::for_chunk(seed, pixel * n as u64 + s as u64);
+    let j = Vec2::new(rng.next_f64() as f32, rng.next_f64() as f32);
+    let k = (n as f64).sqrt().round() as u32;
+    if k * k == n {
+        (Vec2::new((s % k) as f32, (s / k) as f32) + j) / k as f32
+    } else {
+        j
+    }
+}
+
+/// The inputs of shading one sample, found by the shadow pass.
+#[derive(Debug, Clone, Copy)]
+enum SampleGeom {
+    Sky,
+    Ground { lit: bool },
+    Plant {
+        point: Vec3,
+        normal: Vec3,
+        lit: bool,
+    },
+}
+
+/// The scene, its acceleration structure and lighting, ready to render frames.
+pub struct Renderer<'a> {
+    scene: &'a Scene,
+    accel: &'a SceneAccel,
+    lighting: &'a [Option<ModelLighting>],
+    materials: Vec<Vec<ShadeMaterial>>,
+    to_sun: Vec3,
+    /// Sun colour × irradiance.
+    sun: Vec3,
+    ground_colour: Vec3,
+    sky: Vec3,
+}
+
+impl<'a> Renderer<'a> {
+    /// `lighting[m]` is model `m`'s LB light (`None`: no indirect light on it); `to_sun` the
+    /// unit vector towards the sun; `sun_colour` its linear RGB (luminance 1 for 6500 K).
+    pub fn new(
+        scene: &'a Scene,
+        accel: &'a SceneAccel,
+        lighting: &'a [Option<ModelLighting>],
+        to_sun: Vec3,
+        sun_colour: Vec3,
+        sun_irradiance: f32,
+    ) -> Renderer<'a> {
+        assert_eq!(lighting.len(), scene.models.len(), "one lighting per model");
+        Renderer {
+            scene,
+            accel,
+            lighting,
+            materials: shade_materials(&scene.models),
+            to_sun: to_sun.normalize(),
+            sun: sun_colour * sun_irradiance,
+            ground_colour: Vec3::from_array(scene.ground.color),
+            sky: Vec3::from_array(scene.sky_color),
+        }
+    }
+
+    /// Renders the scene's camera view at `settings`' resolution. `progress(n)` is called from
+    /// worker threads as tiles finish each of the three passes (3 × tiles units in all).
+    pub fn render(
+        &self,
+        settings: &RenderSettings,
+        progress: &(dyn Fn(u64) + Sync),
+    ) -> Result<Frame, TraceError> {
+        let mut cam = self.scene.camera.clone();
+        cam.width = settings.width;
+        cam.height = settings.height;
+        let camera = PinholeCamera::new(&cam)?;
+        let (w, h, n) = (
+            settings.width,
+            settings.height,
+            settings.rays_per_pixel.max(1),
+        );
+        let mut pixels = vec![Radiance::default(); w as usize * h as usize];
+        let mut timings = FrameTimings::default();
+        let mut stats = TraceStats::default();
+        // Bands of whole tile rows.
+        let tile_rows = h.div_ceil(TILE);
+        let row_samples = (w as usize * TILE as usize * n as usize).max(1);
+        let band_rows = (BAND_SAMPLES / row_samples).clamp(1, tile_rows as usize) as u32;
+        let mut row = 0;
+        while row < tile_rows {
+            let rows = band_rows.min(tile_rows - row);
+            let tiles = band_tiles(w, h, row * TILE, rows);
+            self.render_band(
+                &camera,
+                &tiles,
+                settings,
+                n,
+                &mut pixels,
+                &mut timings,
+                &mut stats,
+                progress,
+            );
+            row += rows;
+        }
+        Ok(Frame {
+            width: w,
+            height: h,
+            pixels,
+            timings,
+            stats,
+        })
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn render_band(
+        &self,
+        camera: &PinholeCamera,
+        tiles: &[Tile],
+        settings: &RenderSettings,
+        n: u32,
+        pixels: &mut [Radiance],
+        timings: &mut FrameTimings,
+        stats: &mut TraceStats,
+        progress: &(dyn Fn(u64) + Sync),
+    ) {
+        let cfg = settings.traversal;
+        let w = camera.width;
+        // Primary rays.
+        let t0 = Instant::now();
+        let primary: Vec<(Vec<(Ray, Option<Hit>)>, TraceStats)> = tiles
+            .par_iter()
+            .map(|tile| {
+                let mut st = TraceStats::default();
+                let mut out = Vec::with_capacity(tile.pixels() * n as usize);
+                for (x, y) in tile.iter() {
+                    let pixel = y as u64 * w as u64 + x as u64;
+                    for s in 0..n {
+                        let o = sample_offset(n, s, pixel, settings.seed);
+                        let ray = camera.ray(x as f32 + o.x, y as f32 + o.y);
+                        let hit = self.accel.closest_hit(&ray, cfg, &mut st);
+                        out.push((ray, hit));
+                    }
+                }
+                progress(1);
+                (out, st)
+            })
+            .collect();
+        timings.primary_seconds += t0.elapsed().as_secs_f64();
+        for (samples, st) in &primary {
+            timings.primary_rays += samples.len() as u64;
+            *stats += *st;
+        }
+        // Shadow rays.
+        let t1 = Instant::now();
+        let geoms: Vec<(Vec<SampleGeom>, TraceStats)> = primary
+            .par_iter()
+            .map(|(samples, _)| {
+                let mut st = TraceStats::default();
+                let g = samples
+                    .iter()
+                    .map(|(ray, hit)| self.sample_geometry(ray, hit.as_ref(), cfg, &mut st))
+                    .collect();
+                progress(1);
+                (g, st)
+            })
+            .collect();
+        timings.shadow_seconds += t1.elapsed().as_secs_f64();
+        for (_, st) in &geoms {
+            timings.shadow_rays += st.rays;
+            *stats += *st;
+        }
+        // Shading.
+        let t2 = Instant::now();
+        let inv_n = 1.0 / n as f32;
+        let shaded: Vec<Vec<Radiance>> = tiles
+            .par_iter()
+            .zip(primary.par_iter().zip(geoms.par_iter()))
+            .map(|(tile, ((samples, _), (g, _)))| {
+                let mut out = Vec::with_capacity(tile.pixels());
+                for (k, _) in tile.iter().enumerate() {
+                    let mut acc = Radiance::default();
+                    for s in 0..n as usize {
+                        let i = k * n as usize + s;
+                        let (ray, hit) = &samples[i];
+                        acc += self.shade(ray, hit.as_ref(), &g[i], &settings.shading);
+                    }
+                    out.push(acc * inv_n);
+                }
+                progress(1);
+                out
+            })
+            .collect();
+        for (tile, values) in tiles.iter().zip(shaded) {
+            for ((x, y), v) in tile.iter().zip(values) {
+                pixels[y as usize * w as usize + x as usize] = v;
+            }
+        }
+        timings.shading_seconds += t2.elapsed().as_secs_f64();
+    }
+
+    /// The hit point, viewer-facing normal, and whether the sun reaches it (shadow ray).
+    fn sample_geometry(
+        &self,
+        ray: &Ray,
+        hit: Option<&Hit>,
+        cfg: TraversalConfig,
+        st: &mut TraceStats,
+    ) -> SampleGeom {
+        let Some(hit) = hit else {
+            return SampleGeom::Sky;
+        };
+        let point = ray.at(hit.t);
+        let view = -ray.dir;
+        if hit.is_ground() {
+            let lit = self.to_sun.y > 0.0 && !self.shadowed(point, Vec3::Y, cfg, st);
+            return SampleGeom::Ground { lit };
+        }
+        let ng = self.accel.geometric_normal(hit);
+        let inst = &self.accel.instances()[hit.instance as usize];
+        let mesh = &self.scene.models[inst.model as usize].mesh;
+        let tri = mesh.indices[hit.triangle as usize];
+        let (u, v) = (hit.u, hit.v);
+        let ns = if mesh.normals.len() == mesh.positions.len() {
+            let n = |k: u32| Vec3::from_array(mesh.normals[k as usize]);
+            let m = n(tri[0]) * (1.0 - u - v) + n(tri[1]) * u + n(tri[2]) * v;
+            inst.to_world.transform_vector3(m).normalize_or_zero()
+        } else {
+            Vec3::ZERO
+        };
+        let mut normal = if ns == Vec3::ZERO || !ns.is_finite() {
+            ng
+        } else if ns.dot(ng) < 0.0 {
+            -ns
+        } else {
+            ns
+        };
+        // Two-sided: the side the viewer sees.
+        let ng_view = if ng.dot(view) < 0.0 { -ng } else { ng };
+        if normal.dot(ng_view) < 0.0 {
+            normal = -normal;
+        }
+        let leaf = self.is_leaf(inst.model, hit.triangle);
+        let probe = SurfacePoint {
+            normal,
+            view,
+            colour: Vec3::ONE,
+            leaf,
+        };
+        let lit = needs_shadow_ray(&probe, self.to_sun) && !self.shadowed(point, ng, cfg, st);
+        SampleGeom::Plant { point, normal, lit }
+    }
+
+    fn is_leaf(&self, model: u32, triangle: u32) -> bool {
+        let mesh = &self.scene.models[model as usize].mesh;
+        let m = mesh
+            .material_ids
+            .get(triangle as usize)
+            .copied()
+            .unwrap_or(0) as usize;
+        self.materials[model as usize]
+            .get(m)
+            .is_some_and(|m| m.leaf)
+    }
+
+    /// Whether something opaque lies between `point` and the sun. The ray starts a little off
+    /// the surface on the sun's side of the geometric normal `ng`.
+    fn shadowed(&self, point: Vec3, ng: Vec3, cfg: TraversalConfig, st: &mut TraceStats) -> bool {
+        let side = if ng.dot(self.to_sun) >= 0.0 {
+            1.0
+        } else {
+            -1.0
+        };
+        let eps = 1e-4 * point.abs().max_element().max(1.0);
+        let ray = Ray::new(point + ng * (side * eps), self.to_sun);
+        self.accel.any_hit(&ray, cfg, st)
+    }
+
+    fn shade(&self, ray: &Ray, hit: Option<&Hit>, g: &SampleGeom, p: &ShadingParams) -> Radiance {
+        match *g {
+            SampleGeom::Sky => Radiance {
+                sky: self.sky,
+                ..Default::default()
+            },
+            SampleGeom::Ground { lit } => {
+                let c = self.ground_colour * self.sun;
+                let cos = self.to_sun.y.max(0.0);
+                Radiance {
+                    local: if lit { c * cos } else { Vec3::ZERO },
+                    indirect: c * p.sky_ambient,
+                    albedo: c,
+                    sky: Vec3::ZERO,
+                }
+            }
+            SampleGeom::Plant { point, normal, lit } => {
+                let hit = hit.expect("plant geometry comes from a hit");
+                let inst = &self.accel.instances()[hit.instance as usize];
+                let mi = inst.model as usize;
+                let mesh = &self.scene.models[mi].mesh;
+                let tri = mesh.indices[hit.triangle as usize];
+                let mat = mesh
+                    .material_ids
+                    .get(hit.triangle as usize)
+                    .copied()
+                    .unwrap_or(0);
+                let material = &self.materials[mi][mat as usize];
+                let colour = if material.texture.is_some() && mesh.uvs.len() == mesh.positions.len()
+                {
+                    let uv = |k: u32| Vec2::from_array(mesh.uvs[k as usize]);
+                    let (u, v) = (hit.u, hit.v);
+                    material.colour(uv(tri[0]) * (1.0 - u - v) + uv(tri[1]) * u + uv(tri[2]) * v)
+                } else {
+                    material.base
+                };
+                let s = SurfacePoint {
+                    normal,
+                    view: -ray.dir,
+                    colour,
+                    leaf: material.leaf,
+                };
+                let albedo = colour * self.sun;
+                let indirect = match &self.lighting[mi] {
+                    Some(l) => {
+                        l.sample(inst.to_model.transform_point3(point)) * albedo * p.indirect
+                    }
+                    None => Vec3::ZERO,
+                };
+                Radiance {
+                    local: local_light(&s, self.to_sun, lit, p) * self.sun,
+                    indirect,
+                    albedo,
+                    sky: Vec3::ZERO,
+                }
+            }
+        }
+    }
+}
+
+/// An image tile `[x0, x1) × [y0, y1)`.
+#[derive(Debug, Clone, Copy)]
+struct Tile {
+    x0: u32,
+    y0: u32,
+    x1: u32,
+    y1: u32,
+}
+
+impl Tile {
+    fn pixels(&self) -> usize {
+        ((self.x1 - self.x0) * (self.y1 - self.y0)) as usize
+    }
+
+    /// Pixels row by row.
+    fn iter(&self) -> impl Iterator<Item = (u32, u32)> + '_ {
+        (self.y0..self.y1).flat_map(move |y| (self.x0..self.x1).map(move |x| (x, y)))
+    }
+}
+
+/// The tiles of `rows` tile rows starting at pixel row `y0`.
+fn band_tiles(w: u32, h: u32, y0: u32, rows: u32) -> Vec<Tile> {
+    let mut out = Vec::new();
+    for r in 0..rows {
+        let ty = y0 + r * TILE;
+        for tx in (0..w).step_by(TILE as usize) {
+            out.push(Tile {
+                x0: tx,
+                y0: ty,
+                x1: (tx + TILE).min(w),
+                y1: (ty + TILE).min(h),
+            });
+        }
+    }
+    out
+}
+
+/// Number of tiles of a `w × h` image.
+pub fn tile_count(w: u32, h: u32) -> u64 {
+    w.div_ceil(TILE) as u64 * h.div_ceil(TILE) as u64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sample_positions_are_stratified_and_deterministic() {
+        assert_eq!(sample_offset(1, 0, 7, 1), Vec2::splat(0.5));
+        let four: Vec<Vec2> = (0..4).map(|s| sample_offset(4, s, 7, 1)).collect();
+        assert_eq!(four[3], Vec2::new(0.75, 0.75));
+        for n in [9u32, 16] {
+            let k = (n as f32).sqrt() as u32;
+            let mut seen = vec![false; n as usize];
+            for s in 0..n {
+                let o = sample_offset(n, s, 123, 9);
+                assert_eq!(o, sample_offset(n, s, 123, 9));
+                let cell = (o.y * k as f32) as u32 * k + (o.x * k as f32) as u32;
+                seen[cell as usize] = true;
+            }
+            assert!(seen.iter().all(|&b| b), "one sample per stratum");
+        }
+        for s in 0..5 {
+            let o = sample_offset(5, s, 3, 2);
+            assert!((0.0..1.0).contains(&o.x) && (0.0..1.0).contains(&o.y));
+        }
+    }
+
+    #[test]
+    fn tiles_cover_the_image_once() {
+        let (w, h) = (21u32, 13u32);
+        let mut count = vec![0; (w * h) as usize];
+        let tiles = band_tiles(w, h, 0, h.div_ceil(TILE));
+        assert_eq!(tiles.len() as u64, tile_count(w, h));
+        for t in &tiles {
+            for (x, y) in t.iter() {
+                count[(y * w + x) as usize] += 1;
+            }
+        }
+        assert!(count.iter().all(|&c| c == 1));
+    }
+
+    #[test]
+    fn modes_parse_and_name() {
+        for m in Mode::ALL {
+            assert_eq!(Mode::parse(m.name()), Some(m));
+        }
+        assert_eq!(Mode::parse("fancy"), None);
+        assert!(!Mode::Local.needs_lb() && Mode::Ambient.needs_lb());
+    }
+}
