@@ -1,1 +1,1068 @@
+//! Per-model LB lighting (000 §4.2-4.3, SPEC §2): voxelize a model, light it with the
+//! lattice-Boltzmann solver under the sun, and look the result up trilinearly in model space.
+//!
+//! * **Normalisation.** Values are divided by the free-space total `Σ_i I·max(0, n_i·d)` with
+//!   `I = 1` (what a site with no medium anywhere upwind holds at steady state), so unobstructed
+//!   sunlight is exactly 1 in every colour, whatever the sun's direction.
+//! * **Placement.** Site `(i, j, k)` sits at `bounds.min + (i, j, k) · cell` with
+//!   `cell = (bounds.max - bounds.min) / (dims - 1)` per axis ([`sylva_lb::Bounds`] is the span
+//!   of site centres). Points outside the grid clamp to the nearest site.
+//! * **Cache.** With a cache directory, the raw solver result is stored as
+//!   `<model>-<key>.sgrid` (a lighting [`GridFile`], f32, CRC-checked, `sylva lb info` reads
+//!   it). The key is a stable FNV-1a hash over everything the result depends on (see
+//!   [`cache_key`]) and is stored in the file's metadata too. An entry that cannot be read, or
+//!   whose key, dimensions or bounds are not the expected ones, is recomputed and replaced
+//!   atomically; [`LightingSource::Recomputed`] says why.
+//! * **Sun.** The direction is rounded to 1e-5 per component (then renormalised) before it is
+//!   hashed *and* before it is solved with, so a cache entry is a function of its key alone.
 
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use glam::{DVec3, Vec3};
+use sylva_lb::solver::{memory_needed, solve_lighting, Boundary, SolveError, SolveOptions};
+use sylva_lb::{
+    DensityGrid, Dims, Element, GridFile, GridFileError, GridKind, LightingGrid, MediumParams,
+    ParamError, Preset,
+};
+use sylva_scene::voxelize::{
+    voxelize, GridPlacement, VoxelizeError, VoxelizeOptions, DEFAULT_GRID, OPAQUE_ALPHA, SUB,
+};
+use sylva_scene::{LbSettings, MaterialKind, Model, Wrap};
+use thiserror::Error;
+
+/// Bump whenever the solver, the voxelizer or this module changes what a cache entry holds.
+pub const CACHE_VERSION: u32 = 1;
+/// Extension of cache entries.
+pub const CACHE_EXTENSION: &str = "sgrid";
+/// Metadata key holding the cache key (16 hex digits) in a cache entry.
+pub const KEY_METADATA: &str = "cache_key";
+/// Sun direction components are rounded to multiples of this.
+pub const SUN_QUANTUM: f64 = 1e-5;
+
+#[derive(Debug, Error)]
+pub enum LightingError {
+    #[error("LB preset: {0}")]
+    Params(#[from] ParamError),
+    #[error("sun direction ({}, {}, {}) must be a finite, non-zero vector", .0[0], .0[1], .0[2])]
+    Sun([f32; 3]),
+    #[error(transparent)]
+    Voxelize(#[from] VoxelizeError),
+    #[error(transparent)]
+    Memory(#[from] sylva_core::MemoryError),
+    #[error("LB lighting of model '{model}': {source}")]
+    Solve { model: String, source: SolveError },
+    #[error("cannot create the lighting cache directory {}: {source}", .dir.display())]
+    CacheDir {
+        dir: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("cannot write the lighting cache entry {}: {source}", .path.display())]
+    CacheWrite {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+}
+
+/// How models are lit.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LightingOptions {
+    /// Sites along each model's longest edge, shell included (scene `[lb] grid`).
+    pub grid: usize,
+    /// LB preset name (scene `[lb] preset`).
+    pub preset: String,
+    /// Where lighting grids are cached; `None`: always compute, write nothing.
+    pub cache_dir: Option<PathBuf>,
+}
+
+impl Default for LightingOptions {
+    fn default() -> Self {
+        LightingOptions {
+            grid: DEFAULT_GRID,
+            preset: "leaf".into(),
+            cache_dir: None,
+        }
+    }
+}
+
+impl LightingOptions {
+    /// The options a scene's `[lb]` table asks for.
+    pub fn from_scene(lb: &LbSettings, cache_dir: Option<PathBuf>) -> LightingOptions {
+        LightingOptions {
+            grid: lb.grid as usize,
+            preset: lb.preset.clone(),
+            cache_dir,
+        }
+    }
+}
+
+/// One model's LB light, normalised so that unobstructed sunlight (free space) is 1.0 per
+/// colour, with its placement in model space.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelLighting {
+    dims: Dims,
+    /// Model-space centre of site (0, 0, 0).
+    origin: Vec3,
+    /// Sites per model-space unit along each axis (0 along a degenerate axis).
+    inv_cell: Vec3,
+    /// Largest site coordinate per axis, `dims - 1`.
+    last: Vec3,
+    /// RGB per site, site order `(x * ny + y) * nz + z`.
+    values: Vec<[f32; 3]>,
+}
+
+impl ModelLighting {
+    /// Normalises a solver result lit by a sun in direction `sun_to` (towards the sun; it is
+    /// normalised here). A zero or non-finite `sun_to` leaves the values as they are.
+    pub fn from_grid(grid: &LightingGrid, sun_to: Vec3) -> ModelLighting {
+        let scale = free_space_total(sun_to.as_dvec3())
+            .filter(|&t| t > 0.0)
+            .map_or(1.0, |t| 1.0 / t);
+        Self::scaled(grid, scale)
+    }
+
+    fn scaled(grid: &LightingGrid, scale: f64) -> ModelLighting {
+        let d = grid.dims;
+        let n = [d.nx, d.ny, d.nz];
+        let min = Vec3::from_array(grid.bounds.min);
+        let max = Vec3::from_array(grid.bounds.max);
+        let inv_cell = Vec3::from_array(std::array::from_fn(|a| {
+            let extent = max[a] - min[a];
+            if extent > 0.0 && extent.is_finite() {
+                (n[a] - 1) as f32 / extent
+            } else {
+                0.0
+            }
+        }));
+        let [r, g, b] = &grid.colours;
+        let values = r
+            .iter()
+            .zip(g)
+            .zip(b)
+            .map(|((&r, &g), &b)| [r, g, b].map(|v| (v as f64 * scale) as f32))
+            .collect();
+        ModelLighting {
+            dims: d,
+            origin: min,
+            inv_cell,
+            last: Vec3::new((d.nx - 1) as f32, (d.ny - 1) as f32, (d.nz - 1) as f32),
+            values,
+        }
+    }
+
+    /// Trilinear interpolation of the normalised RGB light at model-space point `p`; points
+    /// outside the grid clamp to the nearest site.
+    #[inline]
+    pub fn sample(&self, p: Vec3) -> Vec3 {
+        // `max` before `min` turns NaN into 0.
+        let f = ((p - self.origin) * self.inv_cell)
+            .max(Vec3::ZERO)
+            .min(self.last);
+        // dims ≥ 3, so last - 1 ≥ 1: the upper corner always exists.
+        let i = f.floor().min(self.last - Vec3::ONE);
+        let t = f - i;
+        let (ix, iy, iz) = (i.x as usize, i.y as usize, i.z as usize);
+        let (sy, sx) = (self.dims.nz, self.dims.ny * self.dims.nz);
+        let base = ix * sx + iy * sy + iz;
+        let v = |o: usize| Vec3::from_array(self.values[base + o]);
+        let x00 = v(0).lerp(v(sx), t.x);
+        let x01 = v(1).lerp(v(sx + 1), t.x);
+        let x10 = v(sy).lerp(v(sx + sy), t.x);
+        let x11 = v(sy + 1).lerp(v(sx + sy + 1), t.x);
+        let y0 = x00.lerp(x10, t.y);
+        let y1 = x01.lerp(x11, t.y);
+        y0.lerp(y1, t.z)
+    }
+
+    pub fn dims(&self) -> Dims {
+        self.dims
+    }
+
+    /// Bytes held (the values and the struct).
+    pub fn memory_bytes(&self) -> u64 {
+        (self.values.capacity() * std::mem::size_of::<[f32; 3]>() + std::mem::size_of::<Self>())
+            as u64
+    }
+
+    /// Normalised light at site `(x, y, z)`.
+    pub fn site(&self, x: usize, y: usize, z: usize) -> [f32; 3] {
+        self.values[self.dims.index(x, y, z)]
+    }
+
+    /// Model-space centre of site `(x, y, z)`.
+    pub fn site_position(&self, x: usize, y: usize, z: usize) -> Vec3 {
+        let c = Vec3::new(x as f32, y as f32, z as f32);
+        let cell = Vec3::select(
+            self.inv_cell.cmpgt(Vec3::ZERO),
+            self.inv_cell.recip(),
+            Vec3::ZERO,
+        );
+        self.origin + c * cell
+    }
+}
+
+/// Where a model's lighting came from.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LightingSource {
+    /// Read from a valid cache entry.
+    Cached,
+    /// Solved (no cache, or no entry yet).
+    Computed,
+    /// The cache entry was bad (`reason` names the file and the problem) and was replaced.
+    Recomputed { reason: String },
+}
+
+/// What [`model_lighting`] did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LightingReport {
+    pub source: LightingSource,
+    /// Wall-clock seconds of the whole call.
+    pub seconds: f64,
+    /// The cache entry (read or written); `None` without a cache.
+    pub path: Option<PathBuf>,
+    pub dims: Dims,
+}
+
+/// FNV-1a, 64 bits: stable across Rust releases and platforms.
+struct Fnv(u64);
+
+impl Fnv {
+    fn new() -> Fnv {
+        Fnv(0xcbf2_9ce4_8422_2325)
+    }
+    fn bytes(&mut self, b: &[u8]) {
+        for &x in b {
+            self.0 ^= x as u64;
+            self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    fn u64(&mut self, v: u64) {
+        self.bytes(&v.to_le_bytes());
+    }
+    fn f64(&mut self, v: f64) {
+        self.u64(v.to_bits());
+    }
+    fn str(&mut self, s: &str) {
+        self.u64(s.len() as u64);
+        self.bytes(s.as_bytes());
+    }
+}
+
+/// The sun direction rounded to [`SUN_QUANTUM`]: the integer components (hashed) and the unit
+/// vector solved with.
+fn quantise_sun(sun_to: Vec3) -> Result<([i64; 3], DVec3), LightingError> {
+    let v = sun_to.as_dvec3();
+    let len = v.length();
+    if !(len.is_finite() && len > 0.0) {
+        return Err(LightingError::Sun(sun_to.to_array()));
+    }
+    let q = (v / len)
+        .to_array()
+        .map(|c| (c / SUN_QUANTUM).round() as i64);
+    let d = DVec3::new(q[0] as f64, q[1] as f64, q[2] as f64) * SUN_QUANTUM;
+    Ok((q, d.normalize()))
+}
+
+/// `Σ_i max(0, n_i · d)` for light travelling along `d = -sun_to`: the total a free-space
+/// site holds under a unit-intensity sun, summed from the boundary values the solver uses.
+fn free_space_total(sun_to: DVec3) -> Option<f64> {
+    let len = sun_to.length();
+    if !(len.is_finite() && len > 0.0) {
+        return None;
+    }
+    let d = -sun_to / len;
+    let b = Boundary::sun(d.to_array(), 1.0);
+    Some(b.values.iter().map(|&v| v as f64).sum())
+}
+
+fn medium(preset: &str) -> Result<MediumParams, LightingError> {
+    let m = Preset::parse(preset)?.params();
+    m.validate()?;
+    Ok(m)
+}
+
+/// How long the solver runs over `dims` (the papers' schedule).
+fn solve_options(dims: Dims) -> SolveOptions {
+    SolveOptions::papers(dims)
+}
+
+/// The stable 64-bit key of a model's lighting: [`CACHE_VERSION`] and the grid file version,
+/// the mesh's geometry hash, per material its kind and (for leaves, whose textures are
+/// alpha-tested) the texture's size, wrap and opaque texels, the voxelizer's sub-cell count
+/// and opacity threshold, the grid size, the preset's parameters (bit patterns), the sun
+/// direction rounded to 1e-5, and the solve schedule.
+pub fn cache_key(
+    model: &Model,
+    sun_to: Vec3,
+    opts: &LightingOptions,
+) -> Result<u64, LightingError> {
+    let medium = medium(&opts.preset)?;
+    let (sun, _) = quantise_sun(sun_to)?;
+    Ok(key_of(model, sun, opts.grid, &medium))
+}
+
+fn key_of(model: &Model, sun: [i64; 3], grid: usize, m: &MediumParams) -> u64 {
+    let mut h = Fnv::new();
+    h.str("sylva-render lighting");
+    h.u64(CACHE_VERSION as u64);
+    h.u64(sylva_lb::grid_file::VERSION as u64);
+    h.u64(model.mesh.geometry_hash());
+    // Voxelization.
+    h.u64(SUB as u64);
+    h.u64(OPAQUE_ALPHA as u64);
+    h.u64(1); // alpha test on
+    h.u64(model.materials.len() as u64);
+    for mat in &model.materials {
+        match mat.kind {
+            MaterialKind::Wood => h.u64(1),
+            MaterialKind::Leaf => {
+                h.u64(2);
+                match &mat.texture {
+                    None => h.u64(0),
+                    Some(t) => {
+                        h.u64(1);
+                        h.u64(t.width as u64);
+                        h.u64(t.height as u64);
+                        h.u64(match t.wrap {
+                            Wrap::Repeat => 1,
+                            Wrap::Clamp => 2,
+                        });
+                        // Only opacity matters to the voxelizer: one bit per texel.
+                        let mut bits = 0u8;
+                        for (i, p) in t.pixels.iter().enumerate() {
+                            bits = (bits << 1) | (p[3] >= OPAQUE_ALPHA) as u8;
+                            if i % 8 == 7 {
+                                h.bytes(&[bits]);
+                                bits = 0;
+                            }
+                        }
+                        h.bytes(&[bits]);
+                    }
+                }
+            }
+        }
+    }
+    h.u64(grid as u64);
+    // Medium.
+    for c in &m.colours {
+        h.f64(c.sigma_a);
+        h.f64(c.sigma_s);
+        h.f64(c.g);
+    }
+    h.u64(m.zero_f0_on_green as u64);
+    h.u64(m.zero_f0_on_brown as u64);
+    h.f64(m.brown_threshold);
+    // Sun and boundary intensity.
+    for c in sun {
+        h.u64(c as u64);
+    }
+    h.f64(1.0);
+    // Solve schedule: the papers' 2 × longest edge, no tolerance.
+    h.str("papers:2N");
+    h.0
+}
+
+/// `name` with everything but ASCII letters, digits, '-' and '_' replaced by '_' (at most 64
+/// characters; "model" if empty).
+fn sanitise(name: &str) -> String {
+    let s: String = name
+        .chars()
+        .take(64)
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    if s.is_empty() {
+        "model".into()
+    } else {
+        s
+    }
+}
+
+/// The cache entry of `model` under `key` in `dir`.
+pub fn cache_path(dir: &Path, model: &Model, key: u64) -> PathBuf {
+    dir.join(format!(
+        "{}-{key:016x}.{CACHE_EXTENSION}",
+        sanitise(&model.name)
+    ))
+}
+
+/// The placement [`voxelize`] will choose, computed without voxelizing (the bounding box of
+/// the triangles' vertices, as the voxelizer takes it).
+fn placement(model: &Model, n: usize) -> Result<GridPlacement, VoxelizeError> {
+    let mesh = &model.mesh;
+    if mesh.indices.is_empty() {
+        return Err(VoxelizeError::Empty(model.name.clone()));
+    }
+    mesh.validate(model.materials.len())
+        .map_err(|problem| VoxelizeError::BadMesh {
+            model: model.name.clone(),
+            problem,
+        })?;
+    let (mut min, mut max) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for t in &mesh.indices {
+        for &i in t {
+            let p = mesh.positions[i as usize];
+            if p.iter().any(|v| !v.is_finite()) {
+                return Err(VoxelizeError::BadVertex {
+                    model: model.name.clone(),
+                    vertex: i as usize,
+                    position: p,
+                });
+            }
+            for a in 0..3 {
+                min[a] = min[a].min(p[a] as f64);
+                max[a] = max[a].max(p[a] as f64);
+            }
+        }
+    }
+    GridPlacement::fit(min, max, n).map_err(|e| match e {
+        VoxelizeError::ZeroExtent(_) => VoxelizeError::ZeroExtent(model.name.clone()),
+        e => e,
+    })
+}
+
+/// Lights `grid` under a unit sun towards `sun_to` (unit), forwarding progress.
+fn solve_density(
+    grid: &DensityGrid,
+    medium: &MediumParams,
+    sun_to: DVec3,
+    progress: &mut dyn FnMut(usize, usize, usize),
+) -> Result<LightingGrid, SolveError> {
+    let opts = solve_options(grid.dims);
+    let max = opts.max_steps;
+    let (lighting, _) = solve_lighting(
+        grid,
+        medium,
+        Boundary::sun((-sun_to).to_array(), 1.0),
+        &opts,
+        &mut |c, s, _| progress(c, s, max),
+    )?;
+    Ok(lighting)
+}
+
+fn normalise(grid: &LightingGrid, sun_to: DVec3) -> ModelLighting {
+    let total = free_space_total(sun_to).expect("a unit sun direction");
+    ModelLighting::scaled(grid, 1.0 / total)
+}
+
+/// Reads and checks a cache entry; `Err` is the reason it is unusable, naming the file.
+fn read_entry(path: &Path, key: u64, placement: &GridPlacement) -> Result<LightingGrid, String> {
+    let file = GridFile::read(path).map_err(|e| e.to_string())?;
+    let shown = path.display();
+    if file.kind != GridKind::Lighting {
+        return Err(format!(
+            "{shown} holds a {} grid, not a lighting grid",
+            file.kind.name()
+        ));
+    }
+    let want = format!("{key:016x}");
+    match file.metadata_value(KEY_METADATA) {
+        Some(k) if k == want => {}
+        Some(k) => {
+            return Err(format!(
+                "{shown} is stale: its cache key is {k}, expected {want}"
+            ))
+        }
+        None => {
+            return Err(format!(
+                "{shown} has no cache key: not a lighting cache entry"
+            ))
+        }
+    }
+    if file.dims != placement.dims {
+        return Err(format!(
+            "{shown} holds a {} grid, the model needs {}",
+            file.dims, placement.dims
+        ));
+    }
+    if file.bounds != placement.bounds() {
+        return Err(format!(
+            "{shown} covers {:?}..{:?}, the model's grid covers {:?}..{:?}",
+            file.bounds.min,
+            file.bounds.max,
+            placement.bounds().min,
+            placement.bounds().max
+        ));
+    }
+    let grid = file.into_lighting(path).map_err(|e| e.to_string())?;
+    for (c, ch) in grid.colours.iter().enumerate() {
+        if let Some(i) = ch.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+            let (x, y, z) = grid.dims.coords(i);
+            return Err(format!(
+                "{shown}: {} light at site ({x}, {y}, {z}) is {}",
+                sylva_lb::params::COLOUR_NAMES[c],
+                ch[i]
+            ));
+        }
+    }
+    Ok(grid)
+}
+
+/// One model's LB lighting under the sun towards `sun_to` (model frame): from the cache when
+/// it holds a valid entry, otherwise voxelized, solved and (with a cache) stored.
+/// `progress(colour, step, max_steps)` follows the solve.
+pub fn model_lighting(
+    model: &Model,
+    sun_to: Vec3,
+    opts: &LightingOptions,
+    progress: &mut dyn FnMut(usize, usize, usize),
+) -> Result<(ModelLighting, LightingReport), LightingError> {
+    let t0 = Instant::now();
+    let medium = medium(&opts.preset)?;
+    let (sun_q, sun) = quantise_sun(sun_to)?;
+    let key = key_of(model, sun_q, opts.grid, &medium);
+    let placement = placement(model, opts.grid)?;
+    let dims = placement.dims;
+
+    let path = match &opts.cache_dir {
+        Some(dir) => {
+            std::fs::create_dir_all(dir).map_err(|source| LightingError::CacheDir {
+                dir: dir.clone(),
+                source,
+            })?;
+            Some(cache_path(dir, model, key))
+        }
+        None => None,
+    };
+    let mut source = LightingSource::Computed;
+    if let Some(path) = &path {
+        match path.try_exists() {
+            Ok(false) => {}
+            Ok(true) => match read_entry(path, key, &placement) {
+                Ok(grid) => {
+                    let lighting = normalise(&grid, sun);
+                    let report = LightingReport {
+                        source: LightingSource::Cached,
+                        seconds: t0.elapsed().as_secs_f64(),
+                        path: Some(path.clone()),
+                        dims,
+                    };
+                    return Ok((lighting, report));
+                }
+                Err(reason) => source = LightingSource::Recomputed { reason },
+            },
+            Err(e) => {
+                source = LightingSource::Recomputed {
+                    reason: format!("cannot read {}: {e}", path.display()),
+                }
+            }
+        }
+    }
+
+    sylva_core::check_memory(
+        &format!("the LB lighting of model '{}' on a {dims} grid", model.name),
+        memory_needed(dims) + sylva_scene::voxelize::memory_needed(dims),
+    )?;
+    let density = voxelize(
+        model,
+        &VoxelizeOptions {
+            grid: opts.grid,
+            alpha_test: true,
+        },
+    )?;
+    debug_assert_eq!(density.dims, dims);
+    debug_assert_eq!(density.bounds, placement.bounds());
+    let grid =
+        solve_density(&density, &medium, sun, progress).map_err(|source| LightingError::Solve {
+            model: model.name.clone(),
+            source,
+        })?;
+    drop(density);
+
+    if let Some(path) = &path {
+        let metadata = vec![
+            (KEY_METADATA.to_string(), format!("{key:016x}")),
+            ("source".to_string(), model.name.clone()),
+            ("preset".to_string(), opts.preset.clone()),
+            ("grid".to_string(), opts.grid.to_string()),
+            (
+                "sun_to".to_string(),
+                format!("{:.6},{:.6},{:.6}", sun.x, sun.y, sun.z),
+            ),
+            (
+                "steps".to_string(),
+                solve_options(dims).max_steps.to_string(),
+            ),
+        ];
+        GridFile::from_lighting(&grid, Element::F32, metadata)
+            .write(path)
+            .map_err(|e| LightingError::CacheWrite {
+                path: path.clone(),
+                source: match e {
+                    GridFileError::Io { source, .. } => source,
+                    e => std::io::Error::other(e.to_string()),
+                },
+            })?;
+    }
+    let lighting = normalise(&grid, sun);
+    let report = LightingReport {
+        source,
+        seconds: t0.elapsed().as_secs_f64(),
+        path,
+        dims,
+    };
+    Ok((lighting, report))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sylva_lb::Bounds;
+    use sylva_scene::{Material, Mesh};
+
+    const N: usize = 16;
+
+    fn quad(mesh: &mut Mesh, c: [Vec3; 4], material: u8) {
+        let n = (c[1] - c[0]).cross(c[2] - c[0]).normalize();
+        let uv = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+        let i: Vec<u32> = (0..4).map(|k| mesh.push_vertex(c[k], n, uv[k])).collect();
+        mesh.push_triangle(i[0], i[1], i[2], material);
+        mesh.push_triangle(i[0], i[2], i[3], material);
+    }
+
+    /// A leafy plate at y = 1 over x, z ∈ [0, 2] on a wooden post from y = 0.
+    fn model(plate_y: f32) -> Model {
+        let mut mesh = Mesh::default();
+        quad(
+            &mut mesh,
+            [
+                Vec3::new(0.0, plate_y, 0.0),
+                Vec3::new(0.0, plate_y, 2.0),
+                Vec3::new(2.0, plate_y, 2.0),
+                Vec3::new(2.0, plate_y, 0.0),
+            ],
+            0,
+        );
+        quad(
+            &mut mesh,
+            [
+                Vec3::new(1.0, 0.0, 1.0),
+                Vec3::new(1.1, 0.0, 1.0),
+                Vec3::new(1.1, plate_y, 1.0),
+                Vec3::new(1.0, plate_y, 1.0),
+            ],
+            1,
+        );
+        let mat = |name: &str, kind| Material {
+            name: name.into(),
+            kind,
+            base_color: [0.2, 0.5, 0.1],
+            texture: None,
+            two_sided: true,
+        };
+        Model::new(
+            "test plate/1",
+            mesh,
+            vec![
+                mat("leaf", MaterialKind::Leaf),
+                mat("bark", MaterialKind::Wood),
+            ],
+        )
+    }
+
+    fn opts(dir: Option<&Path>) -> LightingOptions {
+        LightingOptions {
+            grid: N,
+            preset: "leaf".into(),
+            cache_dir: dir.map(Path::to_path_buf),
+        }
+    }
+
+    fn sun() -> Vec3 {
+        Vec3::new(0.3, 0.8, 0.2).normalize()
+    }
+
+    fn no_progress() -> impl FnMut(usize, usize, usize) {
+        |_, _, _| {}
+    }
+
+    /// Samples at a fixed set of points in and around the model's box.
+    fn probe(l: &ModelLighting) -> Vec<[u32; 3]> {
+        let mut out = Vec::new();
+        for i in 0..7 {
+            for j in 0..5 {
+                for k in 0..7 {
+                    let p = Vec3::new(
+                        i as f32 * 0.37 - 0.2,
+                        j as f32 * 0.29 - 0.1,
+                        k as f32 * 0.33,
+                    );
+                    out.push(l.sample(p).to_array().map(f32::to_bits));
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn computed_then_cached_bit_identical() {
+        let dir = tempfile::tempdir().unwrap();
+        let m = model(1.0);
+        let o = opts(Some(dir.path()));
+        let mut calls = 0usize;
+        let mut last = (0, 0, 0);
+        let (a, ra) = model_lighting(&m, sun(), &o, &mut |c, s, max| {
+            calls += 1;
+            last = (c, s, max);
+        })
+        .unwrap();
+        assert_eq!(ra.source, LightingSource::Computed);
+        let path = ra.path.clone().unwrap();
+        assert!(path.is_file());
+        let key = cache_key(&m, sun(), &o).unwrap();
+        assert_eq!(
+            path.file_name().unwrap().to_str().unwrap(),
+            format!("test_plate_1-{key:016x}.sgrid")
+        );
+        assert_eq!(ra.dims, a.dims());
+        assert!(calls > 0);
+        assert_eq!(last.1, last.2, "progress reaches max steps");
+        assert_eq!(last.2, 2 * a.dims().longest_edge());
+
+        let mut calls2 = 0usize;
+        let (b, rb) = model_lighting(&m, sun(), &o, &mut |_, _, _| calls2 += 1).unwrap();
+        assert_eq!(rb.source, LightingSource::Cached);
+        assert_eq!(rb.path.as_deref(), Some(path.as_path()));
+        assert_eq!(calls2, 0, "no solve on a cache hit");
+        assert_eq!(a, b);
+        assert_eq!(probe(&a), probe(&b));
+
+        // Without a cache: computed, same values, nothing written.
+        let (c, rc) = model_lighting(&m, sun(), &opts(None), &mut no_progress()).unwrap();
+        assert_eq!(rc.source, LightingSource::Computed);
+        assert_eq!(rc.path, None);
+        assert_eq!(probe(&a), probe(&c));
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    fn assert_recomputed(m: &Model, o: &LightingOptions, want: &ModelLighting, path: &Path) {
+        let (l, r) = model_lighting(m, sun(), o, &mut no_progress()).unwrap();
+        match &r.source {
+            LightingSource::Recomputed { reason } => {
+                assert!(
+                    reason.contains(&path.display().to_string()),
+                    "reason names the file: {reason}"
+                );
+            }
+            s => panic!("expected Recomputed, got {s:?}"),
+        }
+        assert_eq!(probe(&l), probe(want));
+        // The entry was replaced by a valid one.
+        let (_, r2) = model_lighting(m, sun(), o, &mut no_progress()).unwrap();
+        assert_eq!(r2.source, LightingSource::Cached);
+        GridFile::read(path).unwrap();
+    }
+
+    #[test]
+    fn corrupt_entries_are_recomputed() {
+        let dir = tempfile::tempdir().unwrap();
+        let m = model(1.0);
+        let o = opts(Some(dir.path()));
+        let (orig, r) = model_lighting(&m, sun(), &o, &mut no_progress()).unwrap();
+        let path = r.path.unwrap();
+        let good = std::fs::read(&path).unwrap();
+
+        // A flipped byte in the middle of the payload: checksum mismatch.
+        let mut bad = good.clone();
+        let mid = bad.len() / 2;
+        bad[mid] ^= 0x5a;
+        std::fs::write(&path, &bad).unwrap();
+        assert_recomputed(&m, &o, &orig, &path);
+
+        // Truncated.
+        std::fs::write(&path, &good[..good.len() / 3]).unwrap();
+        assert_recomputed(&m, &o, &orig, &path);
+
+        // Empty.
+        std::fs::write(&path, b"").unwrap();
+        assert_recomputed(&m, &o, &orig, &path);
+
+        // A valid grid file with another key (renamed or from an older version): stale.
+        let mut file = GridFile::read(&path).unwrap();
+        for (k, v) in &mut file.metadata {
+            if k == KEY_METADATA {
+                *v = "0123456789abcdef".into();
+            }
+        }
+        file.write(&path).unwrap();
+        assert_recomputed(&m, &o, &orig, &path);
+
+        // Right key, wrong dimensions.
+        let mut file = GridFile::read(&path).unwrap();
+        let d = file.dims;
+        let small = Dims::new(d.nx, d.ny, d.nz - 1).unwrap();
+        file.dims = small;
+        for ch in &mut file.channels {
+            ch.truncate(small.sites());
+        }
+        file.write(&path).unwrap();
+        assert_recomputed(&m, &o, &orig, &path);
+    }
+
+    #[test]
+    fn key_tracks_inputs() {
+        let m = model(1.0);
+        let o = opts(None);
+        let k = cache_key(&m, sun(), &o).unwrap();
+        assert_eq!(k, cache_key(&model(1.0), sun(), &o).unwrap(), "stable");
+        assert_eq!(
+            k,
+            cache_key(&m, sun() * 3.0, &o).unwrap(),
+            "length of sun_to"
+        );
+        assert_eq!(
+            k,
+            cache_key(&m, sun() + Vec3::splat(1e-7), &o).unwrap(),
+            "below the rounding"
+        );
+        let other_sun = Vec3::new(0.3, 0.8, 0.25).normalize();
+        assert_ne!(k, cache_key(&m, other_sun, &o).unwrap(), "sun");
+        let grid = LightingOptions {
+            grid: N + 1,
+            ..o.clone()
+        };
+        assert_ne!(k, cache_key(&m, sun(), &grid).unwrap(), "grid");
+        let preset = LightingOptions {
+            preset: "dogrose".into(),
+            ..o.clone()
+        };
+        assert_ne!(k, cache_key(&m, sun(), &preset).unwrap(), "preset");
+        assert_ne!(k, cache_key(&model(1.01), sun(), &o).unwrap(), "geometry");
+        // Material kind and leaf opacity.
+        let mut wood = m.clone();
+        wood.materials[0].kind = MaterialKind::Wood;
+        assert_ne!(k, cache_key(&wood, sun(), &o).unwrap(), "material kind");
+        let mut tex = m.clone();
+        let mut t = sylva_scene::Texture::new(2, 2, vec![[10, 200, 10, 255]; 4], Wrap::Clamp);
+        tex.materials[0].texture = Some(std::sync::Arc::new(t.clone()));
+        let kt = cache_key(&tex, sun(), &o).unwrap();
+        assert_ne!(k, kt, "texture");
+        t.pixels[3][3] = 0;
+        tex.materials[0].texture = Some(std::sync::Arc::new(t.clone()));
+        assert_ne!(kt, cache_key(&tex, sun(), &o).unwrap(), "texture alpha");
+        // The cache directory and the model's name are not part of the key.
+        let elsewhere = LightingOptions {
+            cache_dir: Some("/somewhere".into()),
+            ..o.clone()
+        };
+        assert_eq!(k, cache_key(&m, sun(), &elsewhere).unwrap());
+        let mut renamed = m.clone();
+        renamed.name = "other".into();
+        assert_eq!(k, cache_key(&renamed, sun(), &o).unwrap());
+
+        assert!(matches!(
+            cache_key(&m, Vec3::ZERO, &o),
+            Err(LightingError::Sun(_))
+        ));
+        assert!(matches!(
+            cache_key(&m, Vec3::new(f32::NAN, 1.0, 0.0), &o),
+            Err(LightingError::Sun(_))
+        ));
+        let bad = LightingOptions {
+            preset: "granite".into(),
+            ..o
+        };
+        let e = cache_key(&m, sun(), &bad).unwrap_err();
+        assert!(e.to_string().contains("granite"), "{e}");
+    }
+
+    #[test]
+    fn free_space_is_one() {
+        let dims = Dims::new(12, 10, 9).unwrap();
+        let bounds = Bounds {
+            min: [-1.0, 0.0, 2.0],
+            max: [3.0, 2.0, 4.0],
+        };
+        let empty = DensityGrid {
+            bounds,
+            ..DensityGrid::empty(dims)
+        };
+        for to_sun in [
+            Vec3::Y,
+            sun(),
+            Vec3::new(-0.7, 0.2, 0.6),
+            Vec3::new(0.0, -1.0, 0.0),
+        ] {
+            let (_, s) = quantise_sun(to_sun).unwrap();
+            let medium = Preset::Leaf.params();
+            let grid = solve_density(&empty, &medium, s, &mut no_progress()).unwrap();
+            let l = normalise(&grid, s);
+            for x in 0..dims.nx {
+                for y in 0..dims.ny {
+                    for z in 0..dims.nz {
+                        for v in l.site(x, y, z) {
+                            assert!((v - 1.0).abs() < 1e-5, "{to_sun}: ({x},{y},{z}) {v}");
+                        }
+                    }
+                }
+            }
+            for p in [Vec3::new(0.3, 1.1, 2.9), Vec3::new(-5.0, 9.0, 3.0)] {
+                let v = l.sample(p);
+                assert!((v - Vec3::ONE).abs().max_element() < 1e-5, "{v}");
+            }
+            // from_grid normalises the same way.
+            let f = ModelLighting::from_grid(&grid, s.as_vec3());
+            assert!(
+                (f.sample(Vec3::new(1.0, 1.0, 3.0)) - Vec3::ONE)
+                    .abs()
+                    .max_element()
+                    < 1e-5
+            );
+        }
+    }
+
+    #[test]
+    fn shadow_under_the_plate() {
+        let m = model(1.0);
+        let (l, _) = model_lighting(&m, Vec3::Y, &opts(None), &mut no_progress()).unwrap();
+        let under = l.sample(Vec3::new(0.6, 0.5, 0.6));
+        let above = l.sample(Vec3::new(0.6, 1.05 + 1.0 / N as f32 * 2.0, 0.6));
+        assert!(under.max_element() < 0.9, "under {under}");
+        assert!(under.max_element() < above.min_element(), "{under} {above}");
+    }
+
+    /// A lighting grid holding `f(position)` with unit normalisation.
+    fn linear_grid(dims: Dims, bounds: Bounds, f: impl Fn(Vec3) -> Vec3) -> LightingGrid {
+        let n = [dims.nx, dims.ny, dims.nz];
+        let min = Vec3::from_array(bounds.min);
+        let cell = Vec3::from_array(std::array::from_fn(|a| {
+            (bounds.max[a] - bounds.min[a]) / (n[a] - 1) as f32
+        }));
+        let mut colours: [Vec<f32>; 3] = Default::default();
+        for i in 0..dims.sites() {
+            let (x, y, z) = dims.coords(i);
+            let p = min + Vec3::new(x as f32, y as f32, z as f32) * cell;
+            let v = f(p);
+            for c in 0..3 {
+                colours[c].push(v[c]);
+            }
+        }
+        LightingGrid {
+            dims,
+            bounds,
+            colours,
+        }
+    }
+
+    #[test]
+    fn trilinear_exact_on_linear_fields_and_clamps() {
+        let dims = Dims::new(5, 4, 7).unwrap();
+        let bounds = Bounds {
+            min: [-1.0, 0.5, 2.0],
+            max: [3.0, 2.0, 5.0],
+        };
+        let f = |p: Vec3| {
+            Vec3::new(
+                1.0 + 0.5 * p.x - 0.25 * p.y + 0.125 * p.z,
+                2.0 - p.x + 0.75 * p.z,
+                3.0 + 0.3 * p.y,
+            )
+        };
+        let grid = linear_grid(dims, bounds, f);
+        // Scale so that the normalisation is undone: from_grid divides by the free-space total.
+        let total = free_space_total(Vec3::Y.as_dvec3()).unwrap();
+        let l = ModelLighting::scaled(&grid, 1.0);
+        let l2 = ModelLighting::from_grid(&grid, Vec3::Y);
+        let min = Vec3::from_array(bounds.min);
+        let max = Vec3::from_array(bounds.max);
+        let mut rng = 0x1234_5678u32;
+        let mut next = || {
+            rng ^= rng << 13;
+            rng ^= rng >> 17;
+            rng ^= rng << 5;
+            rng as f32 / u32::MAX as f32
+        };
+        for _ in 0..2000 {
+            let t = Vec3::new(next(), next(), next());
+            let p = min + (max - min) * t;
+            let want = f(p);
+            let got = l.sample(p);
+            assert!(
+                (got - want).abs().max_element() < 1e-5 * want.abs().max_element().max(1.0),
+                "{p}: {got} vs {want}"
+            );
+            let got2 = l2.sample(p) * total as f32;
+            assert!((got2 - want).abs().max_element() < 1e-4, "{got2} vs {want}");
+        }
+        // Sites exactly.
+        for (x, y, z) in [(0, 0, 0), (4, 3, 6), (2, 1, 3)] {
+            let p = l.site_position(x, y, z);
+            assert_eq!(l.sample(p).to_array(), l.site(x, y, z));
+        }
+        // Clamping: outside points take the value at the nearest point of the box.
+        let outside = [
+            Vec3::new(-10.0, 1.0, 3.0),
+            Vec3::new(10.0, 100.0, -3.0),
+            Vec3::new(0.0, -5.0, 9.0),
+            Vec3::new(1e30, -1e30, f32::INFINITY),
+        ];
+        for p in outside {
+            let q = p.clamp(min, max);
+            let (got, want) = (l.sample(p), f(q));
+            assert!(
+                (got - want).abs().max_element() < 1e-5 * 10.0,
+                "{p}: {got} vs {want}"
+            );
+        }
+        // NaN does not panic.
+        let _ = l.sample(Vec3::NAN);
+        assert!(l.memory_bytes() >= (dims.sites() * 12) as u64);
+        assert_eq!(l.dims(), dims);
+    }
+
+    #[test]
+    fn unwritable_cache_dir_is_an_error_naming_it() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("not-a-dir");
+        std::fs::write(&file, b"x").unwrap();
+        let cache = file.join("cache");
+        let e = model_lighting(&model(1.0), sun(), &opts(Some(&cache)), &mut no_progress())
+            .unwrap_err();
+        assert!(matches!(e, LightingError::CacheDir { .. }), "{e:?}");
+        assert!(e.to_string().contains(&cache.display().to_string()), "{e}");
+    }
+
+    #[test]
+    fn model_errors_pass_through() {
+        let empty = Model::new("nothing", Mesh::default(), vec![]);
+        let e = model_lighting(&empty, sun(), &opts(None), &mut no_progress()).unwrap_err();
+        assert!(e.to_string().contains("nothing"), "{e}");
+        let e = model_lighting(
+            &model(1.0),
+            sun(),
+            &LightingOptions {
+                grid: 2,
+                ..opts(None)
+            },
+            &mut no_progress(),
+        )
+        .unwrap_err();
+        assert!(
+            matches!(e, LightingError::Voxelize(VoxelizeError::BadGrid(2))),
+            "{e:?}"
+        );
+    }
+
+    #[test]
+    fn placement_matches_voxelize() {
+        let m = model(1.0);
+        for n in [4, 9, 16, 23] {
+            let p = placement(&m, n).unwrap();
+            let g = voxelize(
+                &m,
+                &VoxelizeOptions {
+                    grid: n,
+                    alpha_test: true,
+                },
+            )
+            .unwrap();
+            assert_eq!(p.dims, g.dims);
+            assert_eq!(p.bounds(), g.bounds);
+        }
+    }
+}
