@@ -180,11 +180,16 @@ fn sample_offset(n: u32, s: u32, pixel: u64, seed: u64) -> Vec2 {
     }
 }
 
+/// One tile's primary rays and hits (pixel by pixel, sample by sample) and their counters.
+type TileHits = (Vec<(Ray, Option<Hit>)>, TraceStats);
+
 /// The inputs of shading one sample, found by the shadow pass.
 #[derive(Debug, Clone, Copy)]
 enum SampleGeom {
     Sky,
-    Ground { lit: bool },
+    Ground {
+        lit: bool,
+    },
     Plant {
         point: Vec3,
         normal: Vec3,
@@ -236,7 +241,7 @@ impl<'a> Renderer<'a> {
         settings: &RenderSettings,
         progress: &(dyn Fn(u64) + Sync),
     ) -> Result<Frame, TraceError> {
-        let mut cam = self.scene.camera.clone();
+        let mut cam = self.scene.camera;
         cam.width = settings.width;
         cam.height = settings.height;
         let camera = PinholeCamera::new(&cam)?;
@@ -293,7 +298,7 @@ impl<'a> Renderer<'a> {
         let w = camera.width;
         // Primary rays.
         let t0 = Instant::now();
-        let primary: Vec<(Vec<(Ray, Option<Hit>)>, TraceStats)> = tiles
+        let primary: Vec<TileHits> = tiles
             .par_iter()
             .map(|tile| {
                 let mut st = TraceStats::default();

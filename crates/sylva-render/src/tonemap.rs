@@ -99,7 +99,8 @@ impl ToneMap {
             .iter()
             .map(|p| {
                 let lw = luminance(*p);
-                if !(lw > 0.0) {
+                // Also catches NaN.
+                if lw.is_nan() || lw <= 0.0 {
                     return [0.0; 3];
                 }
                 let l = lw * scale;

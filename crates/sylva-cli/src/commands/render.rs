@@ -168,7 +168,9 @@ pub fn prepare(a: &FrameArgs, need_lb: bool, to_stdout: bool) -> Result<Prepared
     if a.sun.is_some() || a.elevation.is_some() || a.azimuth.is_some() {
         scene.sun = match (&a.sun, a.elevation, a.azimuth) {
             (Some(v), _, _) => Sun::parse_vector(v).context("--sun")?,
-            (None, Some(e), Some(az)) => Sun::from_angles(e, az).context("--elevation/--azimuth")?,
+            (None, Some(e), Some(az)) => {
+                Sun::from_angles(e, az).context("--elevation/--azimuth")?
+            }
             _ => bail!("--elevation and --azimuth go together"),
         };
     }
@@ -275,7 +277,13 @@ pub fn render_frame(p: &Prepared, rays_per_pixel: u32, seed: u64) -> Result<Fram
 
 fn sanitize(name: &str) -> String {
     name.chars()
-        .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' })
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
         .collect()
 }
 
@@ -285,16 +293,18 @@ fn mode_path(base: &Path, mode: Mode, several: bool) -> PathBuf {
         return base.to_path_buf();
     }
     let stem = base.file_stem().unwrap_or_default().to_string_lossy();
-    let ext = base.extension().map(|e| e.to_string_lossy().into_owned()).unwrap_or_else(|| "png".into());
+    let ext = base
+        .extension()
+        .map(|e| e.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "png".into());
     base.with_file_name(format!("{stem}-{}.{ext}", mode.name()))
 }
 
 pub fn run(a: RenderArgs) -> Result<()> {
     let modes: Vec<Mode> = match a.mode.as_str() {
         "all" => Mode::ALL.to_vec(),
-        m => vec![Mode::parse(m).with_context(|| {
-            format!("--mode '{m}': expected full, local, ambient, lb or all")
-        })?],
+        m => vec![Mode::parse(m)
+            .with_context(|| format!("--mode '{m}': expected full, local, ambient, lb or all"))?],
     };
     let tm = ToneMap {
         key: a.key,
@@ -304,15 +314,20 @@ pub fn run(a: RenderArgs) -> Result<()> {
     if let Some(o) = &a.output {
         let ext = o.extension().map(|e| e.to_ascii_lowercase());
         if ext.as_deref() != Some(std::ffi::OsStr::new("png")) {
-            bail!("{}: the output is a PNG file (name it .png; --hdr adds an .exr beside it)", o.display());
+            bail!(
+                "{}: the output is a PNG file (name it .png; --hdr adds an .exr beside it)",
+                o.display()
+            );
+        }
+    }
+    if let Some(r) = a.rpp {
+        if !(1..=1024).contains(&r) {
+            bail!("--rpp {r}: rays per pixel must be 1 to 1024");
         }
     }
     let t_all = Instant::now();
     let p = prepare(&a.frame, modes.iter().any(|m| m.needs_lb()), true)?;
     let rpp = a.rpp.unwrap_or(p.scene.camera.rays_per_pixel);
-    if !(1..=1024).contains(&rpp) {
-        bail!("--rpp {rpp}: rays per pixel must be 1 to 1024");
-    }
     let frame = render_frame(&p, rpp, a.frame.seed)?;
 
     let t3 = Instant::now();
@@ -325,8 +340,16 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let exposure = tm.measure(&full);
     let mut images = Vec::new();
     for &mode in &modes {
-        let hdr = if mode == Mode::Full { full.clone() } else { frame.compose(mode) };
-        let stats = if modes.len() > 1 { exposure } else { tm.measure(&hdr) };
+        let hdr = if mode == Mode::Full {
+            full.clone()
+        } else {
+            frame.compose(mode)
+        };
+        let stats = if modes.len() > 1 {
+            exposure
+        } else {
+            tm.measure(&hdr)
+        };
         let ldr: Vec<[u8; 3]> = tm.apply_with(&hdr, stats).into_iter().map(srgb8).collect();
         images.push((mode, hdr, ldr));
     }
@@ -368,11 +391,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
     ] {
         println!("  {stage:<20}{s:>8.3}");
     }
-    println!(
-        "  {:<20}{:>8.3}",
-        "total",
-        t_all.elapsed().as_secs_f64()
-    );
+    println!("  {:<20}{:>8.3}", "total", t_all.elapsed().as_secs_f64());
     println!(
         "{}x{} at {rpp} rays/pixel: {} primary + {} shadow rays, {:.2} Mrays/s; frame {:.3} s; {} kd-restarts; kd-trees {}, LB grids {}",
         frame.width,

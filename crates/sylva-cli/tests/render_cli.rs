@@ -1,0 +1,163 @@
+//! `sylva render` and `sylva bench trace` end to end on a small scene.
+
+mod common;
+
+use common::sylva;
+use std::fs;
+use std::path::Path;
+
+const SCENE: &str = r#"
+name = "roses"
+
+[[models]]
+name = "rose"
+species = "dogrose"
+
+[[instances]]
+model = "rose"
+count = 3
+area = { min = [-3.0, -3.0], max = [3.0, 3.0] }
+min_spacing = 2.0
+seed = 5
+
+[ground]
+size = [20.0, 20.0]
+
+[camera]
+position = [0.0, 3.0, -9.0]
+look_at = [0.0, 0.8, 0.0]
+fov = 40.0
+resolution = [64, 40]
+"#;
+
+fn write_scene(dir: &Path) -> String {
+    let p = dir.join("roses.toml");
+    fs::write(&p, SCENE).unwrap();
+    p.to_str().unwrap().to_string()
+}
+
+#[test]
+fn render_writes_images_caches_lb_and_recovers_from_a_corrupt_cache() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write_scene(dir.path());
+    let out = dir.path().join("img/roses.png");
+    let cache = dir.path().join("cache");
+    let args = |mode: &'static str| {
+        vec![
+            "render".to_string(),
+            scene.clone(),
+            "-o".into(),
+            out.to_str().unwrap().into(),
+            "--hdr".into(),
+            "--mode".into(),
+            mode.into(),
+            "--lb-grid".into(),
+            "16".into(),
+            "--cache-dir".into(),
+            cache.to_str().unwrap().into(),
+        ]
+    };
+    let run = |mode| {
+        let a = args(mode);
+        sylva(&a.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let (ok, stdout, stderr) = run("full");
+    assert!(ok, "{stdout}{stderr}");
+    assert!(stdout.contains("solved"), "{stdout}");
+    for stage in [
+        "scene build",
+        "LB precompute",
+        "primary rays",
+        "shadow rays",
+        "shading",
+        "tone mapping",
+    ] {
+        assert!(stdout.contains(stage), "summary lacks {stage}: {stdout}");
+    }
+    let png = image::open(&out).unwrap().to_rgb8();
+    assert_eq!(png.dimensions(), (64, 40));
+    let exr = image::open(out.with_extension("exr")).unwrap().to_rgb32f();
+    assert_eq!(exr.dimensions(), (64, 40));
+    // Not a flat image: sky, ground and plants differ.
+    let first = png.get_pixel(0, 0);
+    assert!(png.pixels().any(|p| p != first));
+
+    // Second run: from the cache, the same image.
+    let (ok, stdout, _) = run("full");
+    assert!(ok && stdout.contains("from cache"), "{stdout}");
+    assert_eq!(image::open(&out).unwrap().to_rgb8(), png);
+
+    // A corrupted entry is reported, recomputed, and the image is unchanged.
+    let entry = fs::read_dir(&cache)
+        .unwrap()
+        .next()
+        .unwrap()
+        .unwrap()
+        .path();
+    let mut bytes = fs::read(&entry).unwrap();
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x5a;
+    fs::write(&entry, bytes).unwrap();
+    let (ok, stdout, stderr) = run("full");
+    assert!(ok, "{stderr}");
+    assert!(
+        stderr.contains("warning") && stderr.contains(entry.file_name().unwrap().to_str().unwrap()),
+        "{stderr}"
+    );
+    assert!(stdout.contains("solved again"), "{stdout}");
+    assert_eq!(image::open(&out).unwrap().to_rgb8(), png);
+
+    // All four modes of 000 Fig. 2, named after the output.
+    let (ok, stdout, stderr) = run("all");
+    assert!(ok, "{stderr}");
+    for m in ["full", "local", "ambient", "lb"] {
+        let p = dir.path().join(format!("img/roses-{m}.png"));
+        assert!(p.exists(), "{stdout}");
+    }
+}
+
+#[test]
+fn render_refuses_bad_options_with_reasons() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write_scene(dir.path());
+    let cases: &[(&[&str], &str)] = &[
+        (&["--mode", "fancy"], "--mode 'fancy'"),
+        (&["--rpp", "0"], "rays per pixel"),
+        (&["-o", "x.jpg"], "PNG"),
+        (&["--width", "0"], "resolution"),
+        (&["--sun", "0,0,0"], "--sun"),
+        (&["--indirect", "NaN"], "indirect"),
+        (&["--key=-1"], "key"),
+    ];
+    for (extra, want) in cases {
+        let mut a = vec!["render", scene.as_str(), "--no-cache"];
+        if !extra.contains(&"--mode") {
+            a.extend(["--mode", "local"]);
+        }
+        a.extend_from_slice(extra);
+        let (ok, stdout, stderr) = sylva(&a);
+        assert!(!ok, "{a:?} should fail: {stdout}");
+        assert!(stderr.contains(want), "{a:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+    let (ok, _, stderr) = sylva(&["render", "no-such-scene.toml"]);
+    assert!(!ok && stderr.contains("no-such-scene"), "{stderr}");
+}
+
+#[test]
+fn bench_trace_json_has_the_fields() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write_scene(dir.path());
+    let (ok, stdout, stderr) =
+        sylva(&["bench", "trace", &scene, "--no-lb", "--runs", "1", "--json"]);
+    assert!(ok, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
+    assert_eq!(v["width"], 64);
+    assert_eq!(v["height"], 40);
+    assert_eq!(v["rays_per_pixel"], 1);
+    assert!(v["frame_seconds"].as_f64().unwrap() > 0.0);
+    assert!(v["mrays_per_second"].as_f64().unwrap() > 0.0);
+    assert_eq!(v["rpp4"]["rays_per_pixel"], 4);
+    assert_eq!(v["rpp4"]["primary_rays"], 4 * 64 * 40);
+    assert_eq!(v["memory"]["unique_models"], 1);
+}
