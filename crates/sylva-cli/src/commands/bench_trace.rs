@@ -100,6 +100,7 @@ pub fn run(a: BenchTraceArgs) -> Result<()> {
         o.insert("lb".into(), (!a.no_lb).into());
         o.insert("accel_build_seconds".into(), p.accel_seconds.into());
         o.insert("lb_seconds".into(), p.lb_seconds.into());
+        o.insert("lb_models_cached".into(), p.lb_cached.into());
         o.insert("rpp4".into(), results[1].json());
         o.insert(
             "memory".into(),
@@ -127,8 +128,11 @@ pub fn run(a: BenchTraceArgs) -> Result<()> {
         a.runs
     );
     o += &format!(
-        "acceleration build {:.3} s; LB lighting {:.3} s (cache)\n",
-        p.accel_seconds, p.lb_seconds
+        "acceleration build {:.3} s; LB lighting {:.3} s ({} of {} models from the cache)\n",
+        p.accel_seconds,
+        p.lb_seconds,
+        p.lb_cached,
+        p.scene.models.len()
     );
     for m in &results {
         o += &format!(

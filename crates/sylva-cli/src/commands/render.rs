@@ -104,6 +104,8 @@ pub struct Prepared {
     pub scene_seconds: f64,
     pub lb_seconds: f64,
     pub accel_seconds: f64,
+    /// Models whose LB light came from the cache.
+    pub lb_cached: usize,
 }
 
 impl Prepared {
@@ -201,6 +203,7 @@ pub fn prepare(a: &FrameArgs, need_lb: bool, to_stdout: bool) -> Result<Prepared
     // LB lighting per model: computed once per model and sun, then cached.
     let t1 = Instant::now();
     let mut lighting = Vec::with_capacity(scene.models.len());
+    let mut lb_cached = 0;
     if need_lb {
         let opts = LightingOptions {
             grid: a.lb_grid.unwrap_or(scene.lb.grid as usize),
@@ -216,10 +219,13 @@ pub fn prepare(a: &FrameArgs, need_lb: bool, to_stdout: bool) -> Result<Prepared
             .with_context(|| format!("LB lighting of model '{}'", model.name))?;
             pb.finish_and_clear();
             match &report.source {
-                LightingSource::Cached => say(format!(
-                    "  LB {}: {} grid from cache ({:.2} s)",
-                    model.name, report.dims, report.seconds
-                )),
+                LightingSource::Cached => {
+                    lb_cached += 1;
+                    say(format!(
+                        "  LB {}: {} grid from cache ({:.2} s)",
+                        model.name, report.dims, report.seconds
+                    ))
+                }
                 LightingSource::Computed => say(format!(
                     "  LB {}: {} grid solved in {:.1} s{}",
                     model.name,
@@ -261,6 +267,7 @@ pub fn prepare(a: &FrameArgs, need_lb: bool, to_stdout: bool) -> Result<Prepared
         scene_seconds,
         lb_seconds,
         accel_seconds,
+        lb_cached,
     })
 }
 
