@@ -128,6 +128,7 @@ fn render_refuses_bad_options_with_reasons() {
         (&["--sun", "0,0,0"], "--sun"),
         (&["--indirect", "NaN"], "indirect"),
         (&["--key=-1"], "key"),
+        (&["--stack", "0"], "--stack 0"),
     ];
     for (extra, want) in cases {
         let mut a = vec!["render", scene.as_str(), "--no-cache"];

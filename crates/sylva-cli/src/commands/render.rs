@@ -29,6 +29,7 @@ pub struct FrameArgs {
     /// other follows the scene's aspect ratio).
     #[arg(long)]
     pub width: Option<u32>,
+    /// Image height in pixels (default: the scene camera's).
     #[arg(long)]
     pub height: Option<u32>,
     /// Sun direction (vector towards the sun, x,y,z with y up); default: the scene's sun.
@@ -175,6 +176,13 @@ pub fn prepare(a: &FrameArgs, need_lb: bool, to_stdout: bool) -> Result<Prepared
             }
             _ => bail!("--elevation and --azimuth go together"),
         };
+    }
+    if !(1..=sylva_trace::MAX_DEPTH).contains(&a.stack) {
+        bail!(
+            "--stack {}: the short stack holds 1 to {} entries",
+            a.stack,
+            sylva_trace::MAX_DEPTH
+        );
     }
     let scene_seconds = t0.elapsed().as_secs_f64();
     let (width, height) = resolution(a, &scene)?;
