@@ -188,6 +188,7 @@ type TileHits = (Vec<(Ray, Option<Hit>)>, TraceStats);
 enum SampleGeom {
     Sky,
     Ground {
+        point: Vec3,
         lit: bool,
     },
     Plant {
@@ -208,6 +209,8 @@ pub struct Renderer<'a> {
     sun: Vec3,
     ground_colour: Vec3,
     sky: Vec3,
+    /// Instances over each ground cell, for the LB light under trees.
+    ground_index: GroundIndex,
 }
 
 impl<'a> Renderer<'a> {
@@ -231,7 +234,51 @@ impl<'a> Renderer<'a> {
             sun: sun_colour * sun_irradiance,
             ground_colour: Vec3::from_array(scene.ground.color),
             sky: Vec3::from_array(scene.sky_color),
+            ground_index: if lighting.iter().any(Option::is_some) {
+                GroundIndex::new(accel)
+            } else {
+                GroundIndex::default()
+            },
         }
+    }
+
+    /// How much of the sky light reaches the ground at `point`: the product, over the trees
+    /// whose LB grid covers it, of their LB luminance there (1 in free space, less in a crown's
+    /// shade), clamped to [0, 1]. 1 away from trees.
+    fn ground_lb_factor(&self, point: Vec3) -> f32 {
+        let mut f = 1.0f32;
+        for &i in self.ground_index.at(point) {
+            let inst = &self.accel.instances()[i as usize];
+            let Some(l) = &self.lighting[inst.model as usize] else {
+                continue;
+            };
+            let b = &self.scene.models[inst.model as usize].bounds;
+            let pm = inst.to_model.transform_point3(point);
+            // Trees stand on the ground; a model floating above it has no LB light down here.
+            let margin = 0.05 * (b.max.y - b.min.y) + 1e-3;
+            if pm.x >= b.min.x
+                && pm.x <= b.max.x
+                && pm.z >= b.min.z
+                && pm.z <= b.max.z
+                && pm.y >= b.min.y - margin
+            {
+                // The grid ends at the model's box while its shade on the ground would go on:
+                // fade to open sky over the box's outer 20 % so no edge shows.
+                let edge = (pm.x - b.min.x)
+                    .min(b.max.x - pm.x)
+                    .min(pm.z - b.min.z)
+                    .min(b.max.z - pm.z);
+                let width = 0.2 * (b.max.x - b.min.x).min(b.max.z - b.min.z);
+                let w = if width > 0.0 {
+                    (edge / width).clamp(0.0, 1.0)
+                } else {
+                    1.0
+                };
+                let lb = luminance(l.sample(pm).to_array()).clamp(0.0, 1.0);
+                f *= 1.0 - w * (1.0 - lb);
+            }
+        }
+        f
     }
 
     /// Renders the scene's camera view at `settings`' resolution. `progress(n)` is called from
@@ -384,7 +431,7 @@ impl<'a> Renderer<'a> {
         let view = -ray.dir;
         if hit.is_ground() {
             let lit = self.to_sun.y > 0.0 && !self.shadowed(point, Vec3::Y, cfg, st);
-            return SampleGeom::Ground { lit };
+            return SampleGeom::Ground { point, lit };
         }
         let ng = self.accel.geometric_normal(hit);
         let inst = &self.accel.instances()[hit.instance as usize];
@@ -452,12 +499,12 @@ impl<'a> Renderer<'a> {
                 sky: self.sky,
                 ..Default::default()
             },
-            SampleGeom::Ground { lit } => {
+            SampleGeom::Ground { point, lit } => {
                 let c = self.ground_colour * self.sun;
                 let cos = self.to_sun.y.max(0.0);
                 Radiance {
                     local: if lit { c * cos } else { Vec3::ZERO },
-                    indirect: c * p.sky_ambient,
+                    indirect: c * (p.sky_ambient * self.ground_lb_factor(point)),
                     albedo: c,
                     sky: Vec3::ZERO,
                 }
@@ -503,6 +550,85 @@ impl<'a> Renderer<'a> {
                 }
             }
         }
+    }
+}
+
+/// A uniform grid over the ground (x, z) listing the instances whose world box covers each
+/// cell: the ground's LB lookup visits a handful of trees, not all of them.
+#[derive(Debug, Default)]
+struct GroundIndex {
+    origin: Vec2,
+    end: Vec2,
+    inv_cell: f32,
+    nx: usize,
+    nz: usize,
+    cells: Vec<Vec<u32>>,
+}
+
+impl GroundIndex {
+    /// At most this many cells a side.
+    const MAX_CELLS: usize = 256;
+
+    fn new(accel: &SceneAccel) -> GroundIndex {
+        let boxes: Vec<_> = accel.instances().iter().map(|i| i.world_bounds).collect();
+        if boxes.is_empty() {
+            return GroundIndex::default();
+        }
+        let (mut lo, mut hi) = (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
+        let mut footprint = 0.0f64;
+        for b in &boxes {
+            lo = lo.min(Vec2::new(b.min.x, b.min.z));
+            hi = hi.max(Vec2::new(b.max.x, b.max.z));
+            footprint += (b.max.x - b.min.x).max(b.max.z - b.min.z) as f64;
+        }
+        let extent = (hi - lo).max_element().max(1e-3);
+        // Cells about a tree's width, but not more than MAX_CELLS a side.
+        let cell = ((footprint / boxes.len() as f64) as f32).max(extent / Self::MAX_CELLS as f32);
+        if !(cell.is_finite() && cell > 0.0) {
+            return GroundIndex::default();
+        }
+        let nx = (((hi.x - lo.x) / cell).floor() as usize + 1).min(Self::MAX_CELLS);
+        let nz = (((hi.y - lo.y) / cell).floor() as usize + 1).min(Self::MAX_CELLS);
+        let mut index = GroundIndex {
+            origin: lo,
+            end: hi,
+            inv_cell: 1.0 / cell,
+            nx,
+            nz,
+            cells: vec![Vec::new(); nx * nz],
+        };
+        for (i, b) in boxes.iter().enumerate() {
+            let (x0, z0) = index.cell_of(b.min.x, b.min.z);
+            let (x1, z1) = index.cell_of(b.max.x, b.max.z);
+            for z in z0..=z1 {
+                for x in x0..=x1 {
+                    index.cells[z * nx + x].push(i as u32);
+                }
+            }
+        }
+        index
+    }
+
+    fn cell_of(&self, x: f32, z: f32) -> (usize, usize) {
+        let c = |v: f32, o: f32, n: usize| {
+            (((v - o) * self.inv_cell).floor().max(0.0) as usize).min(n - 1)
+        };
+        (c(x, self.origin.x, self.nx), c(z, self.origin.y, self.nz))
+    }
+
+    /// Instances whose box may cover ground point `p` (a superset).
+    fn at(&self, p: Vec3) -> &[u32] {
+        if self.cells.is_empty() {
+            return &[];
+        }
+        let q = Vec2::new(p.x, p.z);
+        // Also false for NaN.
+        let inside = q.cmpge(self.origin).all() && q.cmple(self.end).all();
+        if !inside {
+            return &[];
+        }
+        let (x, z) = self.cell_of(q.x, q.y);
+        &self.cells[z * self.nx + x]
     }
 }
 

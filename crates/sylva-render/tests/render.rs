@@ -276,3 +276,60 @@ fn supersampling_averages_sub_pixel_samples() {
     assert!(edge > 0, "4 rays per pixel change the edge pixels");
     assert_eq!(four.timings.primary_rays, 4 * one.timings.primary_rays);
 }
+
+#[test]
+fn ground_under_a_plant_gets_less_sky_light_than_open_ground() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("rose.toml");
+    fs::write(
+        &path,
+        r#"
+name = "rose"
+
+[[models]]
+name = "rose"
+species = "dogrose"
+
+[[instances]]
+model = "rose"
+position = [0.0, 0.0, 0.0]
+
+[ground]
+size = [20.0, 20.0]
+color = [0.2, 0.3, 0.4]
+
+[camera]
+position = [0.0, 4.0, -5.0]
+look_at = [0.0, 0.0, 0.0]
+fov = 60.0
+resolution = [48, 36]
+"#,
+    )
+    .unwrap();
+    let scene = Scene::load(path.to_str().unwrap()).unwrap();
+    let lighting = with_lb(&scene);
+    let frame = render(&scene, &lighting, 1);
+    let sun = sun_colour();
+    let open_sky = GROUND * sun * ShadingParams::default().sky_ambient;
+    let ground: Vec<Vec3> = frame
+        .pixels
+        .iter()
+        .filter(|r| close(r.albedo, GROUND * sun))
+        .map(|r| r.indirect)
+        .collect();
+    assert!(ground.len() > 100);
+    // Away from the rose the full sky ambient; near its base, less; never more.
+    assert!(ground.iter().any(|g| close(*g, open_sky)));
+    assert!(
+        ground.iter().any(|g| g.x < 0.9 * open_sky.x),
+        "no shade under the rose"
+    );
+    assert!(ground.iter().all(|g| g.x <= open_sky.x * (1.0 + 1e-5)));
+    // Without LB grids the ground takes the constant sky ambient everywhere.
+    let plain = render(&scene, &[None], 1);
+    assert!(plain
+        .pixels
+        .iter()
+        .filter(|r| close(r.albedo, GROUND * sun))
+        .all(|r| close(r.indirect, open_sky)));
+}
