@@ -129,6 +129,10 @@ fn render_refuses_bad_options_with_reasons() {
         (&["--indirect", "NaN"], "indirect"),
         (&["--key=-1"], "key"),
         (&["--stack", "0"], "--stack 0"),
+        (
+            &["--width", "32768", "--height", "32768"],
+            "32768x32768 frame",
+        ),
     ];
     for (extra, want) in cases {
         let mut a = vec!["render", scene.as_str(), "--no-cache"];

@@ -15,11 +15,13 @@
 mod atomic;
 pub mod colour;
 mod memory;
+mod names;
 mod rng;
 mod sun;
 
 pub use atomic::{atomic_write, atomic_write_with};
 pub use colour::{blackbody_rgb, try_blackbody_rgb, SUN_TEMPERATURE_K};
 pub use memory::{available_memory_bytes, check_memory, format_bytes, MemoryError};
+pub use names::file_stem;
 pub use rng::SplitMix64;
 pub use sun::{Sun, SunError};

@@ -670,16 +670,8 @@ pub fn solve_lighting_gpu(
 ) -> Result<(LightingGrid, Vec<SolveReport>), GpuError> {
     medium.validate().map_err(SolveError::from)?;
     validate_options(opts)?;
-    let mut colours: [Vec<f32>; 3] = Default::default();
-    let mut reports: Vec<SolveReport> = Vec::with_capacity(3);
-    let mut lattice: Option<GpuLattice> = None;
-    for c in 0..3 {
-        if let Some(prev) = (0..c).find(|&p| medium.colours[p] == medium.colours[c]) {
-            colours[c] = colours[prev].clone();
-            reports.push(reports[prev]);
-            continue;
-        }
-        let mut lat = match lattice.take() {
+    sylva_lb::solver::solve_colours(grid, medium, |c, lattice: Option<GpuLattice>| {
+        let mut lat = match lattice {
             Some(mut l) => {
                 l.set_colour(&medium.colours[c])?;
                 l.reset(boundary)?;
@@ -688,16 +680,7 @@ pub fn solve_lighting_gpu(
             None => GpuLattice::new(ctx, grid, medium, c, boundary, precision)?,
         };
         let report = lat.run(opts, &mut |s, r| progress(c, s, r))?;
-        colours[c] = lat.site_totals()?;
-        reports.push(report);
-        lattice = Some(lat);
-    }
-    Ok((
-        LightingGrid {
-            dims: grid.dims,
-            bounds: grid.bounds,
-            colours,
-        },
-        reports,
-    ))
+        let totals = lat.site_totals()?;
+        Ok((lat, totals, report))
+    })
 }

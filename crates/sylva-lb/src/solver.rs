@@ -721,42 +721,26 @@ impl Lattice {
     }
 }
 
-/// Lights `grid` in all three colours with the sun boundary `boundary`. Colours with
-/// identical parameters are solved once. `progress(colour, step, residual)`.
-pub fn solve_lighting(
+/// The three colours of `medium`, each solved by `solve(colour, lattice)` once, except that a
+/// colour with the same parameters as an earlier one copies its result. `solve` gets the
+/// lattice the previous solve returned (one lattice's memory, reused colour after colour)
+/// and returns it with the colour's site totals and report. CPU and GPU solvers share this.
+pub fn solve_colours<L, E>(
     grid: &DensityGrid,
     medium: &MediumParams,
-    boundary: Boundary,
-    opts: &SolveOptions,
-    progress: &mut dyn FnMut(usize, usize, f64),
-) -> Result<(LightingGrid, Vec<SolveReport>), SolveError> {
-    medium.validate()?;
-    opts.validate()?;
+    mut solve: impl FnMut(usize, Option<L>) -> Result<(L, Vec<f32>, SolveReport), E>,
+) -> Result<(LightingGrid, Vec<SolveReport>), E> {
     let mut colours: [Vec<f32>; 3] = Default::default();
-    let mut reports = Vec::with_capacity(3);
-    let mut lattice: Option<Lattice> = None;
+    let mut reports: Vec<SolveReport> = Vec::with_capacity(3);
+    let mut lattice: Option<L> = None;
     for c in 0..3 {
         if let Some(prev) = (0..c).find(|&p| medium.colours[p] == medium.colours[c]) {
             colours[c] = colours[prev].clone();
             reports.push(reports[prev]);
             continue;
         }
-        // One lattice's memory, reused colour after colour.
-        let lat = match lattice.take() {
-            Some(mut l) => {
-                let p = medium.colours[c];
-                l.dense_green = Omega::new(&p);
-                l.dense_brown = Omega::new(&ColourParams { g: -1.0, ..p });
-                l.green = CubicOmega::new(&ReducedOmega::new(&l.dense_green));
-                l.brown = CubicOmega::new(&ReducedOmega::new(&l.dense_brown));
-                l.reset(boundary);
-                l
-            }
-            None => Lattice::new(grid, medium, c, boundary)?,
-        };
-        let mut lat = lat;
-        let report = lat.run(opts, &mut |s, r| progress(c, s, r))?;
-        colours[c] = lat.site_totals();
+        let (lat, totals, report) = solve(c, lattice.take())?;
+        colours[c] = totals;
         reports.push(report);
         lattice = Some(lat);
     }
@@ -768,4 +752,34 @@ pub fn solve_lighting(
         },
         reports,
     ))
+}
+
+/// Lights `grid` in all three colours with the sun boundary `boundary`. Colours with
+/// identical parameters are solved once. `progress(colour, step, residual)`.
+pub fn solve_lighting(
+    grid: &DensityGrid,
+    medium: &MediumParams,
+    boundary: Boundary,
+    opts: &SolveOptions,
+    progress: &mut dyn FnMut(usize, usize, f64),
+) -> Result<(LightingGrid, Vec<SolveReport>), SolveError> {
+    medium.validate()?;
+    opts.validate()?;
+    solve_colours(grid, medium, |c, lattice: Option<Lattice>| {
+        let mut lat = match lattice {
+            Some(mut l) => {
+                let p = medium.colours[c];
+                l.dense_green = Omega::new(&p);
+                l.dense_brown = Omega::new(&ColourParams { g: -1.0, ..p });
+                l.green = CubicOmega::new(&ReducedOmega::new(&l.dense_green));
+                l.brown = CubicOmega::new(&ReducedOmega::new(&l.dense_brown));
+                l.reset(boundary);
+                l
+            }
+            None => Lattice::new(grid, medium, c, boundary)?,
+        };
+        let report = lat.run(opts, &mut |s, r| progress(c, s, r))?;
+        let totals = lat.site_totals();
+        Ok((lat, totals, report))
+    })
 }

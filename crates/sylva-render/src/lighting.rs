@@ -26,7 +26,8 @@ use sylva_lb::{
     ParamError, Preset,
 };
 use sylva_scene::voxelize::{
-    voxelize, GridPlacement, VoxelizeError, VoxelizeOptions, DEFAULT_GRID, OPAQUE_ALPHA, SUB,
+    placement_for, voxelize, GridPlacement, VoxelizeError, VoxelizeOptions, DEFAULT_GRID,
+    OPAQUE_ALPHA, SUB,
 };
 use sylva_scene::{LbSettings, MaterialKind, Model, Wrap};
 use thiserror::Error;
@@ -362,68 +363,12 @@ fn key_of(model: &Model, sun: [i64; 3], grid: usize, m: &MediumParams) -> u64 {
     h.0
 }
 
-/// `name` with everything but ASCII letters, digits, '-' and '_' replaced by '_' (at most 64
-/// characters; "model" if empty).
-fn sanitise(name: &str) -> String {
-    let s: String = name
-        .chars()
-        .take(64)
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect();
-    if s.is_empty() {
-        "model".into()
-    } else {
-        s
-    }
-}
-
 /// The cache entry of `model` under `key` in `dir`.
 pub fn cache_path(dir: &Path, model: &Model, key: u64) -> PathBuf {
     dir.join(format!(
         "{}-{key:016x}.{CACHE_EXTENSION}",
-        sanitise(&model.name)
+        sylva_core::file_stem(&model.name, "model")
     ))
-}
-
-/// The placement [`voxelize`] will choose, computed without voxelizing (the bounding box of
-/// the triangles' vertices, as the voxelizer takes it).
-fn placement(model: &Model, n: usize) -> Result<GridPlacement, VoxelizeError> {
-    let mesh = &model.mesh;
-    if mesh.indices.is_empty() {
-        return Err(VoxelizeError::Empty(model.name.clone()));
-    }
-    mesh.validate(model.materials.len())
-        .map_err(|problem| VoxelizeError::BadMesh {
-            model: model.name.clone(),
-            problem,
-        })?;
-    let (mut min, mut max) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-    for t in &mesh.indices {
-        for &i in t {
-            let p = mesh.positions[i as usize];
-            if p.iter().any(|v| !v.is_finite()) {
-                return Err(VoxelizeError::BadVertex {
-                    model: model.name.clone(),
-                    vertex: i as usize,
-                    position: p,
-                });
-            }
-            for a in 0..3 {
-                min[a] = min[a].min(p[a] as f64);
-                max[a] = max[a].max(p[a] as f64);
-            }
-        }
-    }
-    GridPlacement::fit(min, max, n).map_err(|e| match e {
-        VoxelizeError::ZeroExtent(_) => VoxelizeError::ZeroExtent(model.name.clone()),
-        e => e,
-    })
 }
 
 /// Lights `grid` under a unit sun towards `sun_to` (unit), forwarding progress.
@@ -516,7 +461,7 @@ pub fn model_lighting(
     let medium = medium(&opts.preset)?;
     let (sun_q, sun) = quantise_sun(sun_to)?;
     let key = key_of(model, sun_q, opts.grid, &medium);
-    let placement = placement(model, opts.grid)?;
+    let placement = placement_for(model, opts.grid)?;
     let dims = placement.dims;
 
     let path = match &opts.cache_dir {
@@ -1052,7 +997,7 @@ mod tests {
     fn placement_matches_voxelize() {
         let m = model(1.0);
         for n in [4, 9, 16, 23] {
-            let p = placement(&m, n).unwrap();
+            let p = placement_for(&m, n).unwrap();
             let g = voxelize(
                 &m,
                 &VoxelizeOptions {

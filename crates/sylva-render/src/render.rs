@@ -669,6 +669,19 @@ fn band_tiles(w: u32, h: u32, y0: u32, rows: u32) -> Vec<Tile> {
     out
 }
 
+/// Bytes a `w × h` frame at `rays_per_pixel` holds at its peak: the per-pixel parts, the
+/// composed and tone-mapped images the caller makes from them, and one band of samples.
+pub fn memory_needed(w: u32, h: u32, rays_per_pixel: u32) -> u64 {
+    let pixels = w as u64 * h as u64;
+    let per_pixel = std::mem::size_of::<Radiance>() as u64 + 2 * 12 + 3;
+    let band = (pixels * rays_per_pixel.max(1) as u64).min(BAND_SAMPLES as u64 + 64 * w as u64);
+    // Per sample: ray and hit, geometry, shaded value.
+    let per_sample = (std::mem::size_of::<(Ray, Option<Hit>)>()
+        + std::mem::size_of::<SampleGeom>()
+        + std::mem::size_of::<Radiance>()) as u64;
+    pixels * per_pixel + band * per_sample
+}
+
 /// Number of tiles of a `w × h` image.
 pub fn tile_count(w: u32, h: u32) -> u64 {
     w.div_ceil(TILE) as u64 * h.div_ceil(TILE) as u64

@@ -207,12 +207,18 @@ impl SubcellMasks {
 
 /// The model's density grid: `opts.grid` sites along its longest edge (see the module docs).
 pub fn voxelize(model: &Model, opts: &VoxelizeOptions) -> Result<DensityGrid, VoxelizeError> {
+    let placement = placement_for(model, opts.grid)?;
+    voxelize_masks(model, &placement, opts.alpha_test)?.to_density_grid()
+}
+
+/// The placement [`voxelize`] uses for `model` with `grid` sites along its longest edge,
+/// without voxelizing (the mesh is checked the same way).
+pub fn placement_for(model: &Model, grid: usize) -> Result<GridPlacement, VoxelizeError> {
     let (min, max) = check_model(model)?;
-    let placement = GridPlacement::fit(min, max, opts.grid).map_err(|e| match e {
+    GridPlacement::fit(min, max, grid).map_err(|e| match e {
         VoxelizeError::ZeroExtent(_) => VoxelizeError::ZeroExtent(model.name.clone()),
         e => e,
-    })?;
-    voxelize_masks(model, &placement, opts.alpha_test)?.to_density_grid()
+    })
 }
 
 /// Checks the mesh and returns the bounding box of its triangles' vertices.

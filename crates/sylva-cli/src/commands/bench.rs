@@ -177,14 +177,7 @@ fn bench_lb(a: BenchLbArgs) -> Result<()> {
             b.steps,
             backend.describe()
         );
-        println!(
-            "  runs (s):        {}",
-            b.runs
-                .iter()
-                .map(|t| format!("{t:.3}"))
-                .collect::<Vec<_>>()
-                .join(" ")
-        );
+        println!("  runs (s):        {}", format_runs(&b.runs));
         println!("  median:          {:.3} s", b.seconds);
         println!("  MLUPS:           {:.1}", b.mlups);
         println!("  bytes/update:    {}", b.bytes_per_update);
@@ -201,4 +194,12 @@ fn bench_lb(a: BenchLbArgs) -> Result<()> {
         println!("  ratio:           {:.2}", b.ratio);
     }
     Ok(())
+}
+
+/// Run times in seconds, three decimals, space-separated.
+pub fn format_runs(runs: &[f64]) -> String {
+    runs.iter()
+        .map(|t| format!("{t:.3}"))
+        .collect::<Vec<_>>()
+        .join(" ")
 }

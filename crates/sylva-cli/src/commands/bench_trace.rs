@@ -56,7 +56,7 @@ impl Measured {
 }
 
 pub fn run(a: BenchTraceArgs) -> Result<()> {
-    let p = prepare(&a.frame, !a.no_lb, false)?;
+    let p = prepare(&a.frame, !a.no_lb, Some(4), false)?;
     let renderer = p.renderer();
     let mut results = Vec::new();
     for rpp in [1u32, 4] {

@@ -104,14 +104,7 @@ pub fn run(a: BenchVoxelArgs) -> Result<()> {
             b.threads,
             if b.alpha_test { "" } else { ", no alpha test" }
         );
-        println!(
-            "  runs (s):     {}",
-            b.runs
-                .iter()
-                .map(|t| format!("{t:.3}"))
-                .collect::<Vec<_>>()
-                .join(" ")
-        );
+        println!("  runs (s):     {}", super::bench::format_runs(&b.runs));
         println!("  median:       {:.3} s", b.seconds);
         println!(
             "  throughput:   {:.2} M triangles/s",

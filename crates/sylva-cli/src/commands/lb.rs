@@ -231,7 +231,7 @@ fn load_source(a: &SolveArgs, scene: Option<&SceneDesc>) -> Result<(DensityGrid,
             v.name,
             super::voxelize::summary(&v.grid)
         );
-        return Ok((v.grid, super::voxelize::sanitize(&v.name)));
+        return Ok((v.grid, sylva_core::file_stem(&v.name, "model")));
     }
     if let Some(scene) = scene {
         let n = match &a.grid {
@@ -244,7 +244,7 @@ fn load_source(a: &SolveArgs, scene: Option<&SceneDesc>) -> Result<(DensityGrid,
         println!("voxelized {spec}: {}", super::voxelize::summary(&v.grid));
         return Ok((
             v.grid,
-            super::voxelize::sanitize(&format!("{}-{}", scene.name, model.name)),
+            sylva_core::file_stem(&format!("{}-{}", scene.name, model.name), "model"),
         ));
     }
     if let Some(path) = &a.source.input {

@@ -7,7 +7,6 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use glam::Vec3;
-use sylva_core::Sun;
 use sylva_lb::Preset;
 use sylva_render::lighting::{model_lighting, LightingOptions, LightingSource, ModelLighting};
 use sylva_render::output::{write_exr, write_png};
@@ -35,10 +34,10 @@ pub struct FrameArgs {
     /// Sun direction (vector towards the sun, x,y,z with y up); default: the scene's sun.
     #[arg(long, conflicts_with_all = ["elevation", "azimuth"])]
     pub sun: Option<String>,
-    /// Sun elevation above the horizon in degrees (with --azimuth).
+    /// Sun elevation above the horizon in degrees (default 50 when only --azimuth is given).
     #[arg(long)]
     pub elevation: Option<f64>,
-    /// Sun azimuth in degrees, clockwise from +z seen from above (with --elevation).
+    /// Sun azimuth in degrees from +x towards +z (default 30 when only --elevation is given).
     #[arg(long)]
     pub azimuth: Option<f64>,
     /// Short-stack entries of the kd-tree traversal (000 Fig. 1 uses 5).
@@ -157,7 +156,14 @@ fn resolution(a: &FrameArgs, scene: &Scene) -> Result<(u32, u32)> {
 }
 
 /// Builds the scene and its kd-trees and lights every model (from the cache when it can).
-pub fn prepare(a: &FrameArgs, need_lb: bool, to_stdout: bool) -> Result<Prepared> {
+/// `rays_per_pixel`: the most a frame will use (default: the scene camera's); the frame's
+/// memory is checked for it before any LB or kd-tree work.
+pub fn prepare(
+    a: &FrameArgs,
+    need_lb: bool,
+    rays_per_pixel: Option<u32>,
+    to_stdout: bool,
+) -> Result<Prepared> {
     // Machine-readable runs keep stdout for their JSON.
     let say = |s: String| {
         if to_stdout {
@@ -169,13 +175,7 @@ pub fn prepare(a: &FrameArgs, need_lb: bool, to_stdout: bool) -> Result<Prepared
     let t0 = Instant::now();
     let mut scene = Scene::load(&a.scene)?;
     if a.sun.is_some() || a.elevation.is_some() || a.azimuth.is_some() {
-        scene.sun = match (&a.sun, a.elevation, a.azimuth) {
-            (Some(v), _, _) => Sun::parse_vector(v).context("--sun")?,
-            (None, Some(e), Some(az)) => {
-                Sun::from_angles(e, az).context("--elevation/--azimuth")?
-            }
-            _ => bail!("--elevation and --azimuth go together"),
-        };
+        scene.sun = super::lb::parse_sun(a.sun.as_deref(), a.elevation, a.azimuth)?;
     }
     if !(1..=sylva_trace::MAX_DEPTH).contains(&a.stack) {
         bail!(
@@ -186,6 +186,11 @@ pub fn prepare(a: &FrameArgs, need_lb: bool, to_stdout: bool) -> Result<Prepared
     }
     let scene_seconds = t0.elapsed().as_secs_f64();
     let (width, height) = resolution(a, &scene)?;
+    let rays_per_pixel = rays_per_pixel.unwrap_or(scene.camera.rays_per_pixel);
+    sylva_core::check_memory(
+        &format!("a {width}x{height} frame at {rays_per_pixel} rays/pixel"),
+        sylva_render::render::memory_needed(width, height, rays_per_pixel),
+    )?;
     let s = scene.sun.to_sun();
     let to_sun = Vec3::new(s.x as f32, s.y as f32, s.z as f32);
     let preset = Preset::parse(&scene.lb.preset)
@@ -290,18 +295,6 @@ pub fn render_frame(p: &Prepared, rays_per_pixel: u32, seed: u64) -> Result<Fram
     Ok(frame)
 }
 
-fn sanitize(name: &str) -> String {
-    name.chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect()
-}
-
 /// `out.png` → `out-<mode>.png` for modes other than full.
 fn mode_path(base: &Path, mode: Mode, several: bool) -> PathBuf {
     if mode == Mode::Full && !several {
@@ -341,15 +334,17 @@ pub fn run(a: RenderArgs) -> Result<()> {
         }
     }
     let t_all = Instant::now();
-    let p = prepare(&a.frame, modes.iter().any(|m| m.needs_lb()), true)?;
+    let p = prepare(&a.frame, modes.iter().any(|m| m.needs_lb()), a.rpp, true)?;
     let rpp = a.rpp.unwrap_or(p.scene.camera.rays_per_pixel);
     let frame = render_frame(&p, rpp, a.frame.seed)?;
 
     let t3 = Instant::now();
-    let base = a
-        .output
-        .clone()
-        .unwrap_or_else(|| PathBuf::from(format!("sylva-out/{}.png", sanitize(&p.scene.name))));
+    let base = a.output.clone().unwrap_or_else(|| {
+        PathBuf::from(format!(
+            "sylva-out/{}.png",
+            sylva_core::file_stem(&p.scene.name, "scene")
+        ))
+    });
     // Several modes share the full image's exposure so they compare.
     let full = frame.compose(Mode::Full);
     let exposure = tm.measure(&full);

@@ -133,23 +133,10 @@ pub fn summary(g: &DensityGrid) -> String {
     )
 }
 
-/// A model name usable in a file name.
-pub fn sanitize(name: &str) -> String {
-    name.chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect()
-}
-
 pub fn run(a: VoxelizeArgs) -> Result<()> {
     let t0 = Instant::now();
     let v = load_and_voxelize(&a.model, a.grid, !a.no_alpha)?;
-    let name = sanitize(&v.name);
+    let name = sylva_core::file_stem(&v.name, "model");
     let output = a
         .output
         .clone()
