@@ -11,7 +11,10 @@ use rayon::prelude::*;
 use sylva_core::colour::luminance;
 use sylva_core::SplitMix64;
 use sylva_scene::Scene;
-use sylva_trace::{Hit, PinholeCamera, Ray, SceneAccel, TraceError, TraceStats, TraversalConfig};
+use sylva_trace::{
+    Hit, OccluderCache, PinholeCamera, Ray, SceneAccel, TraceError, TraceStats, TraversalConfig,
+    PACKET,
+};
 
 use crate::lighting::ModelLighting;
 use crate::shade::{
@@ -343,57 +346,84 @@ impl<'a> Renderer<'a> {
     ) {
         let cfg = settings.traversal;
         let w = camera.width;
-        // Primary rays.
+        // Primary rays, then the shadow rays of the same tile at once: a shadow ray starts
+        // where its primary ray ended, so its walk down to that point in the model's tree
+        // finds the nodes and triangles the primary ray just loaded still in cache. Each
+        // tile times its two halves; the pass's wall time is split in their proportion.
         let t0 = Instant::now();
-        let primary: Vec<TileHits> = tiles
+        let traced: Vec<(TileHits, Vec<SampleGeom>, TraceStats, [f64; 2])> = tiles
             .par_iter()
             .map(|tile| {
+                let start = Instant::now();
                 let mut st = TraceStats::default();
                 let mut out = Vec::with_capacity(tile.pixels() * n as usize);
                 for (x, y) in tile.iter() {
                     let pixel = y as u64 * w as u64 + x as u64;
                     for s in 0..n {
                         let o = sample_offset(n, s, pixel, settings.seed);
-                        let ray = camera.ray(x as f32 + o.x, y as f32 + o.y);
-                        let hit = self.accel.closest_hit(&ray, cfg, &mut st);
-                        out.push((ray, hit));
+                        out.push((camera.ray(x as f32 + o.x, y as f32 + o.y), None));
+                    }
+                }
+                // Packets of neighbouring rays share their way through the trees; each
+                // ray's hit is the one it would find alone.
+                for group in tile.packets(n) {
+                    let mut rays = [out[group[0]].0; PACKET];
+                    let mut mask = 0u32;
+                    for (l, &i) in group.iter().enumerate() {
+                        if i != usize::MAX {
+                            rays[l] = out[i].0;
+                            mask |= 1 << l;
+                        }
+                    }
+                    let hits = self.accel.closest_hit_packet(&rays, mask, cfg, &mut st);
+                    for (l, &i) in group.iter().enumerate() {
+                        if i != usize::MAX {
+                            out[i].1 = hits[l];
+                        }
                     }
                 }
                 progress(1);
-                (out, st)
-            })
-            .collect();
-        timings.primary_seconds += t0.elapsed().as_secs_f64();
-        for (samples, st) in &primary {
-            timings.primary_rays += samples.len() as u64;
-            *stats += *st;
-        }
-        // Shadow rays.
-        let t1 = Instant::now();
-        let geoms: Vec<(Vec<SampleGeom>, TraceStats)> = primary
-            .par_iter()
-            .map(|(samples, _)| {
-                let mut st = TraceStats::default();
-                let g = samples
+                let mid = Instant::now();
+                let mut sst = TraceStats::default();
+                // One occluder cache per tile: the result never depends on it, and per tile
+                // even the work counters do not depend on the thread count.
+                let mut cache = OccluderCache::new();
+                let g = out
                     .iter()
-                    .map(|(ray, hit)| self.sample_geometry(ray, hit.as_ref(), cfg, &mut st))
+                    .map(|(ray, hit)| {
+                        self.sample_geometry(ray, hit.as_ref(), cfg, &mut sst, &mut cache)
+                    })
                     .collect();
                 progress(1);
-                (g, st)
+                let end = Instant::now();
+                let halves = [(mid - start).as_secs_f64(), (end - mid).as_secs_f64()];
+                ((out, st), g, sst, halves)
             })
             .collect();
-        timings.shadow_seconds += t1.elapsed().as_secs_f64();
-        for (_, st) in &geoms {
-            timings.shadow_rays += st.rays;
-            *stats += *st;
+        let wall = t0.elapsed().as_secs_f64();
+        let mut busy = [0f64; 2];
+        let mut primary = Vec::with_capacity(traced.len());
+        let mut geoms = Vec::with_capacity(traced.len());
+        for ((samples, st), g, sst, halves) in traced {
+            timings.primary_rays += samples.len() as u64;
+            timings.shadow_rays += sst.rays;
+            *stats += st;
+            *stats += sst;
+            busy[0] += halves[0];
+            busy[1] += halves[1];
+            primary.push(samples);
+            geoms.push(g);
         }
+        let share = busy[0] / (busy[0] + busy[1]).max(1e-12);
+        timings.primary_seconds += wall * share;
+        timings.shadow_seconds += wall * (1.0 - share);
         // Shading.
         let t2 = Instant::now();
         let inv_n = 1.0 / n as f32;
         let shaded: Vec<Vec<Radiance>> = tiles
             .par_iter()
             .zip(primary.par_iter().zip(geoms.par_iter()))
-            .map(|(tile, ((samples, _), (g, _)))| {
+            .map(|(tile, (samples, g))| {
                 let mut out = Vec::with_capacity(tile.pixels());
                 for (k, _) in tile.iter().enumerate() {
                     let mut acc = Radiance::default();
@@ -423,6 +453,7 @@ impl<'a> Renderer<'a> {
         hit: Option<&Hit>,
         cfg: TraversalConfig,
         st: &mut TraceStats,
+        cache: &mut OccluderCache,
     ) -> SampleGeom {
         let Some(hit) = hit else {
             return SampleGeom::Sky;
@@ -430,7 +461,7 @@ impl<'a> Renderer<'a> {
         let point = ray.at(hit.t);
         let view = -ray.dir;
         if hit.is_ground() {
-            let lit = self.to_sun.y > 0.0 && !self.shadowed(point, Vec3::Y, cfg, st);
+            let lit = self.to_sun.y > 0.0 && !self.shadowed(point, Vec3::Y, cfg, st, cache);
             return SampleGeom::Ground { point, lit };
         }
         let ng = self.accel.geometric_normal(hit);
@@ -464,7 +495,8 @@ impl<'a> Renderer<'a> {
             colour: Vec3::ONE,
             leaf,
         };
-        let lit = needs_shadow_ray(&probe, self.to_sun) && !self.shadowed(point, ng, cfg, st);
+        let lit =
+            needs_shadow_ray(&probe, self.to_sun) && !self.shadowed(point, ng, cfg, st, cache);
         SampleGeom::Plant { point, normal, lit }
     }
 
@@ -482,7 +514,14 @@ impl<'a> Renderer<'a> {
 
     /// Whether something opaque lies between `point` and the sun. The ray starts a little off
     /// the surface on the sun's side of the geometric normal `ng`.
-    fn shadowed(&self, point: Vec3, ng: Vec3, cfg: TraversalConfig, st: &mut TraceStats) -> bool {
+    fn shadowed(
+        &self,
+        point: Vec3,
+        ng: Vec3,
+        cfg: TraversalConfig,
+        st: &mut TraceStats,
+        cache: &mut OccluderCache,
+    ) -> bool {
         let side = if ng.dot(self.to_sun) >= 0.0 {
             1.0
         } else {
@@ -490,7 +529,7 @@ impl<'a> Renderer<'a> {
         };
         let eps = 1e-4 * point.abs().max_element().max(1.0);
         let ray = Ray::new(point + ng * (side * eps), self.to_sun);
-        self.accel.any_hit(&ray, cfg, st)
+        self.accel.any_hit_cached(&ray, cfg, st, cache)
     }
 
     fn shade(&self, ray: &Ray, hit: Option<&Hit>, g: &SampleGeom, p: &ShadingParams) -> Radiance {
@@ -649,6 +688,40 @@ impl Tile {
     /// Pixels row by row.
     fn iter(&self) -> impl Iterator<Item = (u32, u32)> + '_ {
         (self.y0..self.y1).flat_map(move |y| (self.x0..self.x1).map(move |x| (x, y)))
+    }
+
+    /// The tile's samples (`n` per pixel, indexed in [`Tile::iter`] order, sample by sample)
+    /// in packets of [`PACKET`] neighbours: 2×2 pixels at one sample per pixel, else runs
+    /// of a pixel's samples. `usize::MAX` marks an unused lane at a ragged edge.
+    fn packets(&self, n: u32) -> Vec<[usize; PACKET]> {
+        let (tw, th) = ((self.x1 - self.x0) as usize, (self.y1 - self.y0) as usize);
+        let total = tw * th * n as usize;
+        let mut out = Vec::with_capacity(total.div_ceil(PACKET));
+        if n == 1 {
+            for by in (0..th).step_by(2) {
+                for bx in (0..tw).step_by(2) {
+                    let mut g = [usize::MAX; PACKET];
+                    for (l, (dx, dy)) in [(0, 0), (1, 0), (0, 1), (1, 1)].into_iter().enumerate() {
+                        let (x, y) = (bx + dx, by + dy);
+                        if x < tw && y < th {
+                            g[l] = y * tw + x;
+                        }
+                    }
+                    out.push(g);
+                }
+            }
+        } else {
+            for start in (0..total).step_by(PACKET) {
+                out.push(std::array::from_fn(|l| {
+                    if start + l < total {
+                        start + l
+                    } else {
+                        usize::MAX
+                    }
+                }));
+            }
+        }
+        out
     }
 }
 

@@ -1,5 +1,8 @@
 //! Tracer benchmark: `cargo run --release -p sylva-trace --example trace_bench -- [SCENE...]
-//! [--runs N] [--stack S] [--no-obvhs]` (default scenes: beech catalpa; 5 runs).
+//! [--runs N] [--stack S] [--no-obvhs] [--packets]` (default scenes: beech catalpa; 5 runs).
+//!
+//! `--packets` traces the primary rays of full tiles in 2×2 packets, as `sylva render`
+//! does; the shadow-ray statistics split lit from blocked rays.
 //!
 //! For each scene: builds the two-level kd-trees, traces one primary ray per pixel of the
 //! scene camera's image over rayon in 8×8 tiles, then one shadow ray to the sun from every
@@ -65,6 +68,9 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 /// Tiles of the image, each a list of pixel indices (row-major within the tile).
+/// `--packets`: primary rays in 2×2 packets ([`SceneAccel::closest_hit_packet`]).
+static PACKETS: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
 fn tiles(w: u32, h: u32) -> Vec<Vec<u32>> {
     let mut out = Vec::new();
     for ty in (0..h).step_by(TILE as usize) {
@@ -286,6 +292,7 @@ fn main() {
             "--runs" => runs = it.next().and_then(|s| s.parse().ok()).expect("--runs N"),
             "--stack" => stack = it.next().and_then(|s| s.parse().ok()).expect("--stack S"),
             "--no-obvhs" => with_obvhs = false,
+            "--packets" => PACKETS.store(true, std::sync::atomic::Ordering::Relaxed),
             s => scenes.push(s.to_string()),
         }
     }
@@ -353,6 +360,7 @@ fn bench_scene(name: &str, runs: usize, cfg: TraversalConfig, with_obvhs: bool) 
     let mut hits: Vec<Option<Hit>> = Vec::new();
     let mut pstats = TraceStats::default();
     let mut sstats = TraceStats::default();
+    let mut split = [TraceStats::default(); 2];
     let mut lit = 0usize;
     for _ in 0..runs.max(1) {
         let per_tile: Vec<(Vec<Option<Hit>>, TraceStats)> = prim_s.run(|| {
@@ -360,10 +368,31 @@ fn bench_scene(name: &str, runs: usize, cfg: TraversalConfig, with_obvhs: bool) 
                 .par_iter()
                 .map(|tile| {
                     let mut st = TraceStats::default();
-                    let hs = tile
-                        .iter()
-                        .map(|&p| accel.closest_hit(&cam.pixel_ray(p % w, p / w), cfg, &mut st))
-                        .collect();
+                    let full = tile.len() == (TILE * TILE) as usize;
+                    if !(PACKETS.load(std::sync::atomic::Ordering::Relaxed) && full) {
+                        let hs = tile
+                            .iter()
+                            .map(|&p| accel.closest_hit(&cam.pixel_ray(p % w, p / w), cfg, &mut st))
+                            .collect();
+                        return (hs, st);
+                    }
+                    let t = TILE as usize;
+                    let mut hs = vec![None; tile.len()];
+                    for by in (0..t).step_by(2) {
+                        for bx in (0..t).step_by(2) {
+                            let ids = [
+                                by * t + bx,
+                                by * t + bx + 1,
+                                (by + 1) * t + bx,
+                                (by + 1) * t + bx + 1,
+                            ];
+                            let rays = ids.map(|i| cam.pixel_ray(tile[i] % w, tile[i] / w));
+                            let got = accel.closest_hit_packet(&rays, 0b1111, cfg, &mut st);
+                            for (l, &i) in ids.iter().enumerate() {
+                                hs[i] = got[l];
+                            }
+                        }
+                    }
                     (hs, st)
                 })
                 .collect()
@@ -377,17 +406,21 @@ fn bench_scene(name: &str, runs: usize, cfg: TraversalConfig, with_obvhs: bool) 
             }
         }
         // Shadow rays from every hit.
-        let per_tile: Vec<(usize, TraceStats)> = shadow_s.run(|| {
+        let per_tile: Vec<(usize, [TraceStats; 2])> = shadow_s.run(|| {
             tiles
                 .par_iter()
                 .map(|tile| {
-                    let mut st = TraceStats::default();
+                    // [lit, occluded]
+                    let mut st = [TraceStats::default(); 2];
                     let mut lit = 0usize;
                     for &p in tile {
                         if let Some(hit) = hits[p as usize] {
                             let ray = cam.pixel_ray(p % w, p / w);
                             let s = shadow_ray(&ray, hit.t, accel.geometric_normal(&hit), sun);
-                            lit += !accel.any_hit(&s, cfg, &mut st) as usize;
+                            let mut one = TraceStats::default();
+                            let occluded = accel.any_hit(&s, cfg, &mut one);
+                            lit += !occluded as usize;
+                            st[occluded as usize] += one;
                         }
                     }
                     (lit, st)
@@ -395,10 +428,14 @@ fn bench_scene(name: &str, runs: usize, cfg: TraversalConfig, with_obvhs: bool) 
                 .collect()
         });
         sstats = TraceStats::default();
+        split = [TraceStats::default(); 2];
         lit = 0;
         for (l, st) in per_tile {
             lit += l;
-            sstats += st;
+            sstats += st[0];
+            sstats += st[1];
+            split[0] += st[0];
+            split[1] += st[1];
         }
     }
     let (tp, ts) = (prim_s.wall(), shadow_s.wall());
@@ -425,6 +462,13 @@ fn bench_scene(name: &str, runs: usize, cfg: TraversalConfig, with_obvhs: bool) 
         per(&sstats, sstats.nodes), per(&sstats, sstats.triangle_tests),
         per(&sstats, sstats.instance_visits), per(&sstats, sstats.restarts), lit
     );
+    for (name, s) in ["lit", "occluded"].iter().zip(&split) {
+        println!(
+            "    {name} rays: {}, per ray {:.1} nodes, {:.1} triangle tests, {:.2} instances; {:.0} % of all nodes",
+            s.rays, per(s, s.nodes), per(s, s.triangle_tests), per(s, s.instance_visits),
+            100.0 * s.nodes as f64 / sstats.nodes.max(1) as f64
+        );
+    }
 
     if !with_obvhs {
         return;

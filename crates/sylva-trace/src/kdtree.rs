@@ -12,7 +12,7 @@
 //! offset into the primitive-index list.
 
 use crate::ray::ray_box;
-use glam::Vec3;
+use glam::{BVec4A, Vec3, Vec4};
 use sylva_scene::Aabb;
 
 /// Deepest tree the builder makes; the "unbounded" traversal stack holds this many entries,
@@ -21,6 +21,30 @@ pub const MAX_DEPTH: usize = 56;
 
 /// Relative margin before a leaf's end within which traversal goes on past a hit.
 const TERMINATION_SLACK: f32 = 1e-5;
+
+/// Rays traced together by [`KdTree::traverse_packet`].
+pub const PACKET: usize = 4;
+
+/// Whether the rays `inv_dir` of the lanes in `mask` can share a packet traversal: finite
+/// inverse directions with the same signs.
+#[allow(clippy::needless_range_loop)] // lanes index several parallel arrays
+pub fn packet_compatible(inv_dir: &[[f32; PACKET]; 3], mask: u32) -> bool {
+    let mut signs = None;
+    for l in 0..PACKET {
+        if mask >> l & 1 == 0 {
+            continue;
+        }
+        let inv = [inv_dir[0][l], inv_dir[1][l], inv_dir[2][l]];
+        if !inv.iter().all(|v| v.is_finite()) {
+            return false;
+        }
+        let s = inv.map(|v| v < 0.0);
+        if *signs.get_or_insert(s) != s {
+            return false;
+        }
+    }
+    true
+}
 
 /// The stack of the paper (000 §4.1).
 pub const DEFAULT_STACK_SIZE: usize = 5;
@@ -69,6 +93,8 @@ pub struct TraceStats {
     pub restarts: u64,
     /// Triangle hits discarded by the alpha test.
     pub alpha_rejects: u64,
+    /// Shadow rays answered by an [`crate::OccluderCache`] entry, without a traversal.
+    pub occluder_cache_hits: u64,
 }
 
 impl std::ops::AddAssign for TraceStats {
@@ -80,6 +106,7 @@ impl std::ops::AddAssign for TraceStats {
         self.instance_visits += o.instance_visits;
         self.restarts += o.restarts;
         self.alpha_rejects += o.alpha_rejects;
+        self.occluder_cache_hits += o.occluder_cache_hits;
     }
 }
 
@@ -564,6 +591,176 @@ impl KdTree {
             // ulps short of a boundary (e.g. at a vertex on a split plane) may have an equally
             // near rival in the next leaf, and the tie rule must see both.
             if best + TERMINATION_SLACK * tmax.abs() < tmax {
+                return;
+            }
+        }
+    }
+
+    /// Short-stack traversal of a packet of [`PACKET`] rays at once (lanes in `mask`): one
+    /// walk down the tree serves every lane, so a node is fetched once for the packet rather
+    /// than once per ray. The lanes in `mask` must share the sign of every direction
+    /// component and have finite `inv_dir` (see [`packet_compatible`]); the near/far order
+    /// is then the same for all of them.
+    ///
+    /// Each lane keeps its own interval, exactly as [`KdTree::traverse`] would for that ray
+    /// alone (a lane goes into the children the single-ray rule sends it to), so every lane
+    /// sees its leaves front to back. The short stack holds `(node, lanes, intervals)`; when
+    /// it underflows, each unfinished lane restarts from where its last leaf ended
+    /// (kd-restart per lane). `leaf(prims, lanes, t_min, t_max)` tests the lanes `lanes` of
+    /// the leaf (their intervals in `t_min`/`t_max`) and returns every lane's closest hit
+    /// distance (`-∞` to finish a lane at once); a lane finishes as in the single-ray rule.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)] // the hot path, as `traverse`
+    pub fn traverse_packet<
+        F: FnMut(&[u32], u32, &[f32; PACKET], &[f32; PACKET]) -> [f32; PACKET],
+    >(
+        &self,
+        origin: &[[f32; PACKET]; 3],
+        inv_dir: &[[f32; PACKET]; 3],
+        t_min: &[f32; PACKET],
+        t_max: &[f32; PACKET],
+        mask: u32,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+        mut leaf: F,
+    ) {
+        // Each lane's interval inside the tree's box.
+        let mut scene_min = [0f32; PACKET];
+        let mut scene_max = [0f32; PACKET];
+        let mut alive = 0u32;
+        for l in 0..PACKET {
+            if mask >> l & 1 == 0 {
+                continue;
+            }
+            let o = Vec3::new(origin[0][l], origin[1][l], origin[2][l]);
+            let inv = Vec3::new(inv_dir[0][l], inv_dir[1][l], inv_dir[2][l]);
+            if let Some((a, b)) =
+                ray_box(o, inv, self.bounds.min, self.bounds.max, t_min[l], t_max[l])
+            {
+                scene_min[l] = a;
+                scene_max[l] = b;
+                alive |= 1 << l;
+            }
+        }
+        if alive == 0 {
+            return;
+        }
+        let lead = alive.trailing_zeros() as usize;
+        let negative = [
+            inv_dir[0][lead] < 0.0,
+            inv_dir[1][lead] < 0.0,
+            inv_dir[2][lead] < 0.0,
+        ];
+        let cap = cfg.stack_size.clamp(1, MAX_DEPTH);
+        // Four lanes in SSE registers: one node step is a handful of vector instructions
+        // and two lane masks, with no branch per lane.
+        let o4 = origin.map(Vec4::from_array);
+        let inv4 = inv_dir.map(Vec4::from_array);
+        let scene_max4 = Vec4::from_array(scene_max);
+        type Entry = (u32, u32, Vec4, Vec4);
+        let mut stack = [std::mem::MaybeUninit::<Entry>::uninit(); MAX_DEPTH];
+        let mut top = 0usize;
+        let mut len = 0usize;
+        let mut root = 0u32;
+        let mut first = true;
+        // Where each lane's processed part of its interval ends.
+        let mut done = Vec4::from_array(scene_min);
+        loop {
+            let mut node;
+            let mut lanes;
+            let tmin;
+            let mut tmax;
+            let mut pushdown;
+            if len == 0 {
+                // Lanes with a part of their interval left.
+                let left = if first {
+                    alive
+                } else {
+                    alive & done.cmplt(scene_max4).bitmask()
+                };
+                if left == 0 {
+                    return;
+                }
+                if !first {
+                    stats.restarts += 1;
+                }
+                first = false;
+                node = root;
+                lanes = left;
+                tmin = done;
+                tmax = scene_max4;
+                pushdown = true;
+            } else {
+                top = if top == 0 { cap - 1 } else { top - 1 };
+                len -= 1;
+                // SAFETY: `len > 0` entries below `top` (cyclically) were written by pushes.
+                let e = unsafe { stack[top].assume_init() };
+                node = e.0;
+                // Lanes finished since the push drop out.
+                lanes = e.1 & alive;
+                tmin = e.2;
+                tmax = e.3;
+                pushdown = false;
+                if lanes == 0 {
+                    continue;
+                }
+            }
+            let mut n = self.nodes[node as usize];
+            while !n.is_leaf() {
+                stats.nodes += 1;
+                let axis = (n.a & 3) as usize;
+                let split = f32::from_bits(n.b);
+                let below = node + 1;
+                let above = n.a >> 2;
+                let (one, two) = if negative[axis] {
+                    (above, below)
+                } else {
+                    (below, above)
+                };
+                // The single-ray rule per lane: `d ≥ t_max` near only, else `d ≤ t_min` far
+                // only, else both.
+                let d = (Vec4::splat(split) - o4[axis]) * inv4[axis];
+                let ge_max = d.cmpge(tmax).bitmask();
+                let le_min = d.cmple(tmin).bitmask();
+                let near = lanes & (ge_max | !le_min);
+                let far = lanes & !ge_max;
+                if far == 0 {
+                    node = one;
+                } else if near == 0 {
+                    node = two;
+                } else {
+                    stack[top] = std::mem::MaybeUninit::new((two, far, tmin.max(d), tmax));
+                    top = if top + 1 == cap { 0 } else { top + 1 };
+                    len = (len + 1).min(cap);
+                    node = one;
+                    lanes = near;
+                    tmax = tmax.min(d);
+                    pushdown = false;
+                }
+                if pushdown {
+                    root = node;
+                }
+                n = self.nodes[node as usize];
+            }
+            stats.leaves += 1;
+            let count = (n.a >> 2) as usize;
+            let off = n.b as usize;
+            let (lo, hi) = (tmin.to_array(), tmax.to_array());
+            let best = Vec4::from_array(leaf(&self.indices[off..off + count], lanes, &lo, &hi));
+            let in_leaf = BVec4A::new(
+                lanes & 1 != 0,
+                lanes & 2 != 0,
+                lanes & 4 != 0,
+                lanes & 8 != 0,
+            );
+            done = Vec4::select(in_leaf, tmax, done);
+            // The single-ray termination rule, per lane.
+            let finished = (best + TERMINATION_SLACK * tmax.abs())
+                .cmplt(tmax)
+                .bitmask()
+                & lanes;
+            alive &= !finished;
+            if alive == 0 {
                 return;
             }
         }

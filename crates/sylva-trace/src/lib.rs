@@ -17,7 +17,9 @@ pub mod ray;
 pub mod scene;
 
 pub use camera::PinholeCamera;
-pub use kdtree::{KdTree, TraceStats, TraversalConfig, TreeStats, DEFAULT_STACK_SIZE, MAX_DEPTH};
+pub use kdtree::{
+    KdTree, TraceStats, TraversalConfig, TreeStats, DEFAULT_STACK_SIZE, MAX_DEPTH, PACKET,
+};
 pub use model::{AlphaMask, ModelAccel};
 pub use ray::{intersect_triangle, ray_box, Hit, Ray, TriangleData};
-pub use scene::{AccelMemory, SceneAccel, TraceError, TraceInstance};
+pub use scene::{AccelMemory, OccluderCache, SceneAccel, TraceError, TraceInstance};

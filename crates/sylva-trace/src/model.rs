@@ -10,7 +10,7 @@
 //! A hit on a transparent texel is discarded inside the leaf loop and the traversal goes on,
 //! so the ray is never re-traced from the hit. Wood and untextured leaves are opaque.
 
-use crate::kdtree::{Clip, KdTree, TraceStats, TraversalConfig};
+use crate::kdtree::{Clip, KdTree, TraceStats, TraversalConfig, PACKET};
 use crate::ray::{intersect_triangle, inverse_dir, TriangleData};
 use glam::{Affine3A, Vec2, Vec3};
 use std::sync::Arc;
@@ -420,7 +420,89 @@ impl ModelAccel {
         stats.alpha_rejects += rejects;
     }
 
-    /// Any opaque hit with `t_min < t ≤ t_max`, in model space.
+    /// [`ModelAccel::closest`] for the lanes `mask` of a packet (model-space rays that
+    /// [`crate::kdtree::packet_compatible`] accepts), improving each lane's `best`; the same
+    /// hits, tie rule and alpha rule lane by lane.
+    #[inline]
+    #[allow(clippy::too_many_arguments)] // the hot path, called per instance a packet meets
+    pub(crate) fn closest_packet(
+        &self,
+        origin: &[[f32; PACKET]; 3],
+        dir: &[[f32; PACKET]; 3],
+        inv: &[[f32; PACKET]; 3],
+        t_min: &[f32; PACKET],
+        mask: u32,
+        instance: u32,
+        best: &mut [Best; PACKET],
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+    ) {
+        let (mut tests, mut rejects) = (0u64, 0u64);
+        let t_max = best.map(|b| b.t);
+        let lane = |a: &[[f32; PACKET]; 3], l: usize| Vec3::new(a[0][l], a[1][l], a[2][l]);
+        self.tree.traverse_packet(
+            origin,
+            inv,
+            t_min,
+            &t_max,
+            mask,
+            cfg,
+            stats,
+            |prims, lanes, _, _| {
+                for l in 0..PACKET {
+                    if lanes >> l & 1 == 0 {
+                        continue;
+                    }
+                    let (o, d) = (lane(origin, l), lane(dir, l));
+                    let b = &mut best[l];
+                    tests += prims.len() as u64;
+                    for &p in prims {
+                        let tri = &self.tris[p as usize];
+                        if let Some((t, u, v)) = intersect_triangle(o, d, &tri.data, t_min[l], b.t)
+                        {
+                            if t == b.t && (instance, p) >= (b.instance, b.triangle) {
+                                continue;
+                            }
+                            if !self.passes_alpha(tri.alpha, u, v) {
+                                rejects += 1;
+                                continue;
+                            }
+                            *b = Best {
+                                t,
+                                instance,
+                                triangle: p,
+                                u,
+                                v,
+                            };
+                        }
+                    }
+                }
+                best.map(|b| b.t)
+            },
+        );
+        stats.triangle_tests += tests;
+        stats.alpha_rejects += rejects;
+    }
+
+    /// Whether triangle `triangle` alone stops the model-space ray within `t_min < t ≤ t_max`
+    /// (same arithmetic and alpha rule as [`ModelAccel::any`]).
+    #[inline]
+    pub(crate) fn occludes(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        triangle: u32,
+    ) -> bool {
+        let Some(tri) = self.tris.get(triangle as usize) else {
+            return false;
+        };
+        intersect_triangle(origin, dir, &tri.data, t_min, t_max)
+            .is_some_and(|(_, u, v)| self.passes_alpha(tri.alpha, u, v))
+    }
+
+    /// An opaque hit with `t_min < t ≤ t_max`, in model space: the first triangle found.
     #[inline]
     pub(crate) fn any(
         &self,
@@ -430,9 +512,9 @@ impl ModelAccel {
         t_max: f32,
         cfg: TraversalConfig,
         stats: &mut TraceStats,
-    ) -> bool {
+    ) -> Option<u32> {
         let inv = inverse_dir(dir);
-        let mut found = false;
+        let mut found = None;
         let (mut tests, mut rejects) = (0u64, 0u64);
         self.tree
             .traverse(origin, inv, t_min, t_max, cfg, stats, |prims| {
@@ -443,7 +525,7 @@ impl ModelAccel {
                         intersect_triangle(origin, dir, &tri.data, t_min, t_max)
                     {
                         if self.passes_alpha(tri.alpha, u, v) {
-                            found = true;
+                            found = Some(p);
                             return f32::NEG_INFINITY;
                         }
                         rejects += 1;
@@ -487,7 +569,10 @@ impl ModelAccel {
     /// Whether a model-space ray hits this model anywhere in its interval.
     pub fn any_hit(&self, ray: &crate::Ray, cfg: TraversalConfig, stats: &mut TraceStats) -> bool {
         stats.rays += 1;
-        ray.is_valid() && self.any(ray.origin, ray.dir, ray.t_min, ray.t_max, cfg, stats)
+        ray.is_valid()
+            && self
+                .any(ray.origin, ray.dir, ray.t_min, ray.t_max, cfg, stats)
+                .is_some()
     }
 
     /// Reference: every triangle tested, same rules (for tests).

@@ -11,7 +11,9 @@
 //! instance's world box is slab-tested before its transform, and the ones the ray meets are
 //! entered nearest first, stopping at the first that starts beyond the closest hit.
 
-use crate::kdtree::{Clip, KdTree, TraceStats, TraversalConfig, TreeStats};
+use crate::kdtree::{
+    packet_compatible, Clip, KdTree, TraceStats, TraversalConfig, TreeStats, PACKET,
+};
 use crate::model::{Best, ModelAccel};
 use crate::ray::{inverse_dir, ray_box, Hit, Ray};
 use glam::{Affine3A, Vec3};
@@ -64,6 +66,94 @@ impl Mailbox {
         self.ids[self.next] = id;
         self.next = (self.next + 1) & 7;
         true
+    }
+}
+
+/// Lane `l` of a packet's per-axis arrays.
+#[inline(always)]
+fn lane(a: &[[f32; PACKET]; 3], l: usize) -> Vec3 {
+    Vec3::new(a[0][l], a[1][l], a[2][l])
+}
+
+/// The octant of an inverse direction (0..8), or 8 when it is not finite: lanes of one
+/// group can share a packet traversal.
+#[inline(always)]
+fn sign_group(inv: Vec3) -> u32 {
+    if inv.is_finite() {
+        (inv.x < 0.0) as u32 | ((inv.y < 0.0) as u32) << 1 | ((inv.z < 0.0) as u32) << 2
+    } else {
+        8
+    }
+}
+
+/// [`Mailbox`] for packets: which lanes have tested each of the last few instances.
+struct PacketMailbox {
+    ids: [u32; 8],
+    lanes: [u32; 8],
+    next: usize,
+}
+
+impl PacketMailbox {
+    fn new() -> PacketMailbox {
+        PacketMailbox {
+            ids: [u32::MAX; 8],
+            lanes: [0; 8],
+            next: 0,
+        }
+    }
+
+    #[inline(always)]
+    fn tested(&self, id: u32) -> u32 {
+        (0..8).fold(0, |m, k| {
+            if self.ids[k] == id {
+                m | self.lanes[k]
+            } else {
+                m
+            }
+        })
+    }
+
+    #[inline(always)]
+    fn insert(&mut self, id: u32, lanes: u32) {
+        if let Some(k) = self.ids.iter().position(|&x| x == id) {
+            self.lanes[k] |= lanes;
+            return;
+        }
+        self.ids[self.next] = id;
+        self.lanes[self.next] = lanes;
+        self.next = (self.next + 1) & 7;
+    }
+}
+
+/// The last few occluders `(instance, triangle)` that shadow rays met: keep one per run of
+/// neighbouring rays (a tile), pass it to [`SceneAccel::any_hit_cached`].
+#[derive(Debug, Clone)]
+pub struct OccluderCache {
+    entries: [(u32, u32); OccluderCache::SIZE],
+    next: usize,
+}
+
+impl OccluderCache {
+    const SIZE: usize = 4;
+
+    pub fn new() -> OccluderCache {
+        OccluderCache {
+            entries: [(u32::MAX, 0); OccluderCache::SIZE],
+            next: 0,
+        }
+    }
+}
+
+impl OccluderCache {
+    fn remember(&mut self, e: (u32, u32)) {
+        self.entries[self.next] = e;
+        self.next = (self.next + 1) % OccluderCache::SIZE;
+    }
+}
+
+impl Default for OccluderCache {
+    fn default() -> Self {
+        OccluderCache::new()
     }
 }
 
@@ -331,25 +421,278 @@ impl SceneAccel {
         })
     }
 
+    /// [`SceneAccel::closest_hit`] for up to [`PACKET`] rays at once (the lanes set in
+    /// `mask`; the others give `None`). Rays from one point in nearly the same direction
+    /// (the samples of a pixel, neighbouring pixels) share their walk through both tree
+    /// levels; every lane's hit is exactly the one `closest_hit` finds for it alone. Rays
+    /// whose direction signs differ are split into groups that agree.
+    pub fn closest_hit_packet(
+        &self,
+        rays: &[Ray; PACKET],
+        mask: u32,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+    ) -> [Option<Hit>; PACKET] {
+        let mut out = [None; PACKET];
+        let mut valid = 0u32;
+        for (l, ray) in rays.iter().enumerate() {
+            if mask >> l & 1 == 1 && ray.is_valid() {
+                valid |= 1 << l;
+            }
+        }
+        let mut o = [[0f32; PACKET]; 3];
+        let mut inv = [[0f32; PACKET]; 3];
+        for (l, ray) in rays.iter().enumerate() {
+            let i = inverse_dir(ray.dir);
+            for k in 0..3 {
+                o[k][l] = ray.origin[k];
+                inv[k][l] = i[k];
+            }
+        }
+        if !packet_compatible(&inv, valid) {
+            for (l, ray) in rays.iter().enumerate() {
+                if mask >> l & 1 == 1 {
+                    out[l] = self.closest_hit(ray, cfg, stats);
+                }
+            }
+            return out;
+        }
+        stats.rays += mask.count_ones() as u64;
+        let mut best = [Best {
+            t: 0.0,
+            instance: u32::MAX,
+            triangle: u32::MAX,
+            u: 0.0,
+            v: 0.0,
+        }; PACKET];
+        let mut t_min = [0f32; PACKET];
+        for (l, ray) in rays.iter().enumerate() {
+            best[l].t = ray.t_max;
+            t_min[l] = ray.t_min;
+            if valid >> l & 1 == 0 {
+                continue;
+            }
+            if let Some(t) = self.ground_t(ray, ray.t_max) {
+                let p = ray.at(t);
+                best[l] = Best {
+                    t,
+                    instance: Hit::GROUND,
+                    triangle: 0,
+                    u: p.x,
+                    v: p.z,
+                };
+            }
+        }
+        let t_max = best.map(|b| b.t);
+        let mut visits = 0u64;
+        let mut mailbox = PacketMailbox::new();
+        let mut inner = TraceStats::default();
+        self.top.traverse_packet(
+            &o,
+            &inv,
+            &t_min,
+            &t_max,
+            valid,
+            cfg,
+            stats,
+            |prims, lanes, _, _| {
+                // (first entry over the lanes, instance, lanes, each lane's entry)
+                let mut cand = [(0f32, 0u32, 0u32, [0f32; PACKET]); SORTED_INSTANCES];
+                let mut n = 0;
+                for &i in prims {
+                    let [bmin, bmax] = self.boxes[i as usize];
+                    let mut entry = [f32::INFINITY; PACKET];
+                    let mut meet = 0u32;
+                    for l in 0..PACKET {
+                        if lanes >> l & 1 == 0 {
+                            continue;
+                        }
+                        let (ol, il) = (lane(&o, l), lane(&inv, l));
+                        if let Some((t0, _)) = ray_box(ol, il, bmin, bmax, t_min[l], best[l].t) {
+                            entry[l] = t0;
+                            meet |= 1 << l;
+                        }
+                    }
+                    // An instance a lane met in an earlier leaf was already tested over its
+                    // whole interval.
+                    meet &= !mailbox.tested(i);
+                    if meet == 0 {
+                        continue;
+                    }
+                    if n < SORTED_INSTANCES {
+                        let first = entry.iter().copied().fold(f32::INFINITY, f32::min);
+                        cand[n] = (first, i, meet, entry);
+                        n += 1;
+                    } else {
+                        visits += 1;
+                        mailbox.insert(i, meet);
+                        self.enter_packet(i, rays, &t_min, meet, &mut best, cfg, &mut inner);
+                    }
+                }
+                cand[..n].sort_by(|a, b| a.0.total_cmp(&b.0));
+                for (_, i, meet, entry) in &cand[..n] {
+                    // Equal entry still enters: a hit at exactly `best.t` may win the tie.
+                    let mut go = 0u32;
+                    for l in 0..PACKET {
+                        if meet >> l & 1 == 1 && entry[l] <= best[l].t {
+                            go |= 1 << l;
+                        }
+                    }
+                    if go == 0 {
+                        continue;
+                    }
+                    visits += 1;
+                    mailbox.insert(*i, go);
+                    self.enter_packet(*i, rays, &t_min, go, &mut best, cfg, &mut inner);
+                }
+                best.map(|b| b.t)
+            },
+        );
+        *stats += inner;
+        stats.instance_visits += visits;
+        for l in 0..PACKET {
+            let b = best[l];
+            if valid >> l & 1 == 1 && b.triangle != u32::MAX {
+                out[l] = Some(Hit {
+                    t: b.t,
+                    instance: b.instance,
+                    triangle: b.triangle,
+                    u: b.u,
+                    v: b.v,
+                });
+            }
+        }
+        out
+    }
+
+    /// Tests instance `i` for the lanes `lanes` of a packet, in model space, grouping the
+    /// lanes by the signs of their model-space directions (a rotation can separate them).
+    #[allow(clippy::too_many_arguments)] // the hot path
+    #[allow(clippy::needless_range_loop)] // lanes index several parallel arrays
+    fn enter_packet(
+        &self,
+        i: u32,
+        rays: &[Ray; PACKET],
+        t_min: &[f32; PACKET],
+        lanes: u32,
+        best: &mut [Best; PACKET],
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+    ) {
+        let inst = &self.instances[i as usize];
+        let model = &self.models[inst.model as usize];
+        let mut mo = [[0f32; PACKET]; 3];
+        let mut md = [[0f32; PACKET]; 3];
+        let mut inv = [[0f32; PACKET]; 3];
+        let mut group = [0u32; PACKET]; // sign pattern of each lane, 8 = not finite
+        for l in 0..PACKET {
+            if lanes >> l & 1 == 0 {
+                continue;
+            }
+            // The same arithmetic as `closest_hit`.
+            let o = inst.to_model.transform_point3(rays[l].origin);
+            let d = inst.to_model.transform_vector3(rays[l].dir);
+            let iv = inverse_dir(d);
+            for k in 0..3 {
+                mo[k][l] = o[k];
+                md[k][l] = d[k];
+                inv[k][l] = iv[k];
+            }
+            group[l] = sign_group(iv);
+        }
+        let mut left = lanes;
+        while left != 0 {
+            let lead = left.trailing_zeros() as usize;
+            let g = group[lead];
+            if g == 8 {
+                left &= !(1 << lead);
+                model.closest(
+                    lane(&mo, lead),
+                    lane(&md, lead),
+                    t_min[lead],
+                    i,
+                    &mut best[lead],
+                    cfg,
+                    stats,
+                );
+                continue;
+            }
+            let mut m = 0u32;
+            for l in 0..PACKET {
+                if left >> l & 1 == 1 && group[l] == g {
+                    m |= 1 << l;
+                }
+            }
+            left &= !m;
+            model.closest_packet(&mo, &md, &inv, t_min, m, i, best, cfg, stats);
+        }
+    }
+
     /// Whether anything opaque lies on the ray with `t_min < t ≤ t_max` (shadow rays).
     pub fn any_hit(&self, ray: &Ray, cfg: TraversalConfig, stats: &mut TraceStats) -> bool {
+        self.any_hit_cached(ray, cfg, stats, &mut OccluderCache::new())
+    }
+
+    /// [`SceneAccel::any_hit`], trying the occluders in `cache` first and remembering the
+    /// one a traversal finds. Neighbouring shadow rays (parallel, a pixel apart) are often
+    /// stopped by the same leaf; a cached triangle that stops this ray is an exact answer,
+    /// because any opaque hit in the interval means "shadowed". The result never depends
+    /// on what the cache holds; only the work does.
+    pub fn any_hit_cached(
+        &self,
+        ray: &Ray,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+        cache: &mut OccluderCache,
+    ) -> bool {
         stats.rays += 1;
         if !ray.is_valid() {
             return false;
         }
-        if self.ground_t(ray, ray.t_max).is_some() {
+        if self.ground_t(ray, ray.t_max).is_some() || self.cached_occluder(ray, stats, cache) {
             return true;
         }
+        self.traverse_any(ray, cfg, stats, cache)
+    }
+
+    /// Whether one of the cached occluders stops the (valid) ray.
+    fn cached_occluder(&self, ray: &Ray, stats: &mut TraceStats, cache: &OccluderCache) -> bool {
+        let (o, d) = (ray.origin, ray.dir);
+        for k in 0..OccluderCache::SIZE {
+            // Most recent first.
+            let (i, tri) =
+                cache.entries[(cache.next + OccluderCache::SIZE - 1 - k) % OccluderCache::SIZE];
+            let Some(inst) = self.instances.get(i as usize) else {
+                continue;
+            };
+            let mo = inst.to_model.transform_point3(o);
+            let md = inst.to_model.transform_vector3(d);
+            if self.models[inst.model as usize].occludes(mo, md, ray.t_min, ray.t_max, tri) {
+                stats.occluder_cache_hits += 1;
+                return true;
+            }
+        }
+        false
+    }
+
+    /// The traversal of a shadow ray (valid, not stopped by the ground or the cache).
+    fn traverse_any(
+        &self,
+        ray: &Ray,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+        cache: &mut OccluderCache,
+    ) -> bool {
         let (o, d) = (ray.origin, ray.dir);
         let inv_d = inverse_dir(d);
-        let mut found = false;
+        let mut found = None;
         let mut visits = 0u64;
         let mut mailbox = Mailbox::new();
         let mut inner = TraceStats::default();
         self.top
             .traverse(o, inv_d, ray.t_min, ray.t_max, cfg, stats, |prims| {
                 let mut enter = |i: u32| {
-                    if found || !mailbox.insert(i) {
+                    if found.is_some() || !mailbox.insert(i) {
                         return;
                     }
                     visits += 1;
@@ -357,7 +700,8 @@ impl SceneAccel {
                     let mo = inst.to_model.transform_point3(o);
                     let md = inst.to_model.transform_vector3(d);
                     found = self.models[inst.model as usize]
-                        .any(mo, md, ray.t_min, ray.t_max, cfg, &mut inner);
+                        .any(mo, md, ray.t_min, ray.t_max, cfg, &mut inner)
+                        .map(|tri| (i, tri));
                 };
                 // Nearest box first: a shadow ray starts inside its own tree's box, the most
                 // likely occluder.
@@ -366,7 +710,7 @@ impl SceneAccel {
                 for &(_, i) in &cand[..n] {
                     enter(i);
                 }
-                if found {
+                if found.is_some() {
                     f32::NEG_INFINITY
                 } else {
                     f32::INFINITY
@@ -374,7 +718,10 @@ impl SceneAccel {
             });
         *stats += inner;
         stats.instance_visits += visits;
-        found
+        if let Some(e) = found {
+            cache.remember(e);
+        }
+        found.is_some()
     }
 
     /// The instances of a top-level leaf whose world box the ray meets within

@@ -35,6 +35,7 @@ struct Measured {
     shadow_mrays: f64,
     timings: FrameTimings,
     restarts: u64,
+    occluder_cache_hits: u64,
 }
 
 impl Measured {
@@ -51,6 +52,7 @@ impl Measured {
             "primary_rays": self.timings.primary_rays,
             "shadow_rays": self.timings.shadow_rays,
             "restarts": self.restarts,
+            "occluder_cache_hits": self.occluder_cache_hits,
         })
     }
 }
@@ -82,6 +84,7 @@ pub fn run(a: BenchTraceArgs) -> Result<()> {
             shadow_mrays: med(&|t| t.shadow_rays as f64 / t.shadow_seconds.max(1e-12) * 1e-6),
             timings: t,
             restarts: frames[0].stats.restarts,
+            occluder_cache_hits: frames[0].stats.occluder_cache_hits,
         };
         results.push(m);
     }
