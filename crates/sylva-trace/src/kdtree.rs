@@ -25,25 +25,88 @@ const TERMINATION_SLACK: f32 = 1e-5;
 /// Rays traced together by [`KdTree::traverse_packet`].
 pub const PACKET: usize = 4;
 
+/// Lane `l` of a packet's per-axis arrays.
+#[inline(always)]
+pub(crate) fn lane(a: &[[f32; PACKET]; 3], l: usize) -> Vec3 {
+    Vec3::new(a[0][l], a[1][l], a[2][l])
+}
+
+/// The octant of an inverse direction (0..8), or 8 when it is not finite: lanes of one
+/// octant can share a packet traversal.
+#[inline(always)]
+pub(crate) fn sign_group(inv: Vec3) -> u32 {
+    if inv.is_finite() {
+        (inv.x < 0.0) as u32 | ((inv.y < 0.0) as u32) << 1 | ((inv.z < 0.0) as u32) << 2
+    } else {
+        8
+    }
+}
+
 /// Whether the rays `inv_dir` of the lanes in `mask` can share a packet traversal: finite
 /// inverse directions with the same signs.
-#[allow(clippy::needless_range_loop)] // lanes index several parallel arrays
 pub fn packet_compatible(inv_dir: &[[f32; PACKET]; 3], mask: u32) -> bool {
-    let mut signs = None;
-    for l in 0..PACKET {
-        if mask >> l & 1 == 0 {
-            continue;
-        }
-        let inv = [inv_dir[0][l], inv_dir[1][l], inv_dir[2][l]];
-        if !inv.iter().all(|v| v.is_finite()) {
-            return false;
-        }
-        let s = inv.map(|v| v < 0.0);
-        if *signs.get_or_insert(s) != s {
-            return false;
+    let mut groups = (0..PACKET)
+        .filter(|l| mask >> l & 1 == 1)
+        .map(|l| sign_group(lane(inv_dir, l)));
+    match groups.next() {
+        None => true,
+        Some(g) => g != 8 && groups.all(|h| h == g),
+    }
+}
+
+/// The short stack (000 Fig. 1) as a ring buffer of `cap` entries: a push onto a full stack
+/// overwrites the oldest entry, which kd-restart later makes up for.
+struct ShortStack<T: Copy> {
+    // Uninitialised: a traversal runs once per instance a ray meets, and clearing 56
+    // entries each time cost more than the traversal of a small tree.
+    items: [std::mem::MaybeUninit<T>; MAX_DEPTH],
+    cap: usize,
+    /// Next free slot.
+    top: usize,
+    len: usize,
+}
+
+impl<T: Copy> ShortStack<T> {
+    #[inline(always)]
+    fn new(cap: usize) -> ShortStack<T> {
+        ShortStack {
+            items: [std::mem::MaybeUninit::uninit(); MAX_DEPTH],
+            cap: cap.clamp(1, MAX_DEPTH),
+            top: 0,
+            len: 0,
         }
     }
-    true
+
+    #[inline(always)]
+    fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    #[inline(always)]
+    fn push(&mut self, e: T) {
+        self.items[self.top] = std::mem::MaybeUninit::new(e);
+        self.top = if self.top + 1 == self.cap {
+            0
+        } else {
+            self.top + 1
+        };
+        self.len = (self.len + 1).min(self.cap);
+    }
+
+    /// The newest entry; call only when not empty.
+    #[inline(always)]
+    fn pop(&mut self) -> T {
+        debug_assert!(self.len > 0);
+        self.top = if self.top == 0 {
+            self.cap - 1
+        } else {
+            self.top - 1
+        };
+        self.len -= 1;
+        // SAFETY: the `len + 1` entries below the old `top` (cyclically) were written by
+        // pushes, and callers pop only a non-empty stack.
+        unsafe { self.items[self.top].assume_init() }
+    }
 }
 
 /// The stack of the paper (000 §4.1).
@@ -83,7 +146,8 @@ impl Default for TraversalConfig {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct TraceStats {
     pub rays: u64,
-    /// Interior kd-tree nodes stepped through (both levels).
+    /// Interior kd-tree nodes stepped through (both levels); a packet's step counts once,
+    /// as do its leaves and instance entries.
     pub nodes: u64,
     pub leaves: u64,
     pub triangle_tests: u64,
@@ -510,13 +574,7 @@ impl KdTree {
         ) else {
             return;
         };
-        let cap = cfg.stack_size.clamp(1, MAX_DEPTH);
-        // Ring buffer: a push onto a full stack overwrites the oldest entry.
-        // Uninitialised: a traversal runs once per instance a ray meets, and clearing 56
-        // entries each time cost more than the traversal of a small tree.
-        let mut stack = [std::mem::MaybeUninit::<(u32, f32, f32)>::uninit(); MAX_DEPTH];
-        let mut top = 0usize; // next free slot
-        let mut len = 0usize;
+        let mut stack = ShortStack::<(u32, f32, f32)>::new(cfg.stack_size);
         let mut root = 0u32;
         let mut first = true;
         let o = origin.to_array();
@@ -526,7 +584,7 @@ impl KdTree {
         while tmax < scene_max || first {
             let mut node;
             let mut pushdown;
-            if len == 0 {
+            if stack.is_empty() {
                 if !first {
                     stats.restarts += 1;
                 }
@@ -536,13 +594,7 @@ impl KdTree {
                 tmax = scene_max;
                 pushdown = true;
             } else {
-                top = if top == 0 { cap - 1 } else { top - 1 };
-                len -= 1;
-                // SAFETY: `len > 0` entries below `top` (cyclically) were written by pushes.
-                let e = unsafe { stack[top].assume_init() };
-                node = e.0;
-                tmin = e.1;
-                tmax = e.2;
+                (node, tmin, tmax) = stack.pop();
                 pushdown = false;
             }
             let mut n = self.nodes[node as usize];
@@ -571,9 +623,7 @@ impl KdTree {
                     self.traverse_all(origin, inv_dir, scene_min, scene_max, stats, &mut leaf);
                     return;
                 } else {
-                    stack[top] = std::mem::MaybeUninit::new((two, t_split, tmax));
-                    top = if top + 1 == cap { 0 } else { top + 1 };
-                    len = (len + 1).min(cap);
+                    stack.push((two, t_split, tmax));
                     node = one;
                     tmax = t_split;
                     pushdown = false;
@@ -632,8 +682,7 @@ impl KdTree {
             if mask >> l & 1 == 0 {
                 continue;
             }
-            let o = Vec3::new(origin[0][l], origin[1][l], origin[2][l]);
-            let inv = Vec3::new(inv_dir[0][l], inv_dir[1][l], inv_dir[2][l]);
+            let (o, inv) = (lane(origin, l), lane(inv_dir, l));
             if let Some((a, b)) =
                 ray_box(o, inv, self.bounds.min, self.bounds.max, t_min[l], t_max[l])
             {
@@ -651,16 +700,12 @@ impl KdTree {
             inv_dir[1][lead] < 0.0,
             inv_dir[2][lead] < 0.0,
         ];
-        let cap = cfg.stack_size.clamp(1, MAX_DEPTH);
         // Four lanes in SSE registers: one node step is a handful of vector instructions
         // and two lane masks, with no branch per lane.
         let o4 = origin.map(Vec4::from_array);
         let inv4 = inv_dir.map(Vec4::from_array);
         let scene_max4 = Vec4::from_array(scene_max);
-        type Entry = (u32, u32, Vec4, Vec4);
-        let mut stack = [std::mem::MaybeUninit::<Entry>::uninit(); MAX_DEPTH];
-        let mut top = 0usize;
-        let mut len = 0usize;
+        let mut stack = ShortStack::<(u32, u32, Vec4, Vec4)>::new(cfg.stack_size);
         let mut root = 0u32;
         let mut first = true;
         // Where each lane's processed part of its interval ends.
@@ -671,7 +716,7 @@ impl KdTree {
             let tmin;
             let mut tmax;
             let mut pushdown;
-            if len == 0 {
+            if stack.is_empty() {
                 // Lanes with a part of their interval left.
                 let left = if first {
                     alive
@@ -691,15 +736,10 @@ impl KdTree {
                 tmax = scene_max4;
                 pushdown = true;
             } else {
-                top = if top == 0 { cap - 1 } else { top - 1 };
-                len -= 1;
-                // SAFETY: `len > 0` entries below `top` (cyclically) were written by pushes.
-                let e = unsafe { stack[top].assume_init() };
-                node = e.0;
+                let pushed;
+                (node, pushed, tmin, tmax) = stack.pop();
                 // Lanes finished since the push drop out.
-                lanes = e.1 & alive;
-                tmin = e.2;
-                tmax = e.3;
+                lanes = pushed & alive;
                 pushdown = false;
                 if lanes == 0 {
                     continue;
@@ -729,9 +769,7 @@ impl KdTree {
                 } else if near == 0 {
                     node = two;
                 } else {
-                    stack[top] = std::mem::MaybeUninit::new((two, far, tmin.max(d), tmax));
-                    top = if top + 1 == cap { 0 } else { top + 1 };
-                    len = (len + 1).min(cap);
+                    stack.push((two, far, tmin.max(d), tmax));
                     node = one;
                     lanes = near;
                     tmax = tmax.min(d);

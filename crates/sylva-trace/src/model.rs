@@ -10,7 +10,7 @@
 //! A hit on a transparent texel is discarded inside the leaf loop and the traversal goes on,
 //! so the ray is never re-traced from the hit. Wood and untextured leaves are opaque.
 
-use crate::kdtree::{Clip, KdTree, TraceStats, TraversalConfig, PACKET};
+use crate::kdtree::{lane, Clip, KdTree, TraceStats, TraversalConfig, PACKET};
 use crate::ray::{intersect_triangle, inverse_dir, TriangleData};
 use glam::{Affine3A, Vec2, Vec3};
 use std::sync::Arc;
@@ -100,6 +100,31 @@ pub(crate) struct Best {
     pub triangle: u32,
     pub u: f32,
     pub v: f32,
+}
+
+impl Best {
+    /// Nothing found yet on `t_min < t ≤ t_max`.
+    pub(crate) fn nothing(t_max: f32) -> Best {
+        Best {
+            t: t_max,
+            instance: u32::MAX,
+            triangle: u32::MAX,
+            u: 0.0,
+            v: 0.0,
+        }
+    }
+
+    /// The hit found, if any (`triangle == MAX` marks "nothing yet"; the ground has
+    /// triangle 0).
+    pub(crate) fn hit(self) -> Option<crate::Hit> {
+        (self.triangle != u32::MAX).then_some(crate::Hit {
+            t: self.t,
+            instance: self.instance,
+            triangle: self.triangle,
+            u: self.u,
+            v: self.v,
+        })
+    }
 }
 
 /// A model ready for ray queries.
@@ -375,6 +400,48 @@ impl ModelAccel {
         self.passes_alpha(self.tris[triangle as usize].alpha, u, v)
     }
 
+    /// Tests triangle `p` of instance `instance` against the model-space ray and makes it
+    /// `best` if it is closer (ties: lower `(instance, triangle)`) and opaque there. Returns
+    /// whether the alpha test discarded a hit.
+    #[inline(always)]
+    fn offer(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        instance: u32,
+        p: u32,
+        best: &mut Best,
+    ) -> bool {
+        let tri = &self.tris[p as usize];
+        let Some((t, u, v)) = intersect_triangle(origin, dir, &tri.data, t_min, best.t) else {
+            return false;
+        };
+        if t == best.t && (instance, p) >= (best.instance, best.triangle) {
+            return false;
+        }
+        if !self.passes_alpha(tri.alpha, u, v) {
+            return true;
+        }
+        *best = Best {
+            t,
+            instance,
+            triangle: p,
+            u,
+            v,
+        };
+        false
+    }
+
+    /// Triangle `p` against the segment `t_min < t ≤ t_max` of a model-space ray: `None`
+    /// for a miss, `Some(opaque)` for a hit, `opaque` by the alpha rule.
+    #[inline(always)]
+    fn segment_hit(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32, p: u32) -> Option<bool> {
+        let tri = self.tris.get(p as usize)?;
+        intersect_triangle(origin, dir, &tri.data, t_min, t_max)
+            .map(|(_, u, v)| self.passes_alpha(tri.alpha, u, v))
+    }
+
     /// Closest hit in model space, improving `best` (ties: lower triangle id).
     #[inline]
     #[allow(clippy::too_many_arguments)] // the hot path, called per instance a ray meets
@@ -394,25 +461,7 @@ impl ModelAccel {
             .traverse(origin, inv, t_min, best.t, cfg, stats, |prims| {
                 tests += prims.len() as u64;
                 for &p in prims {
-                    let tri = &self.tris[p as usize];
-                    if let Some((t, u, v)) =
-                        intersect_triangle(origin, dir, &tri.data, t_min, best.t)
-                    {
-                        if t == best.t && (instance, p) >= (best.instance, best.triangle) {
-                            continue;
-                        }
-                        if !self.passes_alpha(tri.alpha, u, v) {
-                            rejects += 1;
-                            continue;
-                        }
-                        *best = Best {
-                            t,
-                            instance,
-                            triangle: p,
-                            u,
-                            v,
-                        };
-                    }
+                    rejects += self.offer(origin, dir, t_min, instance, p, best) as u64;
                 }
                 best.t
             });
@@ -439,7 +488,6 @@ impl ModelAccel {
     ) {
         let (mut tests, mut rejects) = (0u64, 0u64);
         let t_max = best.map(|b| b.t);
-        let lane = |a: &[[f32; PACKET]; 3], l: usize| Vec3::new(a[0][l], a[1][l], a[2][l]);
         self.tree.traverse_packet(
             origin,
             inv,
@@ -454,27 +502,9 @@ impl ModelAccel {
                         continue;
                     }
                     let (o, d) = (lane(origin, l), lane(dir, l));
-                    let b = &mut best[l];
                     tests += prims.len() as u64;
                     for &p in prims {
-                        let tri = &self.tris[p as usize];
-                        if let Some((t, u, v)) = intersect_triangle(o, d, &tri.data, t_min[l], b.t)
-                        {
-                            if t == b.t && (instance, p) >= (b.instance, b.triangle) {
-                                continue;
-                            }
-                            if !self.passes_alpha(tri.alpha, u, v) {
-                                rejects += 1;
-                                continue;
-                            }
-                            *b = Best {
-                                t,
-                                instance,
-                                triangle: p,
-                                u,
-                                v,
-                            };
-                        }
+                        rejects += self.offer(o, d, t_min[l], instance, p, &mut best[l]) as u64;
                     }
                 }
                 best.map(|b| b.t)
@@ -495,11 +525,7 @@ impl ModelAccel {
         t_max: f32,
         triangle: u32,
     ) -> bool {
-        let Some(tri) = self.tris.get(triangle as usize) else {
-            return false;
-        };
-        intersect_triangle(origin, dir, &tri.data, t_min, t_max)
-            .is_some_and(|(_, u, v)| self.passes_alpha(tri.alpha, u, v))
+        self.segment_hit(origin, dir, t_min, t_max, triangle) == Some(true)
     }
 
     /// An opaque hit with `t_min < t ≤ t_max`, in model space: the first triangle found.
@@ -520,15 +546,13 @@ impl ModelAccel {
             .traverse(origin, inv, t_min, t_max, cfg, stats, |prims| {
                 for &p in prims {
                     tests += 1;
-                    let tri = &self.tris[p as usize];
-                    if let Some((_, u, v)) =
-                        intersect_triangle(origin, dir, &tri.data, t_min, t_max)
-                    {
-                        if self.passes_alpha(tri.alpha, u, v) {
+                    match self.segment_hit(origin, dir, t_min, t_max, p) {
+                        Some(true) => {
                             found = Some(p);
                             return f32::NEG_INFINITY;
                         }
-                        rejects += 1;
+                        Some(false) => rejects += 1,
+                        None => {}
                     }
                 }
                 f32::INFINITY
@@ -549,21 +573,9 @@ impl ModelAccel {
         if !ray.is_valid() {
             return None;
         }
-        let mut best = Best {
-            t: ray.t_max,
-            instance: u32::MAX,
-            triangle: u32::MAX,
-            u: 0.0,
-            v: 0.0,
-        };
+        let mut best = Best::nothing(ray.t_max);
         self.closest(ray.origin, ray.dir, ray.t_min, 0, &mut best, cfg, stats);
-        (best.instance != u32::MAX).then_some(crate::Hit {
-            t: best.t,
-            instance: best.instance,
-            triangle: best.triangle,
-            u: best.u,
-            v: best.v,
-        })
+        best.hit()
     }
 
     /// Whether a model-space ray hits this model anywhere in its interval.

@@ -12,7 +12,8 @@
 //! entered nearest first, stopping at the first that starts beyond the closest hit.
 
 use crate::kdtree::{
-    packet_compatible, Clip, KdTree, TraceStats, TraversalConfig, TreeStats, PACKET,
+    lane, packet_compatible, sign_group, Clip, KdTree, TraceStats, TraversalConfig, TreeStats,
+    PACKET,
 };
 use crate::model::{Best, ModelAccel};
 use crate::ray::{inverse_dir, ray_box, Hit, Ray};
@@ -42,10 +43,11 @@ pub enum TraceError {
     Camera(String),
 }
 
-/// The last few instances a ray was tested against (instances span several top-level
-/// leaves, and kd-restarts revisit leaves).
+/// The last few instances a ray (or which lanes of a packet) was tested against: instances
+/// span several top-level leaves, and kd-restarts revisit leaves. A single ray is lane 0.
 struct Mailbox {
     ids: [u32; 8],
+    lanes: [u32; 8],
     next: usize,
 }
 
@@ -53,55 +55,12 @@ impl Mailbox {
     fn new() -> Mailbox {
         Mailbox {
             ids: [u32::MAX; 8],
-            next: 0,
-        }
-    }
-
-    /// `false` when `id` was seen recently.
-    #[inline(always)]
-    fn insert(&mut self, id: u32) -> bool {
-        if self.ids.contains(&id) {
-            return false;
-        }
-        self.ids[self.next] = id;
-        self.next = (self.next + 1) & 7;
-        true
-    }
-}
-
-/// Lane `l` of a packet's per-axis arrays.
-#[inline(always)]
-fn lane(a: &[[f32; PACKET]; 3], l: usize) -> Vec3 {
-    Vec3::new(a[0][l], a[1][l], a[2][l])
-}
-
-/// The octant of an inverse direction (0..8), or 8 when it is not finite: lanes of one
-/// group can share a packet traversal.
-#[inline(always)]
-fn sign_group(inv: Vec3) -> u32 {
-    if inv.is_finite() {
-        (inv.x < 0.0) as u32 | ((inv.y < 0.0) as u32) << 1 | ((inv.z < 0.0) as u32) << 2
-    } else {
-        8
-    }
-}
-
-/// [`Mailbox`] for packets: which lanes have tested each of the last few instances.
-struct PacketMailbox {
-    ids: [u32; 8],
-    lanes: [u32; 8],
-    next: usize,
-}
-
-impl PacketMailbox {
-    fn new() -> PacketMailbox {
-        PacketMailbox {
-            ids: [u32::MAX; 8],
             lanes: [0; 8],
             next: 0,
         }
     }
 
+    /// The lanes that have tested instance `id`.
     #[inline(always)]
     fn tested(&self, id: u32) -> u32 {
         (0..8).fold(0, |m, k| {
@@ -113,6 +72,7 @@ impl PacketMailbox {
         })
     }
 
+    /// Records that `lanes` have tested instance `id`.
     #[inline(always)]
     fn insert(&mut self, id: u32, lanes: u32) {
         if let Some(k) = self.ids.iter().position(|&x| x == id) {
@@ -122,6 +82,16 @@ impl PacketMailbox {
         self.ids[self.next] = id;
         self.lanes[self.next] = lanes;
         self.next = (self.next + 1) & 7;
+    }
+
+    /// For a single ray: records `id`, `false` when it was seen recently.
+    #[inline(always)]
+    fn first_visit(&mut self, id: u32) -> bool {
+        if self.ids.contains(&id) {
+            return false;
+        }
+        self.insert(id, 1);
+        true
     }
 }
 
@@ -142,9 +112,7 @@ impl OccluderCache {
             next: 0,
         }
     }
-}
 
-impl OccluderCache {
     fn remember(&mut self, e: (u32, u32)) {
         self.entries[self.next] = e;
         self.next = (self.next + 1) % OccluderCache::SIZE;
@@ -352,23 +320,7 @@ impl SceneAccel {
         if !ray.is_valid() {
             return None;
         }
-        let mut best = Best {
-            t: ray.t_max,
-            instance: u32::MAX,
-            triangle: u32::MAX,
-            u: 0.0,
-            v: 0.0,
-        };
-        if let Some(t) = self.ground_t(ray, ray.t_max) {
-            let p = ray.at(t);
-            best = Best {
-                t,
-                instance: Hit::GROUND,
-                triangle: 0,
-                u: p.x,
-                v: p.z,
-            };
-        }
+        let mut best = self.ground_best(ray);
         let (o, d) = (ray.origin, ray.dir);
         let inv_d = inverse_dir(d);
         let mut visits = 0u64;
@@ -379,7 +331,7 @@ impl SceneAccel {
                 let mut enter = |i: u32, best: &mut Best| {
                     // An instance met in an earlier leaf was already tested over the whole
                     // interval.
-                    if !mailbox.insert(i) {
+                    if !mailbox.first_visit(i) {
                         return;
                     }
                     visits += 1;
@@ -408,17 +360,25 @@ impl SceneAccel {
             });
         *stats += inner;
         stats.instance_visits += visits;
-        // `triangle == MAX` marks "nothing yet" (the ground has triangle 0).
-        if best.triangle == u32::MAX {
-            return None;
+        best.hit()
+    }
+
+    /// The closest candidate before any instance is tested: the ground hit, or nothing up
+    /// to `ray.t_max`.
+    fn ground_best(&self, ray: &Ray) -> Best {
+        match self.ground_t(ray, ray.t_max) {
+            Some(t) => {
+                let p = ray.at(t);
+                Best {
+                    t,
+                    instance: Hit::GROUND,
+                    triangle: 0,
+                    u: p.x,
+                    v: p.z,
+                }
+            }
+            None => Best::nothing(ray.t_max),
         }
-        Some(Hit {
-            t: best.t,
-            instance: best.instance,
-            triangle: best.triangle,
-            u: best.u,
-            v: best.v,
-        })
     }
 
     /// [`SceneAccel::closest_hit`] for up to [`PACKET`] rays at once (the lanes set in
@@ -458,34 +418,12 @@ impl SceneAccel {
             return out;
         }
         stats.rays += mask.count_ones() as u64;
-        let mut best = [Best {
-            t: 0.0,
-            instance: u32::MAX,
-            triangle: u32::MAX,
-            u: 0.0,
-            v: 0.0,
-        }; PACKET];
-        let mut t_min = [0f32; PACKET];
-        for (l, ray) in rays.iter().enumerate() {
-            best[l].t = ray.t_max;
-            t_min[l] = ray.t_min;
-            if valid >> l & 1 == 0 {
-                continue;
-            }
-            if let Some(t) = self.ground_t(ray, ray.t_max) {
-                let p = ray.at(t);
-                best[l] = Best {
-                    t,
-                    instance: Hit::GROUND,
-                    triangle: 0,
-                    u: p.x,
-                    v: p.z,
-                };
-            }
-        }
+        // Invalid lanes are not traversed; their entries only fill the arrays.
+        let mut best = rays.map(|ray| self.ground_best(&ray));
+        let t_min = rays.map(|ray| ray.t_min);
         let t_max = best.map(|b| b.t);
         let mut visits = 0u64;
-        let mut mailbox = PacketMailbox::new();
+        let mut mailbox = Mailbox::new();
         let mut inner = TraceStats::default();
         self.top.traverse_packet(
             &o,
@@ -551,15 +489,8 @@ impl SceneAccel {
         *stats += inner;
         stats.instance_visits += visits;
         for l in 0..PACKET {
-            let b = best[l];
-            if valid >> l & 1 == 1 && b.triangle != u32::MAX {
-                out[l] = Some(Hit {
-                    t: b.t,
-                    instance: b.instance,
-                    triangle: b.triangle,
-                    u: b.u,
-                    v: b.v,
-                });
+            if valid >> l & 1 == 1 {
+                out[l] = best[l].hit();
             }
         }
         out
@@ -652,37 +583,7 @@ impl SceneAccel {
         if self.ground_t(ray, ray.t_max).is_some() || self.cached_occluder(ray, stats, cache) {
             return true;
         }
-        self.traverse_any(ray, cfg, stats, cache)
-    }
 
-    /// Whether one of the cached occluders stops the (valid) ray.
-    fn cached_occluder(&self, ray: &Ray, stats: &mut TraceStats, cache: &OccluderCache) -> bool {
-        let (o, d) = (ray.origin, ray.dir);
-        for k in 0..OccluderCache::SIZE {
-            // Most recent first.
-            let (i, tri) =
-                cache.entries[(cache.next + OccluderCache::SIZE - 1 - k) % OccluderCache::SIZE];
-            let Some(inst) = self.instances.get(i as usize) else {
-                continue;
-            };
-            let mo = inst.to_model.transform_point3(o);
-            let md = inst.to_model.transform_vector3(d);
-            if self.models[inst.model as usize].occludes(mo, md, ray.t_min, ray.t_max, tri) {
-                stats.occluder_cache_hits += 1;
-                return true;
-            }
-        }
-        false
-    }
-
-    /// The traversal of a shadow ray (valid, not stopped by the ground or the cache).
-    fn traverse_any(
-        &self,
-        ray: &Ray,
-        cfg: TraversalConfig,
-        stats: &mut TraceStats,
-        cache: &mut OccluderCache,
-    ) -> bool {
         let (o, d) = (ray.origin, ray.dir);
         let inv_d = inverse_dir(d);
         let mut found = None;
@@ -692,7 +593,7 @@ impl SceneAccel {
         self.top
             .traverse(o, inv_d, ray.t_min, ray.t_max, cfg, stats, |prims| {
                 let mut enter = |i: u32| {
-                    if found.is_some() || !mailbox.insert(i) {
+                    if found.is_some() || !mailbox.first_visit(i) {
                         return;
                     }
                     visits += 1;
@@ -722,6 +623,26 @@ impl SceneAccel {
             cache.remember(e);
         }
         found.is_some()
+    }
+
+    /// Whether one of the cached occluders stops the (valid) ray.
+    fn cached_occluder(&self, ray: &Ray, stats: &mut TraceStats, cache: &OccluderCache) -> bool {
+        let (o, d) = (ray.origin, ray.dir);
+        for k in 0..OccluderCache::SIZE {
+            // Most recent first.
+            let (i, tri) =
+                cache.entries[(cache.next + OccluderCache::SIZE - 1 - k) % OccluderCache::SIZE];
+            let Some(inst) = self.instances.get(i as usize) else {
+                continue;
+            };
+            let mo = inst.to_model.transform_point3(o);
+            let md = inst.to_model.transform_vector3(d);
+            if self.models[inst.model as usize].occludes(mo, md, ray.t_min, ray.t_max, tri) {
+                stats.occluder_cache_hits += 1;
+                return true;
+            }
+        }
+        false
     }
 
     /// The instances of a top-level leaf whose world box the ray meets within

@@ -106,23 +106,7 @@ fn crowded_top_level_leaves_equal_brute_force() {
     // 40 instances piled on nearly the same spot: the top-level leaves hold more instances
     // than the closest-hit query sorts by entry (16), so the overflow path runs too; a
     // duplicate pair (same model and transform) makes exact ties between instances.
-    let models = vec![soup(120, 21), soup(80, 22)];
-    let mut instances = Vec::new();
-    let mut r = rng(23);
-    for k in 0..40 {
-        instances.push(Instance {
-            model: (k % 2) as u32,
-            position: Vec3::new(
-                uniform(&mut r, -0.3, 0.3),
-                1.0 + uniform(&mut r, -0.3, 0.3),
-                uniform(&mut r, -0.3, 0.3),
-            ),
-            rotation_deg: uniform(&mut r, 0.0, 360.0),
-            scale: uniform(&mut r, 0.5, 1.5),
-        });
-    }
-    instances.push(instances[7]);
-    let accel = SceneAccel::from_parts(&models, &instances, Some([4.0, 4.0])).unwrap();
+    let accel = crowded_scene();
     let top = accel.top_stats();
     // On average more than 16 per non-empty leaf: some leaf overflows the sorted array.
     assert!(

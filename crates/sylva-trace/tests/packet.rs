@@ -166,23 +166,7 @@ fn incoherent_packets_and_partial_masks_equal_single_rays() {
 #[test]
 fn crowded_top_level_leaves_equal_single_rays() {
     // More instances per top-level leaf than are sorted (16), duplicates that tie exactly.
-    let models = vec![soup(120, 21), soup(80, 22)];
-    let mut instances = Vec::new();
-    let mut r = rng(23);
-    for k in 0..40 {
-        instances.push(Instance {
-            model: (k % 2) as u32,
-            position: Vec3::new(
-                uniform(&mut r, -0.3, 0.3),
-                1.0 + uniform(&mut r, -0.3, 0.3),
-                uniform(&mut r, -0.3, 0.3),
-            ),
-            rotation_deg: uniform(&mut r, 0.0, 360.0),
-            scale: uniform(&mut r, 0.5, 1.5),
-        });
-    }
-    instances.push(instances[7]);
-    let accel = SceneAccel::from_parts(&models, &instances, Some([4.0, 4.0])).unwrap();
+    let accel = crowded_scene();
     let mut r = rng(24);
     let mut hits = 0;
     for _ in 0..300 {

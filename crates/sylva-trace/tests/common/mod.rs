@@ -4,8 +4,8 @@
 use glam::Vec3;
 use std::sync::Arc;
 use sylva_core::SplitMix64;
-use sylva_scene::{Material, MaterialKind, Mesh, Model, Texture, Wrap};
-use sylva_trace::Ray;
+use sylva_scene::{Instance, Material, MaterialKind, Mesh, Model, Texture, Wrap};
+use sylva_trace::{Ray, SceneAccel};
 
 pub fn rng(seed: u64) -> SplitMix64 {
     SplitMix64::new(seed)
@@ -92,4 +92,27 @@ pub fn leaf_material(tex: Texture) -> Material {
         texture: Some(Arc::new(tex)),
         two_sided: true,
     }
+}
+
+/// 40 instances of two soups piled on nearly the same spot, plus an exact copy of instance
+/// 7 (ties between instances), on a ground: top-level leaves hold more instances than the
+/// closest-hit query sorts by entry (16).
+pub fn crowded_scene() -> SceneAccel {
+    let models = vec![soup(120, 21), soup(80, 22)];
+    let mut instances = Vec::new();
+    let mut r = rng(23);
+    for k in 0..40 {
+        instances.push(Instance {
+            model: (k % 2) as u32,
+            position: Vec3::new(
+                uniform(&mut r, -0.3, 0.3),
+                1.0 + uniform(&mut r, -0.3, 0.3),
+                uniform(&mut r, -0.3, 0.3),
+            ),
+            rotation_deg: uniform(&mut r, 0.0, 360.0),
+            scale: uniform(&mut r, 0.5, 1.5),
+        });
+    }
+    instances.push(instances[7]);
+    SceneAccel::from_parts(&models, &instances, Some([4.0, 4.0])).unwrap()
 }
