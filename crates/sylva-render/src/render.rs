@@ -461,7 +461,7 @@ impl<'a> Renderer<'a> {
         let point = ray.at(hit.t);
         let view = -ray.dir;
         if hit.is_ground() {
-            let lit = self.to_sun.y > 0.0 && !self.shadowed(point, Vec3::Y, cfg, st, cache);
+            let lit = self.to_sun.y > 0.0 && !self.shadowed(point, Vec3::Y, None, cfg, st, cache);
             return SampleGeom::Ground { point, lit };
         }
         let ng = self.accel.geometric_normal(hit);
@@ -495,8 +495,8 @@ impl<'a> Renderer<'a> {
             colour: Vec3::ONE,
             leaf,
         };
-        let lit =
-            needs_shadow_ray(&probe, self.to_sun) && !self.shadowed(point, ng, cfg, st, cache);
+        let lit = needs_shadow_ray(&probe, self.to_sun)
+            && !self.shadowed(point, ng, Some(hit.instance), cfg, st, cache);
         SampleGeom::Plant { point, normal, lit }
     }
 
@@ -512,12 +512,14 @@ impl<'a> Renderer<'a> {
             .is_some_and(|m| m.leaf)
     }
 
-    /// Whether something opaque lies between `point` and the sun. The ray starts a little off
-    /// the surface on the sun's side of the geometric normal `ng`.
+    /// Whether something opaque lies between `point` (on instance `from`, if any) and the
+    /// sun. The ray starts a little off the surface on the sun's side of the geometric
+    /// normal `ng`.
     fn shadowed(
         &self,
         point: Vec3,
         ng: Vec3,
+        from: Option<u32>,
         cfg: TraversalConfig,
         st: &mut TraceStats,
         cache: &mut OccluderCache,
@@ -529,7 +531,7 @@ impl<'a> Renderer<'a> {
         };
         let eps = 1e-4 * point.abs().max_element().max(1.0);
         let ray = Ray::new(point + ng * (side * eps), self.to_sun);
-        self.accel.any_hit_cached(&ray, cfg, st, cache)
+        self.accel.any_hit_from(&ray, from, cfg, st, cache)
     }
 
     fn shade(&self, ray: &Ray, hit: Option<&Hit>, g: &SampleGeom, p: &ShadingParams) -> Radiance {

@@ -418,7 +418,13 @@ fn bench_scene(name: &str, runs: usize, cfg: TraversalConfig, with_obvhs: bool) 
                             let ray = cam.pixel_ray(p % w, p / w);
                             let s = shadow_ray(&ray, hit.t, accel.geometric_normal(&hit), sun);
                             let mut one = TraceStats::default();
-                            let occluded = accel.any_hit(&s, cfg, &mut one);
+                            let occluded = accel.any_hit_from(
+                                &s,
+                                (!hit.is_ground()).then_some(hit.instance),
+                                cfg,
+                                &mut one,
+                                &mut sylva_trace::OccluderCache::new(),
+                            );
                             lit += !occluded as usize;
                             st[occluded as usize] += one;
                         }

@@ -576,6 +576,24 @@ impl SceneAccel {
         stats: &mut TraceStats,
         cache: &mut OccluderCache,
     ) -> bool {
+        self.any_hit_from(ray, None, cfg, stats, cache)
+    }
+
+    /// [`SceneAccel::any_hit_cached`] for a ray that starts on instance `from` (a shadow
+    /// ray from a surface point): that instance is tested first, then the others in the
+    /// usual order. In a forest the boxes of neighbouring trees overlap, so a shadow ray
+    /// often starts inside several boxes at once, and nearest-box-first order can then
+    /// enter a neighbour before the tree the ray starts in, which is the likeliest
+    /// occluder. The answer does not depend on `from` (any opaque hit means "shadowed");
+    /// only the work does. An id out of range is ignored.
+    pub fn any_hit_from(
+        &self,
+        ray: &Ray,
+        from: Option<u32>,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+        cache: &mut OccluderCache,
+    ) -> bool {
         stats.rays += 1;
         if !ray.is_valid() {
             return false;
@@ -590,6 +608,22 @@ impl SceneAccel {
         let mut visits = 0u64;
         let mut mailbox = Mailbox::new();
         let mut inner = TraceStats::default();
+        if let Some(i) = from.filter(|&i| (i as usize) < self.instances.len()) {
+            mailbox.insert(i, 1);
+            visits += 1;
+            let inst = &self.instances[i as usize];
+            let mo = inst.to_model.transform_point3(o);
+            let md = inst.to_model.transform_vector3(d);
+            found = self.models[inst.model as usize]
+                .any(mo, md, ray.t_min, ray.t_max, cfg, &mut inner)
+                .map(|tri| (i, tri));
+            if let Some(e) = found {
+                *stats += inner;
+                stats.instance_visits += visits;
+                cache.remember(e);
+                return true;
+            }
+        }
         self.top
             .traverse(o, inv_d, ray.t_min, ray.t_max, cfg, stats, |prims| {
                 let mut enter = |i: u32| {

@@ -251,3 +251,74 @@ fn occluder_cache_answers_exactly_and_is_used() {
         "{cache_hits} cache hits"
     );
 }
+
+#[test]
+fn shadow_rays_from_their_own_instance_first_answer_exactly_with_less_work() {
+    // Shadow rays from surface points of a forest whose crowns' boxes overlap: entering the
+    // instance the ray starts on first must give exactly the answer of the plain query and
+    // of brute force, whatever the hint (its own instance, another one, none, an id out of
+    // range), and on such a forest it must save work overall.
+    let accel = maple_forest();
+    let h = accel.instances()[0].world_bounds.max.y;
+    let n = accel.instances().len() as u32;
+    let sun = Vec3::new(-0.4, 0.7, 0.3).normalize();
+    let cfg = TraversalConfig::default();
+    let mut r = rng(53);
+    let (mut plain_work, mut hinted_work) = (TraceStats::default(), TraceStats::default());
+    let (mut rays, mut blocked) = (0usize, 0usize);
+    for k in 0..1500 {
+        let eye = Vec3::new(
+            uniform(&mut r, -2.0, 2.0) * h,
+            uniform(&mut r, 0.1, 1.5) * h,
+            uniform(&mut r, 1.5, 2.5) * h,
+        );
+        let target = Vec3::new(
+            uniform(&mut r, -0.6, 0.6) * h,
+            uniform(&mut r, 0.2, 0.9) * h,
+            uniform(&mut r, -0.6, 0.6) * h,
+        );
+        let primary = Ray::new(eye, (target - eye).normalize());
+        let mut st = TraceStats::default();
+        let Some(hit) = accel.closest_hit(&primary, cfg, &mut st) else {
+            continue;
+        };
+        if hit.is_ground() {
+            continue;
+        }
+        let ng = accel.geometric_normal(&hit);
+        let side = if ng.dot(sun) >= 0.0 { 1.0 } else { -1.0 };
+        let p = primary.at(hit.t);
+        let ray = Ray::new(p + ng * (side * 1e-4 * p.abs().max_element().max(1.0)), sun);
+        let want = accel.any_hit(&ray, cfg, &mut plain_work);
+        let mut cache = sylva_trace::OccluderCache::new();
+        let got = accel.any_hit_from(&ray, Some(hit.instance), cfg, &mut hinted_work, &mut cache);
+        assert_eq!(got, want, "ray {k} from instance {}", hit.instance);
+        for other in [(hit.instance + 1) % n, n, u32::MAX] {
+            let mut st = TraceStats::default();
+            let mut cache = sylva_trace::OccluderCache::new();
+            let got = accel.any_hit_from(&ray, Some(other), cfg, &mut st, &mut cache);
+            assert_eq!(got, want, "ray {k} with hint {other}");
+        }
+        if k % 10 == 0 {
+            assert_eq!(
+                want,
+                accel.brute_any_hit(&ray),
+                "ray {k} against brute force"
+            );
+        }
+        rays += 1;
+        blocked += want as usize;
+    }
+    assert!(rays > 500, "only {rays} rays hit a tree");
+    assert!(
+        blocked > rays / 10 && blocked < rays,
+        "{blocked} of {rays} blocked"
+    );
+    assert_eq!(plain_work.rays, hinted_work.rays);
+    assert!(
+        hinted_work.nodes < plain_work.nodes,
+        "own instance first: {} node steps, plain: {}",
+        hinted_work.nodes,
+        plain_work.nodes
+    );
+}
