@@ -608,55 +608,61 @@ impl SceneAccel {
         let mut visits = 0u64;
         let mut mailbox = Mailbox::new();
         let mut inner = TraceStats::default();
+        // The instance the ray starts on first (the mailbox then skips it below).
         if let Some(i) = from.filter(|&i| (i as usize) < self.instances.len()) {
             mailbox.insert(i, 1);
             visits += 1;
-            let inst = &self.instances[i as usize];
-            let mo = inst.to_model.transform_point3(o);
-            let md = inst.to_model.transform_vector3(d);
-            found = self.models[inst.model as usize]
-                .any(mo, md, ray.t_min, ray.t_max, cfg, &mut inner)
-                .map(|tri| (i, tri));
-            if let Some(e) = found {
-                *stats += inner;
-                stats.instance_visits += visits;
-                cache.remember(e);
-                return true;
-            }
+            found = self.instance_any_hit(i, ray, cfg, &mut inner);
         }
-        self.top
-            .traverse(o, inv_d, ray.t_min, ray.t_max, cfg, stats, |prims| {
-                let mut enter = |i: u32| {
-                    if found.is_some() || !mailbox.first_visit(i) {
-                        return;
+        if found.is_none() {
+            self.top
+                .traverse(o, inv_d, ray.t_min, ray.t_max, cfg, stats, |prims| {
+                    let mut enter = |i: u32| {
+                        if found.is_some() || !mailbox.first_visit(i) {
+                            return;
+                        }
+                        visits += 1;
+                        found = self.instance_any_hit(i, ray, cfg, &mut inner);
+                    };
+                    // Nearest box first: of the trees not yet tested, the ones the ray
+                    // starts in or meets soonest.
+                    let mut cand = [(0f32, 0u32); SORTED_INSTANCES];
+                    let n =
+                        self.entries(prims, o, inv_d, ray.t_min, ray.t_max, &mut cand, &mut enter);
+                    for &(_, i) in &cand[..n] {
+                        enter(i);
                     }
-                    visits += 1;
-                    let inst = &self.instances[i as usize];
-                    let mo = inst.to_model.transform_point3(o);
-                    let md = inst.to_model.transform_vector3(d);
-                    found = self.models[inst.model as usize]
-                        .any(mo, md, ray.t_min, ray.t_max, cfg, &mut inner)
-                        .map(|tri| (i, tri));
-                };
-                // Nearest box first: a shadow ray starts inside its own tree's box, the most
-                // likely occluder.
-                let mut cand = [(0f32, 0u32); SORTED_INSTANCES];
-                let n = self.entries(prims, o, inv_d, ray.t_min, ray.t_max, &mut cand, &mut enter);
-                for &(_, i) in &cand[..n] {
-                    enter(i);
-                }
-                if found.is_some() {
-                    f32::NEG_INFINITY
-                } else {
-                    f32::INFINITY
-                }
-            });
+                    if found.is_some() {
+                        f32::NEG_INFINITY
+                    } else {
+                        f32::INFINITY
+                    }
+                });
+        }
         *stats += inner;
         stats.instance_visits += visits;
         if let Some(e) = found {
             cache.remember(e);
         }
         found.is_some()
+    }
+
+    /// The first opaque hit `(instance, triangle)` of the world-space ray on instance `i`,
+    /// over the ray's whole segment.
+    #[inline(always)]
+    fn instance_any_hit(
+        &self,
+        i: u32,
+        ray: &Ray,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+    ) -> Option<(u32, u32)> {
+        let inst = &self.instances[i as usize];
+        let mo = inst.to_model.transform_point3(ray.origin);
+        let md = inst.to_model.transform_vector3(ray.dir);
+        self.models[inst.model as usize]
+            .any(mo, md, ray.t_min, ray.t_max, cfg, stats)
+            .map(|tri| (i, tri))
     }
 
     /// Whether one of the cached occluders stops the (valid) ray.

@@ -73,6 +73,21 @@ fn maple_forest() -> SceneAccel {
     SceneAccel::from_parts(&[model], &instances, Some([half, half])).unwrap()
 }
 
+/// A camera position outside a forest of height `h` and a point inside it to look at.
+fn view_into_forest(r: &mut sylva_core::SplitMix64, h: f32) -> (Vec3, Vec3) {
+    let eye = Vec3::new(
+        uniform(r, -2.0, 2.0) * h,
+        uniform(r, 0.1, 1.5) * h,
+        uniform(r, 1.5, 2.5) * h,
+    );
+    let target = Vec3::new(
+        uniform(r, -0.6, 0.6) * h,
+        uniform(r, 0.2, 0.9) * h,
+        uniform(r, -0.6, 0.6) * h,
+    );
+    (eye, target)
+}
+
 #[test]
 fn coherent_packets_equal_single_rays_on_a_forest() {
     let accel = maple_forest();
@@ -91,16 +106,7 @@ fn coherent_packets_equal_single_rays_on_a_forest() {
     for k in 0..400 {
         // A camera outside the forest looking at a point inside it; four rays a small
         // angle apart (neighbouring pixels), sometimes less than a leaf apart.
-        let eye = Vec3::new(
-            uniform(&mut r, -2.0, 2.0) * h,
-            uniform(&mut r, 0.1, 1.5) * h,
-            uniform(&mut r, 1.5, 2.5) * h,
-        );
-        let target = Vec3::new(
-            uniform(&mut r, -0.6, 0.6) * h,
-            uniform(&mut r, 0.2, 0.9) * h,
-            uniform(&mut r, -0.6, 0.6) * h,
-        );
+        let (eye, target) = view_into_forest(&mut r, h);
         let spread = if k % 2 == 0 { 1e-3 } else { 2e-2 };
         let base = (target - eye).normalize();
         let rays: [Ray; PACKET] = std::array::from_fn(|l| {
@@ -267,16 +273,7 @@ fn shadow_rays_from_their_own_instance_first_answer_exactly_with_less_work() {
     let (mut plain_work, mut hinted_work) = (TraceStats::default(), TraceStats::default());
     let (mut rays, mut blocked) = (0usize, 0usize);
     for k in 0..1500 {
-        let eye = Vec3::new(
-            uniform(&mut r, -2.0, 2.0) * h,
-            uniform(&mut r, 0.1, 1.5) * h,
-            uniform(&mut r, 1.5, 2.5) * h,
-        );
-        let target = Vec3::new(
-            uniform(&mut r, -0.6, 0.6) * h,
-            uniform(&mut r, 0.2, 0.9) * h,
-            uniform(&mut r, -0.6, 0.6) * h,
-        );
+        let (eye, target) = view_into_forest(&mut r, h);
         let primary = Ray::new(eye, (target - eye).normalize());
         let mut st = TraceStats::default();
         let Some(hit) = accel.closest_hit(&primary, cfg, &mut st) else {
