@@ -3,7 +3,7 @@
 
 mod common;
 use common::sylva;
-use sylva_gpu::{AdapterChoice, ContextOptions, GpuContext, GpuError};
+use sylva_lb_gpu::{AdapterChoice, ContextOptions, GpuContext, GpuError};
 
 /// Whether any adapter exists (software ones included), and whether it has SHADER_F16.
 fn adapter() -> Option<bool> {

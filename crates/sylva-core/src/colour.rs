@@ -172,6 +172,27 @@ pub fn xyz_to_linear_srgb(xyz: [f64; 3]) -> [f64; 3] {
     ]
 }
 
+/// The sRGB transfer function inverted (IEC 61966-2-1): an encoded component in [0, 1] →
+/// linear.
+pub fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.040_45 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// The sRGB transfer function (IEC 61966-2-1): a linear component, clamped to [0, 1] →
+/// encoded.
+pub fn linear_to_srgb(c: f32) -> f32 {
+    let c = c.clamp(0.0, 1.0);
+    if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
+}
+
 /// Luminance (CIE Y) of a linear sRGB colour.
 pub fn luminance(rgb: [f32; 3]) -> f32 {
     0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]

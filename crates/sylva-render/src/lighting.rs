@@ -20,16 +20,16 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::{DVec3, Vec3};
+use sylva_geom::{LbSettings, MaterialKind, Model, Wrap};
 use sylva_lb::solver::{memory_needed, solve_lighting, Boundary, SolveError, SolveOptions};
 use sylva_lb::{
     DensityGrid, Dims, Element, GridFile, GridFileError, GridKind, LightingGrid, MediumParams,
     ParamError, Preset,
 };
-use sylva_scene::voxelize::{
+use sylva_voxel::{
     placement_for, voxelize, GridPlacement, VoxelizeError, VoxelizeOptions, DEFAULT_GRID,
     OPAQUE_ALPHA, SUB,
 };
-use sylva_scene::{LbSettings, MaterialKind, Model, Wrap};
 use thiserror::Error;
 
 /// Bump whenever the solver, the voxelizer or this module changes what a cache entry holds.
@@ -501,7 +501,7 @@ pub fn model_lighting(
 
     sylva_core::check_memory(
         &format!("the LB lighting of model '{}' on a {dims} grid", model.name),
-        memory_needed(dims) + sylva_scene::voxelize::memory_needed(dims),
+        memory_needed(dims) + sylva_voxel::memory_needed(dims),
     )?;
     let density = voxelize(
         model,
@@ -557,8 +557,8 @@ pub fn model_lighting(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use sylva_geom::{Material, Mesh};
     use sylva_lb::Bounds;
-    use sylva_scene::{Material, Mesh};
 
     const N: usize = 16;
 
@@ -783,7 +783,7 @@ mod tests {
         wood.materials[0].kind = MaterialKind::Wood;
         assert_ne!(k, cache_key(&wood, sun(), &o).unwrap(), "material kind");
         let mut tex = m.clone();
-        let mut t = sylva_scene::Texture::new(2, 2, vec![[10, 200, 10, 255]; 4], Wrap::Clamp);
+        let mut t = sylva_geom::Texture::new(2, 2, vec![[10, 200, 10, 255]; 4], Wrap::Clamp);
         tex.materials[0].texture = Some(std::sync::Arc::new(t.clone()));
         let kt = cache_key(&tex, sun(), &o).unwrap();
         assert_ne!(k, kt, "texture");

@@ -10,7 +10,7 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use sylva_core::colour::luminance;
 use sylva_core::SplitMix64;
-use sylva_scene::Scene;
+use sylva_geom::Scene;
 use sylva_trace::{
     Hit, OccluderCache, PinholeCamera, Ray, SceneAccel, TraceError, TraceStats, TraversalConfig,
     PACKET,

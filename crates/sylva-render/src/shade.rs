@@ -12,7 +12,7 @@
 //! * The ground takes the sun and, as indirect light, a constant sky ambient.
 
 use glam::{Vec2, Vec3};
-use sylva_scene::{Material, MaterialKind, Model, Texture, Wrap};
+use sylva_geom::{Material, MaterialKind, Model, Texture, Wrap};
 
 /// Shading constants that the papers leave open (documented in docs/render.md).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -6,9 +6,9 @@ use std::fs;
 use std::path::Path;
 
 use glam::Vec3;
+use sylva_geom::Scene;
 use sylva_render::lighting::{model_lighting, LightingOptions, ModelLighting};
 use sylva_render::{mean_luminance, Frame, Mode, RenderSettings, Renderer, ShadingParams};
-use sylva_scene::Scene;
 use sylva_trace::{PinholeCamera, SceneAccel, TraversalConfig};
 
 const BOARD_OBJ: &str = "mtllib board.mtl\n\
@@ -55,7 +55,7 @@ resolution = [64, 48]
     );
     let path = dir.join("board.toml");
     fs::write(&path, toml).unwrap();
-    Scene::load(path.to_str().unwrap()).unwrap()
+    sylva_scene::load(path.to_str().unwrap()).unwrap()
 }
 
 fn to_sun() -> Vec3 {
@@ -306,7 +306,7 @@ resolution = [48, 36]
 "#,
     )
     .unwrap();
-    let scene = Scene::load(path.to_str().unwrap()).unwrap();
+    let scene = sylva_scene::load(path.to_str().unwrap()).unwrap();
     let lighting = with_lb(&scene);
     let frame = render(&scene, &lighting, 1);
     let sun = sun_colour();

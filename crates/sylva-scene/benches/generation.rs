@@ -3,7 +3,8 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
-use sylva_scene::{Scene, SceneDesc, Species};
+use sylva_grow::Species;
+use sylva_scene::SceneDesc;
 
 fn species(c: &mut Criterion) {
     let mut g = c.benchmark_group("species");
@@ -20,7 +21,7 @@ fn scenes(c: &mut Criterion) {
     let mut g = c.benchmark_group("scene");
     g.sample_size(10);
     g.bench_function("beech_build", |b| {
-        b.iter(|| black_box(Scene::load("beech").unwrap()))
+        b.iter(|| black_box(sylva_scene::load("beech").unwrap()))
     });
     let desc = SceneDesc::load("beech").unwrap();
     g.bench_function("beech_place_instances", |b| {

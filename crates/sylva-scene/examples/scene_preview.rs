@@ -4,14 +4,14 @@
 //! alpha-tested, Lambert shading from the scene's sun, sky and ground colours.
 
 use glam::{Vec2, Vec3, Vec4};
-use sylva_scene::{Filter, Scene};
+use sylva_geom::Filter;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let name = args.get(1).map(String::as_str).unwrap_or("demo");
     let out = args.get(2).map(String::as_str).unwrap_or("scene.rgb");
     let div: u32 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(2).max(1);
-    let scene = Scene::load(name).unwrap_or_else(|e| panic!("{e}"));
+    let scene = sylva_scene::load(name).unwrap_or_else(|e| panic!("{e}"));
     let cam = scene.camera;
     let (w, h) = (
         (cam.width / div).max(1) as usize,

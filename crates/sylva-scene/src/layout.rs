@@ -2,8 +2,8 @@
 //! throwing against everything placed so far), random rotation about the vertical and scale
 //! jitter, all from one seed.
 
-use crate::rng::Rng;
 use std::collections::HashMap;
+use sylva_grow::rng::Rng;
 
 /// Most instances one generator may ask for.
 pub const MAX_GENERATED: usize = 1_000_000;

@@ -1,15 +1,15 @@
 //! Resolving a model named on the command line: a built-in species name, or a model file chosen
 //! by its extension (`.xml`: an Arbaro species, grown by the generator; `.obj`, `.gltf`, `.glb`:
-//! a mesh read by [`crate::import`]); and picking one model of a scene.
+//! a mesh read by [`sylva_io::import`]); and picking one model of a scene.
 
 use std::path::Path;
 
-use crate::arbaro::{self, ArbaroError};
-use crate::import::{self, ImportError, ImportOptions};
-use crate::mesh::Model;
 use crate::scene::{ModelSource, SceneDesc};
-use crate::species::{normalize_name, Species, BUILTIN_NAMES};
-use crate::weber_penn::GenerateError;
+use sylva_geom::Model;
+use sylva_grow::arbaro::{self, ArbaroError};
+use sylva_grow::species::{normalize_name, Species, BUILTIN_NAMES};
+use sylva_grow::weber_penn::GenerateError;
+use sylva_io::import::{self, ImportError, ImportOptions};
 
 /// Model file extensions [`load_model`] reads, lower case.
 pub const MODEL_FILE_EXTENSIONS: &[&str] = &["xml", "obj", "gltf", "glb"];

@@ -6,18 +6,18 @@
 //!
 //! Every error names its origin (file path or built-in scene) and, where it has one, the line.
 
-use crate::arbaro::{self, ArbaroError};
 use crate::builtin_scenes;
-use crate::import::{self, ImportError, ImportOptions, UpAxis};
 use crate::layout::{self, Amount, Area, LayoutError, Occupancy, ScatterSpec};
-use crate::mesh::{Aabb, Model};
-use crate::species::{normalize_name, Species, BUILTIN_NAMES};
-use crate::weber_penn::GenerateError;
-use glam::{Affine3A, Quat, Vec3};
+use glam::Vec3;
 use rayon::prelude::*;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use sylva_core::Sun;
+use sylva_geom::{Aabb, Camera, Ground, Instance, LbSettings, Model, ModelOrigin, Scene};
+use sylva_grow::arbaro::{self, ArbaroError};
+use sylva_grow::species::{normalize_name, Species, BUILTIN_NAMES};
+use sylva_grow::weber_penn::GenerateError;
+use sylva_io::import::{self, ImportError, ImportOptions, UpAxis};
 use toml::Spanned;
 
 /// LB presets a scene may name (the LB crate defines their values).
@@ -205,46 +205,6 @@ pub struct InstanceDesc {
     pub line: usize,
 }
 
-/// The ground plane y = 0: a `size[0]` × `size[1]` rectangle centred on the origin.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
-pub struct Ground {
-    pub enabled: bool,
-    /// Extent along x and z in metres; `None` in a description means "cover the instances".
-    pub size: Option<[f32; 2]>,
-    /// Linear RGB.
-    pub color: [f32; 3],
-}
-
-/// Pinhole camera; +y is up.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Camera {
-    pub position: Vec3,
-    pub look_at: Vec3,
-    /// Vertical field of view in degrees.
-    pub fov_deg: f32,
-    pub width: u32,
-    pub height: u32,
-    pub rays_per_pixel: u32,
-}
-
-/// What the LB lighting of a scene uses.
-#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
-pub struct LbSettings {
-    /// Cells along each model's longest edge.
-    pub grid: u32,
-    /// One of [`LB_PRESETS`].
-    pub preset: String,
-}
-
-impl Default for LbSettings {
-    fn default() -> Self {
-        LbSettings {
-            grid: 128,
-            preset: "leaf".into(),
-        }
-    }
-}
-
 /// A parsed, checked scene file; [`SceneDesc::build`] makes the geometry.
 #[derive(Debug, Clone)]
 pub struct SceneDesc {
@@ -270,56 +230,6 @@ pub struct CameraDesc {
     pub width: u32,
     pub height: u32,
     pub rays_per_pixel: u32,
-}
-
-/// One placed plant: a model reference and a transform (rotation about +y, uniform scale,
-/// translation). Geometry is never copied.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Instance {
-    /// Index into [`Scene::models`].
-    pub model: u32,
-    pub position: Vec3,
-    pub rotation_deg: f32,
-    pub scale: f32,
-}
-
-impl Instance {
-    /// Model space → world space.
-    pub fn transform(&self) -> Affine3A {
-        Affine3A::from_scale_rotation_translation(
-            Vec3::splat(self.scale),
-            Quat::from_rotation_y(self.rotation_deg.to_radians()),
-            self.position,
-        )
-    }
-
-    /// World bounds of `model` under this instance's transform.
-    pub fn world_bounds(&self, model: &Model) -> Aabb {
-        let t = self.transform();
-        let mut b = Aabb::EMPTY;
-        for c in model.bounds.corners() {
-            b.grow(t.transform_point3(c));
-        }
-        b
-    }
-}
-
-/// A built scene: unique models, instances referencing them, and the lighting and view.
-#[derive(Debug, Clone)]
-pub struct Scene {
-    pub name: String,
-    pub origin: String,
-    pub models: Vec<Model>,
-    /// The species each model was grown from, index for index; `None` for imported meshes.
-    pub species: Vec<Option<Species>>,
-    /// The file each imported model was read from, index for index; `None` for species.
-    pub mesh_files: Vec<Option<PathBuf>>,
-    pub instances: Vec<Instance>,
-    pub ground: Ground,
-    pub sun: Sun,
-    pub sky_color: [f32; 3],
-    pub camera: Camera,
-    pub lb: LbSettings,
 }
 
 /// Per-model line of [`SceneStats`].
@@ -785,14 +695,6 @@ impl SceneDesc {
     /// Grows or imports each unique model (in parallel, results in file order) and places
     /// the instances.
     pub fn build(&self) -> Result<Scene, SceneError> {
-        let species: Vec<Option<Species>> = self
-            .models
-            .iter()
-            .map(|m| match &m.source {
-                ModelSource::Species(s) => Some((**s).clone()),
-                ModelSource::Mesh { .. } => None,
-            })
-            .collect();
         let models: Vec<Model> = self
             .models
             .par_iter()
@@ -822,13 +724,12 @@ impl SceneDesc {
             name: self.name.clone(),
             origin: self.origin.clone(),
             models,
-            species,
-            mesh_files: self
+            model_origins: self
                 .models
                 .iter()
                 .map(|m| match &m.source {
-                    ModelSource::Mesh { path, .. } => Some(path.clone()),
-                    ModelSource::Species(_) => None,
+                    ModelSource::Species(s) => ModelOrigin::Species(s.name.clone()),
+                    ModelSource::Mesh { path, .. } => ModelOrigin::MeshFile(path.clone()),
                 })
                 .collect(),
             instances,
@@ -930,59 +831,29 @@ fn frame(bounds: &Aabb, fov_deg: f32) -> (Vec3, Vec3) {
     (center + dir * dist, center)
 }
 
-impl Scene {
-    /// A built-in scene or scene file by name, built.
-    pub fn load(name_or_path: &str) -> Result<Scene, SceneError> {
-        SceneDesc::load(name_or_path)?.build()
-    }
+/// A built-in scene or scene file by name, built.
+pub fn load(name_or_path: &str) -> Result<Scene, SceneError> {
+    SceneDesc::load(name_or_path)?.build()
+}
 
-    /// World bounds of all instances (the ground excluded).
-    pub fn instance_bounds(&self) -> Aabb {
-        self.instances.iter().fold(Aabb::EMPTY, |b, i| {
-            b.union(&i.world_bounds(&self.models[i.model as usize]))
-        })
-    }
-
-    /// Iterates (instance, its model).
-    pub fn instances_with_models(&self) -> impl Iterator<Item = (&Instance, &Model)> {
-        self.instances
-            .iter()
-            .map(|i| (i, &self.models[i.model as usize]))
-    }
-
-    pub fn unique_triangles(&self) -> usize {
-        self.models.iter().map(Model::triangle_count).sum()
-    }
-
-    pub fn instanced_triangles(&self) -> u64 {
-        self.instances
-            .iter()
-            .map(|i| self.models[i.model as usize].triangle_count() as u64)
-            .sum()
-    }
-
-    /// Model geometry and textures plus instance records.
-    pub fn memory_bytes(&self) -> u64 {
-        self.models.iter().map(Model::memory_bytes).sum::<u64>()
-            + (self.instances.capacity() * std::mem::size_of::<Instance>()) as u64
-    }
-
-    pub fn stats(&self) -> SceneStats {
-        let b = self.instance_bounds();
+impl SceneStats {
+    /// What `sylva scene info` reports about a built scene.
+    pub fn of(scene: &Scene) -> SceneStats {
+        let b = scene.instance_bounds();
         let (min, max) = if b.is_empty() {
             ([0.0; 3], [0.0; 3])
         } else {
             (b.min.to_array(), b.max.to_array())
         };
         SceneStats {
-            name: self.name.clone(),
-            instances: self.instances.len(),
-            unique_triangles: self.unique_triangles(),
-            instanced_triangles: self.instanced_triangles(),
+            name: scene.name.clone(),
+            instances: scene.instances.len(),
+            unique_triangles: scene.unique_triangles(),
+            instanced_triangles: scene.instanced_triangles(),
             bounds_min: min,
             bounds_max: max,
-            memory_bytes: self.memory_bytes(),
-            models: self
+            memory_bytes: scene.memory_bytes(),
+            models: scene
                 .models
                 .iter()
                 .enumerate()
@@ -993,18 +864,18 @@ impl Scene {
                         .iter()
                         .filter(|&&id| m.materials[id as usize].is_leaf())
                         .count();
-                    let species = match (&self.species[k], &self.mesh_files[k]) {
-                        (Some(s), _) => s.name.clone(),
-                        (None, Some(p)) => p
+                    let species = match scene.model_origins.get(k) {
+                        Some(ModelOrigin::Species(name)) => name.clone(),
+                        Some(ModelOrigin::MeshFile(p)) => p
                             .file_name()
                             .map(|f| f.to_string_lossy().into_owned())
                             .unwrap_or_default(),
-                        (None, None) => String::new(),
+                        None => String::new(),
                     };
                     ModelStats {
                         name: m.name.clone(),
                         species,
-                        instances: self
+                        instances: scene
                             .instances
                             .iter()
                             .filter(|i| i.model as usize == k)

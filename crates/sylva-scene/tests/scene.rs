@@ -1,8 +1,9 @@
 //! Scene files: parsing, errors with lines, built-in scenes, instancing.
 
 use std::fs;
+use sylva_geom::ModelOrigin;
 use sylva_scene::builtin_scenes;
-use sylva_scene::{Scene, SceneDesc, SceneError};
+use sylva_scene::{SceneDesc, SceneError, SceneStats};
 
 fn parse(text: &str) -> Result<SceneDesc, SceneError> {
     SceneDesc::parse(text, "test.toml", None)
@@ -178,9 +179,12 @@ fn arbaro_models_resolve_relative_to_the_scene_file() {
         "[[models]]\nname = \"aspen\"\narbaro = \"aspen.xml\"\nseed = 4\n\n[[instances]]\nmodel = \"aspen\"\ndensity = 0.01\narea = { min = [0.0, 0.0], max = [100.0, 50.0] }\nmin_spacing = 3.0\n",
     )
     .unwrap();
-    let s = Scene::load(path.to_str().unwrap()).unwrap();
+    let s = sylva_scene::load(path.to_str().unwrap()).unwrap();
     assert_eq!(s.name, "forest");
-    assert_eq!(s.species[0].as_ref().unwrap().name, "quaking_aspen");
+    assert_eq!(
+        s.model_origins[0],
+        ModelOrigin::Species("quaking_aspen".into())
+    );
     assert_eq!(s.instances.len(), 50);
     let m = &s.models[0];
     assert!(m.triangle_count() > 1000);
@@ -199,11 +203,11 @@ fn arbaro_models_resolve_relative_to_the_scene_file() {
 
 #[test]
 fn beech_scene_is_table_2_with_five_unique_models() {
-    let s = Scene::load("beech").unwrap();
+    let s = sylva_scene::load("beech").unwrap();
     assert_eq!(s.instances.len(), 962);
     assert_eq!(s.models.len(), 5);
     assert_eq!((s.camera.width, s.camera.height), (896, 448));
-    let stats = s.stats();
+    let stats = SceneStats::of(&s);
     let count = |n: &str| {
         stats
             .models
@@ -246,11 +250,11 @@ fn every_builtin_scene_parses_and_places() {
     }
     let canopy = SceneDesc::load("canopy").unwrap();
     assert_eq!((canopy.camera.width, canopy.camera.height), (512, 512));
-    let catalpa = Scene::load("catalpa").unwrap();
+    let catalpa = sylva_scene::load("catalpa").unwrap();
     assert_eq!(catalpa.instances.len(), 1);
     assert_eq!(
-        catalpa.species[0].as_ref().unwrap().name,
-        "southern_catalpa"
+        catalpa.model_origins[0],
+        ModelOrigin::Species("southern_catalpa".into())
     );
 }
 
@@ -261,7 +265,7 @@ fn scene_build_is_deterministic_across_thread_counts() {
             .num_threads(threads)
             .build()
             .unwrap()
-            .install(|| Scene::load("demo").unwrap())
+            .install(|| sylva_scene::load("demo").unwrap())
     };
     let (a, b) = (build(1), build(2));
     assert_eq!(a.instances, b.instances);

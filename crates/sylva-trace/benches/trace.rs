@@ -6,10 +6,10 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use glam::Vec3;
 use std::hint::black_box;
 use sylva_core::SplitMix64;
-use sylva_scene::Species;
+use sylva_grow::Species;
 use sylva_trace::{ModelAccel, Ray, TraceStats, TraversalConfig};
 
-fn rays(model: &sylva_scene::Model, n: usize) -> Vec<Ray> {
+fn rays(model: &sylva_geom::Model, n: usize) -> Vec<Ray> {
     let b = model.bounds;
     let c = (b.min + b.max) * 0.5;
     let r = (b.max - b.min).length();

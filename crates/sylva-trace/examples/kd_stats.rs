@@ -1,6 +1,6 @@
 //! Tree statistics per built-in species: `cargo run --release -p sylva-trace --example kd_stats [SPECIES...]`.
 use std::time::Instant;
-use sylva_scene::Species;
+use sylva_grow::Species;
 use sylva_trace::ModelAccel;
 
 fn main() {

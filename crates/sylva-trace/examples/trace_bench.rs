@@ -18,7 +18,7 @@ use obvhs::{
 };
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
-use sylva_scene::Scene;
+use sylva_geom::Scene;
 use sylva_trace::{Hit, PinholeCamera, Ray, SceneAccel, TraceStats, TraversalConfig};
 
 const TILE: u32 = 8;
@@ -311,7 +311,7 @@ fn main() {
 }
 
 fn bench_scene(name: &str, runs: usize, cfg: TraversalConfig, with_obvhs: bool) {
-    let scene = Scene::load(name).unwrap_or_else(|e| panic!("{e}"));
+    let scene = sylva_scene::load(name).unwrap_or_else(|e| panic!("{e}"));
     let cam = PinholeCamera::new(&scene.camera).unwrap_or_else(|e| panic!("{e}"));
     let (w, h) = (cam.width, cam.height);
     let sun = scene.sun.to_sun().as_vec3();

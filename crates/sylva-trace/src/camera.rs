@@ -10,7 +10,7 @@
 use crate::ray::Ray;
 use crate::scene::TraceError;
 use glam::{Vec2, Vec3};
-use sylva_scene::Camera;
+use sylva_geom::Camera;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PinholeCamera {

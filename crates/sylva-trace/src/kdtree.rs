@@ -13,7 +13,7 @@
 
 use crate::ray::ray_box;
 use glam::{BVec4A, Vec3, Vec4};
-use sylva_scene::Aabb;
+use sylva_geom::Aabb;
 
 /// Deepest tree the builder makes; the "unbounded" traversal stack holds this many entries,
 /// so it can never drop one.

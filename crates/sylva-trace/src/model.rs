@@ -14,7 +14,7 @@ use crate::kdtree::{lane, Clip, KdTree, TraceStats, TraversalConfig, PACKET};
 use crate::ray::{intersect_triangle, inverse_dir, TriangleData};
 use glam::{Affine3A, Vec2, Vec3};
 use std::sync::Arc;
-use sylva_scene::{Aabb, MaterialKind, Model, Texture, Wrap};
+use sylva_geom::{Aabb, MaterialKind, Model, Texture, Wrap};
 
 /// Opacity of a texture as one bit per texel: `Texture::alpha(u, v) >= 0.5` without
 /// converting texels to floats.

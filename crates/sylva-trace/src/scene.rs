@@ -19,7 +19,7 @@ use crate::model::{Best, ModelAccel};
 use crate::ray::{inverse_dir, ray_box, Hit, Ray};
 use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
-use sylva_scene::{Aabb, Instance, Model, Scene};
+use sylva_geom::{Aabb, Instance, Model, Scene};
 
 #[derive(Debug, thiserror::Error)]
 pub enum TraceError {
@@ -197,12 +197,7 @@ fn estimate_bytes(triangles: usize) -> u64 {
 impl SceneAccel {
     /// Builds the scene's structures: the models in parallel, then the top level.
     pub fn build(scene: &Scene) -> Result<SceneAccel, TraceError> {
-        let ground = scene
-            .ground
-            .enabled
-            .then(|| scene.ground.size.map(|s| [0.5 * s[0], 0.5 * s[1]]))
-            .flatten();
-        SceneAccel::from_parts(&scene.models, &scene.instances, ground)
+        SceneAccel::from_parts(&scene.models, &scene.instances, scene.ground_half_extents())
     }
 
     /// Builds from models and instances; `ground` is the half extents (x, z) of a ground

@@ -6,7 +6,8 @@ mod common;
 use common::*;
 use glam::Vec3;
 use std::sync::OnceLock;
-use sylva_scene::{Instance, Model, Species};
+use sylva_geom::{Instance, Model};
+use sylva_grow::Species;
 use sylva_trace::{Hit, ModelAccel, Ray, SceneAccel, TraceStats, TraversalConfig};
 
 fn red_maple() -> &'static Model {

@@ -8,7 +8,8 @@ mod common;
 
 use common::*;
 use glam::Vec3;
-use sylva_scene::{Instance, Species};
+use sylva_geom::Instance;
+use sylva_grow::Species;
 use sylva_trace::{Hit, Ray, SceneAccel, TraceStats, TraversalConfig, PACKET};
 
 fn same(a: Option<Hit>, b: Option<Hit>) -> bool {

@@ -4,7 +4,7 @@ mod common;
 
 use common::*;
 use glam::{Vec2, Vec3};
-use sylva_scene::{Aabb, Camera, Instance, Mesh, Model, Texture, Wrap};
+use sylva_geom::{Aabb, Camera, Instance, Mesh, Model, Texture, Wrap};
 use sylva_trace::ray::intersect_triangle_vertices;
 use sylva_trace::{
     ray::inverse_dir, ray_box, AlphaMask, Hit, ModelAccel, PinholeCamera, Ray, SceneAccel,

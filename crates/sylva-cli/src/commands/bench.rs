@@ -131,7 +131,7 @@ fn bench_lb(a: BenchLbArgs) -> Result<()> {
         }
         super::device::Backend::Gpu { ctx, precision } => {
             let mut lattice =
-                sylva_gpu::GpuLattice::new(ctx, &grid, &medium, 0, boundary, *precision)?;
+                sylva_lb_gpu::GpuLattice::new(ctx, &grid, &medium, 0, boundary, *precision)?;
             for r in 0..a.repeats {
                 lattice.reset(boundary)?;
                 let report =

@@ -2,7 +2,7 @@
 
 use super::scene::{emit, outln};
 use std::time::Instant;
-use sylva_scene::{Scene, Species};
+use sylva_grow::Species;
 
 #[derive(clap::Args)]
 pub struct BenchSceneArgs {
@@ -54,12 +54,12 @@ pub fn run(args: BenchSceneArgs) -> anyhow::Result<()> {
     let mut last = None;
     for _ in 0..args.runs {
         let t = Instant::now();
-        let scene = Scene::load(&args.scene)?;
+        let scene = sylva_scene::load(&args.scene)?;
         times.push(t.elapsed().as_secs_f64());
         last = Some(scene);
     }
     let scene = last.expect("runs ≥ 1");
-    let stats = scene.stats();
+    let stats = sylva_scene::SceneStats::of(&scene);
     let build = median(times);
     let peak = peak_rss_bytes();
     if args.json {

@@ -4,7 +4,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Result};
 use serde::Serialize;
-use sylva_scene::voxelize::{voxelize, VoxelizeOptions, DEFAULT_GRID};
+use sylva_voxel::{voxelize, VoxelizeOptions, DEFAULT_GRID};
 
 use super::progress::bar;
 

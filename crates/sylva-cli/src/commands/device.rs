@@ -3,8 +3,8 @@
 
 use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
-use sylva_gpu::{AdapterChoice, ContextOptions, GpuContext, GpuError, Precision};
 use sylva_lb::{Boundary, DensityGrid, LightingGrid, MediumParams, SolveOptions, SolveReport};
+use sylva_lb_gpu::{AdapterChoice, ContextOptions, GpuContext, GpuError, Precision};
 
 /// Where the LB solver runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -118,7 +118,7 @@ impl Backend {
     ) -> Result<(LightingGrid, Vec<SolveReport>)> {
         Ok(match self {
             Backend::Cpu => sylva_lb::solve_lighting(grid, medium, boundary, opts, progress)?,
-            Backend::Gpu { ctx, precision } => sylva_gpu::solve_lighting_gpu(
+            Backend::Gpu { ctx, precision } => sylva_lb_gpu::solve_lighting_gpu(
                 ctx, grid, medium, boundary, opts, *precision, progress,
             )?,
         })

@@ -8,8 +8,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::Args;
 use sylva_core::format_bytes;
-use sylva_scene::export::{self, mitsuba, obj, Format};
-use sylva_scene::Scene;
+use sylva_io::export::{self, mitsuba, obj, Format};
 
 use super::progress::bar;
 use super::scene::thousands;
@@ -89,7 +88,7 @@ pub fn run(args: ExportArgs) -> Result<()> {
     export::prepare_dir(&args.output)?;
     catch_interrupt();
     let t0 = Instant::now();
-    let scene = Scene::load(&args.scene)?;
+    let scene = sylva_scene::load(&args.scene)?;
     let triangles = scene.instanced_triangles();
     eprintln!(
         "scene '{}': {} instances, {} instanced triangles (built in {:.1} s)",

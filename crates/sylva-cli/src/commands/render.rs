@@ -7,13 +7,13 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use glam::Vec3;
+use sylva_geom::Scene;
 use sylva_lb::Preset;
 use sylva_render::lighting::{model_lighting, LightingOptions, LightingSource, ModelLighting};
 use sylva_render::output::{write_exr, write_png};
 use sylva_render::shade::transmission_from_g;
 use sylva_render::tonemap::srgb8;
 use sylva_render::{Frame, Mode, RenderSettings, Renderer, ShadingParams, ToneMap};
-use sylva_scene::Scene;
 use sylva_trace::{SceneAccel, TraversalConfig};
 
 use super::progress::bar;
@@ -173,7 +173,7 @@ pub fn prepare(
         }
     };
     let t0 = Instant::now();
-    let mut scene = Scene::load(&a.scene)?;
+    let mut scene = sylva_scene::load(&a.scene)?;
     if a.sun.is_some() || a.elevation.is_some() || a.azimuth.is_some() {
         scene.sun = super::lb::parse_sun(a.sun.as_deref(), a.elevation, a.azimuth)?;
     }

@@ -2,7 +2,7 @@
 
 use anyhow::Context;
 use sylva_scene::builtin_scenes;
-use sylva_scene::{Scene, SceneDesc};
+use sylva_scene::{SceneDesc, SceneStats};
 
 #[derive(clap::Args)]
 pub struct SceneArgs {
@@ -107,8 +107,8 @@ pub fn run(args: SceneArgs) -> anyhow::Result<()> {
 fn info(name: &str, json: bool) -> anyhow::Result<()> {
     let mut o = String::new();
     let desc = SceneDesc::load(name)?;
-    let scene: Scene = desc.build()?;
-    let stats = scene.stats();
+    let scene = desc.build()?;
+    let stats = SceneStats::of(&scene);
     if json {
         let mut v = serde_json::to_value(&stats)?;
         let obj = v.as_object_mut().expect("stats serialise to an object");
@@ -132,8 +132,15 @@ fn info(name: &str, json: bool) -> anyhow::Result<()> {
                 "rays_per_pixel": c.rays_per_pixel,
             }),
         );
-        obj.insert("lb".into(), serde_json::to_value(&scene.lb)?);
-        obj.insert("ground".into(), serde_json::to_value(scene.ground)?);
+        obj.insert(
+            "lb".into(),
+            serde_json::json!({"grid": scene.lb.grid, "preset": scene.lb.preset}),
+        );
+        let g = &scene.ground;
+        obj.insert(
+            "ground".into(),
+            serde_json::json!({"enabled": g.enabled, "size": g.size, "color": g.color}),
+        );
         obj.insert("sky_color".into(), serde_json::to_value(scene.sky_color)?);
         outln!(o, "{}", serde_json::to_string_pretty(&v)?);
         return emit(&o);

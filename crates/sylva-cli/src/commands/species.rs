@@ -3,9 +3,9 @@
 use super::scene::{emit, outln, outs, thousands};
 use anyhow::Context;
 use std::path::Path;
-use sylva_scene::species::BUILTIN_NAMES;
-use sylva_scene::weber_penn::LEAF;
-use sylva_scene::{arbaro, Species};
+use sylva_grow::species::BUILTIN_NAMES;
+use sylva_grow::weber_penn::LEAF;
+use sylva_grow::{arbaro, Species};
 
 #[derive(clap::Args)]
 pub struct SpeciesArgs {

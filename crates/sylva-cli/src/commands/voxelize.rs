@@ -6,10 +6,10 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Args;
+use sylva_geom::Model;
 use sylva_lb::preview::write_density_preview;
 use sylva_lb::{DensityGrid, Element, GridFile};
-use sylva_scene::voxelize::{voxelize, VoxelizeOptions, DEFAULT_GRID};
-use sylva_scene::Model;
+use sylva_voxel::{voxelize, VoxelizeOptions, DEFAULT_GRID};
 
 use super::progress::bar;
 

@@ -4,7 +4,7 @@
 use glam::Vec3;
 use std::sync::Arc;
 use sylva_core::SplitMix64;
-use sylva_scene::{Instance, Material, MaterialKind, Mesh, Model, Texture, Wrap};
+use sylva_geom::{Instance, Material, MaterialKind, Mesh, Model, Texture, Wrap};
 use sylva_trace::{Ray, SceneAccel};
 
 pub fn rng(seed: u64) -> SplitMix64 {

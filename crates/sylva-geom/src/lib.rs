@@ -1,0 +1,22 @@
+//! Geometry and the built scene as plain data: what every stage after scene building reads.
+//!
+//! * [`mesh`]: [`Aabb`], indexed triangle [`Mesh`]es and [`Model`]s (mesh + materials +
+//!   bounds).
+//! * [`material`]: leaf and wood [`Material`]s.
+//! * [`texture`]: RGBA8 [`Texture`]s with their wrap and filter modes, and THE texel opacity
+//!   rule ([`is_opaque`]) the voxelizer, the tracer's alpha test and the cache keys share.
+//! * [`scene`]: the built [`Scene`]: models, [`Instance`]s, [`Ground`], sun, sky, [`Camera`]
+//!   and [`LbSettings`].
+//!
+//! No file formats, no generators, no LB here: scene files and growing live in `sylva-scene`
+//! and `sylva-grow`, model files in `sylva-io`, the density grid in `sylva-voxel`.
+
+pub mod material;
+pub mod mesh;
+pub mod scene;
+pub mod texture;
+
+pub use material::{Material, MaterialKind};
+pub use mesh::{Aabb, Mesh, Model};
+pub use scene::{Camera, Ground, Instance, LbSettings, ModelOrigin, Scene};
+pub use texture::{Filter, Texture, Wrap};

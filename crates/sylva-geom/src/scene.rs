@@ -1,0 +1,148 @@
+//! The built scene as plain data: unique models, instances that reference them, and the
+//! ground, sun, sky, camera and LB settings. How it is described and built (scene files,
+//! growing, import) is `sylva-scene`'s business; everything downstream reads this.
+
+use crate::mesh::{Aabb, Model};
+use glam::{Affine3A, Quat, Vec3};
+use std::path::PathBuf;
+use sylva_core::Sun;
+
+/// The ground plane y = 0: a `size[0]` × `size[1]` rectangle centred on the origin.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ground {
+    pub enabled: bool,
+    /// Extent along x and z in metres; `None` in a description means "cover the instances".
+    pub size: Option<[f32; 2]>,
+    /// Linear RGB.
+    pub color: [f32; 3],
+}
+
+/// Pinhole camera; +y is up.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    pub position: Vec3,
+    pub look_at: Vec3,
+    /// Vertical field of view in degrees.
+    pub fov_deg: f32,
+    pub width: u32,
+    pub height: u32,
+    pub rays_per_pixel: u32,
+}
+
+/// What the LB lighting of a scene uses.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LbSettings {
+    /// Cells along each model's longest edge.
+    pub grid: u32,
+    /// An LB preset name (`sylva_lb::Preset`).
+    pub preset: String,
+}
+
+impl Default for LbSettings {
+    fn default() -> Self {
+        LbSettings {
+            grid: 128,
+            preset: "leaf".into(),
+        }
+    }
+}
+
+/// One placed plant: a model reference and a transform (rotation about +y, uniform scale,
+/// translation). Geometry is never copied.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Instance {
+    /// Index into [`Scene::models`].
+    pub model: u32,
+    pub position: Vec3,
+    pub rotation_deg: f32,
+    pub scale: f32,
+}
+
+impl Instance {
+    /// Model space → world space.
+    pub fn transform(&self) -> Affine3A {
+        Affine3A::from_scale_rotation_translation(
+            Vec3::splat(self.scale),
+            Quat::from_rotation_y(self.rotation_deg.to_radians()),
+            self.position,
+        )
+    }
+
+    /// World bounds of `model` under this instance's transform.
+    pub fn world_bounds(&self, model: &Model) -> Aabb {
+        let t = self.transform();
+        let mut b = Aabb::EMPTY;
+        for c in model.bounds.corners() {
+            b.grow(t.transform_point3(c));
+        }
+        b
+    }
+}
+
+/// Where a model of a built scene came from, for reports.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ModelOrigin {
+    /// Grown from the species of this name (built-in or an Arbaro file).
+    Species(String),
+    /// Read from this mesh file.
+    MeshFile(PathBuf),
+}
+
+/// A built scene: unique models, instances referencing them, and the lighting and view.
+#[derive(Debug, Clone)]
+pub struct Scene {
+    pub name: String,
+    /// The file path, or `built-in scene 'NAME'`.
+    pub origin: String,
+    pub models: Vec<Model>,
+    /// Where each model came from, index for index.
+    pub model_origins: Vec<ModelOrigin>,
+    pub instances: Vec<Instance>,
+    pub ground: Ground,
+    pub sun: Sun,
+    /// Linear RGB radiance of the sky.
+    pub sky_color: [f32; 3],
+    pub camera: Camera,
+    pub lb: LbSettings,
+}
+
+impl Scene {
+    /// World bounds of all instances (the ground excluded).
+    pub fn instance_bounds(&self) -> Aabb {
+        self.instances.iter().fold(Aabb::EMPTY, |b, i| {
+            b.union(&i.world_bounds(&self.models[i.model as usize]))
+        })
+    }
+
+    /// Iterates (instance, its model).
+    pub fn instances_with_models(&self) -> impl Iterator<Item = (&Instance, &Model)> {
+        self.instances
+            .iter()
+            .map(|i| (i, &self.models[i.model as usize]))
+    }
+
+    pub fn unique_triangles(&self) -> usize {
+        self.models.iter().map(Model::triangle_count).sum()
+    }
+
+    pub fn instanced_triangles(&self) -> u64 {
+        self.instances
+            .iter()
+            .map(|i| self.models[i.model as usize].triangle_count() as u64)
+            .sum()
+    }
+
+    /// Model geometry and textures plus instance records.
+    pub fn memory_bytes(&self) -> u64 {
+        self.models.iter().map(Model::memory_bytes).sum::<u64>()
+            + (self.instances.capacity() * std::mem::size_of::<Instance>()) as u64
+    }
+
+    /// Half extents (x, z) of the ground rectangle on y = 0, when there is one.
+    pub fn ground_half_extents(&self) -> Option<[f32; 2]> {
+        self.ground
+            .enabled
+            .then(|| self.ground.size.map(|s| [0.5 * s[0], 0.5 * s[1]]))
+            .flatten()
+    }
+}

@@ -1,0 +1,544 @@
+//! Species: Weber & Penn parameters plus the leaf and bark look. The built-in species are the
+//! trees of the papers (000 Table 2, a pine for 000 Fig. 3b, the dogrose of 002 §3.2.2), each
+//! with its own generated leaf and bark textures.
+
+use crate::textures::{bark_texture, leaf_texture, mean_linear_color, BarkPattern, LeafOutline};
+use crate::weber_penn::{self, GenerateError, Params, LEAF, WOOD};
+use std::sync::Arc;
+use sylva_geom::{Material, MaterialKind, Mesh, Model};
+
+/// A plant species: how to grow it and how it looks.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Species {
+    /// Identifier (`red_maple`).
+    pub name: String,
+    /// Human name (`red maple`).
+    pub display_name: String,
+    pub params: Params,
+    /// Seed of the generator: one species, one tree.
+    pub seed: u64,
+    pub leaf_outline: LeafOutline,
+    /// Leaf colour, sRGB.
+    pub leaf_color: [u8; 3],
+    pub bark_pattern: BarkPattern,
+    /// Bark colour, sRGB.
+    pub bark_color: [u8; 3],
+    /// Triangles per instance reported by the source, where it reports one.
+    pub reference_triangles: Option<usize>,
+    /// Where the species comes from.
+    pub source: String,
+}
+
+/// Names of the built-in species, in the order `sylva species list` prints them.
+pub const BUILTIN_NAMES: &[&str] = &[
+    "red_maple",
+    "ohio_buckeye",
+    "paper_birch",
+    "southern_catalpa",
+    "american_beech",
+    "pine",
+    "dogrose",
+];
+
+/// `"Red Maple"`, `"red-maple"` → `"red_maple"`.
+pub fn normalize_name(name: &str) -> String {
+    name.trim()
+        .to_ascii_lowercase()
+        .chars()
+        .map(|c| if c == ' ' || c == '-' { '_' } else { c })
+        .collect()
+}
+
+fn params(values: &[(&str, f64)]) -> Params {
+    let mut p = Params::default();
+    for (name, value) in values {
+        p.set(name, *value)
+            .unwrap_or_else(|e| panic!("built-in species parameter: {e}"));
+    }
+    p
+}
+
+impl Species {
+    /// A built-in species by name (any case; spaces or dashes for underscores).
+    pub fn builtin(name: &str) -> Option<Species> {
+        let n = normalize_name(name);
+        let s = match n.as_str() {
+            "red_maple" => red_maple(),
+            "ohio_buckeye" => ohio_buckeye(),
+            "paper_birch" => paper_birch(),
+            "southern_catalpa" => southern_catalpa(),
+            "american_beech" => american_beech(),
+            "pine" => pine(),
+            "dogrose" | "dog_rose" => dogrose(),
+            _ => return None,
+        };
+        Some(s)
+    }
+
+    pub fn all_builtin() -> Vec<Species> {
+        BUILTIN_NAMES
+            .iter()
+            .map(|n| Species::builtin(n).expect("listed"))
+            .collect()
+    }
+
+    /// A species from parameters alone (an Arbaro file): the leaf outline comes from
+    /// `LeafShape`, colours are a generic summer green and brown bark.
+    pub fn from_params(name: &str, params: Params, seed: u64, source: String) -> Species {
+        Species {
+            name: name.to_string(),
+            display_name: name.replace('_', " "),
+            leaf_outline: LeafOutline::from_index(params.general.leaf_shape as u32),
+            params,
+            seed,
+            leaf_color: [75, 125, 45],
+            bark_pattern: BarkPattern::Furrowed,
+            bark_color: [105, 85, 65],
+            reference_triangles: None,
+            source,
+        }
+    }
+
+    /// The tree's mesh (wood = material 0, leaves = material 1).
+    pub fn generate_mesh(&self) -> Result<Mesh, GenerateError> {
+        weber_penn::generate(&self.params, self.seed)
+    }
+
+    /// Bark (index 0) and leaf (index 1) materials with their textures.
+    pub fn materials(&self) -> Vec<Material> {
+        let tex_seed = (self.seed as u32).wrapping_mul(2654435761);
+        let bark = Arc::new(bark_texture(self.bark_pattern, self.bark_color, tex_seed));
+        let leaf = Arc::new(leaf_texture(
+            self.leaf_outline,
+            self.leaf_color,
+            tex_seed ^ 0x5a5a,
+        ));
+        let mut m = vec![
+            Material {
+                name: format!("{} bark", self.display_name),
+                kind: MaterialKind::Wood,
+                base_color: mean_linear_color(&bark),
+                texture: Some(bark),
+                two_sided: false,
+            },
+            Material {
+                name: format!("{} leaf", self.display_name),
+                kind: MaterialKind::Leaf,
+                base_color: mean_linear_color(&leaf),
+                texture: Some(leaf),
+                two_sided: true,
+            },
+        ];
+        debug_assert_eq!(m[WOOD as usize].kind, MaterialKind::Wood);
+        debug_assert_eq!(m[LEAF as usize].kind, MaterialKind::Leaf);
+        m.shrink_to_fit();
+        m
+    }
+
+    /// Mesh + materials.
+    pub fn build_model(&self) -> Result<Model, GenerateError> {
+        let mut mesh = self.generate_mesh()?;
+        mesh.positions.shrink_to_fit();
+        mesh.normals.shrink_to_fit();
+        mesh.uvs.shrink_to_fit();
+        mesh.indices.shrink_to_fit();
+        mesh.material_ids.shrink_to_fit();
+        Ok(Model::new(self.name.clone(), mesh, self.materials()))
+    }
+}
+
+fn builtin(
+    name: &str,
+    params: Params,
+    seed: u64,
+    leaf: (LeafOutline, [u8; 3]),
+    bark: (BarkPattern, [u8; 3]),
+    reference_triangles: Option<usize>,
+    source: &str,
+) -> Species {
+    Species {
+        name: name.to_string(),
+        display_name: name.replace('_', " "),
+        params,
+        seed,
+        leaf_outline: leaf.0,
+        leaf_color: leaf.1,
+        bark_pattern: bark.0,
+        bark_color: bark.1,
+        reference_triangles,
+        source: source.to_string(),
+    }
+}
+
+const TABLE2: &str = "paper 000 Table 2 (beech scene)";
+
+/// Oval crown, three-lobed toothed leaves, smooth grey bark.
+fn red_maple() -> Species {
+    let p = params(&[
+        ("Shape", 1.0),
+        ("BaseSize", 0.3),
+        ("Scale", 15.0),
+        ("ScaleV", 0.0),
+        ("Levels", 3.0),
+        ("Ratio", 0.018),
+        ("RatioPower", 1.3),
+        ("Flare", 0.6),
+        ("Leaves", 29.0),
+        ("LeafScale", 0.15),
+        ("LeafScaleX", 1.0),
+        ("LeafBend", 0.4),
+        ("AttractionUp", 0.6),
+        ("0CurveRes", 8.0),
+        ("0CurveV", 20.0),
+        ("1DownAngle", 55.0),
+        ("1DownAngleV", -30.0),
+        ("1Rotate", 140.0),
+        ("1Branches", 45.0),
+        ("1Length", 0.4),
+        ("1LengthV", 0.05),
+        ("1CurveRes", 5.0),
+        ("1Curve", -20.0),
+        ("1CurveV", 50.0),
+        ("1SegSplits", 0.15),
+        ("1SplitAngle", 25.0),
+        ("2DownAngle", 40.0),
+        ("2DownAngleV", 10.0),
+        ("2Rotate", 140.0),
+        ("2Branches", 35.0),
+        ("2Length", 0.5),
+        ("2LengthV", 0.1),
+        ("2CurveRes", 3.0),
+        ("2Curve", -10.0),
+        ("2CurveV", 60.0),
+        ("3DownAngle", 35.0),
+        ("3DownAngleV", 15.0),
+        ("3Rotate", 140.0),
+    ]);
+    builtin(
+        "red_maple",
+        p,
+        11,
+        (LeafOutline::Palmate, [82, 128, 40]),
+        (BarkPattern::Smooth, [128, 124, 118]),
+        Some(115_529),
+        TABLE2,
+    )
+}
+
+/// Small rounded tree, five-leaflet palmate leaves, grey-brown furrowed bark.
+fn ohio_buckeye() -> Species {
+    let p = params(&[
+        ("Shape", 1.0),
+        ("BaseSize", 0.25),
+        ("Scale", 11.0),
+        ("Levels", 3.0),
+        ("Ratio", 0.022),
+        ("RatioPower", 1.3),
+        ("Flare", 0.5),
+        ("Leaves", 60.0),
+        ("LeafScale", 0.2),
+        ("LeafScaleX", 1.0),
+        ("LeafBend", 0.5),
+        ("AttractionUp", 0.5),
+        ("0CurveRes", 6.0),
+        ("0CurveV", 25.0),
+        ("1DownAngle", 60.0),
+        ("1DownAngleV", -30.0),
+        ("1Rotate", 140.0),
+        ("1Branches", 40.0),
+        ("1Length", 0.45),
+        ("1LengthV", 0.05),
+        ("1CurveRes", 5.0),
+        ("1Curve", -25.0),
+        ("1CurveV", 60.0),
+        ("1SegSplits", 0.2),
+        ("1SplitAngle", 30.0),
+        ("2DownAngle", 40.0),
+        ("2DownAngleV", 10.0),
+        ("2Rotate", 140.0),
+        ("2Branches", 30.0),
+        ("2Length", 0.5),
+        ("2LengthV", 0.1),
+        ("2CurveRes", 3.0),
+        ("2Curve", 10.0),
+        ("2CurveV", 60.0),
+        ("3DownAngle", 40.0),
+        ("3DownAngleV", 10.0),
+        ("3Rotate", 140.0),
+    ]);
+    builtin(
+        "ohio_buckeye",
+        p,
+        23,
+        (LeafOutline::PalmatelyCompound, [58, 102, 36]),
+        (BarkPattern::Furrowed, [112, 100, 86]),
+        Some(168_520),
+        TABLE2,
+    )
+}
+
+/// Narrow oval crown with drooping twigs, small toothed leaves, white bark with lenticels.
+fn paper_birch() -> Species {
+    let p = params(&[
+        ("Shape", 7.0),
+        ("BaseSize", 0.3),
+        ("Scale", 18.0),
+        ("ScaleV", 0.0),
+        ("Levels", 4.0),
+        ("Ratio", 0.014),
+        ("RatioPower", 1.2),
+        ("Flare", 0.4),
+        ("Leaves", 27.0),
+        ("LeafScale", 0.085),
+        ("LeafScaleX", 0.75),
+        ("LeafBend", 0.3),
+        ("AttractionUp", -0.4),
+        ("0CurveRes", 8.0),
+        ("0CurveV", 15.0),
+        ("1DownAngle", 50.0),
+        ("1DownAngleV", -20.0),
+        ("1Rotate", 140.0),
+        ("1Branches", 45.0),
+        ("1Length", 0.3),
+        ("1LengthV", 0.05),
+        ("1CurveRes", 5.0),
+        ("1Curve", -15.0),
+        ("1CurveV", 40.0),
+        ("2DownAngle", 45.0),
+        ("2DownAngleV", 10.0),
+        ("2Rotate", 140.0),
+        ("2Branches", 22.0),
+        ("2Length", 0.55),
+        ("2LengthV", 0.1),
+        ("2CurveRes", 3.0),
+        ("2Curve", 20.0),
+        ("2CurveV", 60.0),
+        ("3DownAngle", 40.0),
+        ("3DownAngleV", 10.0),
+        ("3Rotate", 140.0),
+        ("3Branches", 10.0),
+        ("3Length", 0.45),
+        ("3CurveRes", 2.0),
+        ("3CurveV", 40.0),
+    ]);
+    builtin(
+        "paper_birch",
+        p,
+        37,
+        (LeafOutline::OvateSerrate, [92, 142, 52]),
+        (BarkPattern::Birch, [228, 224, 214]),
+        Some(372_896),
+        TABLE2,
+    )
+}
+
+/// Broad irregular crown, large heart-shaped light-green leaves, grey-brown bark.
+fn southern_catalpa() -> Species {
+    let p = params(&[
+        ("Shape", 2.0),
+        ("BaseSize", 0.3),
+        ("Scale", 12.0),
+        ("Levels", 3.0),
+        ("Ratio", 0.025),
+        ("RatioPower", 1.3),
+        ("Flare", 0.6),
+        ("Leaves", 36.0),
+        ("LeafScale", 0.28),
+        ("LeafScaleX", 0.85),
+        ("LeafBend", 0.5),
+        ("AttractionUp", 0.3),
+        ("0CurveRes", 6.0),
+        ("0CurveV", 30.0),
+        ("0SegSplits", 0.4),
+        ("0SplitAngle", 30.0),
+        ("1DownAngle", 55.0),
+        ("1DownAngleV", -20.0),
+        ("1Rotate", 140.0),
+        ("1Branches", 30.0),
+        ("1Length", 0.5),
+        ("1LengthV", 0.1),
+        ("1CurveRes", 5.0),
+        ("1Curve", -30.0),
+        ("1CurveV", 80.0),
+        ("1SegSplits", 0.1),
+        ("1SplitAngle", 30.0),
+        ("2DownAngle", 45.0),
+        ("2DownAngleV", 10.0),
+        ("2Rotate", 140.0),
+        ("2Branches", 25.0),
+        ("2Length", 0.45),
+        ("2LengthV", 0.1),
+        ("2CurveRes", 3.0),
+        ("2Curve", 10.0),
+        ("2CurveV", 60.0),
+        ("3DownAngle", 45.0),
+        ("3DownAngleV", 10.0),
+        ("3Rotate", 140.0),
+    ]);
+    builtin(
+        "southern_catalpa",
+        p,
+        41,
+        (LeafOutline::Cordate, [112, 158, 60]),
+        (BarkPattern::Furrowed, [138, 118, 94]),
+        Some(155_342),
+        TABLE2,
+    )
+}
+
+/// Tall broad dense crown, elliptic toothed leaves, smooth grey bark.
+fn american_beech() -> Species {
+    let p = params(&[
+        ("Shape", 1.0),
+        ("BaseSize", 0.2),
+        ("Scale", 20.0),
+        ("Levels", 4.0),
+        ("Ratio", 0.02),
+        ("RatioPower", 1.3),
+        ("Lobes", 3.0),
+        ("LobeDepth", 0.05),
+        ("Flare", 0.8),
+        ("Leaves", 18.5),
+        ("LeafScale", 0.12),
+        ("LeafScaleX", 0.55),
+        ("LeafBend", 0.4),
+        ("AttractionUp", 0.3),
+        ("0CurveRes", 10.0),
+        ("0CurveV", 20.0),
+        ("0SegSplits", 0.2),
+        ("0SplitAngle", 20.0),
+        ("1DownAngle", 60.0),
+        ("1DownAngleV", -30.0),
+        ("1Rotate", 140.0),
+        ("1Branches", 50.0),
+        ("1Length", 0.35),
+        ("1LengthV", 0.05),
+        ("1CurveRes", 6.0),
+        ("1Curve", -20.0),
+        ("1CurveV", 50.0),
+        ("2DownAngle", 45.0),
+        ("2DownAngleV", 10.0),
+        ("2Rotate", 140.0),
+        ("2Branches", 25.0),
+        ("2Length", 0.5),
+        ("2LengthV", 0.1),
+        ("2CurveRes", 4.0),
+        ("2Curve", -10.0),
+        ("2CurveV", 60.0),
+        ("3DownAngle", 45.0),
+        ("3DownAngleV", 10.0),
+        ("3Rotate", 140.0),
+        ("3Branches", 5.0),
+        ("3Length", 0.4),
+        ("3CurveRes", 1.0),
+        ("3CurveV", 30.0),
+    ]);
+    builtin(
+        "american_beech",
+        p,
+        53,
+        (LeafOutline::OvateSerrate, [72, 124, 44]),
+        (BarkPattern::Smooth, [150, 150, 144]),
+        Some(496_719),
+        TABLE2,
+    )
+}
+
+/// Conical conifer with whorled branches and needle fascicles, reddish plated bark.
+fn pine() -> Species {
+    let p = params(&[
+        ("Shape", 0.0),
+        ("BaseSize", 0.35),
+        ("Scale", 20.0),
+        ("Levels", 3.0),
+        ("Ratio", 0.017),
+        ("RatioPower", 1.4),
+        ("Flare", 0.4),
+        ("Leaves", 60.0),
+        ("LeafScale", 0.16),
+        ("LeafScaleX", 0.6),
+        ("LeafBend", 0.2),
+        ("0CurveRes", 8.0),
+        ("0CurveV", 8.0),
+        ("1DownAngle", 80.0),
+        ("1DownAngleV", -20.0),
+        ("1Rotate", 137.5),
+        ("1Branches", 90.0),
+        ("1Length", 0.35),
+        ("1LengthV", 0.04),
+        ("1CurveRes", 4.0),
+        ("1Curve", 20.0),
+        ("1CurveV", 20.0),
+        ("2DownAngle", 50.0),
+        ("2DownAngleV", 10.0),
+        ("2Rotate", -90.0),
+        ("2Branches", 30.0),
+        ("2Length", 0.3),
+        ("2LengthV", 0.05),
+        ("2CurveRes", 2.0),
+        ("2CurveV", 30.0),
+        ("3DownAngle", 30.0),
+        ("3DownAngleV", 10.0),
+        ("3Rotate", 137.5),
+    ]);
+    builtin(
+        "pine",
+        p,
+        67,
+        (LeafOutline::Needles, [44, 84, 40]),
+        (BarkPattern::Plated, [122, 76, 50]),
+        None,
+        "paper 000 Fig. 3b (beech trees replaced by pines)",
+    )
+}
+
+/// Multi-stemmed arching shrub about 2 m high with pinnate leaves (Rosa canina).
+fn dogrose() -> Species {
+    let p = params(&[
+        ("Shape", 3.0),
+        ("BaseSize", 0.1),
+        ("Scale", 2.2),
+        ("Levels", 3.0),
+        ("Ratio", 0.012),
+        ("RatioPower", 1.2),
+        ("Flare", 0.0),
+        ("Leaves", 20.0),
+        ("LeafScale", 0.1),
+        ("LeafScaleX", 0.8),
+        ("LeafBend", 0.6),
+        ("0CurveRes", 6.0),
+        ("0Curve", 50.0),
+        ("0CurveV", 20.0),
+        ("0BaseSplits", 6.0),
+        ("0SplitAngle", 22.0),
+        ("0SplitAngleV", 10.0),
+        ("0Taper", 0.8),
+        ("1DownAngle", 50.0),
+        ("1DownAngleV", 10.0),
+        ("1Rotate", 140.0),
+        ("1Branches", 14.0),
+        ("1Length", 0.35),
+        ("1LengthV", 0.05),
+        ("1CurveRes", 3.0),
+        ("1Curve", 20.0),
+        ("1CurveV", 30.0),
+        ("2DownAngle", 40.0),
+        ("2DownAngleV", 10.0),
+        ("2Rotate", -90.0),
+        ("2Branches", 8.0),
+        ("2Length", 0.5),
+        ("2CurveRes", 2.0),
+        ("3DownAngle", 45.0),
+        ("3DownAngleV", 10.0),
+        ("3Rotate", 140.0),
+    ]);
+    builtin(
+        "dogrose",
+        p,
+        79,
+        (LeafOutline::Pinnate, [66, 118, 44]),
+        (BarkPattern::Smooth, [96, 104, 58]),
+        None,
+        "paper 002 §3.2.2 (Xfrog dogrose, Rosa canina)",
+    )
+}

@@ -1,0 +1,236 @@
+//! Built-in species: triangle counts against paper 000 Table 2, determinism, materials, form.
+
+use sylva_geom::MaterialKind;
+use sylva_grow::species::BUILTIN_NAMES;
+use sylva_grow::weber_penn::{self, Params, LEAF, WOOD};
+use sylva_grow::Species;
+
+fn pool(threads: usize) -> rayon::ThreadPool {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+}
+
+#[test]
+fn triangle_counts_match_table_2_within_ten_percent() {
+    let table = [
+        ("red_maple", 115_529),
+        ("ohio_buckeye", 168_520),
+        ("paper_birch", 372_896),
+        ("southern_catalpa", 155_342),
+        ("american_beech", 496_719),
+    ];
+    for (name, reference) in table {
+        let s = Species::builtin(name).unwrap();
+        assert_eq!(s.reference_triangles, Some(reference));
+        let n = s.generate_mesh().unwrap().triangle_count() as f64;
+        let ratio = n / reference as f64;
+        assert!(
+            (0.9..=1.1).contains(&ratio),
+            "{name}: {n} triangles vs {reference} in Table 2 (ratio {ratio:.3})"
+        );
+    }
+}
+
+#[test]
+fn generation_is_deterministic_on_one_and_two_threads() {
+    for name in ["american_beech", "dogrose"] {
+        let s = Species::builtin(name).unwrap();
+        let one = pool(1).install(|| s.generate_mesh().unwrap());
+        let two = pool(2).install(|| s.generate_mesh().unwrap());
+        assert_eq!(one.triangle_count(), two.triangle_count(), "{name}");
+        assert_eq!(one.geometry_hash(), two.geometry_hash(), "{name}");
+        // A different seed grows a different tree.
+        let mut other = s.clone();
+        other.seed += 1;
+        assert_ne!(
+            other.generate_mesh().unwrap().geometry_hash(),
+            one.geometry_hash(),
+            "{name}"
+        );
+    }
+}
+
+#[test]
+fn every_builtin_keeps_leaf_and_wood_apart_with_textures() {
+    for s in Species::all_builtin() {
+        let m = s.build_model().unwrap();
+        m.mesh.validate(m.materials.len()).unwrap();
+        assert_eq!(m.materials.len(), 2);
+        assert_eq!(m.materials[WOOD as usize].kind, MaterialKind::Wood);
+        assert_eq!(m.materials[LEAF as usize].kind, MaterialKind::Leaf);
+        assert!(m.materials[LEAF as usize].two_sided);
+        let leaf_tex = m.materials[LEAF as usize].texture.as_ref().unwrap();
+        let bark_tex = m.materials[WOOD as usize].texture.as_ref().unwrap();
+        assert!(
+            leaf_tex.opaque_fraction() < 0.9,
+            "{}: leaf shape must be in alpha",
+            s.name
+        );
+        assert_eq!(bark_tex.opaque_fraction(), 1.0);
+        let leaves = m.mesh.triangles_with_material(LEAF);
+        let wood = m.mesh.triangles_with_material(WOOD);
+        assert!(
+            leaves > 10_000 && wood > 10_000,
+            "{}: {leaves} leaf, {wood} wood",
+            s.name
+        );
+        // Leaf colour is green; wood is not.
+        let lc = m.materials[LEAF as usize].base_color;
+        assert!(lc[1] > lc[0] && lc[1] > lc[2], "{}: leaf {lc:?}", s.name);
+        // Trees stand on the ground at the origin.
+        assert!(m.bounds.min.y.abs() < 0.5, "{}: {:?}", s.name, m.bounds);
+    }
+}
+
+#[test]
+fn forms_read_as_their_species() {
+    let size = |n: &str| {
+        let m = Species::builtin(n).unwrap().generate_mesh().unwrap();
+        m.bounds().size()
+    };
+    let rose = size("dogrose");
+    assert!(rose.y > 1.0 && rose.y < 4.0, "a dogrose is a shrub: {rose}");
+    assert!(rose.x > rose.y, "a dogrose spreads wider than tall: {rose}");
+    let birch = size("paper_birch");
+    assert!(
+        birch.y > 1.5 * birch.x,
+        "paper birch has a narrow crown: {birch}"
+    );
+    let catalpa = size("southern_catalpa");
+    assert!(
+        catalpa.x > catalpa.y,
+        "catalpa has a broad crown: {catalpa}"
+    );
+    let beech = size("american_beech");
+    assert!(beech.y > 15.0, "american beech is a tall tree: {beech}");
+    // Birch bark is light, pine bark reddish brown.
+    let bark = |n: &str| Species::builtin(n).unwrap().materials()[WOOD as usize].base_color;
+    let b = bark("paper_birch");
+    assert!(b.iter().all(|&c| c > 0.4), "birch bark {b:?}");
+    let p = bark("pine");
+    assert!(p[0] > p[1] && p[1] > p[2], "pine bark {p:?}");
+}
+
+#[test]
+fn names_are_forgiving_and_listed() {
+    assert!(Species::builtin("Red Maple").is_some());
+    assert!(Species::builtin("american-beech").is_some());
+    assert!(Species::builtin("oak").is_none());
+    assert_eq!(Species::all_builtin().len(), BUILTIN_NAMES.len());
+}
+
+#[test]
+fn runaway_parameters_are_refused_not_allocated() {
+    let mut p = Params::default();
+    p.set("Levels", 4.0).unwrap();
+    for l in 1..4 {
+        p.set(&format!("{l}Branches"), 2000.0).unwrap();
+        p.set(&format!("{l}Length"), 0.5).unwrap();
+    }
+    p.set("Leaves", 10000.0).unwrap();
+    let e = weber_penn::generate_with_limit(&p, 1, 1_000_000).unwrap_err();
+    assert!(e.to_string().contains("exceed 1000000 triangles"), "{e}");
+}
+
+#[test]
+fn taper_flare_and_zscale_shape_the_trunk() {
+    let mut p = Params::default();
+    p.set("Levels", 1.0).unwrap();
+    p.set("Flare", 0.0).unwrap();
+    p.set("0Taper", 0.0).unwrap();
+    let cylinder = weber_penn::generate(&p, 1).unwrap();
+    let b = cylinder.bounds();
+    // Scale 10, 0Length 1, Ratio 0.015: a 10 m trunk of radius 0.15 m.
+    assert!((b.size().y - 10.0).abs() < 1e-3, "{b:?}");
+    assert!((b.size().x - 0.3).abs() < 0.01, "{b:?}");
+    p.set("Flare", 2.0).unwrap();
+    let flared = weber_penn::generate(&p, 1).unwrap().bounds();
+    assert!(flared.size().x > 1.5 * b.size().x, "{flared:?}");
+    p.set("ZScale", 2.0).unwrap();
+    let tall = weber_penn::generate(&p, 1).unwrap().bounds();
+    assert!((tall.size().y - 20.0).abs() < 1e-2, "{tall:?}");
+    // A bare trunk carries no leaves until Leaves is set.
+    assert_eq!(cylinder.triangles_with_material(LEAF), 0);
+    p.set("Leaves", 50.0).unwrap();
+    let leafy = weber_penn::generate(&p, 1).unwrap();
+    assert_eq!(leafy.triangles_with_material(LEAF), 100);
+}
+
+#[test]
+fn pruning_envelope_narrows_the_crown() {
+    let mut p = Species::builtin("red_maple").unwrap().params;
+    let wide = weber_penn::generate(&p, 3).unwrap().bounds().size();
+    p.set("PruneRatio", 1.0).unwrap();
+    p.set("PruneWidth", 0.2).unwrap();
+    let pruned = weber_penn::generate(&p, 3).unwrap().bounds().size();
+    assert!(pruned.x < 0.8 * wide.x, "{pruned} vs {wide}");
+    // Leaf distribution shape matters: conical (0) puts fewer leaves near the base than
+    // cylindrical (3).
+    p.set("PruneRatio", 0.0).unwrap();
+    p.set("LeafDistrib", 0.0).unwrap();
+    let conical = weber_penn::generate(&p, 3)
+        .unwrap()
+        .triangles_with_material(LEAF);
+    p.set("LeafDistrib", 3.0).unwrap();
+    let cylindrical = weber_penn::generate(&p, 3)
+        .unwrap()
+        .triangles_with_material(LEAF);
+    assert!(conical < cylindrical, "{conical} vs {cylindrical}");
+}
+
+mod any_valid_parameters {
+    use proptest::prelude::*;
+    use sylva_grow::weber_penn::{self, GenerateError, Params, GENERAL_SPECS, LEVEL_SPECS};
+
+    /// A value inside `spec`'s range (whole where the parameter is), biased to moderate sizes
+    /// for counts so most cases finish under the budget.
+    fn value(spec: &weber_penn::ParamSpec, u: f64) -> f64 {
+        let (lo, hi) = match spec.name {
+            "Branches" => (0.0, 60.0),
+            "Leaves" => (0.0, 80.0),
+            "CurveRes" => (1.0, 12.0),
+            "Scale" if spec.min > 0.0 && spec.max == 1000.0 => (0.5, 3.0),
+            _ => (spec.min, spec.max),
+        };
+        let v = lo + (hi - lo) * u;
+        if spec.integer {
+            v.round().clamp(spec.min, spec.max)
+        } else {
+            v
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        /// Any in-range parameter set gives a valid mesh or a budget error, never a panic or
+        /// non-finite geometry.
+        #[test]
+        fn valid_mesh_or_budget_error(
+            general in proptest::collection::vec(0.0f64..1.0, GENERAL_SPECS.len()),
+            levels in proptest::collection::vec(0.0f64..1.0, 4 * LEVEL_SPECS.len()),
+            seed in 0u64..1000,
+        ) {
+            let mut p = Params::default();
+            for (spec, u) in GENERAL_SPECS.iter().zip(&general) {
+                let v = match spec.name {
+                    "Scale" => 1.0 + 20.0 * u,
+                    _ => value(spec, *u),
+                };
+                p.set(spec.name, v).unwrap();
+            }
+            for l in 0..4 {
+                for (k, spec) in LEVEL_SPECS.iter().enumerate() {
+                    let v = value(spec, levels[l * LEVEL_SPECS.len() + k]);
+                    p.set(&format!("{l}{}", spec.name), v).unwrap();
+                }
+            }
+            match weber_penn::generate_with_limit(&p, seed, 300_000) {
+                Ok(mesh) => prop_assert!(mesh.validate(2).is_ok(), "{:?}", mesh.validate(2)),
+                Err(GenerateError::TooManyTriangles { limit }) => prop_assert_eq!(limit, 300_000),
+                Err(e) => prop_assert!(false, "unexpected error {e}"),
+            }
+        }
+    }
+}

@@ -1,0 +1,553 @@
+//! Mitsuba 3 export: `scene.xml`, `meshes/*.ply`, `textures/*.png`.
+//!
+//! The scene keeps sylva's instancing. Each unique model is written once, one binary PLY per
+//! material (a Mitsuba shape carries one BSDF), grouped in a `shapegroup`; each plant is an
+//! `instance` of it with its `to_world` matrix. The mapping (see `docs/export.md`):
+//!
+//! | sylva | Mitsuba 3 |
+//! | --- | --- |
+//! | leaf material (alpha-textured quad) | `mask` (opacity = the alpha channel, nearest texel) around a `principledthin` with the leaf texture as `base_color` and `diff_trans` (diffuse transmission) from [`MitsubaOptions::leaf_diff_trans`] |
+//! | wood material | `diffuse` with the bark texture; wrapped in `twosided` when the material is two-sided |
+//! | sun | `directional`, `direction` = the direction light travels, `irradiance` = [`MitsubaOptions::sun_irradiance`] × the 6500 K black-body colour |
+//! | sky colour | `constant` emitter of that radiance |
+//! | ground | `rectangle` on y = 0 with a `diffuse` of the ground colour |
+//! | camera | `perspective`, `lookat` with up = +y, `fov_axis` = `y` (sylva's fov is vertical), the same width, height |
+//! | rays per pixel | `independent` sampler's `sample_count` (the `spp` default, `-Dspp=N` overrides) |
+//! | — | `volpath` integrator: unlike `path`, its shadow rays pass through a mask's transparent texels (null transmission), so leaves cast leaf-shaped shadows rather than quad-shaped ones |
+//!
+//! PLY texture coordinates are sylva's as they are: Mitsuba's PLY loader and bitmap texture
+//! both put v = 0 at the image's first (top) row, as sylva does.
+
+use super::{
+    file_stems, has_transparency, material_stems, triangles_by_material, validate_models,
+    write_file, write_png, ExportError, Exported, PngChannels, TextureFiles,
+};
+use glam::{Mat4, Vec3};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use sylva_geom::{Material, Model, Scene, Wrap};
+
+/// The scene file in the output directory.
+pub const XML_FILE: &str = "scene.xml";
+/// PLY meshes, relative to the output directory.
+pub const MESH_DIR: &str = "meshes";
+/// Textures, relative to the output directory.
+pub const TEXTURE_DIR: &str = "textures";
+
+/// Choices the scene file does not fix.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MitsubaOptions {
+    /// Samples per pixel, the XML's `spp` default (render with `-Dspp=N` to change it).
+    pub spp: u32,
+    /// The `volpath` integrator's `max_depth`: scattering events (passes through transparent
+    /// texels do not count); -1 is unbounded, ended by Russian roulette. The XML's
+    /// `max_depth` default.
+    pub max_depth: i32,
+    /// Irradiance of the sun on a surface facing it, as luminance; its colour is a 6500 K
+    /// black body. π makes a white Lambertian surface facing the sun as bright as sylva's
+    /// local shading `k_d (N·L)` with a sun of intensity 1.
+    pub sun_irradiance: f32,
+    /// `principledthin`'s `diff_trans` for leaves, in [0, 2]: 0 reflects only, 2 transmits
+    /// only, 1 splits the leaf's albedo evenly between reflection and transmission.
+    pub leaf_diff_trans: f32,
+}
+
+impl MitsubaOptions {
+    /// The scene's samples per pixel, unbounded paths (an unbiased reference), a sun of
+    /// irradiance π, leaves that reflect and transmit alike.
+    pub fn for_scene(scene: &Scene) -> MitsubaOptions {
+        MitsubaOptions {
+            spp: scene.camera.rays_per_pixel,
+            max_depth: -1,
+            sun_irradiance: std::f32::consts::PI,
+            leaf_diff_trans: 1.0,
+        }
+    }
+
+    pub fn validate(&self) -> Result<(), ExportError> {
+        let bad = |m: String| Err(ExportError::Option(m));
+        if self.spp == 0 {
+            return bad("samples per pixel must be at least 1".into());
+        }
+        if self.max_depth < -1 || self.max_depth == 0 {
+            return bad(format!(
+                "max_depth {} must be -1 (unbounded) or at least 1",
+                self.max_depth
+            ));
+        }
+        if !(self.sun_irradiance.is_finite() && self.sun_irradiance >= 0.0) {
+            return bad(format!(
+                "sun irradiance {} must be finite and ≥ 0",
+                self.sun_irradiance
+            ));
+        }
+        if !(0.0..=2.0).contains(&self.leaf_diff_trans) {
+            return bad(format!(
+                "leaf diffuse transmission {} must be in [0, 2]",
+                self.leaf_diff_trans
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// `"x, y, z"`.
+fn v3(v: impl Into<[f32; 3]>) -> String {
+    let [x, y, z] = v.into();
+    format!("{x}, {y}, {z}")
+}
+
+/// Text safe inside an XML comment or attribute.
+fn xml_text(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+        .replace("--", "- -")
+}
+
+/// Row-major "m00 m01 ... m33" of `m`.
+fn matrix_value(m: Mat4) -> String {
+    let rows: Vec<String> = (0..4)
+        .map(|r| {
+            let row = m.row(r);
+            format!("{} {} {} {}", row.x, row.y, row.z, row.w)
+        })
+        .collect();
+    rows.join("  ")
+}
+
+fn bitmap(out: &mut String, indent: &str, name: &str, file: &str, wrap: Wrap, alpha: bool) {
+    let wrap = match wrap {
+        Wrap::Repeat => "repeat",
+        Wrap::Clamp => "clamp",
+    };
+    let _ = writeln!(out, "{indent}<texture type=\"bitmap\" name=\"{name}\">");
+    let _ = writeln!(
+        out,
+        "{indent}    <string name=\"filename\" value=\"{file}\"/>"
+    );
+    let _ = writeln!(
+        out,
+        "{indent}    <string name=\"wrap_mode\" value=\"{wrap}\"/>"
+    );
+    if alpha {
+        // Coverage is linear, and sylva's alpha test reads the nearest texel.
+        let _ = writeln!(out, "{indent}    <boolean name=\"raw\" value=\"true\"/>");
+        let _ = writeln!(
+            out,
+            "{indent}    <string name=\"filter_type\" value=\"nearest\"/>"
+        );
+    }
+    let _ = writeln!(out, "{indent}</texture>");
+}
+
+/// Opens `<bsdf type="TY" [id="ID"]>` and indents further.
+fn open_bsdf(out: &mut String, indent: &mut String, ty: &str, id: Option<&str>) {
+    match id {
+        Some(id) => {
+            let _ = writeln!(out, "{indent}<bsdf type=\"{ty}\" id=\"{id}\">");
+        }
+        None => {
+            let _ = writeln!(out, "{indent}<bsdf type=\"{ty}\">");
+        }
+    }
+    indent.push_str("    ");
+}
+
+/// The BSDF element of `mat` with id `id`.
+fn bsdf(out: &mut String, id: &str, mat: &Material, tex_stem: Option<&str>, opts: &MitsubaOptions) {
+    let tex = mat.texture.as_ref();
+    let colour_file = tex_stem.map(|s| format!("{TEXTURE_DIR}/{s}.png"));
+    let masked = tex.is_some_and(|t| has_transparency(t));
+    let _ = writeln!(
+        out,
+        "    <!-- {} ({}) -->",
+        xml_text(&mat.name),
+        if mat.is_leaf() { "leaf" } else { "wood" }
+    );
+    let mut indent = "    ".to_string();
+    let mut closes = 0;
+    let mut id = Some(id);
+    if masked {
+        open_bsdf(out, &mut indent, "mask", id.take());
+        closes += 1;
+        bitmap(
+            out,
+            &indent,
+            "opacity",
+            &format!("{TEXTURE_DIR}/{}_alpha.png", tex_stem.unwrap_or_default()),
+            Wrap::Clamp,
+            true,
+        );
+    }
+    let wrap = tex.map(|t| t.wrap).unwrap_or(Wrap::Repeat);
+    if mat.is_leaf() {
+        // A thin two-sided sheet that reflects and transmits diffusely.
+        open_bsdf(out, &mut indent, "principledthin", id.take());
+        closes += 1;
+        match &colour_file {
+            Some(f) => bitmap(out, &indent, "base_color", f, wrap, false),
+            None => {
+                let _ = writeln!(
+                    out,
+                    "{indent}<rgb name=\"base_color\" value=\"{}\"/>",
+                    v3(mat.base_color)
+                );
+            }
+        }
+        let _ = writeln!(
+            out,
+            "{indent}<float name=\"diff_trans\" value=\"{}\"/>",
+            opts.leaf_diff_trans
+        );
+    } else {
+        if mat.two_sided {
+            open_bsdf(out, &mut indent, "twosided", id.take());
+            closes += 1;
+        }
+        open_bsdf(out, &mut indent, "diffuse", id.take());
+        closes += 1;
+        match &colour_file {
+            Some(f) => bitmap(out, &indent, "reflectance", f, wrap, false),
+            None => {
+                let _ = writeln!(
+                    out,
+                    "{indent}<rgb name=\"reflectance\" value=\"{}\"/>",
+                    v3(mat.base_color)
+                );
+            }
+        }
+    }
+    for _ in 0..closes {
+        indent.truncate(indent.len() - 4);
+        let _ = writeln!(out, "{indent}</bsdf>");
+    }
+}
+
+/// Writes the triangles `tris` of `model` as a binary little-endian PLY (x y z nx ny nz u v,
+/// faces as `vertex_indices`), with only the vertices they use.
+fn write_ply(path: &Path, model: &Model, tris: &[u32], comment: &str) -> Result<(), ExportError> {
+    let mesh = &model.mesh;
+    let mut remap = vec![u32::MAX; mesh.vertex_count()];
+    let mut used: Vec<u32> = Vec::new();
+    for &t in tris {
+        for i in mesh.indices[t as usize] {
+            if remap[i as usize] == u32::MAX {
+                remap[i as usize] = used.len() as u32;
+                used.push(i);
+            }
+        }
+    }
+    write_file(path, |w| {
+        write!(
+            w,
+            "ply\nformat binary_little_endian 1.0\ncomment {comment}\nelement vertex {}\n\
+             property float x\nproperty float y\nproperty float z\n\
+             property float nx\nproperty float ny\nproperty float nz\n\
+             property float u\nproperty float v\n\
+             element face {}\nproperty list uchar uint vertex_indices\nend_header\n",
+            used.len(),
+            tris.len()
+        )?;
+        let mut rec = [0u8; 32];
+        for &i in &used {
+            let i = i as usize;
+            let vals = [
+                mesh.positions[i][0],
+                mesh.positions[i][1],
+                mesh.positions[i][2],
+                mesh.normals[i][0],
+                mesh.normals[i][1],
+                mesh.normals[i][2],
+                mesh.uvs[i][0],
+                mesh.uvs[i][1],
+            ];
+            for (k, v) in vals.iter().enumerate() {
+                rec[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
+            }
+            w.write_all(&rec)?;
+        }
+        let mut face = [0u8; 13];
+        face[0] = 3;
+        for &t in tris {
+            for (k, i) in mesh.indices[t as usize].iter().enumerate() {
+                face[1 + 4 * k..5 + 4 * k].copy_from_slice(&remap[*i as usize].to_le_bytes());
+            }
+            w.write_all(&face)?;
+        }
+        Ok(())
+    })
+}
+
+/// The far clipping distance: twice the farthest point of the scene from the camera, at least
+/// Mitsuba's default 10 km.
+fn far_clip(scene: &Scene) -> f32 {
+    let mut b = scene.instance_bounds();
+    if let Some(q) = super::ground_quad(scene) {
+        for (p, _) in q {
+            b.grow(Vec3::from_array(p));
+        }
+    }
+    if b.is_empty() {
+        return 1e4;
+    }
+    let far = b
+        .corners()
+        .iter()
+        .map(|c| c.distance(scene.camera.position))
+        .fold(0.0f32, f32::max);
+    (2.0 * far).max(1e4)
+}
+
+/// Bytes of the PLY files of the models in `written` (exact: header aside, 32 bytes a vertex
+/// and 13 a face).
+fn ply_bytes(scene: &Scene, written: &[bool]) -> u64 {
+    scene
+        .models
+        .iter()
+        .zip(written)
+        .filter(|(_, w)| **w)
+        .map(|(m, _)| 32 * m.mesh.vertex_count() as u64 + 13 * m.triangle_count() as u64 + 4096)
+        .sum()
+}
+
+/// Writes `scene.xml`, the PLY meshes and the textures into `dir` (created if needed), after
+/// checking that the disk has room. `progress(n)` is called with the number of models written
+/// so far; returning `false` cancels the export ([`ExportError::Cancelled`]) before
+/// `scene.xml` is written.
+pub fn write(
+    scene: &Scene,
+    dir: &Path,
+    opts: &MitsubaOptions,
+    progress: &mut dyn FnMut(u64) -> bool,
+) -> Result<Exported, ExportError> {
+    opts.validate()?;
+    validate_models(&scene.models)?;
+    super::prepare_dir(dir)?;
+    let model_stems = file_stems(&scene.models.iter().map(|m| &m.name).collect::<Vec<_>>());
+    let mat_stems = material_stems(&scene.models);
+    let textures = TextureFiles::new(&scene.models, &mat_stems);
+    let mut out = Exported::default();
+    // Only models that are placed and have geometry are written.
+    let written: Vec<bool> = (0..scene.models.len())
+        .map(|k| {
+            scene.models[k].triangle_count() > 0
+                && scene.instances.iter().any(|i| i.model as usize == k)
+        })
+        .collect();
+    super::check_disk_space(
+        dir,
+        ply_bytes(scene, &written) + 200 * scene.instances.len() as u64,
+        super::available_disk_bytes(dir),
+    )?;
+
+    // Textures of the written models only.
+    let needed: std::collections::HashSet<&str> = scene
+        .models
+        .iter()
+        .zip(&written)
+        .filter(|(_, w)| **w)
+        .flat_map(|(m, _)| m.materials.iter().filter_map(|mat| mat.texture.as_ref()))
+        .map(|t| textures.stem(t))
+        .collect();
+    for (t, stem) in textures.unique(&scene.models) {
+        if !needed.contains(stem.as_str()) {
+            continue;
+        }
+        let rel = PathBuf::from(TEXTURE_DIR).join(format!("{stem}.png"));
+        write_png(&dir.join(&rel), t, PngChannels::Rgb)?;
+        out.add(dir, rel)?;
+        if has_transparency(t) {
+            let rel = PathBuf::from(TEXTURE_DIR).join(format!("{stem}_alpha.png"));
+            write_png(&dir.join(&rel), t, PngChannels::Alpha)?;
+            out.add(dir, rel)?;
+        }
+    }
+
+    let cam = scene.camera;
+    let mut x = String::new();
+    let _ = writeln!(x, "<?xml version=\"1.0\" encoding=\"utf-8\"?>");
+    let _ = writeln!(
+        x,
+        "<!-- sylva scene '{}' ({}): {} instances of {} models, {} triangles plus the ground.\n     \
+         World frame: right-handed, +y up, metres. Render with Mitsuba 3 (RGB variant), e.g.\n     \
+         mitsuba -m scalar_rgb -Dspp=256 -o render.exr {XML_FILE}  (see docs/export.md) -->",
+        xml_text(&scene.name),
+        xml_text(&scene.origin),
+        scene.instances.len(),
+        scene.models.len(),
+        scene.instanced_triangles()
+    );
+    let _ = writeln!(x, "<scene version=\"3.0.0\">");
+    let _ = writeln!(x, "    <default name=\"spp\" value=\"{}\"/>", opts.spp);
+    let _ = writeln!(
+        x,
+        "    <default name=\"max_depth\" value=\"{}\"/>\n",
+        opts.max_depth
+    );
+    let _ = writeln!(
+        x,
+        "    <!-- volpath, not path: its shadow rays see through the leaves' transparent texels. -->\n    <integrator type=\"volpath\">\n        <integer name=\"max_depth\" value=\"$max_depth\"/>\n    </integrator>\n"
+    );
+
+    // Camera: sylva's fov is vertical; lookat with +y up.
+    let fwd = (cam.look_at - cam.position).normalize_or_zero();
+    let up = if fwd.cross(Vec3::Y).length() < 1e-6 {
+        // Looking straight up or down: +y cannot be "up" on the image; take +z.
+        Vec3::Z
+    } else {
+        Vec3::Y
+    };
+    let _ = writeln!(x, "    <sensor type=\"perspective\">");
+    let _ = writeln!(x, "        <string name=\"fov_axis\" value=\"y\"/>");
+    let _ = writeln!(x, "        <float name=\"fov\" value=\"{}\"/>", cam.fov_deg);
+    let _ = writeln!(x, "        <float name=\"near_clip\" value=\"0.01\"/>");
+    let _ = writeln!(
+        x,
+        "        <float name=\"far_clip\" value=\"{}\"/>",
+        far_clip(scene)
+    );
+    let _ = writeln!(
+        x,
+        "        <transform name=\"to_world\">\n            <lookat origin=\"{}\" target=\"{}\" up=\"{}\"/>\n        </transform>",
+        v3(cam.position),
+        v3(cam.look_at),
+        v3(up)
+    );
+    let _ = writeln!(
+        x,
+        "        <sampler type=\"independent\">\n            <integer name=\"sample_count\" value=\"$spp\"/>\n        </sampler>"
+    );
+    let _ = writeln!(
+        x,
+        "        <film type=\"hdrfilm\">\n            <integer name=\"width\" value=\"{}\"/>\n            <integer name=\"height\" value=\"{}\"/>\n            <string name=\"pixel_format\" value=\"rgb\"/>\n            <rfilter type=\"box\"/>\n        </film>",
+        cam.width, cam.height
+    );
+    let _ = writeln!(x, "    </sensor>\n");
+
+    // Lights.
+    let sun =
+        sylva_core::blackbody_rgb(sylva_core::SUN_TEMPERATURE_K).map(|c| c * opts.sun_irradiance);
+    let _ = writeln!(
+        x,
+        "    <!-- The sun: elevation {:.2}°, azimuth {:.2}°; a 6500 K black body. -->",
+        scene.sun.elevation_deg(),
+        scene.sun.azimuth_deg()
+    );
+    let _ = writeln!(
+        x,
+        "    <emitter type=\"directional\">\n        <vector name=\"direction\" value=\"{}\"/>\n        <rgb name=\"irradiance\" value=\"{}\"/>\n    </emitter>",
+        v3(scene.sun.travel().as_vec3()),
+        v3(sun)
+    );
+    let _ = writeln!(
+        x,
+        "    <emitter type=\"constant\">\n        <rgb name=\"radiance\" value=\"{}\"/>\n    </emitter>\n",
+        v3(scene.sky_color)
+    );
+
+    // Materials.
+    for (k, model) in scene.models.iter().enumerate() {
+        if !written[k] {
+            continue;
+        }
+        for (j, mat) in model.materials.iter().enumerate() {
+            let stem = mat.texture.as_ref().map(|t| textures.stem(t));
+            bsdf(
+                &mut x,
+                &format!("bsdf-{}", mat_stems[k][j]),
+                mat,
+                stem,
+                opts,
+            );
+        }
+    }
+    x.push('\n');
+
+    // Ground.
+    if let Some(q) = super::ground_quad(scene) {
+        let (hx, hz) = (q[2].0[0], q[2].0[2]);
+        // The rectangle spans [-1, 1]² in x-y with normal +z: map x → x, y → -z, z → +y.
+        let m = Mat4::from_cols_array_2d(&[
+            [hx, 0.0, 0.0, 0.0],
+            [0.0, 0.0, -hz, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ]);
+        let _ = writeln!(
+            x,
+            "    <shape type=\"rectangle\" id=\"ground\">\n        <transform name=\"to_world\">\n            <matrix value=\"{}\"/>\n        </transform>\n        <bsdf type=\"diffuse\">\n            <rgb name=\"reflectance\" value=\"{}\"/>\n        </bsdf>\n    </shape>\n",
+            matrix_value(m),
+            v3(scene.ground.color)
+        );
+    }
+
+    // Models: one PLY per material, grouped.
+    let mut done = 0u64;
+    for (k, model) in scene.models.iter().enumerate() {
+        if !written[k] {
+            done += 1;
+            if !progress(done) {
+                return Err(ExportError::Cancelled);
+            }
+            continue;
+        }
+        let _ = writeln!(
+            x,
+            "    <shape type=\"shapegroup\" id=\"model-{}\">",
+            model_stems[k]
+        );
+        for (j, tris) in triangles_by_material(model).iter().enumerate() {
+            if tris.is_empty() {
+                continue;
+            }
+            // Forward slashes: the XML is read on any system.
+            let name = format!("{MESH_DIR}/{}.ply", mat_stems[k][j]);
+            let rel = PathBuf::from(&name);
+            write_ply(
+                &dir.join(&rel),
+                model,
+                tris,
+                &format!("sylva model {} material {}", model_stems[k], j),
+            )?;
+            out.add(dir, rel.clone())?;
+            let _ = writeln!(
+                x,
+                "        <shape type=\"ply\">\n            <string name=\"filename\" value=\"{}\"/>\n            <ref id=\"bsdf-{}\"/>\n        </shape>",
+                name,
+                mat_stems[k][j]
+            );
+        }
+        let _ = writeln!(x, "    </shape>");
+        done += 1;
+        if !progress(done) {
+            return Err(ExportError::Cancelled);
+        }
+    }
+    x.push('\n');
+
+    // Instances.
+    for inst in &scene.instances {
+        let k = inst.model as usize;
+        if !written[k] {
+            continue;
+        }
+        let _ = writeln!(
+            x,
+            "    <shape type=\"instance\">\n        <ref id=\"model-{}\"/>\n        <transform name=\"to_world\">\n            <matrix value=\"{}\"/>\n        </transform>\n    </shape>",
+            model_stems[k],
+            matrix_value(Mat4::from(inst.transform()))
+        );
+    }
+    let _ = writeln!(x, "</scene>");
+    write_file(&dir.join(XML_FILE), |w| w.write_all(x.as_bytes()))?;
+    out.add(dir, PathBuf::from(XML_FILE))?;
+    out.triangles = scene.instanced_triangles()
+        + if super::ground_quad(scene).is_some() {
+            2
+        } else {
+            0
+        };
+    Ok(out)
+}

@@ -1,0 +1,384 @@
+//! The GPU solver against the CPU solver (the oracle): same grids, same parameters, same
+//! step counts and stop rules, results within 1e-5 relative in f32.
+//!
+//! These run on whatever adapter there is, software ones (lavapipe, as in CI) included.
+//! Where no adapter exists at all they print why and pass.
+
+use sylva_lb::lattice::Q;
+use sylva_lb::{
+    solve_lighting, Boundary, ColourParams, DensityGrid, Dims, Lattice, MediumParams, Preset,
+    SolveOptions, StopReason,
+};
+use sylva_lb_gpu::{
+    solve_lighting_gpu, AdapterChoice, ContextOptions, GpuContext, GpuError, GpuLattice,
+    LbGpuError, Precision,
+};
+
+fn context_with(opts: ContextOptions) -> Option<GpuContext> {
+    match GpuContext::new(&opts) {
+        Ok(ctx) => {
+            eprintln!("GPU tests on {}", ctx.describe());
+            Some(ctx)
+        }
+        Err(e @ GpuError::NoAdapter { .. }) => {
+            eprintln!("skipping GPU test: {e}");
+            None
+        }
+        Err(e) => panic!("opening the GPU failed: {e}"),
+    }
+}
+
+fn context() -> Option<GpuContext> {
+    context_with(ContextOptions::new(AdapterChoice::Any))
+}
+
+/// A deterministic medium with empty, green and brown sites in a non-cubic grid.
+fn mixed_grid(dims: Dims) -> DensityGrid {
+    let mut g = DensityGrid::empty(dims);
+    let mut state = 0x9e37_79b9_u32;
+    for i in 0..dims.sites() {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        let r = (state % 1000) as f32 / 1000.0;
+        let (x, _, _) = dims.coords(i);
+        // A third empty, the rest leafy; a trunk-like slab of wood.
+        if r > 0.33 {
+            g.density[i] = r;
+            if x == dims.nx / 2 {
+                g.wood[i] = 0.8;
+            }
+        }
+    }
+    g
+}
+
+fn anisotropic_medium(zero_f0_on_brown: bool) -> MediumParams {
+    MediumParams {
+        // Forward, the backward limit and the forward limit (the g = ±1 special cases).
+        colours: [
+            ColourParams {
+                sigma_a: 0.1,
+                sigma_s: 0.85,
+                g: 0.6,
+            },
+            ColourParams {
+                sigma_a: 0.05,
+                sigma_s: 0.9,
+                g: -1.0,
+            },
+            ColourParams {
+                sigma_a: 0.2,
+                sigma_s: 0.7,
+                g: 1.0,
+            },
+        ],
+        zero_f0_on_green: true,
+        zero_f0_on_brown,
+        brown_threshold: 0.5,
+    }
+}
+
+fn sun() -> Boundary {
+    Boundary::sun([0.3, -0.9, 0.2], 1.0)
+}
+
+/// Largest |a - b| relative to |b|, with a floor of 1e-3 of the largest value so that
+/// sites with almost no light do not dominate.
+fn max_relative_error(a: &[f32], b: &[f32]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    let scale = b.iter().fold(0.0f64, |m, &v| m.max(v.abs() as f64));
+    a.iter()
+        .zip(b)
+        .map(|(&x, &y)| (x as f64 - y as f64).abs() / (y.abs() as f64).max(1e-3 * scale))
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn three_colours_agree_with_the_cpu_on_green_brown_and_empty_sites() {
+    let Some(ctx) = context() else { return };
+    let dims = Dims::new(14, 12, 10).unwrap();
+    let grid = mixed_grid(dims);
+    let opts = SolveOptions {
+        max_steps: 24,
+        tolerance: None,
+    };
+    for brown_rule in [true, false] {
+        let medium = anisotropic_medium(brown_rule);
+        let (cpu, cpu_reports) =
+            solve_lighting(&grid, &medium, sun(), &opts, &mut |_, _, _| {}).unwrap();
+        let (gpu, gpu_reports) = solve_lighting_gpu(
+            &ctx,
+            &grid,
+            &medium,
+            sun(),
+            &opts,
+            Precision::F32,
+            &mut |_, _, _| {},
+        )
+        .unwrap();
+        for c in 0..3 {
+            let err = max_relative_error(&gpu.colours[c], &cpu.colours[c]);
+            eprintln!("colour {c}, zero f0 on brown {brown_rule}: max relative error {err:.2e}");
+            assert!(err < 1e-5, "colour {c}: {err}");
+            assert_eq!(gpu_reports[c].steps, cpu_reports[c].steps);
+            assert_eq!(gpu_reports[c].stop, cpu_reports[c].stop);
+            let (rg, rc) = (gpu_reports[c].residual, cpu_reports[c].residual);
+            assert!((rg - rc).abs() <= 1e-4 * rc.abs() + 1e-9, "{rg} vs {rc}");
+        }
+        // The light really went somewhere: interior sites are lit, and differ by colour.
+        assert!(cpu.colours[0].iter().any(|&v| v > 0.01));
+        assert_ne!(cpu.colours[0], cpu.colours[1]);
+    }
+}
+
+#[test]
+fn every_step_count_maps_onto_the_cpu_state() {
+    // The GPU keeps post-collision values and needs no launch for the first step: check the
+    // bookkeeping at 0, 1, 2, 3 and 5 steps, against the CPU lattice's state.
+    let Some(ctx) = context() else { return };
+    let dims = Dims::new(7, 8, 9).unwrap();
+    let grid = mixed_grid(dims);
+    let medium = Preset::Leaf.params();
+    let mut cpu = Lattice::new(&grid, &medium, 2, sun()).unwrap();
+    let mut gpu = GpuLattice::new(&ctx, &grid, &medium, 2, sun(), Precision::F32).unwrap();
+    let err = max_relative_error(&gpu.site_totals().unwrap(), &cpu.site_totals());
+    assert_eq!(err, 0.0, "before any step");
+    for steps in [1, 2, 3, 5] {
+        cpu.reset(sun());
+        gpu.reset(sun()).unwrap();
+        let opts = SolveOptions {
+            max_steps: steps,
+            tolerance: None,
+        };
+        let mut cpu_residuals = Vec::new();
+        let mut gpu_residuals = Vec::new();
+        cpu.run(&opts, &mut |_, r| cpu_residuals.push(r)).unwrap();
+        gpu.run(&opts, &mut |_, r| gpu_residuals.push(r)).unwrap();
+        let err = max_relative_error(&gpu.site_totals().unwrap(), &cpu.site_totals());
+        assert!(err < 1e-5, "{steps} steps: {err}");
+        assert_eq!(cpu_residuals.len(), gpu_residuals.len());
+        for (g, c) in gpu_residuals.iter().zip(&cpu_residuals) {
+            assert!(
+                g == c || (g - c).abs() <= 1e-4 * c.abs(),
+                "{steps} steps: residuals {gpu_residuals:?} vs {cpu_residuals:?}"
+            );
+        }
+    }
+}
+
+#[test]
+fn tolerance_stops_after_the_same_step_as_the_cpu() {
+    let Some(ctx) = context() else { return };
+    let dims = Dims::new(10, 10, 10).unwrap();
+    let grid = mixed_grid(dims);
+    let medium = Preset::Dogrose.params();
+    let opts = SolveOptions {
+        max_steps: 400,
+        tolerance: Some(1e-3),
+    };
+    let mut cpu = Lattice::new(&grid, &medium, 0, sun()).unwrap();
+    let mut gpu = GpuLattice::new(&ctx, &grid, &medium, 0, sun(), Precision::F32).unwrap();
+    let c = cpu.run(&opts, &mut |_, _| {}).unwrap();
+    let g = gpu.run(&opts, &mut |_, _| {}).unwrap();
+    assert_eq!(c.stop, StopReason::Converged);
+    assert_eq!((g.steps, g.stop), (c.steps, c.stop));
+    assert!(c.steps < opts.max_steps && g.residual < 1e-3);
+    let err = max_relative_error(&gpu.site_totals().unwrap(), &cpu.site_totals());
+    assert!(err < 1e-5, "{err}");
+}
+
+#[test]
+fn a_state_split_over_many_bindings_gives_the_same_result() {
+    let Some(whole) = context() else { return };
+    let dims = Dims::new(9, 11, 13).unwrap();
+    let grid = mixed_grid(dims);
+    let medium = anisotropic_medium(true);
+    // Room for two directions per binding (the stride rounds sites up to 128).
+    let direction = (dims.sites() as u64).div_ceil(128) * 128 * 4;
+    let mut opts = ContextOptions::new(AdapterChoice::Any);
+    opts.max_binding_bytes = Some(2 * direction);
+    let split = context_with(opts).expect("the same adapter again");
+    assert_eq!(
+        split.limits().max_storage_buffer_binding_size,
+        2 * direction
+    );
+    let run = |ctx: &GpuContext| {
+        let mut lat = GpuLattice::new(ctx, &grid, &medium, 0, sun(), Precision::F32).unwrap();
+        lat.run(
+            &SolveOptions {
+                max_steps: 9,
+                tolerance: None,
+            },
+            &mut |_, _| {},
+        )
+        .unwrap();
+        (lat.parts(), lat.site_totals().unwrap())
+    };
+    let (one, a) = run(&whole);
+    let (many, b) = run(&split);
+    assert_eq!(one, 1);
+    assert_eq!(many, Q.div_ceil(2));
+    // Same arithmetic, only the bindings differ: bit-identical.
+    assert_eq!(a, b);
+    let mut cpu = Lattice::new(&grid, &medium, 0, sun()).unwrap();
+    cpu.run(
+        &SolveOptions {
+            max_steps: 9,
+            tolerance: None,
+        },
+        &mut |_, _| {},
+    )
+    .unwrap();
+    let err = max_relative_error(&b, &cpu.site_totals());
+    assert!(err < 1e-5, "{err}");
+
+    // One direction per binding: 19 parts, 40 storage buffers per stage, where allowed.
+    let mut opts = ContextOptions::new(AdapterChoice::Any);
+    opts.max_binding_bytes = Some(direction);
+    let single = context_with(opts).expect("the same adapter again");
+    match GpuLattice::new(&single, &grid, &medium, 0, sun(), Precision::F32) {
+        Ok(lat) => assert_eq!(lat.parts(), Q),
+        Err(LbGpuError::TooLarge(msg)) => {
+            assert!(msg.contains("storage buffers per shader stage"), "{msg}")
+        }
+        Err(e) => panic!("{e}"),
+    }
+    // Less than one direction per binding cannot work: a clear error, not a panic.
+    let mut opts = ContextOptions::new(AdapterChoice::Any);
+    opts.max_binding_bytes = Some(direction / 2);
+    let tiny = context_with(opts).expect("the same adapter again");
+    match GpuLattice::new(&tiny, &grid, &medium, 0, sun(), Precision::F32) {
+        Err(LbGpuError::TooLarge(msg)) => assert!(msg.contains("per storage binding"), "{msg}"),
+        Err(e) => panic!("{e}"),
+        Ok(_) => panic!("a binding smaller than one direction was accepted"),
+    }
+}
+
+#[test]
+fn a_grid_larger_than_one_binding_agrees_with_the_cpu() {
+    let Some(ctx) = context() else { return };
+    // 122³ × 19 × 4 B = 138 MB per copy, above lavapipe's 128 MiB per binding.
+    let dims = Dims::cube(122).unwrap();
+    let mut grid = DensityGrid::empty(dims);
+    grid.density.fill(0.7);
+    let medium = Preset::Cloud.params();
+    let state_bytes = (dims.sites() as u64 * Q as u64 * 4) as f64;
+    let opts = SolveOptions {
+        max_steps: 4,
+        tolerance: None,
+    };
+    let mut gpu = GpuLattice::new(&ctx, &grid, &medium, 0, sun(), Precision::F32).unwrap();
+    let binding = ctx.limits().max_storage_buffer_binding_size as f64;
+    eprintln!(
+        "{dims}: {:.0} MB per state copy, {:.0} MB per binding, {} parts",
+        state_bytes / 1e6,
+        binding / 1e6,
+        gpu.parts()
+    );
+    if state_bytes > binding {
+        assert!(gpu.parts() >= 2);
+    }
+    gpu.run(&opts, &mut |_, _| {}).unwrap();
+    let mut cpu = Lattice::new(&grid, &medium, 0, sun()).unwrap();
+    cpu.run(&opts, &mut |_, _| {}).unwrap();
+    let err = max_relative_error(&gpu.site_totals().unwrap(), &cpu.site_totals());
+    assert!(err < 1e-5, "{err}");
+}
+
+/// Measured bound for f16 storage against f32 storage (docs/gpu.md): 11-bit values,
+/// rounded once per step.
+const F16_BOUND: f64 = 2e-3;
+
+#[test]
+fn f16_storage_stays_within_its_documented_error() {
+    let Some(ctx) = context() else { return };
+    let dims = Dims::new(16, 16, 16).unwrap();
+    let grid = mixed_grid(dims);
+    let medium = Preset::Leaf.params();
+    if !ctx.supports_f16() {
+        // A clear refusal, not a silent fallback to f32.
+        match GpuLattice::new(&ctx, &grid, &medium, 0, sun(), Precision::F16) {
+            Err(LbGpuError::F16Unsupported(_)) => {
+                eprintln!(
+                    "skipping f16 measurement: {} lacks SHADER_F16",
+                    ctx.describe()
+                )
+            }
+            Err(e) => panic!("{e}"),
+            Ok(_) => panic!("f16 accepted without SHADER_F16"),
+        }
+        return;
+    }
+    let opts = SolveOptions::papers(dims);
+    let (a, _) = solve_lighting_gpu(
+        &ctx,
+        &grid,
+        &medium,
+        sun(),
+        &opts,
+        Precision::F32,
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    let (h, _) = solve_lighting_gpu(
+        &ctx,
+        &grid,
+        &medium,
+        sun(),
+        &opts,
+        Precision::F16,
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    for c in 0..3 {
+        let err = max_relative_error(&h.colours[c], &a.colours[c]);
+        eprintln!("f16 vs f32, colour {c}: max relative error {err:.2e}");
+        assert!(err < F16_BOUND, "colour {c}: {err}");
+        // f16 really is lower precision: the results are not bit-identical.
+        assert_ne!(h.colours[c], a.colours[c]);
+    }
+}
+
+#[test]
+fn no_adapter_at_all_is_a_clear_error() {
+    let mut opts = ContextOptions::new(AdapterChoice::Any);
+    opts.backends = Some(sylva_wgpu::wgpu::Backends::empty());
+    match GpuContext::new(&opts) {
+        Err(e @ GpuError::NoAdapter { .. }) => {
+            let msg = e.to_string();
+            assert!(msg.contains("no GPU adapter found"), "{msg}");
+            assert!(msg.contains("--device cpu"), "{msg}");
+        }
+        Err(e) => panic!("unexpected error: {e}"),
+        Ok(ctx) => panic!("an adapter without backends: {}", ctx.describe()),
+    }
+}
+
+#[test]
+fn bad_input_is_refused() {
+    let Some(ctx) = context() else { return };
+    let dims = Dims::cube(5).unwrap();
+    let grid = mixed_grid(dims);
+    let medium = Preset::Leaf.params();
+    let mut bad = sun();
+    bad.values[3] = f32::NAN;
+    assert!(matches!(
+        GpuLattice::new(&ctx, &grid, &medium, 0, bad, Precision::F32),
+        Err(LbGpuError::Solve(_))
+    ));
+    let mut lat = GpuLattice::new(&ctx, &grid, &medium, 0, sun(), Precision::F32).unwrap();
+    for opts in [
+        SolveOptions {
+            max_steps: 0,
+            tolerance: None,
+        },
+        SolveOptions {
+            max_steps: 5,
+            tolerance: Some(f64::NAN),
+        },
+    ] {
+        let e = lat.run(&opts, &mut |_, _| {}).unwrap_err();
+        assert!(matches!(e, LbGpuError::Solve(_)), "{e}");
+    }
+}

@@ -1,0 +1,603 @@
+//! Voxelization: hand-computed densities and wood fractions of known shapes, agreement with a
+//! brute-force reference, determinism across thread counts, bad input.
+
+use std::sync::Arc;
+
+use glam::Vec3;
+use sylva_core::SplitMix64;
+use sylva_geom::{Material, MaterialKind, Mesh, Model, Texture, Wrap};
+use sylva_grow::Species;
+use sylva_lb::Dims;
+use sylva_voxel::{
+    subcell_bit, voxelize, voxelize_masks, GridPlacement, SubcellMasks, VoxelizeError,
+    VoxelizeOptions, SUB, SUBCELLS,
+};
+
+const WOOD: u8 = 0;
+const LEAF: u8 = 1;
+
+fn materials(leaf_texture: Option<Texture>) -> Vec<Material> {
+    vec![
+        Material {
+            name: "bark".into(),
+            kind: MaterialKind::Wood,
+            base_color: [0.3, 0.2, 0.1],
+            texture: None,
+            two_sided: false,
+        },
+        Material {
+            name: "leaf".into(),
+            kind: MaterialKind::Leaf,
+            base_color: [0.1, 0.5, 0.1],
+            texture: leaf_texture.map(Arc::new),
+            two_sided: true,
+        },
+    ]
+}
+
+/// Quad `x0..x1` × `z0..z1` at height `y`, u along x and v along z, each from 0 to 1.
+fn push_quad(m: &mut Mesh, x: [f32; 2], y: f32, z: [f32; 2], material: u8) {
+    let n = Vec3::Y;
+    let a = m.push_vertex(Vec3::new(x[0], y, z[0]), n, [0.0, 0.0]);
+    let b = m.push_vertex(Vec3::new(x[1], y, z[0]), n, [1.0, 0.0]);
+    let c = m.push_vertex(Vec3::new(x[1], y, z[1]), n, [1.0, 1.0]);
+    let d = m.push_vertex(Vec3::new(x[0], y, z[1]), n, [0.0, 1.0]);
+    m.push_triangle(a, b, c, material);
+    m.push_triangle(a, c, d, material);
+}
+
+/// 5³ sites, cells of edge 3 from the origin: sub-cells are unit cubes, sub-cell k = [k, k+1],
+/// and the interior cells 1..=3 hold sub-cells 3..=11.
+fn unit_placement() -> GridPlacement {
+    GridPlacement {
+        dims: Dims::cube(5).unwrap(),
+        origin: [0.0; 3],
+        cell: 3.0,
+    }
+}
+
+/// Mask of the sub-cells of a cell whose local coordinate along `axis` is `layer`.
+fn layer(axis: usize, layer: usize) -> u32 {
+    let mut m = 0;
+    for a in 0..SUB {
+        for b in 0..SUB {
+            let s = match axis {
+                0 => [layer, a, b],
+                1 => [a, layer, b],
+                _ => [a, b, layer],
+            };
+            m |= subcell_bit(s[0], s[1], s[2]);
+        }
+    }
+    m
+}
+
+fn masks(model: &Model, p: &GridPlacement) -> SubcellMasks {
+    voxelize_masks(model, p, true).unwrap()
+}
+
+/// Expected masks per cell from a function of the cell; asserts every cell.
+fn assert_cells(m: &SubcellMasks, what: &str, expect: impl Fn(usize, usize, usize) -> (u32, u32)) {
+    let d = m.placement.dims;
+    for x in 0..d.nx {
+        for y in 0..d.ny {
+            for z in 0..d.nz {
+                let i = d.index(x, y, z);
+                assert_eq!(
+                    (m.any(i), m.wood(i)),
+                    expect(x, y, z),
+                    "{what}: cell ({x}, {y}, {z})"
+                );
+            }
+        }
+    }
+}
+
+fn interior(d: Dims, x: usize, y: usize, z: usize) -> bool {
+    !d.on_shell(x, y, z)
+}
+
+#[test]
+fn axis_aligned_plane_fills_one_or_two_sub_cell_layers() {
+    let p = unit_placement();
+    let d = p.dims;
+    // (height, cells met with the layers they get)
+    let cases: [(f32, &[(usize, u32)]); 3] = [
+        // Inside sub-cell layer 4 = layer 1 of cell 1: density 1/3.
+        (4.5, &[(1, layer(1, 1))]),
+        // On the face between layers 4 and 5, both in cell 1: closed boxes count both, 2/3.
+        (5.0, &[(1, layer(1, 1) | layer(1, 2))]),
+        // On the face between cells 1 and 2: layer 2 of cell 1 and layer 0 of cell 2, 1/3 each.
+        (6.0, &[(1, layer(1, 2)), (2, layer(1, 0))]),
+    ];
+    for (y, want) in cases {
+        let mut mesh = Mesh::default();
+        push_quad(&mut mesh, [3.0, 12.0], y, [3.0, 12.0], LEAF);
+        let model = Model::new("plane", mesh, materials(None));
+        let m = masks(&model, &p);
+        assert_cells(&m, &format!("plane y = {y}"), |x, cy, z| {
+            let hit = want.iter().find(|(c, _)| *c == cy);
+            match hit {
+                Some((_, bits)) if interior(d, x, cy, z) => (*bits, 0),
+                _ => (0, 0),
+            }
+        });
+        let g = m.to_density_grid().unwrap();
+        let expect_density = want[0].1.count_ones() as f32 / 27.0;
+        assert_eq!(g.density[d.index(2, want[0].0, 2)], expect_density);
+    }
+    assert_eq!(layer(1, 1).count_ones(), 9);
+}
+
+#[test]
+fn flat_model_gets_one_interior_cell_across_and_sits_in_its_middle_layer() {
+    let mut mesh = Mesh::default();
+    push_quad(&mut mesh, [0.0, 9.0], 0.0, [0.0, 9.0], LEAF);
+    let model = Model::new("plane", mesh, materials(None));
+    let g = voxelize(
+        &model,
+        &VoxelizeOptions {
+            grid: 5,
+            alpha_test: true,
+        },
+    )
+    .unwrap();
+    assert_eq!(g.dims, Dims::new(5, 3, 5).unwrap());
+    // Site centres: cells of edge 3 from -3 (x, z) and -4.5 (y, centred on the plane).
+    assert_eq!(g.bounds.min, [-1.5, -3.0, -1.5]);
+    assert_eq!(g.bounds.max, [10.5, 3.0, 10.5]);
+    for x in 0..5 {
+        for z in 0..5 {
+            let i = g.dims.index(x, 1, z);
+            let want = if g.dims.on_shell(x, 1, z) {
+                0.0
+            } else {
+                1.0 / 3.0
+            };
+            assert_eq!(g.density[i], want, "({x}, 1, {z})");
+        }
+    }
+    let (mean, occupied) = g.occupancy();
+    assert_eq!(occupied, 9);
+    assert!((mean - 9.0 / 3.0 / 75.0).abs() < 1e-7, "{mean}");
+}
+
+#[test]
+fn box_surface_fills_shell_cells_and_leaves_the_inside_empty() {
+    // Cube [0, 18]³ at N = 8: cell edge 18 / 6 = 3, interior cells 1..=6, faces on the
+    // interior's outer faces.
+    let c = [
+        Vec3::new(0.0, 0.0, 0.0),
+        Vec3::new(18.0, 0.0, 0.0),
+        Vec3::new(18.0, 18.0, 0.0),
+        Vec3::new(0.0, 18.0, 0.0),
+        Vec3::new(0.0, 0.0, 18.0),
+        Vec3::new(18.0, 0.0, 18.0),
+        Vec3::new(18.0, 18.0, 18.0),
+        Vec3::new(0.0, 18.0, 18.0),
+    ];
+    let faces = [
+        [0, 3, 2, 1],
+        [4, 5, 6, 7],
+        [0, 1, 5, 4],
+        [3, 7, 6, 2],
+        [0, 4, 7, 3],
+        [1, 2, 6, 5],
+    ];
+    let mut mesh = Mesh::default();
+    for f in faces {
+        let v = f.map(|i| mesh.push_vertex(c[i], Vec3::Y, [0.0, 0.0]));
+        mesh.push_triangle(v[0], v[1], v[2], WOOD);
+        mesh.push_triangle(v[0], v[2], v[3], WOOD);
+    }
+    let model = Model::new("box", mesh, materials(None));
+    let g = voxelize(
+        &model,
+        &VoxelizeOptions {
+            grid: 8,
+            alpha_test: true,
+        },
+    )
+    .unwrap();
+    let d = g.dims;
+    assert_eq!(d, Dims::cube(8).unwrap());
+    let mut counts = [0usize; 4];
+    for x in 0..8 {
+        for y in 0..8 {
+            for z in 0..8 {
+                let i = d.index(x, y, z);
+                let faces = [x, y, z].iter().filter(|&&c| c == 1 || c == 6).count();
+                // The touched layer of each face; 27 minus the sub-cells in none of them.
+                let want = if d.on_shell(x, y, z) {
+                    0
+                } else {
+                    27 - 3u32.pow(3 - faces as u32) * 2u32.pow(faces as u32)
+                };
+                assert_eq!(g.density[i], want as f32 / 27.0, "({x}, {y}, {z})");
+                assert_eq!(g.wood[i], if want > 0 { 1.0 } else { 0.0 });
+                if !d.on_shell(x, y, z) {
+                    counts[faces] += 1;
+                }
+            }
+        }
+    }
+    // 4³ empty inside cells, 6 · 4² face cells (9/27), 12 · 4 edge cells (15/27), 8 corners
+    // (19/27).
+    assert_eq!(counts, [64, 96, 48, 8]);
+}
+
+/// 2×1 texture: texel 0 (u < 1/2) opaque, texel 1 transparent.
+fn half_texture(wrap: Wrap) -> Texture {
+    Texture::new(2, 1, vec![[0, 200, 0, 255], [0, 200, 0, 0]], wrap)
+}
+
+#[test]
+fn half_transparent_quad_keeps_exactly_its_opaque_half() {
+    let p = unit_placement();
+    let d = p.dims;
+    // x from 3 to 9 maps u 0 → 1: the opaque half is x ≤ 6, cell 1 exactly.
+    let build = |tex: Option<Texture>| {
+        let mut mesh = Mesh::default();
+        push_quad(&mut mesh, [3.0, 9.0], 4.5, [3.0, 12.0], LEAF);
+        Model::new("leaf", mesh, materials(tex))
+    };
+    let plain = masks(&build(None), &p);
+    let textured = masks(&build(Some(half_texture(Wrap::Clamp))), &p);
+    let untested = voxelize_masks(&build(Some(half_texture(Wrap::Clamp))), &p, false).unwrap();
+    assert_eq!(plain, untested);
+    let on_plane = |x: usize, y: usize, z: usize| interior(d, x, y, z) && y == 1;
+    // Untextured: cells 1 and 2 get layer 1 (1/3); the quad's edge x = 9 touches sub-cell 9,
+    // the first of cell 3.
+    assert_cells(&plain, "untextured", |x, y, z| match x {
+        1 | 2 if on_plane(x, y, z) => (layer(1, 1), 0),
+        3 if on_plane(x, y, z) => (layer(1, 1) & layer(0, 0), 0),
+        _ => (0, 0),
+    });
+    // Textured: sub-cell 5 (u ∈ [1/3, 1/2]) reaches texel 0; sub-cell 6 (u ∈ [1/2, 2/3])
+    // samples only texel 1, and so on: cell 2 and the edge in cell 3 drop out.
+    assert_cells(&textured, "textured", |x, y, z| match x {
+        1 if on_plane(x, y, z) => (layer(1, 1), 0),
+        _ => (0, 0),
+    });
+    let total = |m: &SubcellMasks| m.bits.iter().map(|&b| (b as u32).count_ones()).sum::<u32>();
+    assert_eq!(2 * total(&textured), total(&plain) - 9);
+}
+
+#[test]
+fn wood_and_leaf_fractions_and_a_mixed_cell() {
+    let p = unit_placement();
+    let d = p.dims;
+    // Wood from x = 3 to 7.5, leaf from 7.5 to 12: sub-cell 7 (in cell 2) holds both.
+    let mut mesh = Mesh::default();
+    push_quad(&mut mesh, [3.0, 7.5], 4.5, [3.0, 12.0], WOOD);
+    push_quad(&mut mesh, [7.5, 12.0], 4.5, [3.0, 12.0], LEAF);
+    let model = Model::new("mixed", mesh, materials(None));
+    let m = masks(&model, &p);
+    let row = layer(1, 1);
+    assert_cells(&m, "wood/leaf", |x, y, z| {
+        if !(interior(d, x, y, z) && y == 1) {
+            return (0, 0);
+        }
+        match x {
+            1 => (row, row),
+            2 => (row, row & (layer(0, 0) | layer(0, 1))),
+            _ => (row, 0),
+        }
+    });
+    let g = m.to_density_grid().unwrap();
+    for z in 1..4 {
+        let w = |x| g.wood[d.index(x, 1, z)];
+        assert_eq!((w(1), w(2), w(3)), (1.0, 2.0 / 3.0, 0.0));
+        assert_eq!(g.density[d.index(2, 1, z)], 1.0 / 3.0);
+    }
+}
+
+// ---------- brute-force reference ----------
+
+/// Akenine-Möller's triangle/box test as published (box centre and half size, 13 axes).
+fn reference_overlap(v: [[f64; 3]; 3], centre: [f64; 3], half: f64) -> bool {
+    let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let cross = |a: [f64; 3], b: [f64; 3]| {
+        [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ]
+    };
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let v = v.map(|p| sub(p, centre));
+    let e = [sub(v[1], v[0]), sub(v[2], v[1]), sub(v[0], v[2])];
+    let mut axes: Vec<[f64; 3]> = vec![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    axes.push(cross(e[0], e[1]));
+    for ei in e {
+        for a in 0..3 {
+            let mut u = [0.0; 3];
+            u[a] = 1.0;
+            axes.push(cross(ei, u));
+        }
+    }
+    axes.iter().all(|&a| {
+        let p = v.map(|x| dot(x, a));
+        let r = half * (a[0].abs() + a[1].abs() + a[2].abs());
+        let (lo, hi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+        !(lo > r || hi < -r)
+    })
+}
+
+/// Triangle ∩ box [lo, lo + 1] as a polygon of (x, y, z, u, v), by clipping against each face.
+fn reference_clip(tri: [[f64; 5]; 3], lo: [f64; 3]) -> Vec<[f64; 5]> {
+    let mut poly = tri.to_vec();
+    for a in 0..3 {
+        for (sign, off) in [(1.0, lo[a]), (-1.0, lo[a] + 1.0)] {
+            let inside = |p: &[f64; 5]| sign * (p[a] - off);
+            let mut out = Vec::new();
+            for k in 0..poly.len() {
+                let (p, q) = (poly[k], poly[(k + 1) % poly.len()]);
+                let (dp, dq) = (inside(&p), inside(&q));
+                if dp >= 0.0 {
+                    out.push(p);
+                }
+                if dp * dq < 0.0 {
+                    let t = dp / (dp - dq);
+                    out.push(std::array::from_fn(|c| p[c] + t * (q[c] - p[c])));
+                }
+            }
+            poly = out;
+        }
+    }
+    poly
+}
+
+/// Closed convex polygon vs closed square [k, k+1] × [l, l+1]: 2-D separating axes.
+fn polygon_meets_square(pts: &[[f64; 2]], k: f64, l: f64) -> bool {
+    let sq = [[k, l], [k + 1.0, l], [k + 1.0, l + 1.0], [k, l + 1.0]];
+    let mut axes = vec![[1.0, 0.0], [0.0, 1.0]];
+    for i in 0..pts.len() {
+        let (p, q) = (pts[i], pts[(i + 1) % pts.len()]);
+        axes.push([q[1] - p[1], p[0] - q[0]]);
+    }
+    axes.iter().all(|a| {
+        let proj = |s: &[[f64; 2]]| {
+            s.iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                    let d = p[0] * a[0] + p[1] * a[1];
+                    (lo.min(d), hi.max(d))
+                })
+        };
+        let (a0, a1) = proj(pts);
+        let (b0, b1) = proj(&sq);
+        !(a1 < b0 || b1 < a0)
+    })
+}
+
+/// Every interior sub-cell against every triangle; textured leaves against every opaque texel.
+fn reference_masks(model: &Model, p: &GridPlacement) -> Vec<u64> {
+    let d = p.dims;
+    let mut bits = vec![0u64; d.sites()];
+    let inv = 3.0 / p.cell;
+    let mesh = &model.mesh;
+    for (t, &mat) in mesh.indices.iter().zip(&mesh.material_ids) {
+        let material = &model.materials[mat as usize];
+        let v = t.map(|i| {
+            let q = mesh.positions[i as usize];
+            [0, 1, 2].map(|a| (q[a] as f64 - p.origin[a]) * inv)
+        });
+        for x in 3..3 * (d.nx - 1) {
+            for y in 3..3 * (d.ny - 1) {
+                for z in 3..3 * (d.nz - 1) {
+                    let lo = [x as f64, y as f64, z as f64];
+                    if !reference_overlap(v, lo.map(|c| c + 0.5), 0.5) {
+                        continue;
+                    }
+                    if let (MaterialKind::Leaf, Some(tex)) = (material.kind, &material.texture) {
+                        let (w, h) = (tex.width as f64, tex.height as f64);
+                        let tri: [[f64; 5]; 3] = std::array::from_fn(|k| {
+                            let uv = mesh.uvs[t[k] as usize];
+                            [
+                                v[k][0],
+                                v[k][1],
+                                v[k][2],
+                                uv[0] as f64 * w,
+                                uv[1] as f64 * h,
+                            ]
+                        });
+                        let poly: Vec<[f64; 2]> = reference_clip(tri, lo)
+                            .iter()
+                            .map(|q| [q[3], q[4]])
+                            .collect();
+                        if poly.is_empty() {
+                            continue;
+                        }
+                        let (mut u0, mut u1, mut v0, mut v1) = (1e9f64, -1e9f64, 1e9f64, -1e9f64);
+                        for q in &poly {
+                            u0 = u0.min(q[0]);
+                            u1 = u1.max(q[0]);
+                            v0 = v0.min(q[1]);
+                            v1 = v1.max(q[1]);
+                        }
+                        let mut opaque = false;
+                        for k in u0.floor() as i64..=u1.floor() as i64 {
+                            for l in v0.floor() as i64..=v1.floor() as i64 {
+                                let idx = |i: i64, n: u32| match tex.wrap {
+                                    Wrap::Repeat => i.rem_euclid(n as i64) as u32,
+                                    Wrap::Clamp => i.clamp(0, n as i64 - 1) as u32,
+                                };
+                                let a = tex.texel(idx(k, tex.width), idx(l, tex.height))[3];
+                                if a >= 128 && polygon_meets_square(&poly, k as f64, l as f64) {
+                                    opaque = true;
+                                }
+                            }
+                        }
+                        if !opaque {
+                            continue;
+                        }
+                    }
+                    let cell = d.index(x / 3, y / 3, z / 3);
+                    let bit = subcell_bit(x % 3, y % 3, z % 3) as u64;
+                    bits[cell] |= bit;
+                    if material.kind == MaterialKind::Wood {
+                        bits[cell] |= bit << 32;
+                    }
+                }
+            }
+        }
+    }
+    bits
+}
+
+fn random_texture(rng: &mut SplitMix64, w: u32, h: u32, wrap: Wrap) -> Texture {
+    let px = (0..w * h)
+        .map(|_| [10, 200, 10, if rng.next_f64() < 0.4 { 255 } else { 0 }])
+        .collect();
+    Texture::new(w, h, px, wrap)
+}
+
+/// A random mesh in [0, 10]³: small and large triangles, wood, plain leaves and textured
+/// leaves (third material) with texture coordinates beyond [0, 1].
+fn random_model(seed: u64, wrap: Wrap) -> Model {
+    let mut rng = SplitMix64::new(seed);
+    let mut mesh = Mesh::default();
+    let mut r = |lo: f64, hi: f64| (lo + (hi - lo) * rng.next_f64()) as f32;
+    for t in 0..60 {
+        let size = if t % 5 == 0 { 6.0 } else { 1.2 };
+        let c = Vec3::new(r(1.0, 9.0), r(1.0, 9.0), r(1.0, 9.0));
+        let v: Vec<u32> = (0..3)
+            .map(|_| {
+                let p = c + Vec3::new(r(-size, size), r(-size, size), r(-size, size));
+                let p = p.clamp(Vec3::ZERO, Vec3::splat(10.0));
+                mesh.push_vertex(p, Vec3::Y, [r(-1.5, 2.5), r(-1.5, 2.5)])
+            })
+            .collect();
+        mesh.push_triangle(v[0], v[1], v[2], (t % 3) as u8);
+    }
+    let mut rng = SplitMix64::new(seed ^ 0xabc);
+    let mut mats = materials(None);
+    mats.push(Material {
+        name: "textured leaf".into(),
+        kind: MaterialKind::Leaf,
+        base_color: [0.1, 0.5, 0.1],
+        texture: Some(Arc::new(random_texture(&mut rng, 7, 5, wrap))),
+        two_sided: true,
+    });
+    let mut model = Model::new("random", mesh, mats);
+    // Corners pin the bounding box to [0, 10]³ (isolated degenerate triangles: points).
+    for p in [Vec3::ZERO, Vec3::splat(10.0)] {
+        let i = model.mesh.push_vertex(p, Vec3::Y, [0.0, 0.0]);
+        model.mesh.push_triangle(i, i, i, WOOD);
+    }
+    model.bounds = model.mesh.bounds();
+    model
+}
+
+#[test]
+fn agrees_with_brute_force_on_random_meshes() {
+    for (seed, wrap) in [(1, Wrap::Repeat), (2, Wrap::Clamp), (3, Wrap::Repeat)] {
+        let model = random_model(seed, wrap);
+        let p = GridPlacement::fit([0.0; 3], [10.0; 3], 11).unwrap();
+        let fast = masks(&model, &p);
+        let reference = reference_masks(&model, &p);
+        let mut textured_cells = 0;
+        for (i, (&a, &b)) in fast.bits.iter().zip(&reference).enumerate() {
+            assert_eq!(a, b, "seed {seed}: cell {:?}", p.dims.coords(i));
+            textured_cells += (a != 0) as usize;
+        }
+        // The comparison is not vacuous: many cells are occupied, some partly.
+        assert!(textured_cells > 100, "{textured_cells}");
+        // Alpha testing only ever removes sub-cells.
+        let plain = voxelize_masks(&model, &p, false).unwrap();
+        let mut removed = 0;
+        for (&a, &b) in fast.bits.iter().zip(&plain.bits) {
+            assert_eq!(a & !b, 0);
+            removed += (b & !a).count_ones();
+        }
+        assert!(removed > 0, "seed {seed}: the texture removed nothing");
+    }
+}
+
+#[test]
+fn same_grid_on_one_and_two_threads() {
+    let model = Species::builtin("red_maple")
+        .unwrap()
+        .build_model()
+        .unwrap();
+    let opts = VoxelizeOptions {
+        grid: 48,
+        alpha_test: true,
+    };
+    let pool = |n| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+    };
+    let one = pool(1).install(|| voxelize(&model, &opts).unwrap());
+    let two = pool(2).install(|| voxelize(&model, &opts).unwrap());
+    assert_eq!(one, two);
+    assert_eq!(one.dims.longest_edge(), 48);
+    // A tree: brown cells (mostly wood) and green ones, nothing on the shell.
+    let brown = (0..one.dims.sites())
+        .filter(|&i| one.density[i] > 0.0 && one.wood[i] > 0.5)
+        .count();
+    let (_, occupied) = one.occupancy();
+    assert!(brown > 0 && brown < occupied / 2, "{brown} of {occupied}");
+    for i in 0..one.dims.sites() {
+        let (x, y, z) = one.dims.coords(i);
+        if one.dims.on_shell(x, y, z) {
+            assert_eq!(one.density[i], 0.0);
+        }
+    }
+    // Densities are multiples of 1/27.
+    assert!(one
+        .density
+        .iter()
+        .all(|&r| (r * SUBCELLS as f32 - (r * SUBCELLS as f32).round()).abs() < 1e-4));
+}
+
+#[test]
+fn bad_input_is_refused_with_a_reason() {
+    let opts = |grid| VoxelizeOptions {
+        grid,
+        alpha_test: true,
+    };
+    let empty = Model::new("nothing", Mesh::default(), materials(None));
+    let e = voxelize(&empty, &opts(32)).unwrap_err();
+    assert!(matches!(e, VoxelizeError::Empty(_)), "{e}");
+    assert!(e.to_string().contains("nothing"));
+
+    let quad = || {
+        let mut mesh = Mesh::default();
+        push_quad(&mut mesh, [0.0, 1.0], 0.0, [0.0, 1.0], LEAF);
+        mesh
+    };
+    let mut mesh = quad();
+    mesh.positions[2][1] = f32::NAN;
+    let e = voxelize(&Model::new("nan", mesh, materials(None)), &opts(32)).unwrap_err();
+    assert!(e.to_string().contains("vertex 2"), "{e}");
+
+    let ok = Model::new("quad", quad(), materials(None));
+    for n in [0, 3, 100_000] {
+        let e = voxelize(&ok, &opts(n)).unwrap_err();
+        assert!(matches!(e, VoxelizeError::BadGrid(m) if m == n), "{e}");
+    }
+    assert!(voxelize(&ok, &opts(4)).is_ok());
+
+    let mut point = Mesh::default();
+    let i = point.push_vertex(Vec3::ONE, Vec3::Y, [0.0, 0.0]);
+    point.push_triangle(i, i, i, WOOD);
+    let e = voxelize(&Model::new("dot", point, materials(None)), &opts(32)).unwrap_err();
+    assert!(
+        matches!(e, VoxelizeError::ZeroExtent(ref n) if n == "dot"),
+        "{e}"
+    );
+
+    let mut mesh = quad();
+    mesh.material_ids[0] = 7;
+    let e = voxelize(&Model::new("mat", mesh, materials(None)), &opts(32)).unwrap_err();
+    assert!(e.to_string().contains("material id 7"), "{e}");
+
+    let mut mesh = quad();
+    mesh.uvs[1][0] = f32::INFINITY;
+    let tex = Some(half_texture(Wrap::Clamp));
+    let e = voxelize(&Model::new("uv", mesh, materials(tex)), &opts(32)).unwrap_err();
+    assert!(matches!(e, VoxelizeError::BadUv { triangle: 0, .. }), "{e}");
+}
