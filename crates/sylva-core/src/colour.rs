@@ -193,6 +193,11 @@ pub fn linear_to_srgb(c: f32) -> f32 {
     }
 }
 
+/// A linear component, clamped to [0, 1] → 8-bit sRGB, rounded to nearest.
+pub fn linear_to_srgb8(c: f32) -> u8 {
+    (linear_to_srgb(c) * 255.0).round() as u8
+}
+
 /// Luminance (CIE Y) of a linear sRGB colour.
 pub fn luminance(rgb: [f32; 3]) -> f32 {
     0.2126 * rgb[0] + 0.7152 * rgb[1] + 0.0722 * rgb[2]
@@ -220,6 +225,22 @@ pub fn blackbody_rgb(kelvin: f64) -> [f32; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn srgb_transfer_known_values_and_round_trip() {
+        assert_eq!([0.0, 1.0, 0.5].map(linear_to_srgb8), [0, 255, 188]);
+        assert!((linear_to_srgb(0.5) - 0.735_357).abs() < 1e-5);
+        assert_eq!(linear_to_srgb(-1.0), 0.0);
+        assert_eq!(linear_to_srgb(2.0), linear_to_srgb(1.0));
+        // The two pieces meet at the thresholds.
+        let t = 0.003_130_8f32;
+        assert!((12.92 * t - (1.055 * t.powf(1.0 / 2.4) - 0.055)).abs() < 1e-6);
+        let t = 0.040_45f32;
+        assert!((t / 12.92 - ((t + 0.055) / 1.055).powf(2.4)).abs() < 1e-6);
+        for b in 0..=255u8 {
+            assert_eq!(linear_to_srgb8(srgb_to_linear(b as f32 / 255.0)), b);
+        }
+    }
 
     /// Planckian-locus chromaticities (CIE 1931 2°) from the literature, e.g. Wyszecki &
     /// Stiles, Table 1(3.11), and the tabulated CIE values used by colour-science packages.

@@ -11,9 +11,12 @@
 //! * Light colours are linear sRGB; [`blackbody_rgb`] gives a black body's (the sun is 6500 K).
 //! * Randomness comes from [`SplitMix64`], seeded per task so results do not depend on the
 //!   thread count.
+//! * Cache keys and geometry fingerprints are hashed with [`Fnv64`] (FNV-1a over explicit
+//!   little-endian bytes): stable across Rust releases and platforms.
 
 mod atomic;
 pub mod colour;
+mod hash;
 mod memory;
 mod names;
 mod rng;
@@ -21,6 +24,7 @@ mod sun;
 
 pub use atomic::{atomic_write, atomic_write_with};
 pub use colour::{blackbody_rgb, try_blackbody_rgb, SUN_TEMPERATURE_K};
+pub use hash::Fnv64;
 pub use memory::{available_memory_bytes, check_memory, format_bytes, MemoryError};
 pub use names::file_stem;
 pub use rng::SplitMix64;

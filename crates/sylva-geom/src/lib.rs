@@ -19,4 +19,4 @@ pub mod texture;
 pub use material::{Material, MaterialKind};
 pub use mesh::{Aabb, Mesh, Model};
 pub use scene::{Camera, Ground, Instance, LbSettings, ModelOrigin, Scene};
-pub use texture::{Filter, Texture, Wrap};
+pub use texture::{is_opaque, nearest_texel_coords, Filter, Texture, Wrap, OPAQUE_ALPHA};

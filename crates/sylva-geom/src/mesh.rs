@@ -2,6 +2,7 @@
 
 use crate::material::Material;
 use glam::Vec3;
+use sylva_core::Fnv64;
 
 /// Axis-aligned bounding box.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -128,29 +129,23 @@ impl Mesh {
         self.material_ids.iter().filter(|&&m| m == id).count()
     }
 
-    /// FNV-1a hash over every array (bit patterns of the floats): equal hashes mean identical
-    /// geometry, used to check that generation is deterministic.
+    /// Stable hash ([`Fnv64`]) over every array (bit patterns of the floats): equal hashes
+    /// mean identical geometry. Checks that generation is deterministic; part of LB cache keys.
     pub fn geometry_hash(&self) -> u64 {
-        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-        let mut eat = |x: u32| {
-            for b in x.to_le_bytes() {
-                h ^= b as u64;
-                h = h.wrapping_mul(0x0100_0000_01b3);
-            }
-        };
+        let mut h = Fnv64::new();
         for p in self.positions.iter().chain(&self.normals) {
-            p.iter().for_each(|v| eat(v.to_bits()));
+            p.iter().for_each(|&v| h.f32(v));
         }
         for uv in &self.uvs {
-            uv.iter().for_each(|v| eat(v.to_bits()));
+            uv.iter().for_each(|&v| h.f32(v));
         }
         for t in &self.indices {
-            t.iter().for_each(|&i| eat(i));
+            t.iter().for_each(|&i| h.u32(i));
         }
         for &m in &self.material_ids {
-            eat(m as u32);
+            h.u32(m as u32);
         }
-        h
+        h.finish()
     }
 
     /// Checks the invariants the renderer relies on; returns a description of the first defect.
@@ -270,5 +265,11 @@ mod tests {
         assert_eq!(m.geometry_hash(), n.geometry_hash());
         n.positions[2][0] = 1.0001;
         assert_ne!(m.geometry_hash(), n.geometry_hash());
+    }
+
+    #[test]
+    fn hash_is_stable_across_releases() {
+        // LB cache entries are keyed by it: a change here orphans every cache entry.
+        assert_eq!(quad().geometry_hash(), 14_790_618_558_702_144_374);
     }
 }

@@ -1,7 +1,19 @@
-//! RGBA8 textures with nearest and bilinear sampling: leaf shapes live in alpha, so the ray
-//! tracer alpha-tests leaves with [`Texture::alpha`].
+//! RGBA8 textures with nearest and bilinear sampling. Leaf shapes live in alpha, and
+//! [`is_opaque`] is the one rule that says which texels are leaf: the voxelizer counts only
+//! opaque texels, the tracer's alpha test discards hits on the others, and LB cache keys hash
+//! the opaque/transparent pattern.
 
 use glam::Vec4;
+use sylva_core::colour::srgb_to_linear;
+
+/// Alpha byte from which a texel is opaque: `alpha / 255 ≥ 0.5`.
+pub const OPAQUE_ALPHA: u8 = 128;
+
+/// Whether an RGBA texel is opaque (alpha ≥ [`OPAQUE_ALPHA`]): THE texel opacity rule.
+#[inline]
+pub fn is_opaque(texel: [u8; 4]) -> bool {
+    texel[3] >= OPAQUE_ALPHA
+}
 
 /// How coordinates outside [0, 1] are mapped.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -10,11 +22,39 @@ pub enum Wrap {
     Clamp,
 }
 
+impl Wrap {
+    /// Texel index `i` (any integer) mapped into `0..n`.
+    #[inline]
+    pub fn apply(self, i: i64, n: u32) -> u32 {
+        match self {
+            Wrap::Repeat => i.rem_euclid(n as i64) as u32,
+            Wrap::Clamp => i.clamp(0, n as i64 - 1) as u32,
+        }
+    }
+}
+
 /// Texel lookup.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Filter {
     Nearest,
     Bilinear,
+}
+
+/// The texel `(x, y)` of a `width × height` grid nearest `(u, v)` (the one whose square holds
+/// it), with `wrap`; non-finite coordinates give the texel at (0, 0), as [`Texture::sample`]
+/// does. For structures that keep a texture's layout without its pixels (the tracer's alpha
+/// bitmasks).
+#[inline]
+pub fn nearest_texel_coords(u: f32, v: f32, width: u32, height: u32, wrap: Wrap) -> (u32, u32) {
+    let (u, v) = if u.is_finite() && v.is_finite() {
+        (u, v)
+    } else {
+        (0.0, 0.0)
+    };
+    (
+        wrap.apply((u * width as f32).floor() as i64, width),
+        wrap.apply((v * height as f32).floor() as i64, height),
+    )
 }
 
 /// An 8-bit RGBA image; texel (x, y) sits at u = (x + 0.5) / width, v = (y + 0.5) / height,
@@ -63,18 +103,8 @@ impl Texture {
         self.pixels[(y * self.width + x) as usize]
     }
 
-    fn index(&self, i: i64, n: u32, wrap: Wrap) -> u32 {
-        match wrap {
-            Wrap::Repeat => i.rem_euclid(n as i64) as u32,
-            Wrap::Clamp => i.clamp(0, n as i64 - 1) as u32,
-        }
-    }
-
     fn texel_f(&self, x: i64, y: i64, wrap: Wrap) -> Vec4 {
-        let t = self.texel(
-            self.index(x, self.width, wrap),
-            self.index(y, self.height, wrap),
-        );
+        let t = self.texel(wrap.apply(x, self.width), wrap.apply(y, self.height));
         Vec4::new(t[0] as f32, t[1] as f32, t[2] as f32, t[3] as f32) / 255.0
     }
 
@@ -108,21 +138,33 @@ impl Texture {
         }
     }
 
-    /// Coverage at (u, v), nearest texel: what an alpha test compares with its threshold.
+    /// Coverage at (u, v), nearest texel.
     pub fn alpha(&self, u: f32, v: f32) -> f32 {
         self.sample(u, v, Filter::Nearest).w
     }
 
-    /// Fraction of texels with alpha ≥ 0.5.
-    pub fn opaque_fraction(&self) -> f64 {
-        self.pixels.iter().filter(|p| p[3] >= 128).count() as f64 / self.pixels.len() as f64
+    /// Whether the nearest texel at (u, v) is opaque ([`is_opaque`]): the alpha test.
+    pub fn is_opaque_at(&self, u: f32, v: f32) -> bool {
+        is_opaque(self.nearest_texel(u, v))
     }
 
-    /// Mean colour (RGB in [0, 1]) over texels with alpha ≥ 0.5; black when none are.
+    /// The texel nearest (u, v) with the texture's wrap mode ([`nearest_texel_coords`]).
+    pub fn nearest_texel(&self, u: f32, v: f32) -> [u8; 4] {
+        let (x, y) = nearest_texel_coords(u, v, self.width, self.height, self.wrap);
+        self.texel(x, y)
+    }
+
+    /// Fraction of opaque texels.
+    pub fn opaque_fraction(&self) -> f64 {
+        self.pixels.iter().filter(|p| is_opaque(**p)).count() as f64 / self.pixels.len() as f64
+    }
+
+    /// Mean colour (RGB in [0, 1], as stored: sRGB-encoded) over opaque texels; black when
+    /// none are.
     pub fn mean_opaque_color(&self) -> [f32; 3] {
         let mut sum = [0f64; 3];
         let mut n = 0usize;
-        for p in self.pixels.iter().filter(|p| p[3] >= 128) {
+        for p in self.pixels.iter().filter(|p| is_opaque(**p)) {
             for c in 0..3 {
                 sum[c] += p[c] as f64 / 255.0;
             }
@@ -132,6 +174,12 @@ impl Texture {
             return [0.0; 3];
         }
         sum.map(|s| (s / n as f64) as f32)
+    }
+
+    /// [`Texture::mean_opaque_color`] decoded to linear RGB: a textured material's
+    /// representative colour.
+    pub fn mean_opaque_linear(&self) -> [f32; 3] {
+        self.mean_opaque_color().map(srgb_to_linear)
     }
 
     pub fn memory_bytes(&self) -> u64 {
@@ -184,5 +232,25 @@ mod tests {
         let c = t.sample_with(0.75, 0.75, Filter::Bilinear, Wrap::Clamp);
         assert!(c.x.abs() < 1e-6 && (c.w - 1.0).abs() < 1e-6);
         assert_eq!(t.opaque_fraction(), 0.75);
+    }
+
+    #[test]
+    fn opacity_rule_is_alpha_at_least_half() {
+        assert!(!is_opaque([255, 255, 255, 127]));
+        assert!(is_opaque([0, 0, 0, 128]));
+        // The nearest-texel test agrees with the coverage `alpha` for every byte and wrap.
+        for wrap in [Wrap::Repeat, Wrap::Clamp] {
+            let t = Texture::from_fn(16, 16, wrap, |u, v| {
+                [0, 0, 0, (u * 16.0) as u8 * 16 + (v * 16.0) as u8]
+            });
+            for i in -20..40 {
+                for j in -20..40 {
+                    let (u, v) = (i as f32 * 0.031, j as f32 * 0.029);
+                    let want = t.alpha(u, v) >= 0.5;
+                    assert_eq!(t.is_opaque_at(u, v), want, "{wrap:?} {u} {v}");
+                }
+            }
+            assert_eq!(t.is_opaque_at(f32::NAN, 0.3), t.alpha(f32::NAN, 0.3) >= 0.5);
+        }
     }
 }

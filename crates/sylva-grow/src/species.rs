@@ -2,7 +2,7 @@
 //! trees of the papers (000 Table 2, a pine for 000 Fig. 3b, the dogrose of 002 §3.2.2), each
 //! with its own generated leaf and bark textures.
 
-use crate::textures::{bark_texture, leaf_texture, mean_linear_color, BarkPattern, LeafOutline};
+use crate::textures::{bark_texture, leaf_texture, BarkPattern, LeafOutline};
 use crate::weber_penn::{self, GenerateError, Params, LEAF, WOOD};
 use std::sync::Arc;
 use sylva_geom::{Material, MaterialKind, Mesh, Model};
@@ -117,14 +117,14 @@ impl Species {
             Material {
                 name: format!("{} bark", self.display_name),
                 kind: MaterialKind::Wood,
-                base_color: mean_linear_color(&bark),
+                base_color: bark.mean_opaque_linear(),
                 texture: Some(bark),
                 two_sided: false,
             },
             Material {
                 name: format!("{} leaf", self.display_name),
                 kind: MaterialKind::Leaf,
-                base_color: mean_linear_color(&leaf),
+                base_color: leaf.mean_opaque_linear(),
                 texture: Some(leaf),
                 two_sided: true,
             },

@@ -2,7 +2,6 @@
 //! bark patterns that repeat. No files are read, so the built-in species need no downloads.
 
 use std::f32::consts::PI;
-use sylva_core::colour::srgb_to_linear;
 use sylva_geom::{Texture, Wrap};
 
 /// Leaf outlines (the `LeafShape` parameter of species files selects one by index).
@@ -256,11 +255,6 @@ pub fn bark_texture(pattern: BarkPattern, base: [u8; 3], seed: u32) -> Texture {
         };
         [c[0], c[1], c[2], 255]
     })
-}
-
-/// Mean opaque colour of `t`, linear RGB.
-pub fn mean_linear_color(t: &Texture) -> [f32; 3] {
-    t.mean_opaque_color().map(srgb_to_linear)
 }
 
 #[cfg(test)]

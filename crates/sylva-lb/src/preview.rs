@@ -3,6 +3,8 @@
 
 use std::path::Path;
 
+use sylva_core::colour::linear_to_srgb;
+
 use crate::grid::{DensityGrid, Dims, LightingGrid};
 
 /// Scale applied so every preview is at least this many pixels tall.
@@ -26,7 +28,7 @@ fn render(
     let mut put = |px: usize, py: usize, c: [f32; 3]| {
         // +y up: row 0 of the image is the top.
         let idx = (h - 1 - py) * w + px;
-        img[idx] = c.map(|v| (srgb(v.clamp(0.0, 1.0)) * 255.0 + 0.5) as u8);
+        img[idx] = c.map(|v| (linear_to_srgb(v) * 255.0 + 0.5) as u8);
     };
     let (mz, mx, my) = (d.nz / 2, d.nx / 2, d.ny / 2);
     for x in 0..d.nx {
@@ -63,14 +65,6 @@ fn render(
     )
     .map_err(std::io::Error::other)?;
     sylva_core::atomic_write(path, &png)
-}
-
-fn srgb(v: f32) -> f32 {
-    if v <= 0.003_130_8 {
-        12.92 * v
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    }
 }
 
 /// Lighting preview, scaled so the brightest interior site is white.

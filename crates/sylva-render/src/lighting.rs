@@ -9,7 +9,7 @@
 //!   of site centres). Points outside the grid clamp to the nearest site.
 //! * **Cache.** With a cache directory, the raw solver result is stored as
 //!   `<model>-<key>.sgrid` (a lighting [`GridFile`], f32, CRC-checked, `sylva lb info` reads
-//!   it). The key is a stable FNV-1a hash over everything the result depends on (see
+//!   it). The key is a stable hash ([`Fnv64`]) over everything the result depends on (see
 //!   [`cache_key`]) and is stored in the file's metadata too. An entry that cannot be read, or
 //!   whose key, dimensions or bounds are not the expected ones, is recomputed and replaced
 //!   atomically; [`LightingSource::Recomputed`] says why.
@@ -20,15 +20,15 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::{DVec3, Vec3};
-use sylva_geom::{LbSettings, MaterialKind, Model, Wrap};
+use sylva_core::Fnv64;
+use sylva_geom::{is_opaque, LbSettings, MaterialKind, Model, Wrap, OPAQUE_ALPHA};
 use sylva_lb::solver::{memory_needed, solve_lighting, Boundary, SolveError, SolveOptions};
 use sylva_lb::{
     DensityGrid, Dims, Element, GridFile, GridFileError, GridKind, LightingGrid, MediumParams,
     ParamError, Preset,
 };
 use sylva_voxel::{
-    placement_for, voxelize, GridPlacement, VoxelizeError, VoxelizeOptions, DEFAULT_GRID,
-    OPAQUE_ALPHA, SUB,
+    placement_for, voxelize, GridPlacement, VoxelizeError, VoxelizeOptions, DEFAULT_GRID, SUB,
 };
 use thiserror::Error;
 
@@ -224,31 +224,6 @@ pub struct LightingReport {
     pub dims: Dims,
 }
 
-/// FNV-1a, 64 bits: stable across Rust releases and platforms.
-struct Fnv(u64);
-
-impl Fnv {
-    fn new() -> Fnv {
-        Fnv(0xcbf2_9ce4_8422_2325)
-    }
-    fn bytes(&mut self, b: &[u8]) {
-        for &x in b {
-            self.0 ^= x as u64;
-            self.0 = self.0.wrapping_mul(0x0100_0000_01b3);
-        }
-    }
-    fn u64(&mut self, v: u64) {
-        self.bytes(&v.to_le_bytes());
-    }
-    fn f64(&mut self, v: f64) {
-        self.u64(v.to_bits());
-    }
-    fn str(&mut self, s: &str) {
-        self.u64(s.len() as u64);
-        self.bytes(s.as_bytes());
-    }
-}
-
 /// The sun direction rounded to [`SUN_QUANTUM`]: the integer components (hashed) and the unit
 /// vector solved with.
 fn quantise_sun(sun_to: Vec3) -> Result<([i64; 3], DVec3), LightingError> {
@@ -303,7 +278,7 @@ pub fn cache_key(
 }
 
 fn key_of(model: &Model, sun: [i64; 3], grid: usize, m: &MediumParams) -> u64 {
-    let mut h = Fnv::new();
+    let mut h = Fnv64::new();
     h.str("sylva-render lighting");
     h.u64(CACHE_VERSION as u64);
     h.u64(sylva_lb::grid_file::VERSION as u64);
@@ -331,7 +306,7 @@ fn key_of(model: &Model, sun: [i64; 3], grid: usize, m: &MediumParams) -> u64 {
                         // Only opacity matters to the voxelizer: one bit per texel.
                         let mut bits = 0u8;
                         for (i, p) in t.pixels.iter().enumerate() {
-                            bits = (bits << 1) | (p[3] >= OPAQUE_ALPHA) as u8;
+                            bits = (bits << 1) | is_opaque(*p) as u8;
                             if i % 8 == 7 {
                                 h.bytes(&[bits]);
                                 bits = 0;
@@ -360,7 +335,7 @@ fn key_of(model: &Model, sun: [i64; 3], grid: usize, m: &MediumParams) -> u64 {
     h.f64(1.0);
     // Solve schedule: the papers' 2 × longest edge, no tolerance.
     h.str("papers:2N");
-    h.0
+    h.finish()
 }
 
 /// The cache entry of `model` under `key` in `dir`.

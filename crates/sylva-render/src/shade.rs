@@ -12,6 +12,7 @@
 //! * The ground takes the sun and, as indirect light, a constant sky ambient.
 
 use glam::{Vec2, Vec3};
+use sylva_core::colour::srgb_to_linear;
 use sylva_geom::{Material, MaterialKind, Model, Texture, Wrap};
 
 /// Shading constants that the papers leave open (documented in docs/render.md).
@@ -81,15 +82,6 @@ impl ShadingParams {
     }
 }
 
-/// sRGB-encoded [0, 1] → linear.
-pub fn srgb_decode(c: f32) -> f32 {
-    if c <= 0.040_45 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
-
 /// A texture decoded to linear RGB once, so shading samples without `powf`.
 #[derive(Debug, Clone)]
 pub struct LinearTexture {
@@ -101,7 +93,7 @@ pub struct LinearTexture {
 
 impl LinearTexture {
     pub fn new(t: &Texture) -> LinearTexture {
-        let lut: Vec<f32> = (0..256).map(|i| srgb_decode(i as f32 / 255.0)).collect();
+        let lut: Vec<f32> = (0..256).map(|i| srgb_to_linear(i as f32 / 255.0)).collect();
         LinearTexture {
             width: t.width,
             height: t.height,
@@ -114,15 +106,12 @@ impl LinearTexture {
         }
     }
 
-    fn index(&self, i: i64, n: u32) -> usize {
-        match self.wrap {
-            Wrap::Repeat => i.rem_euclid(n as i64) as usize,
-            Wrap::Clamp => i.clamp(0, n as i64 - 1) as usize,
-        }
-    }
-
     fn texel(&self, x: i64, y: i64) -> Vec3 {
-        self.texels[self.index(y, self.height) * self.width as usize + self.index(x, self.width)]
+        let (x, y) = (
+            self.wrap.apply(x, self.width),
+            self.wrap.apply(y, self.height),
+        );
+        self.texels[y as usize * self.width as usize + x as usize]
     }
 
     /// Bilinear, texel centres at `(x + 0.5) / width` as in [`Texture`].
@@ -318,7 +307,7 @@ mod tests {
         // Texel centres.
         let c = lt.sample(Vec2::new(0.75, 0.25));
         assert!((c.x - 1.0).abs() < 1e-6 && c.y.abs() < 1e-6);
-        assert!((c.z - srgb_decode(64.0 / 255.0)).abs() < 1e-6);
+        assert!((c.z - srgb_to_linear(64.0 / 255.0)).abs() < 1e-6);
         // Halfway between two texels (wrapping) is their mean.
         let m = lt.sample(Vec2::new(0.0, 0.25));
         assert!((m.x - 0.5).abs() < 1e-6);

@@ -6,7 +6,7 @@
 //!
 //! A triangle whose material is a leaf ([`MaterialKind::Leaf`]) with a texture is
 //! alpha-tested: at the hit's interpolated texture coordinates, the nearest texel (the
-//! texture's own wrap mode, exactly [`Texture::alpha`]) must have alpha ≥ 0.5 (byte ≥ 128).
+//! texture's own wrap mode) must be opaque ([`sylva_geom::is_opaque`]: alpha byte ≥ 128).
 //! A hit on a transparent texel is discarded inside the leaf loop and the traversal goes on,
 //! so the ray is never re-traced from the hit. Wood and untextured leaves are opaque.
 
@@ -14,10 +14,10 @@ use crate::kdtree::{lane, Clip, KdTree, TraceStats, TraversalConfig, PACKET};
 use crate::ray::{intersect_triangle, inverse_dir, TriangleData};
 use glam::{Affine3A, Vec2, Vec3};
 use std::sync::Arc;
-use sylva_geom::{Aabb, MaterialKind, Model, Texture, Wrap};
+use sylva_geom::{is_opaque, nearest_texel_coords, Aabb, MaterialKind, Model, Texture, Wrap};
 
-/// Opacity of a texture as one bit per texel: `Texture::alpha(u, v) >= 0.5` without
-/// converting texels to floats.
+/// Opacity of a texture as one bit per texel ([`is_opaque`]): [`Texture::is_opaque_at`]
+/// without the pixels.
 #[derive(Debug, Clone)]
 pub struct AlphaMask {
     width: u32,
@@ -31,7 +31,7 @@ impl AlphaMask {
         let n = tex.pixels.len();
         let mut bits = vec![0u64; n.div_ceil(64)];
         for (i, p) in tex.pixels.iter().enumerate() {
-            if p[3] >= 128 {
+            if is_opaque(*p) {
                 bits[i / 64] |= 1 << (i % 64);
             }
         }
@@ -43,31 +43,10 @@ impl AlphaMask {
         }
     }
 
-    fn index(i: i64, n: u32, wrap: Wrap) -> u32 {
-        match wrap {
-            Wrap::Repeat => i.rem_euclid(n as i64) as u32,
-            Wrap::Clamp => i.clamp(0, n as i64 - 1) as u32,
-        }
-    }
-
     /// Same texel as `Texture::sample(u, v, Filter::Nearest)`.
     #[inline]
     pub fn opaque(&self, u: f32, v: f32) -> bool {
-        let (u, v) = if u.is_finite() && v.is_finite() {
-            (u, v)
-        } else {
-            (0.0, 0.0)
-        };
-        let x = Self::index(
-            (u * self.width as f32).floor() as i64,
-            self.width,
-            self.wrap,
-        );
-        let y = Self::index(
-            (v * self.height as f32).floor() as i64,
-            self.height,
-            self.wrap,
-        );
+        let (x, y) = nearest_texel_coords(u, v, self.width, self.height, self.wrap);
         let i = (y * self.width + x) as usize;
         self.bits[i / 64] >> (i % 64) & 1 == 1
     }

@@ -5,7 +5,7 @@
 //! triangle/box overlap, the separating-axis test of Akenine-Möller in the form of Schwarz &
 //! Seidel 2010). Density = counted sub-cells / 27; wood fraction = sub-cells met by a wood
 //! triangle / counted sub-cells. A leaf triangle with a texture counts in a sub-cell only if the
-//! piece of it inside the sub-cell samples an opaque texel (`Texture::alpha ≥ 0.5`).
+//! piece of it inside the sub-cell samples an opaque texel ([`sylva_geom::is_opaque`]: alpha ≥ 0.5).
 //!
 //! Conventions (docs/voxelize.md has the reasoning):
 //!
@@ -28,7 +28,7 @@ use rayon::prelude::*;
 use sylva_lb::{Bounds, DensityGrid, Dims, GridError};
 use thiserror::Error;
 
-use sylva_geom::{MaterialKind, Model, Texture, Wrap};
+use sylva_geom::{is_opaque, MaterialKind, Model, Texture, Wrap};
 
 /// Sub-cells per cell edge.
 pub const SUB: usize = 3;
@@ -40,8 +40,6 @@ pub const DEFAULT_GRID: usize = 128;
 pub const MAX_GRID: usize = sylva_lb::grid::MAX_EDGE;
 /// Smallest `N`: the two shell sites plus two interior ones.
 pub const MIN_GRID: usize = 4;
-/// Alpha byte from which a texel is opaque: `alpha / 255 ≥ 0.5`.
-pub const OPAQUE_ALPHA: u8 = 128;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct VoxelizeOptions {
@@ -612,7 +610,7 @@ impl TextureCoverage {
         for y in 0..h {
             let mut row = 0u32;
             for x in 0..w {
-                row += (t.pixels[y * w + x][3] >= OPAQUE_ALPHA) as u32;
+                row += is_opaque(t.pixels[y * w + x]) as u32;
                 table[(y + 1) * (w + 1) + x + 1] = table[y * (w + 1) + x + 1] + row;
             }
         }

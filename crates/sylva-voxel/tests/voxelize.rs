@@ -418,12 +418,13 @@ fn reference_masks(model: &Model, p: &GridPlacement) -> Vec<u64> {
                         let mut opaque = false;
                         for k in u0.floor() as i64..=u1.floor() as i64 {
                             for l in v0.floor() as i64..=v1.floor() as i64 {
-                                let idx = |i: i64, n: u32| match tex.wrap {
-                                    Wrap::Repeat => i.rem_euclid(n as i64) as u32,
-                                    Wrap::Clamp => i.clamp(0, n as i64 - 1) as u32,
-                                };
-                                let a = tex.texel(idx(k, tex.width), idx(l, tex.height))[3];
-                                if a >= 128 && polygon_meets_square(&poly, k as f64, l as f64) {
+                                let texel = tex.texel(
+                                    tex.wrap.apply(k, tex.width),
+                                    tex.wrap.apply(l, tex.height),
+                                );
+                                if sylva_geom::is_opaque(texel)
+                                    && polygon_meets_square(&poly, k as f64, l as f64)
+                                {
                                     opaque = true;
                                 }
                             }

@@ -11,7 +11,7 @@
 //! `alphaCutoff`, baked so texture alpha ≥ 0.5 means opaque), `doubleSided`, and
 //! `KHR_materials_diffuse_transmission` (a translucent leaf).
 
-use super::{decode_image, linear_to_srgb8, remap_alpha, tint, to_texture, ImportError};
+use super::{decode_image, remap_alpha, tint, to_texture, ImportError};
 use super::{RawMaterial, RawModel};
 use base64::Engine;
 use glam::{Mat3, Mat4, Vec3};
@@ -22,6 +22,7 @@ use gltf::texture::WrappingMode;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+use sylva_core::colour::linear_to_srgb8;
 use sylva_geom::{Texture, Wrap};
 
 pub(super) fn load(path: &Path) -> Result<RawModel, ImportError> {

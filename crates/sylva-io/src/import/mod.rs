@@ -5,7 +5,7 @@
 //! This module owns what the formats have in common: [`ImportOptions`], [`ImportError`],
 //! the leaf/wood decision (alpha mask or diffuse transmission → leaf, overridden by
 //! material-name patterns), texture decoding and baking (colour factors multiplied in,
-//! alpha remapped so that `Texture::alpha(u, v) >= 0.5` means opaque), normals where the
+//! alpha remapped so that the cutoff falls on [`sylva_geom::is_opaque`]), normals where the
 //! file has none, and the final checks. [`obj`] and [`gltf`] read their formats into the
 //! shared intermediate form.
 
@@ -15,8 +15,8 @@ mod obj;
 use glam::Vec3;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use sylva_core::colour::srgb_to_linear;
-use sylva_geom::{Material, MaterialKind, Mesh, Model, Texture, Wrap};
+use sylva_core::colour::{linear_to_srgb8, srgb_to_linear};
+use sylva_geom::{Material, MaterialKind, Mesh, Model, Texture, Wrap, OPAQUE_ALPHA};
 
 /// Sylva models hold at most this many materials (material ids are `u8`).
 pub const MAX_MATERIALS: usize = 256;
@@ -303,7 +303,7 @@ impl RawModel {
 impl RawMaterial {
     fn into_material(self, leaf: bool) -> Material {
         let base_color = match &self.texture {
-            Some(t) => t.mean_opaque_color().map(srgb_to_linear),
+            Some(t) => t.mean_opaque_linear(),
             None => self.color,
         };
         Material {
@@ -428,17 +428,6 @@ pub(crate) fn to_texture(img: &image::RgbaImage, wrap: Wrap) -> Texture {
     Texture::new(img.width(), img.height(), pixels, wrap)
 }
 
-/// Linear → sRGB-encoded byte.
-pub(crate) fn linear_to_srgb8(c: f32) -> u8 {
-    let c = c.clamp(0.0, 1.0);
-    let s = if c <= 0.003_130_8 {
-        12.92 * c
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
-    };
-    (s * 255.0).round() as u8
-}
-
 /// Multiplies the texels' colour by a linear `factor` (a glTF `baseColorFactor`, an MTL
 /// `Kd`), in linear space; a factor of one leaves the bytes as they are.
 pub(crate) fn tint(pixels: &mut [[u8; 4]], factor: [f32; 3]) {
@@ -453,9 +442,13 @@ pub(crate) fn tint(pixels: &mut [[u8; 4]], factor: [f32; 3]) {
     }
 }
 
-/// Maps coverage `a` ∈ [0, 1] to a byte so that `a >= cutoff` ⇔ byte ≥ 128 (sylva's rule,
-/// `Texture::alpha >= 0.5`), keeping the ramp monotonic so filtering still sees edges.
+/// Maps coverage `a` ∈ [0, 1] to a byte so that `a >= cutoff` ⇔ the byte is opaque
+/// ([`sylva_geom::is_opaque`]: byte ≥ [`OPAQUE_ALPHA`]), keeping the ramp monotonic so
+/// filtering still sees edges.
 pub(crate) fn remap_alpha(a: f32, cutoff: f32) -> u8 {
+    // The bytes above and below the rule's threshold: 127 steps each way.
+    const ABOVE: f32 = (u8::MAX - OPAQUE_ALPHA) as f32;
+    const BELOW: f32 = (OPAQUE_ALPHA - 1) as f32;
     let a = a.clamp(0.0, 1.0);
     if a >= cutoff {
         let t = if cutoff < 1.0 {
@@ -463,10 +456,10 @@ pub(crate) fn remap_alpha(a: f32, cutoff: f32) -> u8 {
         } else {
             1.0
         };
-        128 + (127.0 * t).round().clamp(0.0, 127.0) as u8
+        OPAQUE_ALPHA + (ABOVE * t).round().clamp(0.0, ABOVE) as u8
     } else {
         // a < cutoff implies cutoff > 0.
-        (127.0 * a / cutoff).floor().clamp(0.0, 127.0) as u8
+        (BELOW * a / cutoff).floor().clamp(0.0, BELOW) as u8
     }
 }
 
@@ -503,7 +496,11 @@ mod tests {
             for byte in 0..=255u8 {
                 let a = byte as f32 / 255.0;
                 let out = remap_alpha(a, cutoff);
-                assert_eq!(out >= 128, a >= cutoff, "a {a} cutoff {cutoff} -> {out}");
+                assert_eq!(
+                    sylva_geom::is_opaque([0, 0, 0, out]),
+                    a >= cutoff,
+                    "a {a} cutoff {cutoff} -> {out}"
+                );
             }
             // Monotonic.
             let outs: Vec<u8> = (0..=255)
@@ -514,10 +511,7 @@ mod tests {
     }
 
     #[test]
-    fn srgb_round_trip_and_tint() {
-        for b in 0..=255u8 {
-            assert_eq!(linear_to_srgb8(srgb_to_linear(b as f32 / 255.0)), b);
-        }
+    fn tint_multiplies_in_linear_space() {
         let mut px = vec![[200u8, 100, 50, 7]];
         tint(&mut px, [1.0, 1.0, 1.0]);
         assert_eq!(px[0], [200, 100, 50, 7]);

@@ -520,12 +520,12 @@ fn build_material(
         (Some((mut t, has_alpha)), _) => {
             // MTL multiplies the map by Kd; a missing Kd leaves the map as it is.
             tint(&mut t.pixels, kd.unwrap_or([1.0; 3]));
-            raw.alpha_mask = has_alpha && t.pixels.iter().any(|p| p[3] < 128);
+            raw.alpha_mask = has_alpha && t.pixels.iter().any(|p| !sylva_geom::is_opaque(*p));
             Some(t)
         }
         (None, Some((d, _))) => {
             // Only a coverage map: the colour is Kd everywhere.
-            let c = raw.color.map(super::linear_to_srgb8);
+            let c = raw.color.map(sylva_core::colour::linear_to_srgb8);
             Some(Texture::new(
                 d.width,
                 d.height,
