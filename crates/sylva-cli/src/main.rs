@@ -48,6 +48,8 @@ enum Command {
 }
 
 fn main() -> std::process::ExitCode {
+    // Before any thread exists: it may set an environment variable.
+    sylva_wgpu::quiet_headless_probing();
     let cli = Cli::parse();
     if let Some(n) = cli.threads {
         if n == 0 {

@@ -135,3 +135,58 @@ fn cpu_runs_name_themselves_and_refuse_f16() {
         "{err}"
     );
 }
+
+#[test]
+fn render_solves_lb_on_the_device_asked_for() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("rose.toml");
+    std::fs::write(
+        &scene,
+        "[[models]]\nname = \"rose\"\nspecies = \"dogrose\"\n\n[[instances]]\nmodel = \"rose\"\nposition = [0.0, 0.0, 0.0]\n\n[lb]\ngrid = 16\n",
+    )
+    .unwrap();
+    let render = |device: &str| {
+        let out = dir.path().join(format!("{device}.png"));
+        let cache = dir.path().join(format!("cache-{device}"));
+        let (ok, stdout, err) = sylva(&[
+            "render",
+            scene.to_str().unwrap(),
+            "--width",
+            "48",
+            "--device",
+            device,
+            "--cache-dir",
+            cache.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        (ok, stdout, err, out, cache)
+    };
+    let (ok, stdout, err, cpu_png, _) = render("cpu");
+    assert!(ok, "{err}");
+    assert!(stdout.contains("LB solver: CPU, kernel"), "{stdout}");
+    let Some(_) = adapter() else {
+        let (ok, _, err, _, _) = render("gpu");
+        assert!(!ok && err.contains("no GPU adapter"), "{err}");
+        return;
+    };
+    let (ok, stdout, err, gpu_png, cache) = render("gpu");
+    assert!(ok, "{err}");
+    assert!(stdout.contains("LB solver: GPU"), "{stdout}");
+    // The GPU's entry records its solver; CPU and GPU light the model alike.
+    let entry = std::fs::read_dir(&cache).unwrap().next().unwrap().unwrap();
+    let file = sylva_lb::GridFile::read(&entry.path()).unwrap();
+    assert!(file.metadata_value("solver").unwrap().starts_with("GPU"));
+    let (a, b) = (
+        image::open(&cpu_png).unwrap().to_rgb8(),
+        image::open(&gpu_png).unwrap().to_rgb8(),
+    );
+    assert_eq!(a.dimensions(), b.dimensions());
+    let worst = a
+        .pixels()
+        .zip(b.pixels())
+        .flat_map(|(p, q)| (0..3).map(move |c| p[c].abs_diff(q[c])))
+        .max()
+        .unwrap();
+    assert!(worst <= 1, "CPU and GPU images differ by {worst} levels");
+}

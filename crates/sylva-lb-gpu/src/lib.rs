@@ -2,7 +2,9 @@
 //! paper 002 §3.1 ran it with OpenCL.
 //!
 //! Owns the generated kernels ([`shader`]), the device-side lattice
-//! ([`GpuLattice`]) and the three-colour driver ([`solve_lighting_gpu`]). The physics is
+//! ([`GpuLattice`]), the three-colour driver ([`solve_lighting_gpu`]), the solver as an
+//! [`sylva_lb::LbSolver`] backend ([`GpuSolver`]) and the choice between it and the CPU
+//! ([`select_solver`]). The physics is
 //! sylva-lb's: Ω is built on the host by `sylva_lb::collision` and uploaded in the cubic
 //! factorised form of `sylva_lb::kernel::CubicOmega`; the site codes (green ρ, brown -ρ,
 //! shell 0), `f_0` zeroing, boundary shell, stop rules and [`sylva_lb::SolveReport`] are the
@@ -14,11 +16,14 @@
 
 pub mod lattice;
 pub mod shader;
+pub mod solver;
 
 /// The device side: adapter choice and the opened device (`sylva-wgpu`).
 pub use sylva_wgpu::{AdapterChoice, ContextOptions, GpuContext, GpuError};
 
 pub use lattice::{device_memory_needed, solve_lighting_gpu, GpuLattice, Precision};
+pub use solver::{select_solver, GpuSolver, SelectedSolver};
+pub use sylva_wgpu::Device;
 
 use thiserror::Error;
 
@@ -29,6 +34,8 @@ pub enum LbGpuError {
     Gpu(#[from] GpuError),
     #[error("adapter '{0}' lacks SHADER_F16: f16 state storage is unavailable, use f32")]
     F16Unsupported(String),
+    #[error("f16 is a GPU state format; the CPU solver stores f32")]
+    F16OnCpu,
     #[error("grid too large for this GPU: {0}")]
     TooLarge(String),
     #[error(transparent)]

@@ -6,12 +6,12 @@
 
 use sylva_lb::lattice::Q;
 use sylva_lb::{
-    solve_lighting, Boundary, ColourParams, DensityGrid, Dims, Lattice, MediumParams, Preset,
-    SolveOptions, StopReason,
+    solve_lighting, Boundary, ColourParams, DensityGrid, Dims, Lattice, LbSolver, LbSolverError,
+    MediumParams, Preset, SolveOptions, StopReason,
 };
 use sylva_lb_gpu::{
-    solve_lighting_gpu, AdapterChoice, ContextOptions, GpuContext, GpuError, GpuLattice,
-    LbGpuError, Precision,
+    select_solver, solve_lighting_gpu, AdapterChoice, ContextOptions, Device, GpuContext, GpuError,
+    GpuLattice, GpuSolver, LbGpuError, Precision,
 };
 
 fn context_with(opts: ContextOptions) -> Option<GpuContext> {
@@ -381,4 +381,54 @@ fn bad_input_is_refused() {
         let e = lat.run(&opts, &mut |_, _| {}).unwrap_err();
         assert!(matches!(e, LbGpuError::Solve(_)), "{e}");
     }
+}
+
+#[test]
+fn backends_behind_the_trait_agree_and_name_themselves() {
+    // The CPU is always there; f16 is refused where it runs.
+    let cpu = select_solver(Device::Cpu, Precision::F32).unwrap();
+    assert_eq!(cpu.solver.device(), "cpu");
+    assert_eq!(cpu.solver.cache_tag(), "cpu");
+    assert!(matches!(
+        select_solver(Device::Cpu, Precision::F16),
+        Err(LbGpuError::F16OnCpu)
+    ));
+    let Some(ctx) = context() else { return };
+    let gpu = GpuSolver::new(ctx, Precision::F32).unwrap();
+    assert_eq!(gpu.device(), "gpu");
+    assert_eq!(gpu.cache_tag(), "gpu-f32");
+    assert_eq!(gpu.adapter().as_deref(), Some(gpu.context().adapter_name()));
+    assert!(gpu.describe().contains("f32 state"), "{}", gpu.describe());
+    let dims = Dims::new(12, 10, 9).unwrap();
+    let grid = mixed_grid(dims);
+    let medium = anisotropic_medium(true);
+    let opts = SolveOptions {
+        max_steps: 16,
+        tolerance: None,
+    };
+    let solvers: [&dyn LbSolver; 2] = [&*cpu.solver, &gpu];
+    let [(a, _), (b, _)] = solvers.map(|s| {
+        s.solve_lighting(&grid, &medium, sun(), &opts, &mut |_, _, _| {})
+            .unwrap()
+    });
+    for c in 0..3 {
+        let err = max_relative_error(&b.colours[c], &a.colours[c]);
+        assert!(err < 1e-5, "colour {c}: {err}");
+    }
+    // Errors of the solver's own checks come back as such through the GPU backend too.
+    let bad = SolveOptions {
+        max_steps: 0,
+        tolerance: None,
+    };
+    let e = gpu
+        .solve_lighting(&grid, &medium, sun(), &bad, &mut |_, _, _| {})
+        .unwrap_err();
+    assert!(matches!(e, LbSolverError::Solve(_)), "{e}");
+    let mut last = 0;
+    let bench = gpu
+        .benchmark(&grid, &medium, sun(), 4, 2, &mut |s| last = s)
+        .unwrap();
+    assert_eq!((bench.runs.len(), last), (2, 8));
+    assert_eq!(bench.kernel, "wgsl-f32");
+    assert_eq!(bench.bytes_per_update, 156);
 }

@@ -3,12 +3,14 @@
 //! Owns the D3Q19 lattice, the collision matrix with Henyey-Greenstein anisotropy, the
 //! parameter presets, the solver (boundary shell, green/brown sites, convergence), the
 //! density and lighting grids with their file format and previews, and the built-in test
-//! shapes.
+//! shapes; [`LbSolver`] is the solver as a backend ([`CpuSolver`] here, the GPU one in
+//! `sylva-lb-gpu`).
 
 // Tests index lattice tables by direction and axis together.
 #![cfg_attr(test, allow(clippy::needless_range_loop))]
 
 pub mod alloc;
+pub mod backend;
 pub mod bandwidth;
 pub mod collision;
 pub mod grid;
@@ -20,6 +22,7 @@ pub mod preview;
 pub mod shapes;
 pub mod solver;
 
+pub use backend::{CpuSolver, LbBenchmark, LbSolver, LbSolverError};
 pub use grid::{Bounds, DensityGrid, Dims, GridError, LightingGrid};
 pub use grid_file::{Element, GridFile, GridFileError, GridKind};
 pub use params::{ColourParams, MediumParams, ParamError, Preset};

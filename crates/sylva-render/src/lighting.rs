@@ -22,18 +22,20 @@ use std::time::Instant;
 use glam::{DVec3, Vec3};
 use sylva_core::Fnv64;
 use sylva_geom::{is_opaque, LbSettings, MaterialKind, Model, Wrap, OPAQUE_ALPHA};
-use sylva_lb::solver::{memory_needed, solve_lighting, Boundary, SolveError, SolveOptions};
+use sylva_lb::solver::{memory_needed, Boundary, SolveOptions};
 use sylva_lb::{
     DensityGrid, Dims, Element, GridFile, GridFileError, GridKind, LightingGrid, MediumParams,
     ParamError, Preset,
 };
+use sylva_lb::{LbSolver, LbSolverError};
 use sylva_voxel::{
     placement_for, voxelize, GridPlacement, VoxelizeError, VoxelizeOptions, DEFAULT_GRID, SUB,
 };
 use thiserror::Error;
 
 /// Bump whenever the solver, the voxelizer or this module changes what a cache entry holds.
-pub const CACHE_VERSION: u32 = 1;
+/// 2: the solver backend's [`LbSolver::cache_tag`] is part of the key.
+pub const CACHE_VERSION: u32 = 2;
 /// Extension of cache entries.
 pub const CACHE_EXTENSION: &str = "sgrid";
 /// Metadata key holding the cache key (16 hex digits) in a cache entry.
@@ -52,7 +54,10 @@ pub enum LightingError {
     #[error(transparent)]
     Memory(#[from] sylva_core::MemoryError),
     #[error("LB lighting of model '{model}': {source}")]
-    Solve { model: String, source: SolveError },
+    Solve {
+        model: String,
+        source: LbSolverError,
+    },
     #[error("cannot create the lighting cache directory {}: {source}", .dir.display())]
     CacheDir {
         dir: PathBuf,
@@ -266,21 +271,24 @@ fn solve_options(dims: Dims) -> SolveOptions {
 /// the mesh's geometry hash, per material its kind and (for leaves, whose textures are
 /// alpha-tested) the texture's size, wrap and opaque texels, the voxelizer's sub-cell count
 /// and opacity threshold, the grid size, the preset's parameters (bit patterns), the sun
-/// direction rounded to 1e-5, and the solve schedule.
+/// direction rounded to 1e-5, the solve schedule, and the solver backend's
+/// [`LbSolver::cache_tag`] (CPU and GPU results differ in the last bits).
 pub fn cache_key(
     model: &Model,
     sun_to: Vec3,
     opts: &LightingOptions,
+    solver: &dyn LbSolver,
 ) -> Result<u64, LightingError> {
     let medium = medium(&opts.preset)?;
     let (sun, _) = quantise_sun(sun_to)?;
-    Ok(key_of(model, sun, opts.grid, &medium))
+    Ok(key_of(model, sun, opts.grid, &medium, &solver.cache_tag()))
 }
 
-fn key_of(model: &Model, sun: [i64; 3], grid: usize, m: &MediumParams) -> u64 {
+fn key_of(model: &Model, sun: [i64; 3], grid: usize, m: &MediumParams, solver: &str) -> u64 {
     let mut h = Fnv64::new();
     h.str("sylva-render lighting");
     h.u64(CACHE_VERSION as u64);
+    h.str(solver);
     h.u64(sylva_lb::grid_file::VERSION as u64);
     h.u64(model.mesh.geometry_hash());
     // Voxelization.
@@ -346,16 +354,17 @@ pub fn cache_path(dir: &Path, model: &Model, key: u64) -> PathBuf {
     ))
 }
 
-/// Lights `grid` under a unit sun towards `sun_to` (unit), forwarding progress.
+/// Lights `grid` under a unit sun towards `sun_to` (unit) on `solver`, forwarding progress.
 fn solve_density(
     grid: &DensityGrid,
     medium: &MediumParams,
     sun_to: DVec3,
+    solver: &dyn LbSolver,
     progress: &mut dyn FnMut(usize, usize, usize),
-) -> Result<LightingGrid, SolveError> {
+) -> Result<LightingGrid, LbSolverError> {
     let opts = solve_options(grid.dims);
     let max = opts.max_steps;
-    let (lighting, _) = solve_lighting(
+    let (lighting, _) = solver.solve_lighting(
         grid,
         medium,
         Boundary::sun((-sun_to).to_array(), 1.0),
@@ -424,18 +433,19 @@ fn read_entry(path: &Path, key: u64, placement: &GridPlacement) -> Result<Lighti
 }
 
 /// One model's LB lighting under the sun towards `sun_to` (model frame): from the cache when
-/// it holds a valid entry, otherwise voxelized, solved and (with a cache) stored.
+/// it holds a valid entry, otherwise voxelized, solved on `solver` and (with a cache) stored.
 /// `progress(colour, step, max_steps)` follows the solve.
 pub fn model_lighting(
     model: &Model,
     sun_to: Vec3,
     opts: &LightingOptions,
+    solver: &dyn LbSolver,
     progress: &mut dyn FnMut(usize, usize, usize),
 ) -> Result<(ModelLighting, LightingReport), LightingError> {
     let t0 = Instant::now();
     let medium = medium(&opts.preset)?;
     let (sun_q, sun) = quantise_sun(sun_to)?;
-    let key = key_of(model, sun_q, opts.grid, &medium);
+    let key = key_of(model, sun_q, opts.grid, &medium, &solver.cache_tag());
     let placement = placement_for(model, opts.grid)?;
     let dims = placement.dims;
 
@@ -487,11 +497,12 @@ pub fn model_lighting(
     )?;
     debug_assert_eq!(density.dims, dims);
     debug_assert_eq!(density.bounds, placement.bounds());
-    let grid =
-        solve_density(&density, &medium, sun, progress).map_err(|source| LightingError::Solve {
+    let grid = solve_density(&density, &medium, sun, solver, progress).map_err(|source| {
+        LightingError::Solve {
             model: model.name.clone(),
             source,
-        })?;
+        }
+    })?;
     drop(density);
 
     if let Some(path) = &path {
@@ -508,6 +519,7 @@ pub fn model_lighting(
                 "steps".to_string(),
                 solve_options(dims).max_steps.to_string(),
             ),
+            ("solver".to_string(), solver.describe()),
         ];
         GridFile::from_lighting(&grid, Element::F32, metadata)
             .write(path)
@@ -534,6 +546,7 @@ mod tests {
     use super::*;
     use sylva_geom::{Material, Mesh};
     use sylva_lb::Bounds;
+    use sylva_lb::CpuSolver;
 
     const N: usize = 16;
 
@@ -626,7 +639,7 @@ mod tests {
         let o = opts(Some(dir.path()));
         let mut calls = 0usize;
         let mut last = (0, 0, 0);
-        let (a, ra) = model_lighting(&m, sun(), &o, &mut |c, s, max| {
+        let (a, ra) = model_lighting(&m, sun(), &o, &CpuSolver, &mut |c, s, max| {
             calls += 1;
             last = (c, s, max);
         })
@@ -634,7 +647,7 @@ mod tests {
         assert_eq!(ra.source, LightingSource::Computed);
         let path = ra.path.clone().unwrap();
         assert!(path.is_file());
-        let key = cache_key(&m, sun(), &o).unwrap();
+        let key = cache_key(&m, sun(), &o, &CpuSolver).unwrap();
         assert_eq!(
             path.file_name().unwrap().to_str().unwrap(),
             format!("test_plate_1-{key:016x}.sgrid")
@@ -645,7 +658,8 @@ mod tests {
         assert_eq!(last.2, 2 * a.dims().longest_edge());
 
         let mut calls2 = 0usize;
-        let (b, rb) = model_lighting(&m, sun(), &o, &mut |_, _, _| calls2 += 1).unwrap();
+        let (b, rb) =
+            model_lighting(&m, sun(), &o, &CpuSolver, &mut |_, _, _| calls2 += 1).unwrap();
         assert_eq!(rb.source, LightingSource::Cached);
         assert_eq!(rb.path.as_deref(), Some(path.as_path()));
         assert_eq!(calls2, 0, "no solve on a cache hit");
@@ -653,7 +667,8 @@ mod tests {
         assert_eq!(probe(&a), probe(&b));
 
         // Without a cache: computed, same values, nothing written.
-        let (c, rc) = model_lighting(&m, sun(), &opts(None), &mut no_progress()).unwrap();
+        let (c, rc) =
+            model_lighting(&m, sun(), &opts(None), &CpuSolver, &mut no_progress()).unwrap();
         assert_eq!(rc.source, LightingSource::Computed);
         assert_eq!(rc.path, None);
         assert_eq!(probe(&a), probe(&c));
@@ -661,7 +676,7 @@ mod tests {
     }
 
     fn assert_recomputed(m: &Model, o: &LightingOptions, want: &ModelLighting, path: &Path) {
-        let (l, r) = model_lighting(m, sun(), o, &mut no_progress()).unwrap();
+        let (l, r) = model_lighting(m, sun(), o, &CpuSolver, &mut no_progress()).unwrap();
         match &r.source {
             LightingSource::Recomputed { reason } => {
                 assert!(
@@ -673,7 +688,7 @@ mod tests {
         }
         assert_eq!(probe(&l), probe(want));
         // The entry was replaced by a valid one.
-        let (_, r2) = model_lighting(m, sun(), o, &mut no_progress()).unwrap();
+        let (_, r2) = model_lighting(m, sun(), o, &CpuSolver, &mut no_progress()).unwrap();
         assert_eq!(r2.source, LightingSource::Cached);
         GridFile::read(path).unwrap();
     }
@@ -683,7 +698,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let m = model(1.0);
         let o = opts(Some(dir.path()));
-        let (orig, r) = model_lighting(&m, sun(), &o, &mut no_progress()).unwrap();
+        let (orig, r) = model_lighting(&m, sun(), &o, &CpuSolver, &mut no_progress()).unwrap();
         let path = r.path.unwrap();
         let good = std::fs::read(&path).unwrap();
 
@@ -728,66 +743,86 @@ mod tests {
     fn key_tracks_inputs() {
         let m = model(1.0);
         let o = opts(None);
-        let k = cache_key(&m, sun(), &o).unwrap();
-        assert_eq!(k, cache_key(&model(1.0), sun(), &o).unwrap(), "stable");
+        let k = cache_key(&m, sun(), &o, &CpuSolver).unwrap();
         assert_eq!(
             k,
-            cache_key(&m, sun() * 3.0, &o).unwrap(),
+            cache_key(&model(1.0), sun(), &o, &CpuSolver).unwrap(),
+            "stable"
+        );
+        assert_eq!(
+            k,
+            cache_key(&m, sun() * 3.0, &o, &CpuSolver).unwrap(),
             "length of sun_to"
         );
         assert_eq!(
             k,
-            cache_key(&m, sun() + Vec3::splat(1e-7), &o).unwrap(),
+            cache_key(&m, sun() + Vec3::splat(1e-7), &o, &CpuSolver).unwrap(),
             "below the rounding"
         );
         let other_sun = Vec3::new(0.3, 0.8, 0.25).normalize();
-        assert_ne!(k, cache_key(&m, other_sun, &o).unwrap(), "sun");
+        assert_ne!(k, cache_key(&m, other_sun, &o, &CpuSolver).unwrap(), "sun");
         let grid = LightingOptions {
             grid: N + 1,
             ..o.clone()
         };
-        assert_ne!(k, cache_key(&m, sun(), &grid).unwrap(), "grid");
+        assert_ne!(k, cache_key(&m, sun(), &grid, &CpuSolver).unwrap(), "grid");
         let preset = LightingOptions {
             preset: "dogrose".into(),
             ..o.clone()
         };
-        assert_ne!(k, cache_key(&m, sun(), &preset).unwrap(), "preset");
-        assert_ne!(k, cache_key(&model(1.01), sun(), &o).unwrap(), "geometry");
+        assert_ne!(
+            k,
+            cache_key(&m, sun(), &preset, &CpuSolver).unwrap(),
+            "preset"
+        );
+        assert_ne!(
+            k,
+            cache_key(&model(1.01), sun(), &o, &CpuSolver).unwrap(),
+            "geometry"
+        );
         // Material kind and leaf opacity.
         let mut wood = m.clone();
         wood.materials[0].kind = MaterialKind::Wood;
-        assert_ne!(k, cache_key(&wood, sun(), &o).unwrap(), "material kind");
+        assert_ne!(
+            k,
+            cache_key(&wood, sun(), &o, &CpuSolver).unwrap(),
+            "material kind"
+        );
         let mut tex = m.clone();
         let mut t = sylva_geom::Texture::new(2, 2, vec![[10, 200, 10, 255]; 4], Wrap::Clamp);
         tex.materials[0].texture = Some(std::sync::Arc::new(t.clone()));
-        let kt = cache_key(&tex, sun(), &o).unwrap();
+        let kt = cache_key(&tex, sun(), &o, &CpuSolver).unwrap();
         assert_ne!(k, kt, "texture");
         t.pixels[3][3] = 0;
         tex.materials[0].texture = Some(std::sync::Arc::new(t.clone()));
-        assert_ne!(kt, cache_key(&tex, sun(), &o).unwrap(), "texture alpha");
+        assert_ne!(
+            kt,
+            cache_key(&tex, sun(), &o, &CpuSolver).unwrap(),
+            "texture alpha"
+        );
         // The cache directory and the model's name are not part of the key.
         let elsewhere = LightingOptions {
             cache_dir: Some("/somewhere".into()),
             ..o.clone()
         };
-        assert_eq!(k, cache_key(&m, sun(), &elsewhere).unwrap());
+        assert_eq!(k, cache_key(&m, sun(), &elsewhere, &CpuSolver).unwrap());
         let mut renamed = m.clone();
         renamed.name = "other".into();
-        assert_eq!(k, cache_key(&renamed, sun(), &o).unwrap());
+        assert_eq!(k, cache_key(&renamed, sun(), &o, &CpuSolver).unwrap());
 
         assert!(matches!(
-            cache_key(&m, Vec3::ZERO, &o),
+            cache_key(&m, Vec3::ZERO, &o, &CpuSolver),
             Err(LightingError::Sun(_))
         ));
         assert!(matches!(
-            cache_key(&m, Vec3::new(f32::NAN, 1.0, 0.0), &o),
+            cache_key(&m, Vec3::new(f32::NAN, 1.0, 0.0), &o, &CpuSolver),
             Err(LightingError::Sun(_))
         ));
         let bad = LightingOptions {
             preset: "granite".into(),
             ..o
         };
-        let e = cache_key(&m, sun(), &bad).unwrap_err();
+        let e = cache_key(&m, sun(), &bad, &CpuSolver).unwrap_err();
         assert!(e.to_string().contains("granite"), "{e}");
     }
 
@@ -810,7 +845,7 @@ mod tests {
         ] {
             let (_, s) = quantise_sun(to_sun).unwrap();
             let medium = Preset::Leaf.params();
-            let grid = solve_density(&empty, &medium, s, &mut no_progress()).unwrap();
+            let grid = solve_density(&empty, &medium, s, &CpuSolver, &mut no_progress()).unwrap();
             let l = normalise(&grid, s);
             for x in 0..dims.nx {
                 for y in 0..dims.ny {
@@ -839,7 +874,8 @@ mod tests {
     #[test]
     fn shadow_under_the_plate() {
         let m = model(1.0);
-        let (l, _) = model_lighting(&m, Vec3::Y, &opts(None), &mut no_progress()).unwrap();
+        let (l, _) =
+            model_lighting(&m, Vec3::Y, &opts(None), &CpuSolver, &mut no_progress()).unwrap();
         let under = l.sample(Vec3::new(0.6, 0.5, 0.6));
         let above = l.sample(Vec3::new(0.6, 1.05 + 1.0 / N as f32 * 2.0, 0.6));
         assert!(under.max_element() < 0.9, "under {under}");
@@ -941,8 +977,14 @@ mod tests {
         let file = dir.path().join("not-a-dir");
         std::fs::write(&file, b"x").unwrap();
         let cache = file.join("cache");
-        let e = model_lighting(&model(1.0), sun(), &opts(Some(&cache)), &mut no_progress())
-            .unwrap_err();
+        let e = model_lighting(
+            &model(1.0),
+            sun(),
+            &opts(Some(&cache)),
+            &CpuSolver,
+            &mut no_progress(),
+        )
+        .unwrap_err();
         assert!(matches!(e, LightingError::CacheDir { .. }), "{e:?}");
         assert!(e.to_string().contains(&cache.display().to_string()), "{e}");
     }
@@ -950,7 +992,8 @@ mod tests {
     #[test]
     fn model_errors_pass_through() {
         let empty = Model::new("nothing", Mesh::default(), vec![]);
-        let e = model_lighting(&empty, sun(), &opts(None), &mut no_progress()).unwrap_err();
+        let e =
+            model_lighting(&empty, sun(), &opts(None), &CpuSolver, &mut no_progress()).unwrap_err();
         assert!(e.to_string().contains("nothing"), "{e}");
         let e = model_lighting(
             &model(1.0),
@@ -959,6 +1002,7 @@ mod tests {
                 grid: 2,
                 ..opts(None)
             },
+            &CpuSolver,
             &mut no_progress(),
         )
         .unwrap_err();

@@ -172,7 +172,7 @@ fn with_lb(scene: &Scene) -> Vec<Option<ModelLighting>> {
         .iter()
         .map(|m| {
             Some(
-                model_lighting(m, to_sun(), &opts, &mut |_, _, _| {})
+                model_lighting(m, to_sun(), &opts, &sylva_lb::CpuSolver, &mut |_, _, _| {})
                     .unwrap()
                     .0,
             )

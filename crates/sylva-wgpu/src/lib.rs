@@ -4,11 +4,14 @@
 //! Owns adapter choice ([`GpuContext`] with [`AdapterChoice`]: hardware only, or any adapter
 //! including software ones such as Mesa's lavapipe), the device and its granted limits,
 //! buffer creation and read-back with out-of-memory and validation errors turned into
-//! [`GpuError`]s, and the GPU's copy bandwidth.
+//! [`GpuError`]s, and the GPU's copy bandwidth; [`open_device`] turns a user's
+//! `cpu|gpu|auto` ([`Device`]) into a GPU or none.
 
 pub mod context;
+pub mod select;
 
 pub use context::{AdapterChoice, ContextOptions, GpuContext};
+pub use select::{open_device, quiet_headless_probing, Device, OpenedDevice};
 /// The wgpu version this crate is built on (for [`ContextOptions::backends`]).
 pub use wgpu;
 

@@ -3,9 +3,7 @@
 use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
 use serde::Serialize;
-use sylva_lb::bandwidth::copy_bandwidth_gbs;
-use sylva_lb::lattice::Q;
-use sylva_lb::{Boundary, DensityGrid, Dims, Lattice, Preset, SolveOptions};
+use sylva_lb::{Boundary, DensityGrid, Dims, LbBenchmark, Preset};
 
 use super::progress::bar;
 
@@ -101,52 +99,20 @@ fn bench_lb(a: BenchLbArgs) -> Result<()> {
     }
     let medium = Preset::Cloud.params();
     let boundary = Boundary::sun([0.3, -0.9, 0.3], 1.0);
-    let backend = super::device::Backend::open(a.device, a.precision)?;
-    let opts = SolveOptions {
-        max_steps: a.steps,
-        tolerance: None,
-    };
+    let backend = super::device::open_solver(a.device, a.precision)?;
     let pb = if a.json {
         indicatif::ProgressBar::hidden()
     } else {
         bar((a.steps * a.repeats) as u64, "bench lb")
     };
-    let mut runs = Vec::with_capacity(a.repeats);
-    let (kernel, copy_gbs, bytes_per_update) = match &backend {
-        super::device::Backend::Cpu => {
-            let mut lattice = Lattice::new(&grid, &medium, 0, boundary)?;
-            for r in 0..a.repeats {
-                lattice.reset(boundary);
-                let report =
-                    lattice.run(&opts, &mut |s, _| pb.set_position((r * a.steps + s) as u64))?;
-                runs.push(report.seconds);
-            }
-            // Copy bandwidth on a buffer far larger than the last-level cache, in the same
-            // run. Each update reads and writes the 19 f32 of a site and reads its density.
-            (
-                lattice.kernel().name().to_string(),
-                copy_bandwidth_gbs(256 << 20, 7),
-                2 * Q * 4 + 4,
-            )
-        }
-        super::device::Backend::Gpu { ctx, precision } => {
-            let mut lattice =
-                sylva_lb_gpu::GpuLattice::new(ctx, &grid, &medium, 0, boundary, *precision)?;
-            for r in 0..a.repeats {
-                lattice.reset(boundary)?;
-                let report =
-                    lattice.run(&opts, &mut |s, _| pb.set_position((r * a.steps + s) as u64))?;
-                runs.push(report.seconds);
-            }
-            drop(lattice);
-            // Device-to-device copies of 256 MiB buffers (far beyond any GPU cache), as on the CPU.
-            (
-                format!("wgsl-{}", precision.name()),
-                ctx.copy_bandwidth_gbs(256 << 20, 5)?,
-                precision.bytes_per_update() as usize,
-            )
-        }
-    };
+    let LbBenchmark {
+        runs,
+        kernel,
+        bytes_per_update,
+        copy_gbs,
+    } = backend.benchmark(&grid, &medium, boundary, a.steps, a.repeats, &mut |s| {
+        pb.set_position(s as u64)
+    })?;
     pb.finish_and_clear();
     let mut sorted = runs.clone();
     sorted.sort_by(f64::total_cmp);

@@ -345,7 +345,7 @@ fn solve(a: SolveArgs) -> Result<()> {
         sun.elevation_deg(),
         sun.azimuth_deg()
     );
-    let backend = super::device::Backend::open(a.device, a.precision)?;
+    let backend = super::device::open_solver(a.device, a.precision)?;
     let pb = bar(3 * opts.max_steps as u64, "LB solve");
     let mut last_colour = usize::MAX;
     let t1 = Instant::now();

@@ -61,6 +61,14 @@ pub struct FrameArgs {
     /// Seed of the sub-pixel jitter (rays per pixel other than 1 and 4).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Where the LB lighting is solved: cpu, gpu (the best adapter, a software one such as
+    /// lavapipe included) or auto (a hardware GPU if present, else the CPU). Cache entries
+    /// are kept per device.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub device: super::device::DeviceArg,
+    /// GPU state storage of the LB solve: f32, or f16 (half the memory traffic).
+    #[arg(long, value_enum, default_value = "f32")]
+    pub precision: super::device::PrecisionArg,
 }
 
 #[derive(Args, Debug)]
@@ -218,6 +226,8 @@ pub fn prepare(
     let mut lighting = Vec::with_capacity(scene.models.len());
     let mut lb_cached = 0;
     if need_lb {
+        let solver = super::device::open_solver(a.device, a.precision)?;
+        say(format!("LB solver: {}", solver.describe()));
         let opts = LightingOptions {
             grid: a.lb_grid.unwrap_or(scene.lb.grid as usize),
             preset: scene.lb.preset.clone(),
@@ -225,11 +235,12 @@ pub fn prepare(
         };
         for model in &scene.models {
             let pb = bar(3, &format!("LB {}", model.name));
-            let (l, report) = model_lighting(model, to_sun, &opts, &mut |c, step, max| {
-                pb.set_length(3 * max as u64);
-                pb.set_position((c * max + step) as u64);
-            })
-            .with_context(|| format!("LB lighting of model '{}'", model.name))?;
+            let (l, report) =
+                model_lighting(model, to_sun, &opts, &*solver, &mut |c, step, max| {
+                    pb.set_length(3 * max as u64);
+                    pb.set_position((c * max + step) as u64);
+                })
+                .with_context(|| format!("LB lighting of model '{}'", model.name))?;
             pb.finish_and_clear();
             match &report.source {
                 LightingSource::Cached => {

@@ -1,0 +1,190 @@
+//! The LB solver as a backend: one interface ([`LbSolver`]) over the CPU solver of this crate
+//! ([`CpuSolver`]) and the GPU solver of `sylva-lb-gpu`, so that whoever lights a grid (the
+//! `lb solve` command, the renderer's per-model lighting, a precompute of several boundary
+//! conditions) neither knows nor cares where it runs. Picking one from a device name lives
+//! in `sylva-lb-gpu` (`select_solver`), which sees both.
+
+use crate::bandwidth::copy_bandwidth_gbs;
+use crate::lattice::Q;
+use crate::solver::{solve_lighting, Boundary, Lattice, SolveError, SolveOptions, SolveReport};
+use crate::{DensityGrid, LightingGrid, MediumParams};
+
+/// Why a backend could not solve: the solver's own checks, or the device's failure.
+#[derive(Debug, thiserror::Error)]
+pub enum LbSolverError {
+    #[error(transparent)]
+    Solve(#[from] SolveError),
+    /// A device error (GPU out of memory, lost device, grid beyond its limits), as the
+    /// backend words it.
+    #[error(transparent)]
+    Device(Box<dyn std::error::Error + Send + Sync>),
+}
+
+/// What [`LbSolver::benchmark`] measured: one colour on one grid, several timed runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LbBenchmark {
+    /// Seconds per run of the requested steps.
+    pub runs: Vec<f64>,
+    /// The kernel that ran (`avx2+fma`, `wgsl-f32`, ...).
+    pub kernel: String,
+    /// Bytes moved per site update (state read and written, density read).
+    pub bytes_per_update: usize,
+    /// The device's copy bandwidth measured in the same call, GB/s (read + write counted).
+    pub copy_gbs: f64,
+}
+
+/// Lights density grids with the lattice-Boltzmann solver somewhere (CPU or GPU). Results
+/// agree across backends within the GPU's documented tolerance (docs/gpu.md); a backend is
+/// deterministic on its own.
+pub trait LbSolver: Send + Sync {
+    /// The three-colour solve of [`crate::solve_lighting`]: same inputs, same stop rules,
+    /// same reports. `progress(colour, step, residual)` follows it.
+    fn solve_lighting(
+        &self,
+        grid: &DensityGrid,
+        medium: &MediumParams,
+        boundary: Boundary,
+        opts: &SolveOptions,
+        progress: &mut dyn FnMut(usize, usize, f64),
+    ) -> Result<(LightingGrid, Vec<SolveReport>), LbSolverError>;
+
+    /// `repeats` timed runs of `steps` steps of colour 0 of `medium` on `grid` (reset between
+    /// runs), and the device's copy bandwidth: what `sylva bench lb` reports.
+    /// `progress(done_steps)` counts over all runs.
+    fn benchmark(
+        &self,
+        grid: &DensityGrid,
+        medium: &MediumParams,
+        boundary: Boundary,
+        steps: usize,
+        repeats: usize,
+        progress: &mut dyn FnMut(usize),
+    ) -> Result<LbBenchmark, LbSolverError>;
+
+    /// `"cpu"` or `"gpu"`.
+    fn device(&self) -> &'static str;
+
+    /// The GPU adapter's name; `None` on the CPU.
+    fn adapter(&self) -> Option<String> {
+        None
+    }
+
+    /// One line for summaries: device, kernel or adapter, threads or state precision.
+    fn describe(&self) -> String;
+
+    /// What a result depends on besides its inputs, for cache keys: results of different
+    /// tags may differ in the last bits (`"cpu"`, `"gpu-f32"`, `"gpu-f16"`).
+    fn cache_tag(&self) -> String;
+}
+
+/// The CPU solver of this crate (vector kernel, all rayon threads).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CpuSolver;
+
+impl LbSolver for CpuSolver {
+    fn solve_lighting(
+        &self,
+        grid: &DensityGrid,
+        medium: &MediumParams,
+        boundary: Boundary,
+        opts: &SolveOptions,
+        progress: &mut dyn FnMut(usize, usize, f64),
+    ) -> Result<(LightingGrid, Vec<SolveReport>), LbSolverError> {
+        Ok(solve_lighting(grid, medium, boundary, opts, progress)?)
+    }
+
+    fn benchmark(
+        &self,
+        grid: &DensityGrid,
+        medium: &MediumParams,
+        boundary: Boundary,
+        steps: usize,
+        repeats: usize,
+        progress: &mut dyn FnMut(usize),
+    ) -> Result<LbBenchmark, LbSolverError> {
+        let opts = SolveOptions {
+            max_steps: steps,
+            tolerance: None,
+        };
+        let mut lattice = Lattice::new(grid, medium, 0, boundary)?;
+        let mut runs = Vec::with_capacity(repeats);
+        for r in 0..repeats {
+            lattice.reset(boundary);
+            let report = lattice.run(&opts, &mut |s, _| progress(r * steps + s))?;
+            runs.push(report.seconds);
+        }
+        Ok(LbBenchmark {
+            runs,
+            kernel: lattice.kernel().name().to_string(),
+            // Each update reads and writes the 19 f32 of a site and reads its density.
+            bytes_per_update: 2 * Q * 4 + 4,
+            // On a buffer far larger than the last-level cache, in the same run.
+            copy_gbs: copy_bandwidth_gbs(256 << 20, 7),
+        })
+    }
+
+    fn device(&self) -> &'static str {
+        "cpu"
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "CPU, kernel {}, {} threads",
+            crate::kernel::KernelIsa::detect().name(),
+            rayon::current_num_threads()
+        )
+    }
+
+    fn cache_tag(&self) -> String {
+        "cpu".into()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Dims, Preset};
+
+    #[test]
+    fn cpu_backend_is_the_solver() {
+        let dims = Dims::new(10, 9, 8).unwrap();
+        let mut grid = DensityGrid::empty(dims);
+        for (i, d) in grid.density.iter_mut().enumerate() {
+            *d = (i % 7) as f32 / 7.0;
+        }
+        let medium = Preset::Leaf.params();
+        let boundary = Boundary::sun([0.3, -0.9, 0.3], 1.0);
+        let opts = SolveOptions::papers(dims);
+        let (want, want_reports) =
+            solve_lighting(&grid, &medium, boundary, &opts, &mut |_, _, _| {}).unwrap();
+        let solver: &dyn LbSolver = &CpuSolver;
+        let mut calls = 0;
+        let (got, reports) = solver
+            .solve_lighting(&grid, &medium, boundary, &opts, &mut |_, _, _| calls += 1)
+            .unwrap();
+        assert_eq!(got, want);
+        assert_eq!(reports.len(), want_reports.len());
+        assert_eq!(calls, 3 * opts.max_steps);
+        assert_eq!((solver.device(), solver.adapter()), ("cpu", None));
+        assert!(solver.describe().starts_with("CPU, kernel"));
+
+        let mut last = 0;
+        let b = solver
+            .benchmark(&grid, &medium, boundary, 4, 2, &mut |s| last = s)
+            .unwrap();
+        assert_eq!(b.runs.len(), 2);
+        assert_eq!(last, 2 * 4, "progress counts over all runs");
+        assert_eq!(b.bytes_per_update, 156);
+        assert!(b.copy_gbs > 0.0 && b.runs.iter().all(|&s| s > 0.0));
+
+        // The solver's checks come back as its errors.
+        let bad = SolveOptions {
+            max_steps: 0,
+            tolerance: None,
+        };
+        let e = solver
+            .solve_lighting(&grid, &medium, boundary, &bad, &mut |_, _, _| {})
+            .unwrap_err();
+        assert!(matches!(e, LbSolverError::Solve(SolveError::Steps)), "{e}");
+    }
+}
