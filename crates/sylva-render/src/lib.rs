@@ -1,19 +1,39 @@
-//! The renderer of sylva (SPEC §2, paper 000 §3-4.3): from a built scene to an image.
+//! The renderer of sylva (SPEC §2, paper 000 §3-4.3): from a scene to an image. Owns the
+//! render pipeline; the `sylva` command only parses arguments, draws progress and prints.
 //!
+//! * [`pipeline`]: the pipeline as a library. [`load_scene`] (with a sun override),
+//!   [`PreparedScene::new`] (LB lighting of every model, cached, on any
+//!   [`sylva_lb::LbSolver`]; the kd-trees), [`PreparedScene::render`] (any camera, any image
+//!   region), [`tone_map_modes`] and [`write_images`]; progress through [`Progress`].
 //! * [`lighting`]: per model, the LB lighting grid (voxelize, solve, cache on disk) and its
 //!   trilinear lookup in model space.
+//! * [`indirect`]: [`IndirectLight`], the light scattered in the canopy as shading needs it,
+//!   and [`ModelGridLight`], one LB grid per model.
 //! * [`shade`]: local sunlight (two-sided leaves, transmission, specular) and the indirect,
 //!   albedo and sky parts the comparison modes combine.
-//! * [`render`]: primary rays, shadow rays and shading over 8×8 tiles; the modes of 000 Fig. 2.
+//! * [`render`]: primary rays, shadow rays (through a [`sylva_trace::RayQuery`]) and
+//!   shading over 8×8 tiles; the modes of 000 Fig. 2.
 //! * [`tonemap`]: Reinhard's global operator and sRGB encoding.
 //! * [`output`]: PNG (8-bit sRGB) and EXR (linear) files, written atomically.
+//! * [`stages`]: the stages as `tracing` spans and [`StageClock`], which times them.
 
+pub mod indirect;
 pub mod lighting;
 pub mod output;
+pub mod pipeline;
 pub mod render;
 pub mod shade;
+pub mod stages;
 pub mod tonemap;
 
-pub use render::{mean_luminance, Frame, FrameTimings, Mode, RenderSettings, Renderer};
+pub use indirect::{IndirectLight, ModelGridLight, NoIndirectLight};
+pub use pipeline::{
+    load_scene, mode_path, resolution, tone_map_modes, write_images, LbPlan, ModeImage,
+    PipelineError, PrepareOptions, PreparedScene, Progress, Silent, WrittenImage,
+};
+pub use render::{
+    mean_luminance, Frame, FrameTimings, Mode, Region, RenderError, RenderSettings, Renderer,
+};
 pub use shade::{Radiance, ShadingParams};
+pub use stages::{stage, StageClock};
 pub use tonemap::ToneMap;

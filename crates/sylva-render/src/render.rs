@@ -1,8 +1,14 @@
 //! The frame: primary rays, shadow rays and shading over 8×8 tiles on rayon, in bands of image
 //! rows so memory stays bounded, and the comparison modes of paper 000 Fig. 2.
 //!
-//! Every pixel's samples depend only on the pixel, the sample index and the seed, so a frame is
-//! bit-identical for any thread count.
+//! The renderer asks its questions through two seams: a [`RayQuery`] (the CPU kd-tree tracer
+//! today) answers batches of closest-hit and shadow rays, and an [`IndirectLight`] (today's
+//! per-model LB grids) gives the light scattered in the canopy. What it renders is a
+//! [`RenderSettings`]: any camera, and any rectangle of that camera's image.
+//!
+//! Every pixel's samples depend only on the pixel (its place in the whole image), the sample
+//! index and the seed, so a frame is bit-identical for any thread count, and a region's
+//! pixels are those of the full image.
 
 use std::time::Instant;
 
@@ -10,16 +16,12 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use sylva_core::colour::luminance;
 use sylva_core::SplitMix64;
-use sylva_geom::Scene;
-use sylva_trace::{
-    Hit, OccluderCache, PinholeCamera, Ray, SceneAccel, TraceError, TraceStats, TraversalConfig,
-    PACKET,
-};
+use sylva_geom::{Camera, Scene};
+use sylva_trace::{Hit, PinholeCamera, Ray, RayQuery, ShadowRay, TraceError, TraceStats, PACKET};
 
-use crate::lighting::ModelLighting;
+use crate::indirect::IndirectLight;
 use crate::shade::{
-    local_light, needs_shadow_ray, shade_materials, Radiance, ShadeMaterial, ShadingParams,
-    SurfacePoint,
+    local_light, needs_shadow_ray, Radiance, ShadeMaterial, ShadingParams, SurfacePoint,
 };
 
 /// Tile edge in pixels.
@@ -68,18 +70,83 @@ impl Mode {
     }
 }
 
+/// A rectangle of an image: pixels `x0 .. x0 + width` × `y0 .. y0 + height`, row 0 at the top.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Region {
+    pub x0: u32,
+    pub y0: u32,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl Region {
+    /// The whole of a `width × height` image.
+    pub fn full(width: u32, height: u32) -> Region {
+        Region {
+            x0: 0,
+            y0: 0,
+            width,
+            height,
+        }
+    }
+
+    pub fn pixels(&self) -> u64 {
+        self.width as u64 * self.height as u64
+    }
+
+    /// Whether the region is non-empty and lies inside a `width × height` image.
+    pub fn fits(&self, width: u32, height: u32) -> bool {
+        self.width > 0
+            && self.height > 0
+            && self.x0 as u64 + self.width as u64 <= width as u64
+            && self.y0 as u64 + self.height as u64 <= height as u64
+    }
+}
+
 /// What a frame is rendered with.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RenderSettings {
-    pub width: u32,
-    pub height: u32,
+    /// The view; its `width × height` is the whole image (its `rays_per_pixel` is not used).
+    pub camera: Camera,
+    /// The part of the camera's image to render.
+    pub region: Region,
     /// Samples per pixel, averaged (box filter) before tone mapping. 1: the pixel centre;
     /// 4: a 2×2 grid; a square k²: jittered k×k strata; otherwise jittered random positions.
     pub rays_per_pixel: u32,
     /// Seed of the jitter.
     pub seed: u64,
-    pub traversal: TraversalConfig,
     pub shading: ShadingParams,
+}
+
+impl RenderSettings {
+    /// The whole image of `camera` at `rays_per_pixel`.
+    pub fn full(
+        camera: Camera,
+        rays_per_pixel: u32,
+        seed: u64,
+        shading: ShadingParams,
+    ) -> RenderSettings {
+        RenderSettings {
+            camera,
+            region: Region::full(camera.width, camera.height),
+            rays_per_pixel,
+            seed,
+            shading,
+        }
+    }
+}
+
+/// Why a frame cannot be rendered.
+#[derive(Debug, thiserror::Error)]
+pub enum RenderError {
+    #[error(transparent)]
+    Camera(#[from] TraceError),
+    #[error("image region {}x{} at ({}, {}) does not lie inside the {width}x{height} image", .region.width, .region.height, .region.x0, .region.y0)]
+    Region {
+        region: Region,
+        width: u32,
+        height: u32,
+    },
 }
 
 /// Wall time and ray counts of a frame's passes.
@@ -108,8 +175,10 @@ impl FrameTimings {
 }
 
 /// A rendered frame: per pixel the parts the modes combine, averaged over the samples.
+/// `width × height` pixels, row by row: those of `region`.
 #[derive(Debug, Clone)]
 pub struct Frame {
+    pub region: Region,
     pub width: u32,
     pub height: u32,
     pub pixels: Vec<Radiance>,
@@ -183,9 +252,6 @@ fn sample_offset(n: u32, s: u32, pixel: u64, seed: u64) -> Vec2 {
     }
 }
 
-/// One tile's primary rays and hits (pixel by pixel, sample by sample) and their counters.
-type TileHits = (Vec<(Ray, Option<Hit>)>, TraceStats);
-
 /// The inputs of shading one sample, found by the shadow pass.
 #[derive(Debug, Clone, Copy)]
 enum SampleGeom {
@@ -201,116 +267,96 @@ enum SampleGeom {
     },
 }
 
-/// The scene, its acceleration structure and lighting, ready to render frames.
+impl SampleGeom {
+    fn set_lit(&mut self, sunlit: bool) {
+        match self {
+            SampleGeom::Sky => {}
+            SampleGeom::Ground { lit, .. } | SampleGeom::Plant { lit, .. } => *lit = sunlit,
+        }
+    }
+}
+
+/// A tile's primary samples, pixel by pixel and sample by sample: ray and hit.
+type TileSamples = Vec<(Ray, Option<Hit>)>;
+
+/// One work unit's traced tiles: per tile its primary samples and their shading inputs; the
+/// unit's primary and shadow counters and busy seconds.
+struct TracedUnit {
+    tiles: Vec<(TileSamples, Vec<SampleGeom>)>,
+    primary: TraceStats,
+    shadow: TraceStats,
+    busy: [f64; 2],
+}
+
+/// A scene, something that answers its ray queries and its indirect light, ready to render
+/// frames of any view.
 pub struct Renderer<'a> {
     scene: &'a Scene,
-    accel: &'a SceneAccel,
-    lighting: &'a [Option<ModelLighting>],
-    materials: Vec<Vec<ShadeMaterial>>,
+    query: &'a dyn RayQuery,
+    light: &'a dyn IndirectLight,
+    materials: &'a [Vec<ShadeMaterial>],
     to_sun: Vec3,
     /// Sun colour × irradiance.
     sun: Vec3,
     ground_colour: Vec3,
     sky: Vec3,
-    /// Instances over each ground cell, for the LB light under trees.
-    ground_index: GroundIndex,
 }
 
 impl<'a> Renderer<'a> {
-    /// `lighting[m]` is model `m`'s LB light (`None`: no indirect light on it); `to_sun` the
-    /// unit vector towards the sun; `sun_colour` its linear RGB (luminance 1 for 6500 K).
+    /// `query` traces `scene` (its instances in the scene's order); `light` gives the
+    /// indirect light; `materials` are the scene's, decoded ([`shade_materials`]); `to_sun`
+    /// the unit vector towards the sun; `sun_colour` its linear RGB (luminance 1 for 6500 K).
     pub fn new(
         scene: &'a Scene,
-        accel: &'a SceneAccel,
-        lighting: &'a [Option<ModelLighting>],
+        query: &'a dyn RayQuery,
+        light: &'a dyn IndirectLight,
+        materials: &'a [Vec<ShadeMaterial>],
         to_sun: Vec3,
         sun_colour: Vec3,
         sun_irradiance: f32,
     ) -> Renderer<'a> {
-        assert_eq!(lighting.len(), scene.models.len(), "one lighting per model");
+        assert_eq!(materials.len(), scene.models.len(), "materials per model");
         Renderer {
             scene,
-            accel,
-            lighting,
-            materials: shade_materials(&scene.models),
+            query,
+            light,
+            materials,
             to_sun: to_sun.normalize(),
             sun: sun_colour * sun_irradiance,
             ground_colour: Vec3::from_array(scene.ground.color),
             sky: Vec3::from_array(scene.sky_color),
-            ground_index: if lighting.iter().any(Option::is_some) {
-                GroundIndex::new(accel)
-            } else {
-                GroundIndex::default()
-            },
         }
     }
 
-    /// How much of the sky light reaches the ground at `point`: the product, over the trees
-    /// whose LB grid covers it, of their LB luminance there (1 in free space, less in a crown's
-    /// shade), clamped to [0, 1]. 1 away from trees.
-    fn ground_lb_factor(&self, point: Vec3) -> f32 {
-        let mut f = 1.0f32;
-        for &i in self.ground_index.at(point) {
-            let inst = &self.accel.instances()[i as usize];
-            let Some(l) = &self.lighting[inst.model as usize] else {
-                continue;
-            };
-            let b = &self.scene.models[inst.model as usize].bounds;
-            let pm = inst.to_model.transform_point3(point);
-            // Trees stand on the ground; a model floating above it has no LB light down here.
-            let margin = 0.05 * (b.max.y - b.min.y) + 1e-3;
-            if pm.x >= b.min.x
-                && pm.x <= b.max.x
-                && pm.z >= b.min.z
-                && pm.z <= b.max.z
-                && pm.y >= b.min.y - margin
-            {
-                // The grid ends at the model's box while its shade on the ground would go on:
-                // fade to open sky over the box's outer 20 % so no edge shows.
-                let edge = (pm.x - b.min.x)
-                    .min(b.max.x - pm.x)
-                    .min(pm.z - b.min.z)
-                    .min(b.max.z - pm.z);
-                let width = 0.2 * (b.max.x - b.min.x).min(b.max.z - b.min.z);
-                let w = if width > 0.0 {
-                    (edge / width).clamp(0.0, 1.0)
-                } else {
-                    1.0
-                };
-                let lb = luminance(l.sample(pm).to_array()).clamp(0.0, 1.0);
-                f *= 1.0 - w * (1.0 - lb);
-            }
-        }
-        f
-    }
-
-    /// Renders the scene's camera view at `settings`' resolution. `progress(n)` is called from
+    /// Renders `settings.region` of `settings.camera`'s image. `progress(n)` is called from
     /// worker threads as tiles finish each of the three passes (3 × tiles units in all).
     pub fn render(
         &self,
         settings: &RenderSettings,
         progress: &(dyn Fn(u64) + Sync),
-    ) -> Result<Frame, TraceError> {
-        let mut cam = self.scene.camera;
-        cam.width = settings.width;
-        cam.height = settings.height;
-        let camera = PinholeCamera::new(&cam)?;
-        let (w, h, n) = (
-            settings.width,
-            settings.height,
-            settings.rays_per_pixel.max(1),
-        );
-        let mut pixels = vec![Radiance::default(); w as usize * h as usize];
+    ) -> Result<Frame, RenderError> {
+        let camera = PinholeCamera::new(&settings.camera)?;
+        let region = settings.region;
+        if !region.fits(camera.width, camera.height) {
+            return Err(RenderError::Region {
+                region,
+                width: camera.width,
+                height: camera.height,
+            });
+        }
+        let n = settings.rays_per_pixel.max(1);
+        let mut pixels = vec![Radiance::default(); region.pixels() as usize];
         let mut timings = FrameTimings::default();
         let mut stats = TraceStats::default();
-        // Bands of whole tile rows.
-        let tile_rows = h.div_ceil(TILE);
-        let row_samples = (w as usize * TILE as usize * n as usize).max(1);
-        let band_rows = (BAND_SAMPLES / row_samples).clamp(1, tile_rows as usize) as u32;
-        let mut row = 0;
-        while row < tile_rows {
-            let rows = band_rows.min(tile_rows - row);
-            let tiles = band_tiles(w, h, row * TILE, rows);
+        // Bands of whole tile rows; tiles sit on the whole image's 8-pixel grid.
+        let (first_row, end_row) = tile_rows(region);
+        let row_samples = (region.width as usize * TILE as usize * n as usize).max(1);
+        let band_rows =
+            (BAND_SAMPLES / row_samples).clamp(1, (end_row - first_row) as usize) as u32;
+        let mut row = first_row;
+        while row < end_row {
+            let rows = band_rows.min(end_row - row);
+            let tiles = band_tiles(region, row, rows);
             self.render_band(
                 &camera,
                 &tiles,
@@ -324,8 +370,9 @@ impl<'a> Renderer<'a> {
             row += rows;
         }
         Ok(Frame {
-            width: w,
-            height: h,
+            region,
+            width: region.width,
+            height: region.height,
             pixels,
             timings,
             stats,
@@ -344,75 +391,33 @@ impl<'a> Renderer<'a> {
         stats: &mut TraceStats,
         progress: &(dyn Fn(u64) + Sync),
     ) {
-        let cfg = settings.traversal;
-        let w = camera.width;
-        // Primary rays, then the shadow rays of the same tile at once: a shadow ray starts
-        // where its primary ray ended, so its walk down to that point in the model's tree
-        // finds the nodes and triangles the primary ray just loaded still in cache. Each
-        // tile times its two halves; the pass's wall time is split in their proportion.
+        // Work units of whole tiles, about the tracer's preferred batch each: on the CPU one
+        // tile. A unit's primary rays, then its shadow rays at once: a shadow ray starts where
+        // its primary ray ended, so its walk down to that point in the model's tree finds the
+        // nodes and triangles the primary ray just loaded still in cache. Each unit times its
+        // two halves; the pass's wall time is split in their proportion.
+        let per_tile = (TILE * TILE * n) as usize;
+        let unit_tiles = (self.query.preferred_batch() / per_tile).max(1);
         let t0 = Instant::now();
-        let traced: Vec<(TileHits, Vec<SampleGeom>, TraceStats, [f64; 2])> = tiles
-            .par_iter()
-            .map(|tile| {
-                let start = Instant::now();
-                let mut st = TraceStats::default();
-                let mut out = Vec::with_capacity(tile.pixels() * n as usize);
-                for (x, y) in tile.iter() {
-                    let pixel = y as u64 * w as u64 + x as u64;
-                    for s in 0..n {
-                        let o = sample_offset(n, s, pixel, settings.seed);
-                        out.push((camera.ray(x as f32 + o.x, y as f32 + o.y), None));
-                    }
-                }
-                // Packets of neighbouring rays share their way through the trees; each
-                // ray's hit is the one it would find alone.
-                for group in tile.packets(n) {
-                    let mut rays = [out[group[0]].0; PACKET];
-                    let mut mask = 0u32;
-                    for (l, &i) in group.iter().enumerate() {
-                        if i != usize::MAX {
-                            rays[l] = out[i].0;
-                            mask |= 1 << l;
-                        }
-                    }
-                    let hits = self.accel.closest_hit_packet(&rays, mask, cfg, &mut st);
-                    for (l, &i) in group.iter().enumerate() {
-                        if i != usize::MAX {
-                            out[i].1 = hits[l];
-                        }
-                    }
-                }
-                progress(1);
-                let mid = Instant::now();
-                let mut sst = TraceStats::default();
-                // One occluder cache per tile: the result never depends on it, and per tile
-                // even the work counters do not depend on the thread count.
-                let mut cache = OccluderCache::new();
-                let g = out
-                    .iter()
-                    .map(|(ray, hit)| {
-                        self.sample_geometry(ray, hit.as_ref(), cfg, &mut sst, &mut cache)
-                    })
-                    .collect();
-                progress(1);
-                let end = Instant::now();
-                let halves = [(mid - start).as_secs_f64(), (end - mid).as_secs_f64()];
-                ((out, st), g, sst, halves)
-            })
+        let traced: Vec<TracedUnit> = tiles
+            .par_chunks(unit_tiles)
+            .map(|unit| self.trace_unit(camera, unit, settings, n, progress))
             .collect();
         let wall = t0.elapsed().as_secs_f64();
         let mut busy = [0f64; 2];
-        let mut primary = Vec::with_capacity(traced.len());
-        let mut geoms = Vec::with_capacity(traced.len());
-        for ((samples, st), g, sst, halves) in traced {
-            timings.primary_rays += samples.len() as u64;
-            timings.shadow_rays += sst.rays;
-            *stats += st;
-            *stats += sst;
-            busy[0] += halves[0];
-            busy[1] += halves[1];
-            primary.push(samples);
-            geoms.push(g);
+        let mut primary = Vec::with_capacity(tiles.len());
+        let mut geoms = Vec::with_capacity(tiles.len());
+        for unit in traced {
+            *stats += unit.primary;
+            *stats += unit.shadow;
+            timings.shadow_rays += unit.shadow.rays;
+            busy[0] += unit.busy[0];
+            busy[1] += unit.busy[1];
+            for (samples, g) in unit.tiles {
+                timings.primary_rays += samples.len() as u64;
+                primary.push(samples);
+                geoms.push(g);
+            }
         }
         let share = busy[0] / (busy[0] + busy[1]).max(1e-12);
         timings.primary_seconds += wall * share;
@@ -438,34 +443,98 @@ impl<'a> Renderer<'a> {
                 out
             })
             .collect();
+        let r = settings.region;
         for (tile, values) in tiles.iter().zip(shaded) {
             for ((x, y), v) in tile.iter().zip(values) {
-                pixels[y as usize * w as usize + x as usize] = v;
+                pixels[(y - r.y0) as usize * r.width as usize + (x - r.x0) as usize] = v;
             }
         }
         timings.shading_seconds += t2.elapsed().as_secs_f64();
     }
 
-    /// The hit point, viewer-facing normal, and whether the sun reaches it (shadow ray).
-    fn sample_geometry(
+    /// Primary rays of a unit's tiles (in packet order: neighbours together), then the
+    /// shading inputs of every sample and the shadow rays they need.
+    fn trace_unit(
         &self,
-        ray: &Ray,
-        hit: Option<&Hit>,
-        cfg: TraversalConfig,
-        st: &mut TraceStats,
-        cache: &mut OccluderCache,
-    ) -> SampleGeom {
+        camera: &PinholeCamera,
+        unit: &[Tile],
+        settings: &RenderSettings,
+        n: u32,
+        progress: &(dyn Fn(u64) + Sync),
+    ) -> TracedUnit {
+        let start = Instant::now();
+        let mut primary = TraceStats::default();
+        let w = camera.width as u64;
+        let mut samples: Vec<TileSamples> = Vec::with_capacity(unit.len());
+        // Where each ray of the batch comes from: (tile, sample).
+        let mut order = Vec::new();
+        for (t, tile) in unit.iter().enumerate() {
+            let mut out = Vec::with_capacity(tile.pixels() * n as usize);
+            for (x, y) in tile.iter() {
+                let pixel = y as u64 * w + x as u64;
+                for s in 0..n {
+                    let o = sample_offset(n, s, pixel, settings.seed);
+                    out.push((camera.ray(x as f32 + o.x, y as f32 + o.y), None));
+                }
+            }
+            for group in tile.packets(n) {
+                order.extend(group.iter().filter(|&&i| i != usize::MAX).map(|&i| (t, i)));
+            }
+            samples.push(out);
+        }
+        let rays: Vec<Ray> = order.iter().map(|&(t, i)| samples[t][i].0).collect();
+        let mut hits = vec![None; rays.len()];
+        self.query.closest_hits(&rays, &mut hits, &mut primary);
+        for (&(t, i), hit) in order.iter().zip(hits) {
+            samples[t][i].1 = hit;
+        }
+        progress(unit.len() as u64);
+        let mid = Instant::now();
+        let mut shadow = TraceStats::default();
+        let mut geoms: Vec<Vec<SampleGeom>> = Vec::with_capacity(unit.len());
+        let mut shadow_rays = Vec::new();
+        let mut waiting = Vec::new();
+        for (t, tile_samples) in samples.iter().enumerate() {
+            let mut g = Vec::with_capacity(tile_samples.len());
+            for (i, (ray, hit)) in tile_samples.iter().enumerate() {
+                let (geom, shadow_ray) = self.sample_geometry(ray, hit.as_ref());
+                if let Some(s) = shadow_ray {
+                    shadow_rays.push(s);
+                    waiting.push((t, i));
+                }
+                g.push(geom);
+            }
+            geoms.push(g);
+        }
+        let mut blocked = vec![false; shadow_rays.len()];
+        self.query.any_hits(&shadow_rays, &mut blocked, &mut shadow);
+        for (&(t, i), blocked) in waiting.iter().zip(blocked) {
+            geoms[t][i].set_lit(!blocked);
+        }
+        progress(unit.len() as u64);
+        let end = Instant::now();
+        TracedUnit {
+            tiles: samples.into_iter().zip(geoms).collect(),
+            primary,
+            shadow,
+            busy: [(mid - start).as_secs_f64(), (end - mid).as_secs_f64()],
+        }
+    }
+
+    /// The hit point and viewer-facing normal (not yet lit), and the shadow ray that decides
+    /// whether the sun reaches it, when one is needed.
+    fn sample_geometry(&self, ray: &Ray, hit: Option<&Hit>) -> (SampleGeom, Option<ShadowRay>) {
         let Some(hit) = hit else {
-            return SampleGeom::Sky;
+            return (SampleGeom::Sky, None);
         };
         let point = ray.at(hit.t);
         let view = -ray.dir;
         if hit.is_ground() {
-            let lit = self.to_sun.y > 0.0 && !self.shadowed(point, Vec3::Y, None, cfg, st, cache);
-            return SampleGeom::Ground { point, lit };
+            let shadow = (self.to_sun.y > 0.0).then(|| self.shadow_ray(point, Vec3::Y, None));
+            return (SampleGeom::Ground { point, lit: false }, shadow);
         }
-        let ng = self.accel.geometric_normal(hit);
-        let inst = &self.accel.instances()[hit.instance as usize];
+        let ng = self.query.geometric_normal(hit);
+        let inst = &self.query.instances()[hit.instance as usize];
         let mesh = &self.scene.models[inst.model as usize].mesh;
         let tri = mesh.indices[hit.triangle as usize];
         let (u, v) = (hit.u, hit.v);
@@ -495,9 +564,16 @@ impl<'a> Renderer<'a> {
             colour: Vec3::ONE,
             leaf,
         };
-        let lit = needs_shadow_ray(&probe, self.to_sun)
-            && !self.shadowed(point, ng, Some(hit.instance), cfg, st, cache);
-        SampleGeom::Plant { point, normal, lit }
+        let shadow = needs_shadow_ray(&probe, self.to_sun)
+            .then(|| self.shadow_ray(point, ng, Some(hit.instance)));
+        (
+            SampleGeom::Plant {
+                point,
+                normal,
+                lit: false,
+            },
+            shadow,
+        )
     }
 
     fn is_leaf(&self, model: u32, triangle: u32) -> bool {
@@ -512,26 +588,19 @@ impl<'a> Renderer<'a> {
             .is_some_and(|m| m.leaf)
     }
 
-    /// Whether something opaque lies between `point` (on instance `from`, if any) and the
-    /// sun. The ray starts a little off the surface on the sun's side of the geometric
-    /// normal `ng`.
-    fn shadowed(
-        &self,
-        point: Vec3,
-        ng: Vec3,
-        from: Option<u32>,
-        cfg: TraversalConfig,
-        st: &mut TraceStats,
-        cache: &mut OccluderCache,
-    ) -> bool {
+    /// The ray towards the sun from `point` (on instance `from`, if any), starting a little
+    /// off the surface on the sun's side of the geometric normal `ng`.
+    fn shadow_ray(&self, point: Vec3, ng: Vec3, from: Option<u32>) -> ShadowRay {
         let side = if ng.dot(self.to_sun) >= 0.0 {
             1.0
         } else {
             -1.0
         };
         let eps = 1e-4 * point.abs().max_element().max(1.0);
-        let ray = Ray::new(point + ng * (side * eps), self.to_sun);
-        self.accel.any_hit_from(&ray, from, cfg, st, cache)
+        ShadowRay {
+            ray: Ray::new(point + ng * (side * eps), self.to_sun),
+            from,
+        }
     }
 
     fn shade(&self, ray: &Ray, hit: Option<&Hit>, g: &SampleGeom, p: &ShadingParams) -> Radiance {
@@ -545,14 +614,14 @@ impl<'a> Renderer<'a> {
                 let cos = self.to_sun.y.max(0.0);
                 Radiance {
                     local: if lit { c * cos } else { Vec3::ZERO },
-                    indirect: c * (p.sky_ambient * self.ground_lb_factor(point)),
+                    indirect: c * (p.sky_ambient * self.light.ground_sky(point)),
                     albedo: c,
                     sky: Vec3::ZERO,
                 }
             }
             SampleGeom::Plant { point, normal, lit } => {
                 let hit = hit.expect("plant geometry comes from a hit");
-                let inst = &self.accel.instances()[hit.instance as usize];
+                let inst = &self.query.instances()[hit.instance as usize];
                 let mi = inst.model as usize;
                 let mesh = &self.scene.models[mi].mesh;
                 let tri = mesh.indices[hit.triangle as usize];
@@ -577,10 +646,8 @@ impl<'a> Renderer<'a> {
                     leaf: material.leaf,
                 };
                 let albedo = colour * self.sun;
-                let indirect = match &self.lighting[mi] {
-                    Some(l) => {
-                        l.sample(inst.to_model.transform_point3(point)) * albedo * p.indirect
-                    }
+                let indirect = match self.light.plant(hit.instance, inst, point) {
+                    Some(l) => l * albedo * p.indirect,
                     None => Vec3::ZERO,
                 };
                 Radiance {
@@ -591,85 +658,6 @@ impl<'a> Renderer<'a> {
                 }
             }
         }
-    }
-}
-
-/// A uniform grid over the ground (x, z) listing the instances whose world box covers each
-/// cell: the ground's LB lookup visits a handful of trees, not all of them.
-#[derive(Debug, Default)]
-struct GroundIndex {
-    origin: Vec2,
-    end: Vec2,
-    inv_cell: f32,
-    nx: usize,
-    nz: usize,
-    cells: Vec<Vec<u32>>,
-}
-
-impl GroundIndex {
-    /// At most this many cells a side.
-    const MAX_CELLS: usize = 256;
-
-    fn new(accel: &SceneAccel) -> GroundIndex {
-        let boxes: Vec<_> = accel.instances().iter().map(|i| i.world_bounds).collect();
-        if boxes.is_empty() {
-            return GroundIndex::default();
-        }
-        let (mut lo, mut hi) = (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
-        let mut footprint = 0.0f64;
-        for b in &boxes {
-            lo = lo.min(Vec2::new(b.min.x, b.min.z));
-            hi = hi.max(Vec2::new(b.max.x, b.max.z));
-            footprint += (b.max.x - b.min.x).max(b.max.z - b.min.z) as f64;
-        }
-        let extent = (hi - lo).max_element().max(1e-3);
-        // Cells about a tree's width, but not more than MAX_CELLS a side.
-        let cell = ((footprint / boxes.len() as f64) as f32).max(extent / Self::MAX_CELLS as f32);
-        if !(cell.is_finite() && cell > 0.0) {
-            return GroundIndex::default();
-        }
-        let nx = (((hi.x - lo.x) / cell).floor() as usize + 1).min(Self::MAX_CELLS);
-        let nz = (((hi.y - lo.y) / cell).floor() as usize + 1).min(Self::MAX_CELLS);
-        let mut index = GroundIndex {
-            origin: lo,
-            end: hi,
-            inv_cell: 1.0 / cell,
-            nx,
-            nz,
-            cells: vec![Vec::new(); nx * nz],
-        };
-        for (i, b) in boxes.iter().enumerate() {
-            let (x0, z0) = index.cell_of(b.min.x, b.min.z);
-            let (x1, z1) = index.cell_of(b.max.x, b.max.z);
-            for z in z0..=z1 {
-                for x in x0..=x1 {
-                    index.cells[z * nx + x].push(i as u32);
-                }
-            }
-        }
-        index
-    }
-
-    fn cell_of(&self, x: f32, z: f32) -> (usize, usize) {
-        let c = |v: f32, o: f32, n: usize| {
-            (((v - o) * self.inv_cell).floor().max(0.0) as usize).min(n - 1)
-        };
-        (c(x, self.origin.x, self.nx), c(z, self.origin.y, self.nz))
-    }
-
-    /// Instances whose box may cover ground point `p` (a superset).
-    fn at(&self, p: Vec3) -> &[u32] {
-        if self.cells.is_empty() {
-            return &[];
-        }
-        let q = Vec2::new(p.x, p.z);
-        // Also false for NaN.
-        let inside = q.cmpge(self.origin).all() && q.cmple(self.end).all();
-        if !inside {
-            return &[];
-        }
-        let (x, z) = self.cell_of(q.x, q.y);
-        &self.cells[z * self.nx + x]
     }
 }
 
@@ -727,24 +715,35 @@ impl Tile {
     }
 }
 
-/// The tiles of `rows` tile rows starting at pixel row `y0`.
-fn band_tiles(w: u32, h: u32, y0: u32, rows: u32) -> Vec<Tile> {
+/// The tile rows of the whole image's 8-pixel grid that `r` covers: `first..end`.
+fn tile_rows(r: Region) -> (u32, u32) {
+    (r.y0 / TILE, (r.y0 + r.height).div_ceil(TILE))
+}
+
+/// The tile columns of the whole image's grid that `r` covers: `first..end`.
+fn tile_columns(r: Region) -> (u32, u32) {
+    (r.x0 / TILE, (r.x0 + r.width).div_ceil(TILE))
+}
+
+/// The tiles of tile rows `row..row + rows` clipped to `r`.
+fn band_tiles(r: Region, row: u32, rows: u32) -> Vec<Tile> {
+    let (x_end, y_end) = (r.x0 + r.width, r.y0 + r.height);
+    let (first, end) = tile_columns(r);
     let mut out = Vec::new();
-    for r in 0..rows {
-        let ty = y0 + r * TILE;
-        for tx in (0..w).step_by(TILE as usize) {
+    for ty in row..row + rows {
+        for tx in first..end {
             out.push(Tile {
-                x0: tx,
-                y0: ty,
-                x1: (tx + TILE).min(w),
-                y1: (ty + TILE).min(h),
+                x0: (tx * TILE).max(r.x0),
+                y0: (ty * TILE).max(r.y0),
+                x1: ((tx + 1) * TILE).min(x_end),
+                y1: ((ty + 1) * TILE).min(y_end),
             });
         }
     }
     // Z order: a thread's consecutive tiles cluster in both directions, so the trees seen
     // in one tile are still in cache for the tiles above and below it, not only beside it.
     // Each tile's results depend on that tile alone, so the order changes no pixel.
-    out.sort_by_key(|t| morton(t.x0 / TILE, (t.y0 - y0) / TILE));
+    out.sort_by_key(|t| morton(t.x0 / TILE - first, t.y0 / TILE - row));
     out
 }
 
@@ -761,8 +760,9 @@ fn morton(x: u32, y: u32) -> u64 {
     spread(x) | spread(y) << 1
 }
 
-/// Bytes a `w × h` frame at `rays_per_pixel` holds at its peak: the per-pixel parts, the
-/// composed and tone-mapped images the caller makes from them, and one band of samples.
+/// Bytes a frame of `w × h` pixels (a whole image or a region) at `rays_per_pixel` holds at
+/// its peak: the per-pixel parts, the composed and tone-mapped images the caller makes from
+/// them, and one band of samples.
 pub fn memory_needed(w: u32, h: u32, rays_per_pixel: u32) -> u64 {
     let pixels = w as u64 * h as u64;
     let per_pixel = std::mem::size_of::<Radiance>() as u64 + 2 * 12 + 3;
@@ -774,9 +774,10 @@ pub fn memory_needed(w: u32, h: u32, rays_per_pixel: u32) -> u64 {
     pixels * per_pixel + band * per_sample
 }
 
-/// Number of tiles of a `w × h` image.
-pub fn tile_count(w: u32, h: u32) -> u64 {
-    w.div_ceil(TILE) as u64 * h.div_ceil(TILE) as u64
+/// Number of tiles a frame of region `r` is rendered in.
+pub fn tile_count(r: Region) -> u64 {
+    let ((r0, r1), (c0, c1)) = (tile_rows(r), tile_columns(r));
+    (r1 - r0) as u64 * (c1 - c0) as u64
 }
 
 #[cfg(test)]
@@ -809,14 +810,39 @@ mod tests {
     fn tiles_cover_the_image_once() {
         let (w, h) = (21u32, 13u32);
         let mut count = vec![0; (w * h) as usize];
-        let tiles = band_tiles(w, h, 0, h.div_ceil(TILE));
-        assert_eq!(tiles.len() as u64, tile_count(w, h));
+        let tiles = band_tiles(Region::full(w, h), 0, h.div_ceil(TILE));
+        assert_eq!(tiles.len() as u64, tile_count(Region::full(w, h)));
         for t in &tiles {
             for (x, y) in t.iter() {
                 count[(y * w + x) as usize] += 1;
             }
         }
         assert!(count.iter().all(|&c| c == 1));
+        // A region's tiles cover it once, on the whole image's grid.
+        let r = Region {
+            x0: 5,
+            y0: 3,
+            width: 13,
+            height: 9,
+        };
+        let (first, end) = tile_rows(r);
+        assert_eq!((first, end), (0, 2));
+        let tiles = band_tiles(r, first, end - first);
+        assert_eq!(tiles.len() as u64, tile_count(r));
+        let mut count = vec![0; (w * h) as usize];
+        for t in &tiles {
+            assert!(t.x0 % TILE == 0 || t.x0 == r.x0);
+            assert!(t.y0 % TILE == 0 || t.y0 == r.y0);
+            for (x, y) in t.iter() {
+                count[(y * w + x) as usize] += 1;
+            }
+        }
+        for y in 0..h {
+            for x in 0..w {
+                let inside = (5..18).contains(&x) && (3..12).contains(&y);
+                assert_eq!(count[(y * w + x) as usize], inside as i32, "({x}, {y})");
+            }
+        }
     }
 
     #[test]
@@ -831,7 +857,7 @@ mod tests {
         // A band of 4 × 3 tiles starting below the first tile row: 2×2 blocks first, each
         // in Z order, rows counted from the band's top.
         let (w, h) = (4 * TILE, 5 * TILE);
-        let order: Vec<(u32, u32)> = band_tiles(w, h, 2 * TILE, 3)
+        let order: Vec<(u32, u32)> = band_tiles(Region::full(w, h), 2, 3)
             .iter()
             .map(|t| (t.x0 / TILE, t.y0 / TILE - 2))
             .collect();

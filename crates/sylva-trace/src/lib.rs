@@ -7,12 +7,15 @@
 //! * [`model`]: one model's tree plus triangle and alpha data; the alpha rule for leaves.
 //! * [`scene`]: [`SceneAccel`], the two levels (instances over models) and the ground.
 //! * [`camera`]: [`PinholeCamera`], primary rays from a scene's camera.
+//! * [`query`]: [`RayQuery`], the batched closest-hit and shadow queries a renderer makes,
+//!   and [`KdTracer`], the CPU tracer answering them.
 //!
 //! Shading, images and the `sylva render` command live elsewhere; see `docs/trace.md`.
 
 pub mod camera;
 pub mod kdtree;
 pub mod model;
+pub mod query;
 pub mod ray;
 pub mod scene;
 
@@ -21,5 +24,6 @@ pub use kdtree::{
     KdTree, TraceStats, TraversalConfig, TreeStats, DEFAULT_STACK_SIZE, MAX_DEPTH, PACKET,
 };
 pub use model::{AlphaMask, ModelAccel};
+pub use query::{KdTracer, RayQuery, ShadowRay};
 pub use ray::{intersect_triangle, ray_box, Hit, Ray, TriangleData};
 pub use scene::{AccelMemory, OccluderCache, SceneAccel, TraceError, TraceInstance};

@@ -10,7 +10,9 @@ use common::*;
 use glam::Vec3;
 use sylva_geom::Instance;
 use sylva_grow::Species;
-use sylva_trace::{Hit, Ray, SceneAccel, TraceStats, TraversalConfig, PACKET};
+use sylva_trace::{
+    Hit, KdTracer, Ray, RayQuery, SceneAccel, ShadowRay, TraceStats, TraversalConfig, PACKET,
+};
 
 fn same(a: Option<Hit>, b: Option<Hit>) -> bool {
     match (a, b) {
@@ -319,4 +321,52 @@ fn shadow_rays_from_their_own_instance_first_answer_exactly_with_less_work() {
         hinted_work.nodes,
         plain_work.nodes
     );
+}
+
+#[test]
+fn batched_queries_equal_single_rays_for_any_batch_length() {
+    let accel = maple_forest();
+    let h = accel.instances()[0].world_bounds.max.y;
+    let tracer = KdTracer::new(accel.clone(), TraversalConfig::default());
+    let query: &dyn RayQuery = &tracer;
+    assert!(query.preferred_batch() >= PACKET);
+    let mut r = rng(53);
+    // Batches of neighbouring camera rays, of lengths that leave ragged packets.
+    for len in [1usize, 3, 4, 7, 64, 65] {
+        let (eye, target) = view_into_forest(&mut r, h);
+        let base = (target - eye).normalize();
+        let rays: Vec<Ray> = (0..len)
+            .map(|i| {
+                let d = base + Vec3::new((i % 8) as f32 * 4e-3, (i / 8) as f32 * 4e-3, 0.0);
+                Ray::new(eye, d.normalize())
+            })
+            .collect();
+        let mut hits = vec![None; len];
+        let mut st = TraceStats::default();
+        query.closest_hits(&rays, &mut hits, &mut st);
+        assert_eq!(st.rays, len as u64);
+        let mut shadows = Vec::new();
+        for (ray, hit) in rays.iter().zip(&hits) {
+            let mut one = TraceStats::default();
+            let want = accel.closest_hit(ray, TraversalConfig::UNBOUNDED, &mut one);
+            assert!(same(*hit, want), "{ray:?}: {hit:?} vs {want:?}");
+            if let Some(hit) = hit {
+                let n = query.geometric_normal(hit);
+                assert_eq!(n, accel.geometric_normal(hit));
+                let p = ray.at(hit.t) + n * 1e-3;
+                let from = (!hit.is_ground()).then_some(hit.instance);
+                let dir = Vec3::new(0.3, 1.0, 0.2).normalize();
+                shadows.push(ShadowRay {
+                    ray: Ray::new(p, dir),
+                    from,
+                });
+            }
+        }
+        let mut blocked = vec![false; shadows.len()];
+        query.any_hits(&shadows, &mut blocked, &mut st);
+        for (s, &b) in shadows.iter().zip(&blocked) {
+            assert_eq!(b, accel.brute_any_hit(&s.ray), "{s:?}");
+        }
+    }
+    assert_eq!(query.instances().len(), accel.instances().len());
 }

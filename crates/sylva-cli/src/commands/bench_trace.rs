@@ -2,7 +2,7 @@
 //! rays, shading) at 1 and 4 rays per pixel, with LB lighting from the cache.
 
 use anyhow::Result;
-use sylva_render::FrameTimings;
+use sylva_render::{stage, FrameTimings, Silent, StageClock};
 
 use super::bench_scene::{median, peak_rss_bytes};
 use super::render::{prepare, FrameArgs};
@@ -58,16 +58,22 @@ impl Measured {
 }
 
 pub fn run(a: BenchTraceArgs) -> Result<()> {
-    let p = prepare(&a.frame, !a.no_lb, Some(4), false)?;
-    let renderer = p.renderer();
+    let clock = StageClock::global();
+    clock.reset();
+    let prepared = prepare(&a.frame, !a.no_lb, Some(4), false)?;
+    let (accel_seconds, lb_seconds) = (
+        clock.seconds(stage::ACCEL_BUILD),
+        clock.seconds(stage::LB_PRECOMPUTE),
+    );
+    let p = &prepared.scene;
+    let camera = p.camera(prepared.width, prepared.height);
     let mut results = Vec::new();
     for rpp in [1u32, 4] {
-        let settings = p.settings(rpp, a.frame.seed);
-        renderer.render(&settings, &|_| {})?;
+        let settings = p.settings(camera, rpp, a.frame.seed);
+        p.render(&settings, &Silent)?;
         let mut frames = Vec::new();
         for _ in 0..a.runs {
-            let f = renderer.render(&settings, &|_| {})?;
-            frames.push(f);
+            frames.push(p.render(&settings, &Silent)?);
         }
         let med = |g: &dyn Fn(&FrameTimings) -> f64| {
             median(frames.iter().map(|f| g(&f.timings)).collect())
@@ -88,22 +94,22 @@ pub fn run(a: BenchTraceArgs) -> Result<()> {
         };
         results.push(m);
     }
-    let mem = p.accel.memory();
+    let mem = p.tracer.accel.memory();
     let threads = rayon::current_num_threads();
     let one = &results[0];
     if a.json {
         let mut v = one.json();
         let o = v.as_object_mut().expect("object");
         o.insert("scene".into(), p.scene.name.clone().into());
-        o.insert("width".into(), p.width.into());
-        o.insert("height".into(), p.height.into());
+        o.insert("width".into(), prepared.width.into());
+        o.insert("height".into(), prepared.height.into());
         o.insert("threads".into(), threads.into());
         o.insert("runs".into(), a.runs.into());
-        o.insert("stack_size".into(), p.traversal.stack_size.into());
+        o.insert("stack_size".into(), p.tracer.traversal.stack_size.into());
         o.insert("lb".into(), (!a.no_lb).into());
-        o.insert("accel_build_seconds".into(), p.accel_seconds.into());
-        o.insert("lb_seconds".into(), p.lb_seconds.into());
-        o.insert("lb_models_cached".into(), p.lb_cached.into());
+        o.insert("accel_build_seconds".into(), accel_seconds.into());
+        o.insert("lb_seconds".into(), lb_seconds.into());
+        o.insert("lb_models_cached".into(), p.lb_models_cached.into());
         o.insert("rpp4".into(), results[1].json());
         o.insert(
             "memory".into(),
@@ -124,17 +130,17 @@ pub fn run(a: BenchTraceArgs) -> Result<()> {
     o += &format!(
         "{} at {}x{}, {threads} threads, stack {}, LB {}; medians of {} runs\n",
         p.scene.name,
-        p.width,
-        p.height,
-        p.traversal.stack_size,
+        prepared.width,
+        prepared.height,
+        p.tracer.traversal.stack_size,
         if a.no_lb { "off" } else { "on" },
         a.runs
     );
     o += &format!(
         "acceleration build {:.3} s; LB lighting {:.3} s ({} of {} models from the cache)\n",
-        p.accel_seconds,
-        p.lb_seconds,
-        p.lb_cached,
+        accel_seconds,
+        lb_seconds,
+        p.lb_models_cached,
         p.scene.models.len()
     );
     for m in &results {

@@ -1,6 +1,12 @@
-//! Progress bars that stay quiet when stderr is not a terminal (CI logs, pipes).
+//! Progress bars that stay quiet when stderr is not a terminal (CI logs, pipes), and the
+//! render pipeline's [`Progress`] drawn with them.
+
+use std::sync::Mutex;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use sylva_geom::Model;
+use sylva_render::lighting::LightingReport;
+use sylva_render::Progress;
 
 /// A bar over `len` units of work, labelled `what`.
 pub fn bar(len: u64, what: &str) -> ProgressBar {
@@ -14,4 +20,52 @@ pub fn bar(len: u64, what: &str) -> ProgressBar {
     );
     pb.set_prefix(what.to_string());
     pb
+}
+
+/// One bar per piece of pipeline work; `on_lit` hears each model's LB lighting report.
+pub struct Bars<F> {
+    current: Mutex<Option<ProgressBar>>,
+    on_lit: F,
+}
+
+impl<F: Fn(&Model, &LightingReport) + Sync> Bars<F> {
+    pub fn new(on_lit: F) -> Bars<F> {
+        Bars {
+            current: Mutex::new(None),
+            on_lit,
+        }
+    }
+
+    fn with(&self, f: impl FnOnce(&ProgressBar)) {
+        if let Some(pb) = self.current.lock().expect("progress bar").as_ref() {
+            f(pb);
+        }
+    }
+}
+
+impl<F: Fn(&Model, &LightingReport) + Sync> Progress for Bars<F> {
+    fn start(&self, what: &str, total: u64) {
+        *self.current.lock().expect("progress bar") = Some(bar(total, what));
+    }
+
+    fn set(&self, done: u64, total: u64) {
+        self.with(|pb| {
+            pb.set_length(total);
+            pb.set_position(done);
+        });
+    }
+
+    fn advance(&self, n: u64) {
+        self.with(|pb| pb.inc(n));
+    }
+
+    fn finish(&self) {
+        if let Some(pb) = self.current.lock().expect("progress bar").take() {
+            pb.finish_and_clear();
+        }
+    }
+
+    fn model_lit(&self, model: &Model, report: &LightingReport) {
+        (self.on_lit)(model, report);
+    }
 }

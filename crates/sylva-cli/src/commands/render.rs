@@ -1,22 +1,22 @@
-//! `sylva render [SCENE]`: build the scene, light each model with LB (cached), build the
-//! kd-trees, trace and shade, tone map, write PNG (and EXR), and print a per-stage summary.
+//! `sylva render [SCENE]`: the render pipeline of `sylva_render` (scene, LB lighting per
+//! model, kd-trees, frame, tone mapping, PNG and EXR) with progress bars and a per-stage
+//! summary.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use glam::Vec3;
-use sylva_geom::Scene;
-use sylva_lb::Preset;
-use sylva_render::lighting::{model_lighting, LightingOptions, LightingSource, ModelLighting};
-use sylva_render::output::{write_exr, write_png};
-use sylva_render::shade::transmission_from_g;
-use sylva_render::tonemap::srgb8;
-use sylva_render::{Frame, Mode, RenderSettings, Renderer, ShadingParams, ToneMap};
-use sylva_trace::{SceneAccel, TraversalConfig};
+use sylva_geom::Model;
+use sylva_lb::LbSolver;
+use sylva_render::lighting::{LightingReport, LightingSource};
+use sylva_render::{
+    load_scene, resolution, stage, tone_map_modes, write_images, LbPlan, Mode, PrepareOptions,
+    PreparedScene, ShadingParams, StageClock, ToneMap,
+};
+use sylva_trace::TraversalConfig;
 
-use super::progress::bar;
+use super::progress::Bars;
 
 /// Options shared by `sylva render` and `sylva bench trace`: what the frame looks like.
 #[derive(Args, Debug, Clone)]
@@ -98,72 +98,15 @@ pub struct RenderArgs {
     pub white: Option<f32>,
 }
 
-/// Everything a frame needs, prepared once.
+/// A scene prepared for the frames `a` asks for, and the image size.
 pub struct Prepared {
-    pub scene: Scene,
-    pub accel: SceneAccel,
-    pub lighting: Vec<Option<ModelLighting>>,
-    pub to_sun: Vec3,
-    pub shading: ShadingParams,
+    pub scene: PreparedScene,
     pub width: u32,
     pub height: u32,
-    pub traversal: TraversalConfig,
-    /// Seconds: scene build, LB precompute, acceleration build.
-    pub scene_seconds: f64,
-    pub lb_seconds: f64,
-    pub accel_seconds: f64,
-    /// Models whose LB light came from the cache.
-    pub lb_cached: usize,
 }
 
-impl Prepared {
-    pub fn renderer(&self) -> Renderer<'_> {
-        let sun_colour = Vec3::from_array(sylva_core::blackbody_rgb(sylva_core::SUN_TEMPERATURE_K));
-        Renderer::new(
-            &self.scene,
-            &self.accel,
-            &self.lighting,
-            self.to_sun,
-            sun_colour,
-            self.shading.sun_irradiance,
-        )
-    }
-
-    pub fn settings(&self, rays_per_pixel: u32, seed: u64) -> RenderSettings {
-        RenderSettings {
-            width: self.width,
-            height: self.height,
-            rays_per_pixel,
-            seed,
-            traversal: self.traversal,
-            shading: self.shading,
-        }
-    }
-
-    pub fn lighting_bytes(&self) -> u64 {
-        self.lighting
-            .iter()
-            .flatten()
-            .map(ModelLighting::memory_bytes)
-            .sum()
-    }
-}
-
-fn resolution(a: &FrameArgs, scene: &Scene) -> Result<(u32, u32)> {
-    let (w0, h0) = (scene.camera.width as f64, scene.camera.height as f64);
-    let (w, h) = match (a.width, a.height) {
-        (Some(w), Some(h)) => (w, h),
-        (Some(w), None) => (w, ((w as f64 * h0 / w0).round() as u32).max(1)),
-        (None, Some(h)) => (((h as f64 * w0 / h0).round() as u32).max(1), h),
-        (None, None) => (scene.camera.width, scene.camera.height),
-    };
-    if w == 0 || h == 0 || w > 32768 || h > 32768 {
-        bail!("resolution {w}x{h}: width and height must be 1 to 32768");
-    }
-    Ok((w, h))
-}
-
-/// Builds the scene and its kd-trees and lights every model (from the cache when it can).
+/// Loads the scene, lights every model (from the cache when it can) and builds its
+/// kd-trees, printing what it does (to stdout, or stderr when stdout is for JSON).
 /// `rays_per_pixel`: the most a frame will use (default: the scene camera's); the frame's
 /// memory is checked for it before any LB or kd-tree work.
 pub fn prepare(
@@ -180,11 +123,9 @@ pub fn prepare(
             eprintln!("{s}")
         }
     };
-    let t0 = Instant::now();
-    let mut scene = sylva_scene::load(&a.scene)?;
-    if a.sun.is_some() || a.elevation.is_some() || a.azimuth.is_some() {
-        scene.sun = super::lb::parse_sun(a.sun.as_deref(), a.elevation, a.azimuth)?;
-    }
+    let sun = (a.sun.is_some() || a.elevation.is_some() || a.azimuth.is_some())
+        .then(|| super::lb::parse_sun(a.sun.as_deref(), a.elevation, a.azimuth))
+        .transpose()?;
     if !(1..=sylva_trace::MAX_DEPTH).contains(&a.stack) {
         bail!(
             "--stack {}: the short stack holds 1 to {} entries",
@@ -192,25 +133,9 @@ pub fn prepare(
             sylva_trace::MAX_DEPTH
         );
     }
-    let scene_seconds = t0.elapsed().as_secs_f64();
-    let (width, height) = resolution(a, &scene)?;
+    let scene = load_scene(&a.scene, sun)?;
+    let (width, height) = resolution(a.width, a.height, &scene.camera)?;
     let rays_per_pixel = rays_per_pixel.unwrap_or(scene.camera.rays_per_pixel);
-    sylva_core::check_memory(
-        &format!("a {width}x{height} frame at {rays_per_pixel} rays/pixel"),
-        sylva_render::render::memory_needed(width, height, rays_per_pixel),
-    )?;
-    let s = scene.sun.to_sun();
-    let to_sun = Vec3::new(s.x as f32, s.y as f32, s.z as f32);
-    let preset = Preset::parse(&scene.lb.preset)
-        .with_context(|| format!("scene {}: [lb] preset", scene.name))?;
-    let g = preset.params().colours.map(|c| c.g as f32);
-    let shading = ShadingParams {
-        indirect: a.indirect,
-        sky_ambient: a.sky_ambient,
-        leaf_transmission: transmission_from_g(g),
-        ..ShadingParams::default()
-    };
-    shading.validate().map_err(anyhow::Error::msg)?;
     say(format!(
         "scene {}: {} models, {} instances, {} instanced triangles; {width}x{height}; sun elevation {:.1}° azimuth {:.1}°",
         scene.name,
@@ -220,103 +145,56 @@ pub fn prepare(
         scene.sun.elevation_deg(),
         scene.sun.azimuth_deg()
     ));
-
-    // LB lighting per model: computed once per model and sun, then cached.
-    let t1 = Instant::now();
-    let mut lighting = Vec::with_capacity(scene.models.len());
-    let mut lb_cached = 0;
-    if need_lb {
+    let solver: Option<Box<dyn LbSolver>> = if need_lb {
         let solver = super::device::open_solver(a.device, a.precision)?;
         say(format!("LB solver: {}", solver.describe()));
-        let opts = LightingOptions {
-            grid: a.lb_grid.unwrap_or(scene.lb.grid as usize),
-            preset: scene.lb.preset.clone(),
-            cache_dir: (!a.no_cache).then(|| a.cache_dir.clone()),
-        };
-        for model in &scene.models {
-            let pb = bar(3, &format!("LB {}", model.name));
-            let (l, report) =
-                model_lighting(model, to_sun, &opts, &*solver, &mut |c, step, max| {
-                    pb.set_length(3 * max as u64);
-                    pb.set_position((c * max + step) as u64);
-                })
-                .with_context(|| format!("LB lighting of model '{}'", model.name))?;
-            pb.finish_and_clear();
-            match &report.source {
-                LightingSource::Cached => {
-                    lb_cached += 1;
-                    say(format!(
-                        "  LB {}: {} grid from cache ({:.2} s)",
-                        model.name, report.dims, report.seconds
-                    ))
-                }
-                LightingSource::Computed => say(format!(
-                    "  LB {}: {} grid solved in {:.1} s{}",
-                    model.name,
-                    report.dims,
-                    report.seconds,
-                    report
-                        .path
-                        .as_ref()
-                        .map(|p| format!(", cached as {}", p.display()))
-                        .unwrap_or_default()
-                )),
-                LightingSource::Recomputed { reason } => {
-                    eprintln!("warning: {reason}; recomputed");
-                    say(format!(
-                        "  LB {}: {} grid solved again in {:.1} s",
-                        model.name, report.dims, report.seconds
-                    ))
-                }
-            }
-            lighting.push(Some(l));
-        }
+        Some(solver)
     } else {
-        lighting.resize_with(scene.models.len(), || None);
-    }
-    let lb_seconds = t1.elapsed().as_secs_f64();
-
-    let t2 = Instant::now();
-    let accel = SceneAccel::build(&scene)?;
-    let accel_seconds = t2.elapsed().as_secs_f64();
+        None
+    };
+    let opts = PrepareOptions {
+        lb: solver.as_deref().map(|solver| LbPlan {
+            solver,
+            grid: a.lb_grid,
+            cache_dir: (!a.no_cache).then_some(a.cache_dir.as_path()),
+        }),
+        traversal: TraversalConfig::with_stack(a.stack),
+        indirect: a.indirect,
+        sky_ambient: a.sky_ambient,
+        largest_frame: Some((width, height, rays_per_pixel)),
+    };
+    let progress = Bars::new(
+        |model: &Model, report: &LightingReport| match &report.source {
+            LightingSource::Cached => say(format!(
+                "  LB {}: {} grid from cache ({:.2} s)",
+                model.name, report.dims, report.seconds
+            )),
+            LightingSource::Computed => say(format!(
+                "  LB {}: {} grid solved in {:.1} s{}",
+                model.name,
+                report.dims,
+                report.seconds,
+                report
+                    .path
+                    .as_ref()
+                    .map(|p| format!(", cached as {}", p.display()))
+                    .unwrap_or_default()
+            )),
+            LightingSource::Recomputed { reason } => {
+                eprintln!("warning: {reason}; recomputed");
+                say(format!(
+                    "  LB {}: {} grid solved again in {:.1} s",
+                    model.name, report.dims, report.seconds
+                ))
+            }
+        },
+    );
+    let scene = PreparedScene::new(scene, &opts, &progress)?;
     Ok(Prepared {
         scene,
-        accel,
-        lighting,
-        to_sun,
-        shading,
         width,
         height,
-        traversal: TraversalConfig::with_stack(a.stack),
-        scene_seconds,
-        lb_seconds,
-        accel_seconds,
-        lb_cached,
     })
-}
-
-/// Renders one frame with a progress bar.
-pub fn render_frame(p: &Prepared, rays_per_pixel: u32, seed: u64) -> Result<Frame> {
-    let tiles = sylva_render::render::tile_count(p.width, p.height);
-    let pb = bar(3 * tiles, "render");
-    let frame = p
-        .renderer()
-        .render(&p.settings(rays_per_pixel, seed), &|n| pb.inc(n))?;
-    pb.finish_and_clear();
-    Ok(frame)
-}
-
-/// `out.png` → `out-<mode>.png` for modes other than full.
-fn mode_path(base: &Path, mode: Mode, several: bool) -> PathBuf {
-    if mode == Mode::Full && !several {
-        return base.to_path_buf();
-    }
-    let stem = base.file_stem().unwrap_or_default().to_string_lossy();
-    let ext = base
-        .extension()
-        .map(|e| e.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "png".into());
-    base.with_file_name(format!("{stem}-{}.{ext}", mode.name()))
 }
 
 pub fn run(a: RenderArgs) -> Result<()> {
@@ -344,71 +222,54 @@ pub fn run(a: RenderArgs) -> Result<()> {
             bail!("--rpp {r}: rays per pixel must be 1 to 1024");
         }
     }
+    let clock = StageClock::global();
+    clock.reset();
     let t_all = Instant::now();
     let p = prepare(&a.frame, modes.iter().any(|m| m.needs_lb()), a.rpp, true)?;
-    let rpp = a.rpp.unwrap_or(p.scene.camera.rays_per_pixel);
-    let frame = render_frame(&p, rpp, a.frame.seed)?;
+    let prepared = &p.scene;
+    let rpp = a.rpp.unwrap_or(prepared.scene.camera.rays_per_pixel);
+    let camera = prepared.camera(p.width, p.height);
+    let frame = prepared.render(
+        &prepared.settings(camera, rpp, a.frame.seed),
+        &Bars::new(|_: &Model, _: &LightingReport| {}),
+    )?;
 
-    let t3 = Instant::now();
     let base = a.output.clone().unwrap_or_else(|| {
         PathBuf::from(format!(
             "sylva-out/{}.png",
-            sylva_core::file_stem(&p.scene.name, "scene")
+            sylva_core::file_stem(&prepared.scene.name, "scene")
         ))
     });
-    // Several modes share the full image's exposure so they compare.
-    let full = frame.compose(Mode::Full);
-    let exposure = tm.measure(&full);
-    let mut images = Vec::new();
-    for &mode in &modes {
-        let hdr = if mode == Mode::Full {
-            full.clone()
-        } else {
-            frame.compose(mode)
-        };
-        let stats = if modes.len() > 1 {
-            exposure
-        } else {
-            tm.measure(&hdr)
-        };
-        let ldr: Vec<[u8; 3]> = tm.apply_with(&hdr, stats).into_iter().map(srgb8).collect();
-        images.push((mode, hdr, ldr));
-    }
-    let tone_seconds = t3.elapsed().as_secs_f64();
-    let t4 = Instant::now();
-    for (mode, hdr, ldr) in &images {
-        let path = mode_path(&base, *mode, modes.len() > 1);
-        write_png(&path, frame.width, frame.height, ldr)?;
-        let mut wrote = path.display().to_string();
-        if a.hdr {
-            let exr = path.with_extension("exr");
-            write_exr(&exr, frame.width, frame.height, hdr)?;
+    let images = tone_map_modes(&frame, &modes, &tm);
+    let written = write_images(&base, frame.width, frame.height, &images, a.hdr)?;
+    for (image, files) in images.iter().zip(&written) {
+        let mut wrote = files.png.display().to_string();
+        if let Some(exr) = &files.exr {
             wrote = format!("{wrote} and {}", exr.display());
         }
         println!(
             "wrote {wrote} ({} mode, mean luminance {:.4}{})",
-            mode.name(),
-            sylva_render::mean_luminance(hdr),
-            if *mode == Mode::Ambient {
+            image.mode.name(),
+            sylva_render::mean_luminance(&image.hdr),
+            if image.mode == Mode::Ambient {
                 format!(", ambient {:.4}", frame.matched_ambient())
             } else {
                 String::new()
             }
         );
     }
-    let write_seconds = t4.elapsed().as_secs_f64();
     let t = &frame.timings;
-    let mem = p.accel.memory();
+    let mem = prepared.tracer.accel.memory();
     println!("stage                 seconds");
     for (stage, s) in [
-        ("scene build", p.scene_seconds),
-        ("LB precompute", p.lb_seconds),
-        ("acceleration build", p.accel_seconds),
+        ("scene build", clock.seconds(stage::SCENE_BUILD)),
+        ("LB precompute", clock.seconds(stage::LB_PRECOMPUTE)),
+        ("acceleration build", clock.seconds(stage::ACCEL_BUILD)),
         ("primary rays", t.primary_seconds),
         ("shadow rays", t.shadow_seconds),
         ("shading", t.shading_seconds),
-        ("tone mapping", tone_seconds),
-        ("image output", write_seconds),
+        ("tone mapping", clock.seconds(stage::TONE_MAPPING)),
+        ("image output", clock.seconds(stage::IMAGE_OUTPUT)),
     ] {
         println!("  {stage:<20}{s:>8.3}");
     }
@@ -423,7 +284,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         t.frame_seconds(),
         frame.stats.restarts,
         sylva_core::format_bytes(mem.total()),
-        sylva_core::format_bytes(p.lighting_bytes()),
+        sylva_core::format_bytes(prepared.lighting_bytes()),
     );
     Ok(())
 }

@@ -1,0 +1,217 @@
+//! Indirect light where the renderer needs it: on a plant (the light scattered in the canopy,
+//! RGB, normalised so unobstructed sunlight is 1) and on the ground (how much of the sky's
+//! light gets through the trees). [`IndirectLight`] is the interface; [`ModelGridLight`], one
+//! LB grid per unique model placed by each instance's transform (000 §4.3), is today's
+//! implementation, and [`NoIndirectLight`] the absence of any.
+
+use glam::{Affine3A, Vec2, Vec3};
+use sylva_core::colour::luminance;
+use sylva_geom::{Aabb, Model};
+use sylva_trace::TraceInstance;
+
+use crate::lighting::ModelLighting;
+
+/// Indirect light sources for shading. Implementations are read from many threads at once.
+pub trait IndirectLight: Sync {
+    /// The normalised RGB indirect light at world point `world` on instance `instance`
+    /// (`placed`: its model and transforms, as traced); `None` when this plant gets none.
+    fn plant(&self, instance: u32, placed: &TraceInstance, world: Vec3) -> Option<Vec3>;
+
+    /// The fraction of the sky's light reaching the ground at world point `p`, in [0, 1]:
+    /// 1 in the open.
+    fn ground_sky(&self, p: Vec3) -> f32;
+
+    /// Bytes held.
+    fn memory_bytes(&self) -> u64;
+}
+
+/// No indirect light: plants get none, the ground sees the whole sky.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct NoIndirectLight;
+
+impl IndirectLight for NoIndirectLight {
+    fn plant(&self, _: u32, _: &TraceInstance, _: Vec3) -> Option<Vec3> {
+        None
+    }
+
+    fn ground_sky(&self, _: Vec3) -> f32 {
+        1.0
+    }
+
+    fn memory_bytes(&self) -> u64 {
+        0
+    }
+}
+
+/// One LB lighting grid per unique model (or none), looked up in each instance's model space.
+#[derive(Debug)]
+pub struct ModelGridLight {
+    /// `lighting[m]`: model `m`'s grid.
+    lighting: Vec<Option<ModelLighting>>,
+    /// Per model, its bounds in model space.
+    model_bounds: Vec<Aabb>,
+    /// Per instance: model and world → model transform.
+    instances: Vec<(u32, Affine3A)>,
+    /// Instances over each ground cell, for the LB light under trees.
+    ground_index: GroundIndex,
+}
+
+impl ModelGridLight {
+    /// `lighting[m]` is model `m`'s LB light (`None`: no indirect light on it); `instances`
+    /// as traced.
+    pub fn new(
+        lighting: Vec<Option<ModelLighting>>,
+        models: &[Model],
+        instances: &[TraceInstance],
+    ) -> ModelGridLight {
+        assert_eq!(lighting.len(), models.len(), "one lighting per model");
+        let ground_index = if lighting.iter().any(Option::is_some) {
+            GroundIndex::new(instances)
+        } else {
+            GroundIndex::default()
+        };
+        ModelGridLight {
+            lighting,
+            model_bounds: models.iter().map(|m| m.bounds).collect(),
+            instances: instances.iter().map(|i| (i.model, i.to_model)).collect(),
+            ground_index,
+        }
+    }
+
+    /// Model `m`'s grid.
+    pub fn model(&self, m: usize) -> Option<&ModelLighting> {
+        self.lighting.get(m).and_then(Option::as_ref)
+    }
+}
+
+impl IndirectLight for ModelGridLight {
+    fn plant(&self, _: u32, placed: &TraceInstance, world: Vec3) -> Option<Vec3> {
+        let l = self.lighting[placed.model as usize].as_ref()?;
+        Some(l.sample(placed.to_model.transform_point3(world)))
+    }
+
+    /// The product, over the trees whose LB grid covers `point`, of their LB luminance there
+    /// (1 in free space, less in a crown's shade), clamped to [0, 1].
+    fn ground_sky(&self, point: Vec3) -> f32 {
+        let mut f = 1.0f32;
+        for &i in self.ground_index.at(point) {
+            let (model, to_model) = &self.instances[i as usize];
+            let Some(l) = &self.lighting[*model as usize] else {
+                continue;
+            };
+            let b = &self.model_bounds[*model as usize];
+            let pm = to_model.transform_point3(point);
+            // Trees stand on the ground; a model floating above it has no LB light down here.
+            let margin = 0.05 * (b.max.y - b.min.y) + 1e-3;
+            if pm.x >= b.min.x
+                && pm.x <= b.max.x
+                && pm.z >= b.min.z
+                && pm.z <= b.max.z
+                && pm.y >= b.min.y - margin
+            {
+                // The grid ends at the model's box while its shade on the ground would go on:
+                // fade to open sky over the box's outer 20 % so no edge shows.
+                let edge = (pm.x - b.min.x)
+                    .min(b.max.x - pm.x)
+                    .min(pm.z - b.min.z)
+                    .min(b.max.z - pm.z);
+                let width = 0.2 * (b.max.x - b.min.x).min(b.max.z - b.min.z);
+                let w = if width > 0.0 {
+                    (edge / width).clamp(0.0, 1.0)
+                } else {
+                    1.0
+                };
+                let lb = luminance(l.sample(pm).to_array()).clamp(0.0, 1.0);
+                f *= 1.0 - w * (1.0 - lb);
+            }
+        }
+        f
+    }
+
+    fn memory_bytes(&self) -> u64 {
+        self.lighting
+            .iter()
+            .flatten()
+            .map(ModelLighting::memory_bytes)
+            .sum()
+    }
+}
+
+/// A uniform grid over the ground (x, z) listing the instances whose world box covers each
+/// cell: the ground's LB lookup visits a handful of trees, not all of them.
+#[derive(Debug, Default)]
+struct GroundIndex {
+    origin: Vec2,
+    end: Vec2,
+    inv_cell: f32,
+    nx: usize,
+    nz: usize,
+    cells: Vec<Vec<u32>>,
+}
+
+impl GroundIndex {
+    /// At most this many cells a side.
+    const MAX_CELLS: usize = 256;
+
+    fn new(instances: &[TraceInstance]) -> GroundIndex {
+        let boxes: Vec<_> = instances.iter().map(|i| i.world_bounds).collect();
+        if boxes.is_empty() {
+            return GroundIndex::default();
+        }
+        let (mut lo, mut hi) = (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
+        let mut footprint = 0.0f64;
+        for b in &boxes {
+            lo = lo.min(Vec2::new(b.min.x, b.min.z));
+            hi = hi.max(Vec2::new(b.max.x, b.max.z));
+            footprint += (b.max.x - b.min.x).max(b.max.z - b.min.z) as f64;
+        }
+        let extent = (hi - lo).max_element().max(1e-3);
+        // Cells about a tree's width, but not more than MAX_CELLS a side.
+        let cell = ((footprint / boxes.len() as f64) as f32).max(extent / Self::MAX_CELLS as f32);
+        if !(cell.is_finite() && cell > 0.0) {
+            return GroundIndex::default();
+        }
+        let nx = (((hi.x - lo.x) / cell).floor() as usize + 1).min(Self::MAX_CELLS);
+        let nz = (((hi.y - lo.y) / cell).floor() as usize + 1).min(Self::MAX_CELLS);
+        let mut index = GroundIndex {
+            origin: lo,
+            end: hi,
+            inv_cell: 1.0 / cell,
+            nx,
+            nz,
+            cells: vec![Vec::new(); nx * nz],
+        };
+        for (i, b) in boxes.iter().enumerate() {
+            let (x0, z0) = index.cell_of(b.min.x, b.min.z);
+            let (x1, z1) = index.cell_of(b.max.x, b.max.z);
+            for z in z0..=z1 {
+                for x in x0..=x1 {
+                    index.cells[z * nx + x].push(i as u32);
+                }
+            }
+        }
+        index
+    }
+
+    fn cell_of(&self, x: f32, z: f32) -> (usize, usize) {
+        let c = |v: f32, o: f32, n: usize| {
+            (((v - o) * self.inv_cell).floor().max(0.0) as usize).min(n - 1)
+        };
+        (c(x, self.origin.x, self.nx), c(z, self.origin.y, self.nz))
+    }
+
+    /// Instances whose box may cover ground point `p` (a superset).
+    fn at(&self, p: Vec3) -> &[u32] {
+        if self.cells.is_empty() {
+            return &[];
+        }
+        let q = Vec2::new(p.x, p.z);
+        // Also false for NaN.
+        let inside = q.cmpge(self.origin).all() && q.cmple(self.end).all();
+        if !inside {
+            return &[];
+        }
+        let (x, z) = self.cell_of(q.x, q.y);
+        &self.cells[z * self.nx + x]
+    }
+}

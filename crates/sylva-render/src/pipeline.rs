@@ -1,0 +1,373 @@
+//! The render pipeline as a library: load a scene ([`load_scene`], with a sun override), light
+//! every model with LB (cached, on any [`LbSolver`]) and build the acceleration structure
+//! ([`PreparedScene::new`]), then render frames of any camera and image region
+//! ([`PreparedScene::render`]). Stages are `tracing` spans ([`crate::stages`]); progress goes
+//! to a [`Progress`] the caller implements (the CLI draws bars); nothing here prints.
+
+use std::path::{Path, PathBuf};
+
+use glam::Vec3;
+use sylva_core::{MemoryError, Sun};
+use sylva_geom::{Camera, Model, Scene};
+use sylva_lb::{LbSolver, ParamError, Preset};
+use sylva_scene::SceneError;
+use sylva_trace::{KdTracer, SceneAccel, TraceError, TraversalConfig};
+
+use crate::indirect::{IndirectLight, ModelGridLight};
+use crate::lighting::{
+    model_lighting, LightingError, LightingOptions, LightingReport, LightingSource,
+};
+use crate::output::{write_exr, write_png, OutputError};
+use crate::render::{
+    memory_needed, tile_count, Frame, Mode, RenderError, RenderSettings, Renderer,
+};
+use crate::shade::{shade_materials, transmission_from_g, ShadeMaterial, ShadingParams};
+use crate::stages::stage;
+use crate::tonemap::{srgb8, ToneMap};
+
+/// Largest image edge in pixels.
+pub const MAX_EDGE: u32 = 32768;
+
+/// What the pipeline reports while it works. Every method has a default that ignores it;
+/// calls may come from worker threads.
+pub trait Progress: Sync {
+    /// Work named `what` begins: `total` units.
+    fn start(&self, _what: &str, _total: u64) {}
+    /// `done` of `total` units (the total may change as the work learns its size).
+    fn set(&self, _done: u64, _total: u64) {}
+    /// `n` more units done.
+    fn advance(&self, _n: u64) {}
+    /// The work begun last is over.
+    fn finish(&self) {}
+    /// Model `model`'s LB lighting is ready: read from the cache, solved, or solved again
+    /// because the cache entry was bad ([`LightingReport::source`]).
+    fn model_lit(&self, _model: &Model, _report: &LightingReport) {}
+}
+
+/// Reports nothing.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Silent;
+
+impl Progress for Silent {}
+
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error("resolution {width}x{height}: width and height must be 1 to {MAX_EDGE}")]
+    Resolution { width: u32, height: u32 },
+    #[error("scene {scene}: [lb] preset")]
+    Preset {
+        scene: String,
+        #[source]
+        source: ParamError,
+    },
+    #[error("{0}")]
+    Shading(String),
+    #[error(transparent)]
+    Memory(#[from] MemoryError),
+    #[error("LB lighting of model '{model}'")]
+    Lighting {
+        model: String,
+        #[source]
+        source: LightingError,
+    },
+    #[error(transparent)]
+    Trace(#[from] TraceError),
+    #[error(transparent)]
+    Render(#[from] RenderError),
+}
+
+/// Loads a scene file or built-in scene by name and builds it; `sun` replaces its sun.
+pub fn load_scene(name_or_path: &str, sun: Option<Sun>) -> Result<Scene, PipelineError> {
+    let _span = tracing::info_span!(stage::SCENE_BUILD).entered();
+    let mut scene = sylva_scene::load(name_or_path)?;
+    if let Some(sun) = sun {
+        scene.sun = sun;
+    }
+    Ok(scene)
+}
+
+/// The image size: `width` and `height` as given, the scene camera's where neither is, and
+/// with only one of them the other from the camera's aspect ratio.
+pub fn resolution(
+    width: Option<u32>,
+    height: Option<u32>,
+    camera: &Camera,
+) -> Result<(u32, u32), PipelineError> {
+    let (w0, h0) = (camera.width as f64, camera.height as f64);
+    let (w, h) = match (width, height) {
+        (Some(w), Some(h)) => (w, h),
+        (Some(w), None) => (w, ((w as f64 * h0 / w0).round() as u32).max(1)),
+        (None, Some(h)) => (((h as f64 * w0 / h0).round() as u32).max(1), h),
+        (None, None) => (camera.width, camera.height),
+    };
+    if w == 0 || h == 0 || w > MAX_EDGE || h > MAX_EDGE {
+        return Err(PipelineError::Resolution {
+            width: w,
+            height: h,
+        });
+    }
+    Ok((w, h))
+}
+
+/// LB lighting of every model.
+#[derive(Clone, Copy)]
+pub struct LbPlan<'a> {
+    /// Where the solves run.
+    pub solver: &'a dyn LbSolver,
+    /// Sites along each model's longest edge; `None`: the scene's `[lb] grid`.
+    pub grid: Option<usize>,
+    /// The lighting cache; `None`: always solve, write nothing.
+    pub cache_dir: Option<&'a std::path::Path>,
+}
+
+/// How [`PreparedScene::new`] prepares a scene.
+#[derive(Clone, Copy)]
+pub struct PrepareOptions<'a> {
+    /// LB lighting; `None`: no indirect light on plants (the local-light mode needs none).
+    pub lb: Option<LbPlan<'a>>,
+    /// How the CPU tracer walks its kd-trees.
+    pub traversal: TraversalConfig,
+    /// Scale of the LB indirect light.
+    pub indirect: f32,
+    /// Sky light on the ground as a fraction of the sun's.
+    pub sky_ambient: f32,
+    /// The largest frame that will be rendered, `(width, height, rays per pixel)`: its memory
+    /// is checked before any LB or acceleration work.
+    pub largest_frame: Option<(u32, u32, u32)>,
+}
+
+impl Default for PrepareOptions<'_> {
+    fn default() -> Self {
+        let s = ShadingParams::default();
+        PrepareOptions {
+            lb: None,
+            traversal: TraversalConfig::default(),
+            indirect: s.indirect,
+            sky_ambient: s.sky_ambient,
+            largest_frame: None,
+        }
+    }
+}
+
+/// A scene ready to render: its LB lighting and acceleration structure built.
+pub struct PreparedScene {
+    pub scene: Scene,
+    /// The CPU tracer: the scene's kd-trees and their traversal.
+    pub tracer: KdTracer,
+    /// Per-model LB grids (none without LB).
+    pub light: ModelGridLight,
+    /// Unit vector towards the sun.
+    pub to_sun: Vec3,
+    pub shading: ShadingParams,
+    /// The models' materials decoded for shading.
+    pub materials: Vec<Vec<ShadeMaterial>>,
+    /// Models whose LB lighting came from the cache.
+    pub lb_models_cached: usize,
+}
+
+impl PreparedScene {
+    /// Checks the frame's memory and the shading constants, lights every model (in scene
+    /// order, each from the cache when it can: [`model_lighting`]) and builds the kd-trees.
+    pub fn new(
+        scene: Scene,
+        opts: &PrepareOptions,
+        progress: &dyn Progress,
+    ) -> Result<PreparedScene, PipelineError> {
+        if let Some((w, h, rpp)) = opts.largest_frame {
+            sylva_core::check_memory(
+                &format!("a {w}x{h} frame at {rpp} rays/pixel"),
+                memory_needed(w, h, rpp),
+            )?;
+        }
+        let preset = Preset::parse(&scene.lb.preset).map_err(|source| PipelineError::Preset {
+            scene: scene.name.clone(),
+            source,
+        })?;
+        let g = preset.params().colours.map(|c| c.g as f32);
+        let shading = ShadingParams {
+            indirect: opts.indirect,
+            sky_ambient: opts.sky_ambient,
+            leaf_transmission: transmission_from_g(g),
+            ..ShadingParams::default()
+        };
+        shading.validate().map_err(PipelineError::Shading)?;
+        let s = scene.sun.to_sun();
+        let to_sun = Vec3::new(s.x as f32, s.y as f32, s.z as f32);
+
+        let mut lighting = Vec::with_capacity(scene.models.len());
+        let mut lb_models_cached = 0;
+        if let Some(lb) = &opts.lb {
+            let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
+            let lopts = LightingOptions {
+                grid: lb.grid.unwrap_or(scene.lb.grid as usize),
+                preset: scene.lb.preset.clone(),
+                cache_dir: lb.cache_dir.map(PathBuf::from),
+            };
+            for model in &scene.models {
+                let _m = tracing::info_span!(stage::LB_MODEL, model = %model.name).entered();
+                progress.start(&format!("LB {}", model.name), 3);
+                let lit = model_lighting(model, to_sun, &lopts, lb.solver, &mut |c, step, max| {
+                    progress.set((c * max + step) as u64, 3 * max as u64)
+                });
+                progress.finish();
+                let (l, report) = lit.map_err(|source| PipelineError::Lighting {
+                    model: model.name.clone(),
+                    source,
+                })?;
+                lb_models_cached += (report.source == LightingSource::Cached) as usize;
+                progress.model_lit(model, &report);
+                lighting.push(Some(l));
+            }
+        } else {
+            lighting.resize_with(scene.models.len(), || None);
+        }
+
+        let accel = {
+            let _span = tracing::info_span!(stage::ACCEL_BUILD).entered();
+            SceneAccel::build(&scene)?
+        };
+        let light = ModelGridLight::new(lighting, &scene.models, accel.instances());
+        Ok(PreparedScene {
+            materials: shade_materials(&scene.models),
+            tracer: KdTracer::new(accel, opts.traversal),
+            light,
+            to_sun,
+            shading,
+            lb_models_cached,
+            scene,
+        })
+    }
+
+    /// The scene's camera at `width × height`.
+    pub fn camera(&self, width: u32, height: u32) -> Camera {
+        Camera {
+            width,
+            height,
+            ..self.scene.camera
+        }
+    }
+
+    /// The whole image of `camera` with the prepared shading.
+    pub fn settings(&self, camera: Camera, rays_per_pixel: u32, seed: u64) -> RenderSettings {
+        RenderSettings::full(camera, rays_per_pixel, seed, self.shading)
+    }
+
+    /// The renderer over this scene's tracer and LB light, lit by the 6500 K sun.
+    pub fn renderer(&self) -> Renderer<'_> {
+        let sun_colour = Vec3::from_array(sylva_core::blackbody_rgb(sylva_core::SUN_TEMPERATURE_K));
+        Renderer::new(
+            &self.scene,
+            &self.tracer,
+            &self.light,
+            &self.materials,
+            self.to_sun,
+            sun_colour,
+            self.shading.sun_irradiance,
+        )
+    }
+
+    /// Renders one frame (any camera, any region of its image), reporting tiles as they
+    /// finish each pass (3 × [`tile_count`] units).
+    pub fn render(
+        &self,
+        settings: &RenderSettings,
+        progress: &dyn Progress,
+    ) -> Result<Frame, PipelineError> {
+        let _span = tracing::info_span!(stage::FRAME).entered();
+        progress.start("render", 3 * tile_count(settings.region));
+        let frame = self.renderer().render(settings, &|n| progress.advance(n));
+        progress.finish();
+        Ok(frame?)
+    }
+
+    /// Bytes of the LB grids.
+    pub fn lighting_bytes(&self) -> u64 {
+        self.light.memory_bytes()
+    }
+}
+
+/// One mode's image: linear HDR and tone-mapped 8-bit sRGB, pixel for pixel.
+#[derive(Debug, Clone)]
+pub struct ModeImage {
+    pub mode: Mode,
+    pub hdr: Vec<[f32; 3]>,
+    pub ldr: Vec<[u8; 3]>,
+}
+
+/// The images of `modes`, tone mapped with `tm`. Several modes share the full image's
+/// exposure so they compare (000 Fig. 2); one mode is exposed for itself.
+pub fn tone_map_modes(frame: &Frame, modes: &[Mode], tm: &ToneMap) -> Vec<ModeImage> {
+    let _span = tracing::info_span!(stage::TONE_MAPPING).entered();
+    let full = frame.compose(Mode::Full);
+    let exposure = tm.measure(&full);
+    modes
+        .iter()
+        .map(|&mode| {
+            let hdr = if mode == Mode::Full {
+                full.clone()
+            } else {
+                frame.compose(mode)
+            };
+            let stats = if modes.len() > 1 {
+                exposure
+            } else {
+                tm.measure(&hdr)
+            };
+            let ldr = tm.apply_with(&hdr, stats).into_iter().map(srgb8).collect();
+            ModeImage { mode, hdr, ldr }
+        })
+        .collect()
+}
+
+/// `out.png` → `out-<mode>.png` for modes other than full, and for every mode of a set.
+pub fn mode_path(base: &Path, mode: Mode, several: bool) -> PathBuf {
+    if mode == Mode::Full && !several {
+        return base.to_path_buf();
+    }
+    let stem = base.file_stem().unwrap_or_default().to_string_lossy();
+    let ext = base
+        .extension()
+        .map(|e| e.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "png".into());
+    base.with_file_name(format!("{stem}-{}.{ext}", mode.name()))
+}
+
+/// The files [`write_images`] wrote for one mode.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WrittenImage {
+    pub mode: Mode,
+    pub png: PathBuf,
+    pub exr: Option<PathBuf>,
+}
+
+/// Writes each image as PNG at [`mode_path`] of `base` and, with `hdr`, its linear values
+/// as EXR beside it (atomically).
+pub fn write_images(
+    base: &Path,
+    width: u32,
+    height: u32,
+    images: &[ModeImage],
+    hdr: bool,
+) -> Result<Vec<WrittenImage>, OutputError> {
+    let _span = tracing::info_span!(stage::IMAGE_OUTPUT).entered();
+    let mut written = Vec::with_capacity(images.len());
+    for image in images {
+        let png = mode_path(base, image.mode, images.len() > 1);
+        write_png(&png, width, height, &image.ldr)?;
+        let exr = if hdr {
+            let exr = png.with_extension("exr");
+            write_exr(&exr, width, height, &image.hdr)?;
+            Some(exr)
+        } else {
+            None
+        };
+        written.push(WrittenImage {
+            mode: image.mode,
+            png,
+            exr,
+        });
+    }
+    Ok(written)
+}
