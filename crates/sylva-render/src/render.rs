@@ -288,6 +288,18 @@ struct TracedUnit {
     busy: [f64; 2],
 }
 
+/// Buffers a worker reuses from one work unit to the next: the batch in packet order and
+/// where each ray came from, `(tile, sample)`.
+#[derive(Default)]
+struct Scratch {
+    order: Vec<(usize, usize)>,
+    rays: Vec<Ray>,
+    hits: Vec<Option<Hit>>,
+    shadow_rays: Vec<ShadowRay>,
+    waiting: Vec<(usize, usize)>,
+    blocked: Vec<bool>,
+}
+
 /// A scene, something that answers its ray queries and its indirect light, ready to render
 /// frames of any view.
 pub struct Renderer<'a> {
@@ -401,7 +413,9 @@ impl<'a> Renderer<'a> {
         let t0 = Instant::now();
         let traced: Vec<TracedUnit> = tiles
             .par_chunks(unit_tiles)
-            .map(|unit| self.trace_unit(camera, unit, settings, n, progress))
+            .map_init(Scratch::default, |scratch, unit| {
+                self.trace_unit(scratch, camera, unit, settings, n, progress)
+            })
             .collect();
         let wall = t0.elapsed().as_secs_f64();
         let mut busy = [0f64; 2];
@@ -456,6 +470,7 @@ impl<'a> Renderer<'a> {
     /// shading inputs of every sample and the shadow rays they need.
     fn trace_unit(
         &self,
+        scratch: &mut Scratch,
         camera: &PinholeCamera,
         unit: &[Tile],
         settings: &RenderSettings,
@@ -465,9 +480,8 @@ impl<'a> Renderer<'a> {
         let start = Instant::now();
         let mut primary = TraceStats::default();
         let w = camera.width as u64;
-        let mut samples: Vec<TileSamples> = Vec::with_capacity(unit.len());
-        // Where each ray of the batch comes from: (tile, sample).
-        let mut order = Vec::new();
+        let mut tiles: Vec<(TileSamples, Vec<SampleGeom>)> = Vec::with_capacity(unit.len());
+        scratch.order.clear();
         for (t, tile) in unit.iter().enumerate() {
             let mut out = Vec::with_capacity(tile.pixels() * n as usize);
             for (x, y) in tile.iter() {
@@ -478,43 +492,49 @@ impl<'a> Renderer<'a> {
                 }
             }
             for group in tile.packets(n) {
-                order.extend(group.iter().filter(|&&i| i != usize::MAX).map(|&i| (t, i)));
+                let used = group.iter().filter(|&&i| i != usize::MAX);
+                scratch.order.extend(used.map(|&i| (t, i)));
             }
-            samples.push(out);
+            tiles.push((out, Vec::new()));
         }
-        let rays: Vec<Ray> = order.iter().map(|&(t, i)| samples[t][i].0).collect();
-        let mut hits = vec![None; rays.len()];
-        self.query.closest_hits(&rays, &mut hits, &mut primary);
-        for (&(t, i), hit) in order.iter().zip(hits) {
-            samples[t][i].1 = hit;
+        scratch.rays.clear();
+        scratch
+            .rays
+            .extend(scratch.order.iter().map(|&(t, i)| tiles[t].0[i].0));
+        scratch.hits.clear();
+        scratch.hits.resize(scratch.rays.len(), None);
+        self.query
+            .closest_hits(&scratch.rays, &mut scratch.hits, &mut primary);
+        for (&(t, i), hit) in scratch.order.iter().zip(&scratch.hits) {
+            tiles[t].0[i].1 = *hit;
         }
         progress(unit.len() as u64);
         let mid = Instant::now();
         let mut shadow = TraceStats::default();
-        let mut geoms: Vec<Vec<SampleGeom>> = Vec::with_capacity(unit.len());
-        let mut shadow_rays = Vec::new();
-        let mut waiting = Vec::new();
-        for (t, tile_samples) in samples.iter().enumerate() {
-            let mut g = Vec::with_capacity(tile_samples.len());
-            for (i, (ray, hit)) in tile_samples.iter().enumerate() {
+        scratch.shadow_rays.clear();
+        scratch.waiting.clear();
+        for (t, (samples, geoms)) in tiles.iter_mut().enumerate() {
+            geoms.reserve_exact(samples.len());
+            for (i, (ray, hit)) in samples.iter().enumerate() {
                 let (geom, shadow_ray) = self.sample_geometry(ray, hit.as_ref());
                 if let Some(s) = shadow_ray {
-                    shadow_rays.push(s);
-                    waiting.push((t, i));
+                    scratch.shadow_rays.push(s);
+                    scratch.waiting.push((t, i));
                 }
-                g.push(geom);
+                geoms.push(geom);
             }
-            geoms.push(g);
         }
-        let mut blocked = vec![false; shadow_rays.len()];
-        self.query.any_hits(&shadow_rays, &mut blocked, &mut shadow);
-        for (&(t, i), blocked) in waiting.iter().zip(blocked) {
-            geoms[t][i].set_lit(!blocked);
+        scratch.blocked.clear();
+        scratch.blocked.resize(scratch.shadow_rays.len(), false);
+        self.query
+            .any_hits(&scratch.shadow_rays, &mut scratch.blocked, &mut shadow);
+        for (&(t, i), &blocked) in scratch.waiting.iter().zip(&scratch.blocked) {
+            tiles[t].1[i].set_lit(!blocked);
         }
         progress(unit.len() as u64);
         let end = Instant::now();
         TracedUnit {
-            tiles: samples.into_iter().zip(geoms).collect(),
+            tiles,
             primary,
             shadow,
             busy: [(mid - start).as_secs_f64(), (end - mid).as_secs_f64()],
