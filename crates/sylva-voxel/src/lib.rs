@@ -1,4 +1,6 @@
-//! Voxelization (000 §4.2, SPEC §1): a model's triangles become the LB density grid.
+//! Voxelization (000 §4.2, SPEC §1): a model's triangles become the LB density grid. This
+//! crate owns that step and nothing else: models come from `sylva-geom`, the grid type from
+//! `sylva-lb`.
 //!
 //! Cubic cells cover the model's bounding box, `N` sites along its longest edge; each cell is
 //! refined into 3 × 3 × 3 sub-cells and a sub-cell counts when a triangle meets it (exact
