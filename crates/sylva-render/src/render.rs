@@ -316,7 +316,7 @@ pub struct Renderer<'a> {
 
 impl<'a> Renderer<'a> {
     /// `query` traces `scene` (its instances in the scene's order); `light` gives the
-    /// indirect light; `materials` are the scene's, decoded ([`shade_materials`]); `to_sun`
+    /// indirect light; `materials` are the scene's, decoded ([`crate::shade::shade_materials`]); `to_sun`
     /// the unit vector towards the sun; `sun_colour` its linear RGB (luminance 1 for 6500 K).
     pub fn new(
         scene: &'a Scene,

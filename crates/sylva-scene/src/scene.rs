@@ -1,4 +1,4 @@
-//! Scene files (TOML) and built scenes.
+//! Scene files (TOML) and building them into a [`sylva_geom::Scene`].
 //!
 //! A [`SceneDesc`] is a parsed and checked scene file (no geometry yet); [`SceneDesc::build`]
 //! generates each unique model once and places the instances, which only reference models:
