@@ -410,7 +410,10 @@ def scene_markdown(r):
         "",
         f"Best constant ambient on plant pixels: c = {fmt(f['ambient_c'], 4)} "
         f"(sylva's `--mode ambient` matched c = {fmt(f['sylva_matched_c'], 4)}); "
-        f"best `--indirect` = {fmt(f['indirect'], 4)} (used: {s['indirect']}).",
+        f"best `--indirect` = {fmt(f['indirect'], 4)} (used: {s['indirect']}). "
+        f"Difference image: full red/blue at ± {fmt(r['difference_scale']['luminance'], 4)} "
+        f"luminance ({r['difference_scale']['multiple_of_plant_ref_mean']:g} × the reference's "
+        "mean plant luminance).",
         "",
     ]
     return "\n".join(lines)
@@ -632,8 +635,8 @@ def main(argv=None):
     p.add_argument(
         "--diff-scale",
         type=float,
-        default=1.0,
-        help="the difference image saturates at ± this × the reference's mean plant luminance (1)",
+        default=2.0,
+        help="the difference image saturates at ± this × the reference's mean plant luminance (2)",
     )
     a = p.parse_args(argv)
     if a.spp < 1 or a.rpp < 1:
