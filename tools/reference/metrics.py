@@ -135,3 +135,15 @@ def compare(test, ref_a, ref_b, mask):
     if mse > 0.0:
         out["noise_share"] = min(render_noise_var / 2.0 / mse, 1.0)
     return {k: (_finite_or_none(v) if k != "pixels" else v) for k, v in out.items()}
+
+
+def channel_ratios(test_rgb, ref_rgb, mask):
+    """Mean of each colour channel of `test_rgb` over that of `ref_rgb` on `mask` (R, G, B),
+    None for a channel whose reference mean is zero or a class without pixels: shows a
+    colour shift (e.g. a per-colour transmission) that luminance alone hides."""
+    t = np.asarray(test_rgb, dtype=np.float64)[..., :3][mask]
+    r = np.asarray(ref_rgb, dtype=np.float64)[..., :3][mask]
+    if t.shape[0] == 0:
+        return [None, None, None]
+    tm, rm = t.mean(axis=0), r.mean(axis=0)
+    return [float(a / b) if b > 0 else None for a, b in zip(tm, rm)]

@@ -390,19 +390,20 @@ def scene_markdown(r):
         f"{ref['spp']} spp × seeds {ref['seeds'][0]} and {ref['seeds'][1]} "
         f"({ref['seconds'][0]:.0f} s + {ref['seconds'][1]:.0f} s), export {ref['export_hash']}.",
         "",
-        "| class | pixels | ref. mean L | sylva / ref. | rel. RMSE | ref. noise | "
+        "| class | pixels | ref. mean L | sylva / ref. | (R, G, B) | rel. RMSE | ref. noise | "
         "best ambient rel. RMSE | best LB rel. RMSE |",
-        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
+        "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |",
     ]
     for name in metrics.CLASSES:
         c = r["classes"][name]
         full, amb, lb = c["sylva"], c.get("ambient_fit"), c.get("lb_fit")
         if full["pixels"] == 0:
-            lines.append(f"| {name} | 0 | | | | | | |")
+            lines.append(f"| {name} | 0 | | | | | | | |")
             continue
         lines.append(
             f"| {name} | {full['pixels']} ({pct(c['fraction'])}) | {fmt(full['ref_mean'], 4)} "
-            f"| {fmt(full['ratio'])} | {pct(full['rel_rmse'])} | {pct(full['ref_noise'])} "
+            f"| {fmt(full['ratio'])} | {', '.join(fmt(x, 2) for x in c['ratio_rgb'])} "
+            f"| {pct(full['rel_rmse'])} | {pct(full['ref_noise'])} "
             f"| {pct(amb['rel_rmse']) if amb else ''} | {pct(lb['rel_rmse']) if lb else ''} |"
         )
     f = r["fits"]
@@ -425,7 +426,8 @@ def results_markdown(results, command):
         "",
         f"`{command}`",
         "",
-        "Luminance per pixel class (linear images). *sylva / ref.*: ratio of mean luminances. "
+        "Luminance per pixel class (linear images). *sylva / ref.*: ratio of mean luminances "
+        "(and of each colour channel's mean). "
         "*rel. RMSE*: RMS of the per-pixel luminance difference over the reference's mean in "
         "that class, with the reference's noise subtracted. *ref. noise*: one reference "
         "render's RMS noise over that mean (the comparison uses the mean of two, so half its "
@@ -536,7 +538,11 @@ def run_scene(a, mitsuba, scene):
     class_rows = {}
     for name in metrics.CLASSES:
         m = classes[name]
-        row = {"fraction": float(m.mean()), "sylva": metrics.compare(L["full"], ra, rb, m)}
+        row = {
+            "fraction": float(m.mean()),
+            "sylva": metrics.compare(L["full"], ra, rb, m),
+            "ratio_rgb": metrics.channel_ratios(sy["full"], ref_mean_rgb, m),
+        }
         if name.startswith("plant"):
             for k, img in fitted.items():
                 row[k] = metrics.compare(metrics.luminance(img), ra, rb, m)

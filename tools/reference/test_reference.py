@@ -124,6 +124,23 @@ class Compare(unittest.TestCase):
             )
 
 
+class ChannelRatios(unittest.TestCase):
+    def test_per_channel_mean_ratios_on_the_mask(self):
+        ref = np.ones((2, 2, 3)) * [0.2, 0.4, 0.5]
+        test = ref * [1.0, 2.0, 0.5]
+        test[1, 1] = 100.0  # outside the mask
+        mask = np.array([[True, True], [True, False]])
+        np.testing.assert_allclose(metrics.channel_ratios(test, ref, mask), [1.0, 2.0, 0.5])
+
+    def test_black_channel_and_empty_mask(self):
+        ref = np.zeros((1, 1, 3))
+        ref[..., 1] = 1.0
+        self.assertEqual(metrics.channel_ratios(ref, ref, np.ones((1, 1), bool)), [None, 1.0, None])
+        self.assertEqual(
+            metrics.channel_ratios(ref, ref, np.zeros((1, 1), bool)), [None, None, None]
+        )
+
+
 class FitScale(unittest.TestCase):
     def test_recovers_the_scale_of_an_exact_model(self):
         rng = np.random.default_rng(3)
