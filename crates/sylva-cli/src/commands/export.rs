@@ -29,8 +29,8 @@ pub struct ExportArgs {
     /// rays_per_pixel; `mitsuba -Dspp=N` overrides it when rendering).
     #[arg(long, value_name = "N")]
     pub spp: Option<u32>,
-    /// Mitsuba: the path integrator's max_depth (-1: unbounded; a pass through a leaf's
-    /// transparent texel counts as a bounce).
+    /// Mitsuba: the volpath integrator's max_depth in scattering events (-1: unbounded; passes
+    /// through a leaf's transparent texels do not count).
     #[arg(
         long,
         default_value_t = 64,
