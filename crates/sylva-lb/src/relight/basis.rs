@@ -160,8 +160,9 @@ where
         });
     }
     if options.ambient == Ambient::Sum {
+        let all: Vec<(usize, f64)> = (1..BASES).map(|j| (j, 1.0)).collect();
         for c in 0..3 {
-            channels[c] = sum_bases(&channels, c, dims.sites());
+            channels[c] = combine(&channels, &all, c, dims.sites());
         }
     }
     let set = BasisSet {
@@ -200,18 +201,19 @@ fn check_result(basis: usize, dims: Dims, light: &LightingGrid) -> Result<(), Re
     Ok(())
 }
 
-/// `Σ_{j≥1} B_j` in colour `c`, accumulated in f64 in basis order.
-fn sum_bases(channels: &[Vec<f32>], c: usize, sites: usize) -> Vec<f32> {
+/// `Σ_terms w_j B_j` in colour `c` at every site, accumulated in f64 per site in term order
+/// (so the result does not depend on the thread count).
+fn combine(channels: &[Vec<f32>], terms: &[(usize, f64)], c: usize, sites: usize) -> Vec<f32> {
     let mut out = vec![0.0f32; sites];
     out.par_chunks_mut(CHUNK)
         .enumerate()
         .for_each(|(k, chunk)| {
             let base = k * CHUNK;
             let mut acc = vec![0.0f64; chunk.len()];
-            for j in 1..BASES {
+            for &(j, w) in terms {
                 let src = &channels[3 * j + c][base..base + chunk.len()];
                 for (a, &v) in acc.iter_mut().zip(src) {
-                    *a += v as f64;
+                    *a += w * v as f64;
                 }
             }
             for (o, a) in chunk.iter_mut().zip(&acc) {
@@ -302,25 +304,7 @@ impl BasisSet {
             (3 * sites * 4) as u64,
         )?;
         let terms: Vec<(usize, f64)> = weights.terms().collect();
-        let colours = std::array::from_fn(|c| {
-            let mut out = vec![0.0f32; sites];
-            out.par_chunks_mut(CHUNK)
-                .enumerate()
-                .for_each(|(k, chunk)| {
-                    let base = k * CHUNK;
-                    let mut acc = vec![0.0f64; chunk.len()];
-                    for &(j, w) in &terms {
-                        let src = &self.channels[3 * j + c][base..base + chunk.len()];
-                        for (a, &v) in acc.iter_mut().zip(src) {
-                            *a += w * v as f64;
-                        }
-                    }
-                    for (o, a) in chunk.iter_mut().zip(&acc) {
-                        *o = *a as f32;
-                    }
-                });
-            out
-        });
+        let colours = std::array::from_fn(|c| combine(&self.channels, &terms, c, sites));
         Ok(LightingGrid {
             dims: self.dims,
             bounds: self.bounds,
