@@ -1,10 +1,13 @@
-//! Relighting (paper 004, SPEC §3) on the real solver: base solutions, their combinations
-//! and their file.
+//! Relighting (paper 004, SPEC §3) on the real solver: base solutions, their combinations,
+//! their file, and their compression.
 
 use std::sync::OnceLock;
 
 use sylva_lb::lattice::{unit, Q};
-use sylva_lb::relight::{solve_basis, Ambient, BasisOptions, BasisSet, BasisWeights, RelightError};
+use sylva_lb::relight::{
+    compress, relit_error, sky_directions, solve_basis, Ambient, BasisOptions, BasisSet,
+    BasisWeights, Codec, CompressTarget, Precision, Region, RelightError,
+};
 use sylva_lb::shapes::Shape;
 use sylva_lb::{
     solve_lighting, Boundary, DensityGrid, Dims, Element, GridFile, LightingGrid, MediumParams,
@@ -174,12 +177,7 @@ fn free_space_is_one_and_ambient_adds_its_scale() {
             assert!(set.channel(j, c).iter().all(|&v| (v - want).abs() < 1e-5));
         }
     }
-    for d in [
-        [0.3, -0.9, 0.2],
-        [-0.6, -0.1, 0.7],
-        [0.0, 1.0, 0.0],
-        [0.0, -1.0, 0.0],
-    ] {
+    for d in sky_directions(7).into_iter().chain([[0.0, 1.0, 0.0]]) {
         for w in [
             BasisWeights::exact(d).unwrap(),
             BasisWeights::three_basis(d).unwrap(),
@@ -211,12 +209,25 @@ fn results_do_not_depend_on_the_thread_count() {
                 let lit = set
                     .relight(&BasisWeights::exact([0.2, -0.9, 0.1]).unwrap())
                     .unwrap();
-                (set, lit)
+                let region = Region::near_medium(&grid(), 1);
+                let target = CompressTarget::new(Codec::PcaHaar {
+                    rank: 6,
+                    threshold: 2e-3,
+                });
+                let small = compress(&set, &region, &target).unwrap();
+                let w: Vec<BasisWeights> = sky_directions(5)
+                    .iter()
+                    .map(|&d| BasisWeights::three_basis(d).unwrap())
+                    .collect();
+                let err = relit_error(&set, &small, &region, &w, 3000, 7).unwrap();
+                (set, lit, small, err)
             })
     };
     let (a, b) = (run(1), run(2));
     assert!(a.0 == b.0, "basis sets differ");
     assert!(a.1 == b.1, "relit grids differ");
+    assert!(a.2 == b.2, "compressed sets differ");
+    assert_eq!(a.3, b.3);
 }
 
 #[test]
@@ -401,4 +412,226 @@ fn basis_files_round_trip_and_bad_ones_are_refused() {
         e.to_string().contains("bad.sbasis") && e.to_string().contains("B3 green"),
         "{e}"
     );
+}
+
+/// Random points (grid coordinates) in a region, deterministic.
+fn points(region: &Region, n: usize) -> Vec<[f32; 3]> {
+    let sites = region.sites();
+    let mut r = sylva_core::SplitMix64::new(11);
+    (0..n)
+        .map(|_| {
+            let s = sites[(r.next_u64() % sites.len() as u64) as usize];
+            let (x, y, z) = region.dims.coords(s);
+            [x, y, z].map(|c| c as f32 + r.next_f64() as f32)
+        })
+        .collect()
+}
+
+fn combinations(n: usize) -> Vec<BasisWeights> {
+    sky_directions(n)
+        .iter()
+        .enumerate()
+        .map(|(i, &d)| {
+            let w = if i % 2 == 0 {
+                BasisWeights::three_basis(d)
+            } else {
+                BasisWeights::exact(d)
+            };
+            w.unwrap().with_ambient(0.2 * i as f64).unwrap()
+        })
+        .collect()
+}
+
+#[test]
+fn lossless_settings_round_trip() {
+    let set = solved();
+    let all = Region::all(set.dims);
+    for codec in [
+        Codec::Haar { threshold: 0.0 },
+        Codec::Pca { rank: 57 },
+        Codec::PcaHaar {
+            rank: 57,
+            threshold: 0.0,
+        },
+        Codec::ColourHaar { threshold: 0.0 },
+    ] {
+        let target = CompressTarget {
+            codec,
+            precision: Precision::F32,
+            far_threshold: 0.0,
+        };
+        let c = compress(set, &all, &target).unwrap();
+        let back = c.decompress().unwrap();
+        let scale = |ch: usize| if ch < 3 { 18.0 } else { 1.0 };
+        for (ch, (a, b)) in back.channels().iter().zip(set.channels()).enumerate() {
+            for (x, y) in a.iter().zip(b) {
+                assert!(
+                    (x - y).abs() < 2e-5 * scale(ch),
+                    "{codec:?} channel {ch}: {x} vs {y}"
+                );
+            }
+        }
+        for w in combinations(6) {
+            let pw = c.project(&w);
+            for g in points(&all, 300) {
+                let (x, y) = (c.sample_grid(g, &pw), set.sample(g, &w));
+                for k in 0..3 {
+                    assert!(
+                        (x[k] - y[k]).abs() < 1e-4,
+                        "{codec:?} at {g:?}: {x:?} vs {y:?}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn footprint_decode_equals_full_decode() {
+    let set = solved();
+    let region = Region::near_medium(&grid(), 1);
+    for (codec, precision) in [
+        (Codec::Haar { threshold: 3e-3 }, Precision::F16),
+        (Codec::Haar { threshold: 3e-3 }, Precision::Packed),
+        (Codec::Pca { rank: 5 }, Precision::F16),
+        (
+            Codec::PcaHaar {
+                rank: 5,
+                threshold: 3e-3,
+            },
+            Precision::F32,
+        ),
+        (Codec::ColourHaar { threshold: 3e-3 }, Precision::Packed),
+    ] {
+        let target = CompressTarget {
+            precision,
+            ..CompressTarget::new(codec)
+        };
+        let c = compress(set, &region, &target).unwrap();
+        let full = c.decompress().unwrap();
+        for w in combinations(4) {
+            let pw = c.project(&w);
+            // Anywhere: the footprint kernel against the decoded block.
+            for g in points(&Region::all(set.dims), 400) {
+                let (a, b) = (c.sample_grid(g, &pw), c.sample_grid_by_full_decode(g, &pw));
+                for k in 0..3 {
+                    assert!(
+                        (a[k] - b[k]).abs() < 1e-5,
+                        "{codec:?} {g:?}: {a:?} vs {b:?}"
+                    );
+                }
+            }
+            // At sites: the whole decoded set (every site from the block that owns it),
+            // relit uncompressed, equals the lookup relit in the reduced space.
+            for s in (0..set.dims.sites()).step_by(7) {
+                let (x, y, z) = set.dims.coords(s);
+                let g = [x as f32, y as f32, z as f32];
+                let (a, b) = (c.sample_grid(g, &pw), full.sample(g, &w));
+                for k in 0..3 {
+                    assert!(
+                        close(a[k], b[k], 1e-4, 1.0),
+                        "{codec:?} {g:?}: {a:?} vs {b:?}"
+                    );
+                }
+            }
+        }
+        // Model space goes through the same placement as the uncompressed set.
+        let p = [0.1, -0.3, 0.25];
+        let w = BasisWeights::exact([0.1, -1.0, 0.2]).unwrap();
+        let g = set.placement().grid_coords(p);
+        assert_eq!(
+            c.sample(p, &c.project(&w)),
+            c.sample_grid(g, &c.project(&w))
+        );
+    }
+}
+
+#[test]
+fn error_falls_with_rank_and_rises_with_threshold() {
+    let set = solved();
+    let region = Region::near_medium(&grid(), 1);
+    let w: Vec<BasisWeights> = sky_directions(12)
+        .iter()
+        .map(|&d| BasisWeights::three_basis(d).unwrap())
+        .collect();
+    let error = |codec| {
+        let c = compress(set, &region, &CompressTarget::new(codec)).unwrap();
+        let e = relit_error(set, &c, &region, &w, 4000, 3).unwrap();
+        (e.rmse, c.bytes())
+    };
+    let ranks: Vec<(f64, u64)> = [1, 2, 4, 8, 16]
+        .map(|rank| error(Codec::Pca { rank }))
+        .to_vec();
+    for p in ranks.windows(2) {
+        assert!(p[1].0 < p[0].0, "PCA rank: {ranks:?}");
+        assert!(p[1].1 > p[0].1, "PCA bytes: {ranks:?}");
+    }
+    let haar: Vec<(f64, u64)> = [0.0, 1e-3, 4e-3, 1.6e-2]
+        .map(|threshold| error(Codec::Haar { threshold }))
+        .to_vec();
+    for p in haar.windows(2) {
+        assert!(p[1].0 > p[0].0, "Haar threshold: {haar:?}");
+        assert!(p[1].1 < p[0].1, "Haar bytes: {haar:?}");
+    }
+    // f16 alone (threshold 0) is far below 1 % of free-space light.
+    assert!(haar[0].0 < 1e-3, "{haar:?}");
+    // Decorrelating the colours first stores fewer bytes at the same threshold; packing
+    // coefficients into 16 bits fewer still, at a small cost in error.
+    let packed = |codec| {
+        let target = CompressTarget {
+            precision: Precision::Packed,
+            ..CompressTarget::new(codec)
+        };
+        let c = compress(set, &region, &target).unwrap();
+        (
+            relit_error(set, &c, &region, &w, 4000, 3).unwrap().rmse,
+            c.bytes(),
+        )
+    };
+    let colour = error(Codec::ColourHaar { threshold: 4e-3 });
+    assert!(colour.1 < haar[2].1, "{colour:?} vs {haar:?}");
+    let colour_packed = packed(Codec::ColourHaar { threshold: 4e-3 });
+    assert!(
+        colour_packed.1 < colour.1,
+        "{colour_packed:?} vs {colour:?}"
+    );
+    assert!(
+        colour_packed.0 < 2.0 * colour.0,
+        "{colour_packed:?} vs {colour:?}"
+    );
+}
+
+#[test]
+fn bad_targets_are_refused() {
+    let set = solved();
+    let region = Region::all(set.dims);
+    for codec in [
+        Codec::Pca { rank: 0 },
+        Codec::Pca { rank: 58 },
+        Codec::Haar {
+            threshold: f64::NAN,
+        },
+        Codec::PcaHaar {
+            rank: 3,
+            threshold: -1.0,
+        },
+    ] {
+        let e = compress(set, &region, &CompressTarget::new(codec)).unwrap_err();
+        assert!(matches!(e, RelightError::Target(_)), "{codec:?}: {e}");
+    }
+    let packed_pca = CompressTarget {
+        precision: Precision::Packed,
+        ..CompressTarget::new(Codec::Pca { rank: 4 })
+    };
+    assert!(matches!(
+        compress(set, &region, &packed_pca),
+        Err(RelightError::Target(_))
+    ));
+    let other = Region::all(Dims::cube(5).unwrap());
+    assert!(matches!(
+        compress(set, &other, &CompressTarget::new(Codec::Pca { rank: 2 })),
+        Err(RelightError::Mismatch(_))
+    ));
+    let empty = Region::near_medium(&DensityGrid::empty(set.dims), 1);
+    assert!(compress(set, &empty, &CompressTarget::new(Codec::Pca { rank: 2 })).is_err());
 }

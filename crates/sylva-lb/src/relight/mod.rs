@@ -9,6 +9,8 @@
 //! * [`footprint`]: model space to grid coordinates, and the 2×2×2 sites of a lookup.
 //! * [`region`]: the sites where light matters (in and near the medium), where compression
 //!   error is measured and where it is spent.
+//! * [`compress`]: Haar wavelets on 4³ blocks, PCA across the 57 channels, and both combined,
+//!   with footprint decoding for trilinear lookups and relighting in the reduced space.
 //!
 //! **Normalisation.** [`BasisWeights::exact`] and [`BasisWeights::three_basis`] give weights of
 //! `B_1..B_18` that sum to 1. Each `B_j` holds exactly 1 at an unobstructed site (its boundary
@@ -18,6 +20,7 @@
 //! space. [`BasisWeights::free_space`] states the free-space value of any combination.
 
 pub mod basis;
+pub mod compress;
 pub mod footprint;
 pub mod polyhedron;
 pub mod region;
@@ -28,6 +31,10 @@ use thiserror::Error;
 
 pub use basis::{
     solve_basis, Ambient, BasisOptions, BasisProgress, BasisReport, BasisSet, BasisWeights,
+};
+pub use compress::{
+    compress, relit_error, sky_directions, Codec, CompressTarget, CompressedBasis, ErrorReport,
+    Precision, ProjectedWeights,
 };
 pub use footprint::{Footprint, Placement};
 pub use polyhedron::{exact_weights, face_hit, faces, DirectionError, Face, FaceHit};
@@ -124,4 +131,6 @@ pub enum RelightError {
     File(#[from] crate::GridFileError),
     #[error("{}: {what}", .path.display())]
     Format { path: PathBuf, what: String },
+    #[error("compression target: {0}")]
+    Target(String),
 }
