@@ -635,3 +635,19 @@ fn bad_targets_are_refused() {
     let empty = Region::near_medium(&DensityGrid::empty(set.dims), 1);
     assert!(compress(set, &empty, &CompressTarget::new(Codec::Pca { rank: 2 })).is_err());
 }
+
+#[test]
+#[should_panic(expected = "weights projected for a compressed set with another number of fields")]
+fn weights_of_another_compressed_set_are_refused() {
+    let set = solved();
+    let region = Region::near_medium(&grid(), 1);
+    let haar = compress(
+        set,
+        &region,
+        &CompressTarget::new(Codec::Haar { threshold: 1e-2 }),
+    )
+    .unwrap();
+    let pca = compress(set, &region, &CompressTarget::new(Codec::Pca { rank: 3 })).unwrap();
+    let w = haar.project(&BasisWeights::exact([0.0, -1.0, 0.0]).unwrap());
+    pca.sample_grid([3.0, 3.0, 3.0], &w);
+}

@@ -43,7 +43,7 @@ impl Region {
                 }
                 let c = [dims.coords(i).0, dims.coords(i).1, dims.coords(i).2][axis];
                 let lo = c.saturating_sub(margin);
-                let hi = (c + margin).min(n[axis] - 1);
+                let hi = c.saturating_add(margin).min(n[axis] - 1);
                 *m = (lo..=hi).any(|k| src[i - c * stride + k * stride]);
             }
         }

@@ -398,8 +398,9 @@ impl HaarFields {
         ((b[0] * self.blocks[1] + b[1]) * self.blocks[2] + b[2], o)
     }
 
-    /// Adds `Σ_terms w · field` interpolated at footprint `fp` to `out`. `terms` must be sorted
-    /// by field.
+    /// Adds `Σ_terms w · field` interpolated at footprint `fp` to `out`; `terms` sorted by
+    /// field (as [`super::ProjectedWeights`] holds them), so one pass over the block's counts
+    /// finds every field.
     #[inline]
     pub fn sample_into(&self, fp: &Footprint, terms: &[(u32, [f32; 3])], out: &mut [f32; 3]) {
         let (b, o) = self.block_of(fp.corner);

@@ -197,13 +197,28 @@ enum Store {
     Haar(HaarFields),
 }
 
-/// A combination projected onto a compressed set's fields: colour c of a lookup is
+/// A combination projected onto a compressed set's fields (made by
+/// [`CompressedBasis::project`]): colour c of a lookup is
 /// `constant[c] + Σ_terms weights[c] · field`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ProjectedWeights {
-    pub constant: [f32; 3],
+    /// Fields of the set it was projected for.
+    fields: usize,
+    constant: [f32; 3],
     /// `(field, per-colour weight)`, sorted by field, zero terms left out.
-    pub terms: Vec<(u32, [f32; 3])>,
+    terms: Vec<(u32, [f32; 3])>,
+}
+
+impl ProjectedWeights {
+    /// The part of the combination that does not vary over the grid (the mean's share).
+    pub fn constant(&self) -> [f32; 3] {
+        self.constant
+    }
+
+    /// `(field, per-colour weight)` of every field a lookup reads, sorted by field.
+    pub fn terms(&self) -> &[(u32, [f32; 3])] {
+        &self.terms
+    }
 }
 
 /// A compressed basis set.
@@ -349,6 +364,7 @@ impl CompressedBasis {
                     }
                 }
                 ProjectedWeights {
+                    fields: CHANNELS,
                     constant: [0.0; 3],
                     terms,
                 }
@@ -370,6 +386,7 @@ impl CompressedBasis {
                     }
                 }
                 ProjectedWeights {
+                    fields: *rank,
                     constant: constant.map(|v| v as f32),
                     terms: per_field
                         .iter()
@@ -383,9 +400,14 @@ impl CompressedBasis {
     }
 
     /// The relit light at grid coordinates `g` (in sites, clamped to the grid), decoding only
-    /// the footprint.
+    /// the footprint. `w` must come from this set's [`CompressedBasis::project`].
     #[inline]
     pub fn sample_grid(&self, g: [f32; 3], w: &ProjectedWeights) -> [f32; 3] {
+        assert_eq!(
+            w.fields,
+            self.fields(),
+            "weights projected for a compressed set with another number of fields"
+        );
         let fp = Footprint::at(self.dims, g);
         let mut out = w.constant;
         match &self.store {
