@@ -6,7 +6,7 @@
 //! | --- | --- | --- |
 //! | 0 | 8 | magic `SYLVAGRD` |
 //! | 8 | 4 | format version (1) |
-//! | 12 | 4 | kind: 1 density (channels density, wood fraction), 2 lighting (R, G, B) |
+//! | 12 | 4 | kind: 1 density (channels density, wood fraction), 2 lighting (R, G, B), 3 relighting basis (`B_0` R, G, B, …, `B_18` R, G, B: 57 channels, [`crate::relight::BasisSet`]) |
 //! | 16 | 12 | nx, ny, nz |
 //! | 28 | 4 | channel count |
 //! | 32 | 4 | element type: 1 f32, 2 f16 |
@@ -79,6 +79,7 @@ pub enum GridFileError {
 pub enum GridKind {
     Density,
     Lighting,
+    Basis,
 }
 
 impl GridKind {
@@ -86,18 +87,21 @@ impl GridKind {
         match self {
             GridKind::Density => 1,
             GridKind::Lighting => 2,
+            GridKind::Basis => 3,
         }
     }
     pub fn name(self) -> &'static str {
         match self {
             GridKind::Density => "density",
             GridKind::Lighting => "lighting",
+            GridKind::Basis => "relighting basis",
         }
     }
     pub fn channel_names(self) -> &'static [&'static str] {
         match self {
             GridKind::Density => &["density", "wood fraction"],
             GridKind::Lighting => &["red", "green", "blue"],
+            GridKind::Basis => &crate::relight::CHANNEL_NAMES,
         }
     }
 }
@@ -413,6 +417,7 @@ fn read_header(
     let kind = match u32_at(&h, 12) {
         1 => GridKind::Density,
         2 => GridKind::Lighting,
+        3 => GridKind::Basis,
         k => return Err(bad(format!("unknown grid kind {k}"))),
     };
     let (nx, ny, nz) = (u32_at(&h, 16), u32_at(&h, 20), u32_at(&h, 24));

@@ -2,8 +2,9 @@
 //!
 //! Owns the D3Q19 lattice, the collision matrix with Henyey-Greenstein anisotropy, the
 //! parameter presets, the solver (boundary shell, green/brown sites, convergence), the
-//! density and lighting grids with their file format and previews, and the built-in test
-//! shapes; [`LbSolver`] is the solver as a backend ([`CpuSolver`] here, the GPU one in
+//! density and lighting grids with their file format and previews, the built-in test
+//! shapes and relighting (paper 004: base solutions, the 32-face polyhedron, compression);
+//! [`LbSolver`] is the solver as a backend ([`CpuSolver`] here, the GPU one in
 //! `sylva-lb-gpu`).
 
 // Tests index lattice tables by direction and axis together.
@@ -19,6 +20,7 @@ pub mod kernel;
 pub mod lattice;
 pub mod params;
 pub mod preview;
+pub mod relight;
 pub mod shapes;
 pub mod solver;
 

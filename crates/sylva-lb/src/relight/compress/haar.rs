@@ -1,0 +1,533 @@
+//! Haar wavelets on blocks of 3³ sites stored as 4³ (004 §4.2).
+//!
+//! Block `(bx, by, bz)` owns the sites whose coordinates are `3 b .. 3 b + 2` on each axis and
+//! also stores their forward neighbours `3 b + 3` (clamped to the grid), so the 2×2×2
+//! footprint of a trilinear lookup whose lower corner it owns never leaves it: one block
+//! answers a lookup. 37 of its 64 values repeat a neighbour's; the paper accepts that for
+//! decoding speed.
+//!
+//! **Transform.** Two levels of the 3-D averaging Haar transform (`s = (a + b) / 2`,
+//! `d = (a - b) / 2` along each axis). Level 1 turns each of the 8 cells of 2³ sites into its
+//! mean and 7 details; level 2 does the same with the 8 cell means. Coefficient index 0 is
+//! the block mean, 1..=7 the level-2 details of type `t` (bits x, y, z: 4, 2, 1), and
+//! `8 + 7 c + (t - 1)` detail `t` of cell `c`. A site's value is
+//! `Σ_t H_t σ(t, cell) + Σ_{t≥1} h_{cell,t} σ(t, position in cell)` with
+//! `σ(t, q) = (-1)^popcount(t & q)`.
+//!
+//! **Threshold.** A coefficient is dropped when its RMS contribution over the block (`|H|` at
+//! level 2, `|h| / √8` at level 1, which touches 8 of the 64 sites) is below the threshold
+//! times the field's scale. Blocks that do not meet the region use the far threshold for
+//! their details (their mean is judged by the threshold).
+//!
+//! **Storage.** Per block a start into the coefficient arrays and per block and field a count
+//! (u8); per kept coefficient its index (u8) and value (f16 or f32), or, packed, both in one
+//! u16 (6-bit index, 10-bit value in steps of 1/511 of the field's largest coefficient).
+//!
+//! **Lookup.** The trilinear weights of a footprint and the Haar basis functions are both
+//! products over the axes, so the interpolated value is `Σ_k coef_k K[index_k]` with a
+//! 64-entry kernel `K` that depends only on the footprint: it is built once per lookup and
+//! serves every field of the block, and each kept coefficient then costs one multiply-add.
+
+// Coefficient, cell and axis loops index several tables at once; indices read clearer.
+#![allow(clippy::needless_range_loop)]
+
+use half::f16;
+use rayon::prelude::*;
+
+use super::{Precision, Values};
+use crate::grid::Dims;
+use crate::relight::footprint::Footprint;
+use crate::relight::region::Region;
+use crate::relight::RelightError;
+
+/// Sites a block owns per axis, and stores (with the forward neighbours).
+const OWN: usize = 3;
+const SIDE: usize = 4;
+/// Values (and coefficients) per block and field.
+pub const BLOCK_VALUES: usize = SIDE * SIDE * SIDE;
+
+/// Fields compressed blockwise with Haar wavelets.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HaarFields {
+    dims: Dims,
+    fields: usize,
+    /// Blocks per axis.
+    blocks: [usize; 3],
+    /// Per block, the index of its first coefficient; one more entry closes the last block.
+    starts: Vec<u32>,
+    /// Per block and field (`block * fields + field`): coefficients kept.
+    counts: Vec<u8>,
+    coefs: Coefs,
+}
+
+/// The kept coefficients, block after block, field after field.
+#[derive(Debug, Clone, PartialEq)]
+enum Coefs {
+    /// Per coefficient its index in the block (0..64), and its value.
+    Split { indices: Vec<u8>, values: Values },
+    /// Per coefficient one u16: the value in the top 10 bits (signed, in steps of the field's
+    /// `step`) and the index in the low 6.
+    Packed { words: Vec<u16>, steps: Vec<f32> },
+}
+
+/// Largest magnitude of a 10-bit signed value.
+const PACKED_MAX: f32 = 511.0;
+
+impl Coefs {
+    fn len(&self) -> usize {
+        match self {
+            Coefs::Split { indices, .. } => indices.len(),
+            Coefs::Packed { words, .. } => words.len(),
+        }
+    }
+
+    fn bytes(&self) -> u64 {
+        match self {
+            Coefs::Split { indices, values } => indices.len() as u64 + values.bytes(),
+            Coefs::Packed { words, steps } => (words.len() * 2 + steps.len() * 4) as u64,
+        }
+    }
+
+    /// Coefficient `i` of field `field`: its index and value.
+    #[inline]
+    fn get(&self, field: usize, i: usize) -> (usize, f32) {
+        match self {
+            Coefs::Split { indices, values } => (indices[i] as usize, values.get(i)),
+            Coefs::Packed { words, steps } => {
+                let w = words[i];
+                ((w & 63) as usize, ((w as i16) >> 6) as f32 * steps[field])
+            }
+        }
+    }
+
+    /// `Σ_i value_i · k[index_i]` over coefficients `range` of field `field`.
+    #[inline]
+    fn dot(&self, field: usize, range: std::ops::Range<usize>, k: &[f32; BLOCK_VALUES]) -> f32 {
+        match self {
+            Coefs::Split { indices, values } => {
+                let idx = &indices[range.clone()];
+                match values {
+                    Values::F32(v) => idx
+                        .iter()
+                        .zip(&v[range])
+                        .map(|(&i, &c)| c * k[i as usize])
+                        .sum(),
+                    Values::F16(v) => idx
+                        .iter()
+                        .zip(&v[range])
+                        .map(|(&i, &c)| f16::to_f32(c) * k[i as usize])
+                        .sum(),
+                }
+            }
+            Coefs::Packed { words, steps } => {
+                let sum: f32 = words[range]
+                    .iter()
+                    .map(|&w| ((w as i16) >> 6) as f32 * k[(w & 63) as usize])
+                    .sum();
+                sum * steps[field]
+            }
+        }
+    }
+}
+
+/// `σ(t, q) = (-1)^popcount(t & q)`.
+#[inline]
+fn sign(t: usize, q: usize) -> f32 {
+    if (t & q).count_ones().is_multiple_of(2) {
+        1.0
+    } else {
+        -1.0
+    }
+}
+
+/// Local index of site (x, y, z) in a block's 4³ values.
+#[inline]
+fn local(x: usize, y: usize, z: usize) -> usize {
+    (x * SIDE + y) * SIDE + z
+}
+
+/// Forward transform of one block (see the module docs for the coefficient order).
+fn forward(v: &[f32; BLOCK_VALUES]) -> [f32; BLOCK_VALUES] {
+    let mut out = [0.0f32; BLOCK_VALUES];
+    let mut means = [0.0f32; 8];
+    for (c, mean) in means.iter_mut().enumerate() {
+        let (cx, cy, cz) = (c >> 2, c >> 1 & 1, c & 1);
+        let cell: [f32; 8] = std::array::from_fn(|p| {
+            v[local(2 * cx + (p >> 2), 2 * cy + (p >> 1 & 1), 2 * cz + (p & 1))]
+        });
+        for t in 0..8 {
+            let h = cell
+                .iter()
+                .enumerate()
+                .map(|(p, &x)| sign(t, p) * x)
+                .sum::<f32>()
+                / 8.0;
+            if t == 0 {
+                *mean = h;
+            } else {
+                out[8 + 7 * c + t - 1] = h;
+            }
+        }
+    }
+    for t in 0..8 {
+        out[t] = means
+            .iter()
+            .enumerate()
+            .map(|(c, &m)| sign(t, c) * m)
+            .sum::<f32>()
+            / 8.0;
+    }
+    out
+}
+
+/// Inverse transform of one block from its sparse coefficients: the full decode.
+fn inverse(coefs: impl Iterator<Item = (usize, f32)>) -> [f32; BLOCK_VALUES] {
+    let mut dense = [0.0f32; BLOCK_VALUES];
+    for (k, v) in coefs {
+        dense[k] = v;
+    }
+    let mut out = [0.0f32; BLOCK_VALUES];
+    for x in 0..SIDE {
+        for y in 0..SIDE {
+            for z in 0..SIDE {
+                let c = (x >> 1) << 2 | (y >> 1) << 1 | z >> 1;
+                let p = (x & 1) << 2 | (y & 1) << 1 | z & 1;
+                let mut v = 0.0;
+                for t in 0..8 {
+                    v += dense[t] * sign(t, c);
+                }
+                for t in 1..8 {
+                    v += dense[8 + 7 * c + t - 1] * sign(t, p);
+                }
+                out[local(x, y, z)] = v;
+            }
+        }
+    }
+    out
+}
+
+/// Significance of coefficient `k`: its RMS contribution over the block, per unit value.
+#[inline]
+fn rms_factor(k: usize) -> f32 {
+    if k < 8 {
+        1.0
+    } else {
+        // Touches 8 of 64 sites: sqrt(8 / 64).
+        std::f32::consts::FRAC_1_SQRT_2 / 2.0
+    }
+}
+
+/// The kernel `K` of a footprint whose lower corner is at local coordinates `o` (each 0..=2)
+/// with fractions `t`: the interpolated value is `Σ_k coef_k K[k]`.
+pub(crate) fn kernel(o: [usize; 3], t: [f32; 3]) -> [f32; BLOCK_VALUES] {
+    // Per axis: e[bit] for level-2 functions, f[cell][bit] for level-1 functions.
+    let mut e = [[0.0f32; 2]; 3];
+    let mut f = [[[0.0f32; 2]; 2]; 3];
+    for a in 0..3 {
+        for (v, w) in [(o[a], 1.0 - t[a]), (o[a] + 1, t[a])] {
+            let (cell, pos) = (v >> 1, v & 1);
+            e[a][0] += w;
+            e[a][1] += w * if cell == 0 { 1.0 } else { -1.0 };
+            f[a][cell][0] += w;
+            f[a][cell][1] += w * if pos == 0 { 1.0 } else { -1.0 };
+        }
+    }
+    let mut k = [0.0f32; BLOCK_VALUES];
+    for t in 0..8 {
+        k[t] = e[0][t >> 2] * e[1][t >> 1 & 1] * e[2][t & 1];
+    }
+    for c in 0..8 {
+        let (cx, cy, cz) = (c >> 2, c >> 1 & 1, c & 1);
+        for t in 1..8 {
+            k[8 + 7 * c + t - 1] = f[0][cx][t >> 2] * f[1][cy][t >> 1 & 1] * f[2][cz][t & 1];
+        }
+    }
+    k
+}
+
+impl HaarFields {
+    /// Compresses `scales.len()` fields of a `dims` grid, `value(field, site)`, each with its
+    /// scale (the threshold is relative to it).
+    pub fn encode(
+        dims: Dims,
+        value: &(dyn Fn(usize, usize) -> f32 + Sync),
+        scales: &[f32],
+        threshold: f32,
+        far_threshold: f32,
+        region: &Region,
+        precision: Precision,
+    ) -> Result<HaarFields, RelightError> {
+        let n = [dims.nx, dims.ny, dims.nz];
+        // Lower corners run 0..=n-2; a block owns 3 of them per axis.
+        let blocks = n.map(|v| (v - 1).div_ceil(OWN));
+        let count = blocks[0] * blocks[1] * blocks[2];
+        let nf = scales.len();
+        // Worst case: every coefficient kept (index byte + value).
+        sylva_core::check_memory(
+            &format!("Haar compression of {nf} fields on a {dims} grid"),
+            (count * nf * BLOCK_VALUES * (1 + precision.size()) + count * (nf + 4)) as u64,
+        )?;
+        // Blocks in x-slabs, in parallel; slabs concatenated in order, so the result does not
+        // depend on the thread count.
+        // Per x-slab of blocks: counts, indices, values, and coefficients per block.
+        type Slab = (Vec<u8>, Vec<u8>, Vec<f32>, Vec<u32>);
+        let slabs: Vec<Slab> = (0..blocks[0])
+            .into_par_iter()
+            .map(|bx| {
+                let (mut counts, mut indices, mut values, mut sizes) =
+                    (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+                for by in 0..blocks[1] {
+                    for bz in 0..blocks[2] {
+                        let b = [bx, by, bz];
+                        let site = |x: usize, y: usize, z: usize| {
+                            let c = [x, y, z];
+                            let g: [usize; 3] =
+                                std::array::from_fn(|a| (OWN * b[a] + c[a]).min(n[a] - 1));
+                            dims.index(g[0], g[1], g[2])
+                        };
+                        let sites: [usize; BLOCK_VALUES] =
+                            std::array::from_fn(|i| site(i / 16, i / 4 % 4, i % 4));
+                        let near = sites.iter().any(|&s| region.contains(s));
+                        let t = if near { threshold } else { far_threshold };
+                        let mut size = 0u32;
+                        for (f, &scale) in scales.iter().enumerate() {
+                            let v = sites.map(|s| value(f, s));
+                            let coefs = forward(&v);
+                            // Far blocks drop details by the far threshold, but keep a mean
+                            // that the near threshold would keep.
+                            let limit = |k: usize| {
+                                if k == 0 { threshold } else { t }
+                            } * scale;
+                            let before = indices.len();
+                            for (k, &c) in coefs.iter().enumerate() {
+                                let keep = c != 0.0 && c.abs() * rms_factor(k) >= limit(k);
+                                if keep {
+                                    indices.push(k as u8);
+                                    values.push(c);
+                                }
+                            }
+                            let kept = indices.len() - before;
+                            counts.push(kept as u8);
+                            size += kept as u32;
+                        }
+                        sizes.push(size);
+                    }
+                }
+                (counts, indices, values, sizes)
+            })
+            .collect();
+        let total: u64 = slabs.iter().map(|s| s.1.len() as u64).sum();
+        if total > u32::MAX as u64 {
+            return Err(RelightError::Target(format!(
+                "{total} Haar coefficients kept: more than this format indexes (2³²); raise the threshold"
+            )));
+        }
+        let mut starts = Vec::with_capacity(count + 1);
+        let mut counts = Vec::with_capacity(count * nf);
+        let mut indices = Vec::with_capacity(total as usize);
+        let mut values = Vec::with_capacity(total as usize);
+        let mut at = 0u32;
+        for (c, i, v, sizes) in slabs {
+            for s in sizes {
+                starts.push(at);
+                at += s;
+            }
+            counts.extend(c);
+            indices.extend(i);
+            values.extend(v);
+        }
+        starts.push(at);
+        let coefs = match precision {
+            Precision::Packed => {
+                // Per field, steps of 1/511 of its largest kept coefficient.
+                let mut largest = vec![0.0f32; nf];
+                let mut at = 0usize;
+                for (i, &n) in counts.iter().enumerate() {
+                    let f = i % nf;
+                    for &v in &values[at..at + n as usize] {
+                        largest[f] = largest[f].max(v.abs());
+                    }
+                    at += n as usize;
+                }
+                let steps: Vec<f32> = largest
+                    .iter()
+                    .map(|&m| if m > 0.0 { m / PACKED_MAX } else { 1.0 })
+                    .collect();
+                let mut words = Vec::with_capacity(values.len());
+                let mut at = 0usize;
+                for (i, &n) in counts.iter().enumerate() {
+                    let step = steps[i % nf];
+                    for j in at..at + n as usize {
+                        let q = (values[j] / step).round().clamp(-PACKED_MAX, PACKED_MAX) as i16;
+                        words.push(((q << 6) as u16) | indices[j] as u16);
+                    }
+                    at += n as usize;
+                }
+                Coefs::Packed { words, steps }
+            }
+            _ => Coefs::Split {
+                indices,
+                values: Values::new(values, precision),
+            },
+        };
+        Ok(HaarFields {
+            dims,
+            fields: nf,
+            blocks,
+            starts,
+            counts,
+            coefs,
+        })
+    }
+
+    /// Bytes stored: starts, counts and coefficients.
+    pub fn bytes(&self) -> u64 {
+        (self.starts.len() * 4 + self.counts.len()) as u64 + self.coefs.bytes()
+    }
+
+    /// Coefficients kept, all blocks and fields.
+    pub fn coefficients(&self) -> usize {
+        self.coefs.len()
+    }
+
+    /// The block owning lower corner `corner`, and the corner's local coordinates.
+    #[inline]
+    fn block_of(&self, corner: [usize; 3]) -> (usize, [usize; 3]) {
+        let b = corner.map(|c| c / OWN);
+        let o = [0, 1, 2].map(|a| corner[a] - OWN * b[a]);
+        ((b[0] * self.blocks[1] + b[1]) * self.blocks[2] + b[2], o)
+    }
+
+    /// Adds `Σ_terms w · field` interpolated at footprint `fp` to `out`; `terms` sorted by
+    /// field (as [`super::ProjectedWeights`] holds them), so one pass over the block's counts
+    /// finds every field.
+    #[inline]
+    pub fn sample_into(&self, fp: &Footprint, terms: &[(u32, [f32; 3])], out: &mut [f32; 3]) {
+        let (b, o) = self.block_of(fp.corner);
+        let k = kernel(o, fp.t);
+        let counts = &self.counts[b * self.fields..(b + 1) * self.fields];
+        let mut pos = self.starts[b] as usize;
+        let mut next = 0usize;
+        for &(f, w) in terms {
+            let f = f as usize;
+            pos += counts[next..f].iter().map(|&c| c as usize).sum::<usize>();
+            let n = counts[f] as usize;
+            let v = self.coefs.dot(f, pos..pos + n, &k);
+            pos += n;
+            next = f + 1;
+            for c in 0..3 {
+                out[c] += w[c] * v;
+            }
+        }
+    }
+
+    /// The 4³ values block `b` stores for `field`, decoded in full (the reference for the
+    /// footprint lookup).
+    fn decode_block(&self, b: usize, field: usize) -> [f32; BLOCK_VALUES] {
+        let counts = &self.counts[b * self.fields..(b + 1) * self.fields];
+        let pos =
+            self.starts[b] as usize + counts[..field].iter().map(|&c| c as usize).sum::<usize>();
+        let n = counts[field] as usize;
+        inverse((pos..pos + n).map(|i| self.coefs.get(field, i)))
+    }
+
+    /// Field `field` at every site, each site taken from the block that owns it as a lower
+    /// corner (the last plane of each axis from the last block).
+    pub fn decode_field(&self, field: usize) -> Vec<f32> {
+        let d = self.dims;
+        let n = [d.nx, d.ny, d.nz];
+        let mut out = vec![0.0f32; d.sites()];
+        // Sites of block b along one axis: 3b ..= 3b + 2, and up to the grid's end for the last.
+        let span = |a: usize, b: usize| {
+            let hi = if b + 1 == self.blocks[a] {
+                n[a] - 1
+            } else {
+                OWN * b + OWN - 1
+            };
+            OWN * b..=hi
+        };
+        for bx in 0..self.blocks[0] {
+            for by in 0..self.blocks[1] {
+                for bz in 0..self.blocks[2] {
+                    let b = (bx * self.blocks[1] + by) * self.blocks[2] + bz;
+                    let block = self.decode_block(b, field);
+                    for x in span(0, bx) {
+                        for y in span(1, by) {
+                            for z in span(2, bz) {
+                                out[d.index(x, y, z)] =
+                                    block[local(x - OWN * bx, y - OWN * by, z - OWN * bz)];
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// `Σ_terms w · field` at footprint `fp` from fully decoded blocks (slow; tests).
+    pub fn sample_by_full_decode(
+        &self,
+        fp: &Footprint,
+        terms: &[(u32, [f32; 3])],
+        out: &mut [f32; 3],
+    ) {
+        let (b, o) = self.block_of(fp.corner);
+        let tri = fp.weights();
+        for &(f, w) in terms {
+            let block = self.decode_block(b, f as usize);
+            let v: f32 = (0..8)
+                .map(|k| {
+                    tri[k] * block[local(o[0] + (k >> 2), o[1] + (k >> 1 & 1), o[2] + (k & 1))]
+                })
+                .sum();
+            for c in 0..3 {
+                out[c] += w[c] * v;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pseudo_random(n: usize, seed: u64) -> Vec<f32> {
+        let mut r = sylva_core::SplitMix64::new(seed);
+        (0..n).map(|_| r.next_f64() as f32).collect()
+    }
+
+    #[test]
+    fn transform_round_trips_and_kernel_matches_full_decode() {
+        let v: [f32; 64] = pseudo_random(64, 5).try_into().unwrap();
+        let c = forward(&v);
+        let back = inverse(c.iter().copied().enumerate());
+        for i in 0..64 {
+            assert!(
+                (back[i] - v[i]).abs() < 1e-6,
+                "{i}: {} vs {}",
+                back[i],
+                v[i]
+            );
+        }
+        // A constant block is its mean alone.
+        let c = forward(&[0.75; 64]);
+        assert_eq!(c[0], 0.75);
+        assert!(c[1..].iter().all(|&x| x == 0.0));
+        // The kernel gives the trilinear interpolation of the decoded block.
+        let mut r = sylva_core::SplitMix64::new(9);
+        let c = forward(&v);
+        for _ in 0..200 {
+            let o = [0, 1, 2].map(|_| (r.next_u64() % 3) as usize);
+            let t = [0, 1, 2].map(|_| r.next_f64() as f32);
+            let k = kernel(o, t);
+            let fast: f32 = (0..64).map(|i| c[i] * k[i]).sum();
+            let fp = Footprint { corner: o, t };
+            let w = fp.weights();
+            let slow: f32 = (0..8)
+                .map(|j| w[j] * v[local(o[0] + (j >> 2), o[1] + (j >> 1 & 1), o[2] + (j & 1))])
+                .sum();
+            assert!((fast - slow).abs() < 1e-5, "{o:?} {t:?}: {fast} vs {slow}");
+        }
+    }
+}

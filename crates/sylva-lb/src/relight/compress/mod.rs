@@ -1,0 +1,573 @@
+//! Compression of a basis set (004 §4.2), with lookups that decode only a trilinear footprint.
+//!
+//! Every codec stores a few scalar *fields* over the grid and a linear map back to the 57
+//! channels: `channel ≈ mean + Σ_f component[channel][f] · field_f`.
+//!
+//! * [`Codec::Haar`]: the fields are the 57 channels themselves (identity map), each
+//!   compressed with Haar wavelets on 4³ blocks ([`haar`]).
+//! * [`Codec::Pca`]: the fields are the `rank` leading principal components across the
+//!   channels ([`pca`]), stored per site.
+//! * [`Codec::PcaHaar`]: the component fields, compressed with the Haar codec.
+//!
+//! **Relighting in the reduced space.** A combination `Σ_j w_j B_j` in colour c is a fixed
+//! linear function of the channels, so [`CompressedBasis::project`] turns the weights, once per
+//! instance and sun, into per-field weights and a constant ([`ProjectedWeights`]); a lookup is
+//! then the interpolated fields with non-zero weight and a dot product (`rank` fields for
+//! PCA; 3 per basis for Haar alone, one per colour).
+//!
+//! **Error.** [`relit_error`] compares relit lookups of the compressed set with the
+//! uncompressed ones at random points of a region (where light matters), over many sun
+//! directions; combinations normalised to free-space 1, so the RMSE is a fraction of
+//! unobstructed sunlight.
+
+pub mod haar;
+pub mod pca;
+
+use half::f16;
+use rayon::prelude::*;
+
+use self::haar::HaarFields;
+use super::basis::{BasisOptions, BasisSet, BasisWeights, AMBIENT_FREE_SPACE};
+use super::footprint::{Footprint, Placement};
+use super::region::Region;
+use super::{RelightError, CHANNELS};
+use crate::grid::{Bounds, Dims};
+use crate::params::MediumParams;
+
+/// How stored values are kept.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Precision {
+    F16,
+    F32,
+    /// Haar codecs only: a coefficient's index and value in 16 bits, the value in steps of
+    /// 1/511 of the largest coefficient of its field (2 bytes per coefficient instead of 3).
+    Packed,
+}
+
+impl Precision {
+    /// Bytes per stored value (a packed coefficient's index included).
+    pub fn size(self) -> usize {
+        match self {
+            Precision::F16 | Precision::Packed => 2,
+            Precision::F32 => 4,
+        }
+    }
+}
+
+/// Stored values in their precision.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Values {
+    F16(Vec<f16>),
+    F32(Vec<f32>),
+}
+
+impl Values {
+    fn new(v: Vec<f32>, precision: Precision) -> Values {
+        match precision {
+            Precision::F32 => Values::F32(v),
+            Precision::F16 | Precision::Packed => {
+                Values::F16(v.into_iter().map(f16::from_f32).collect())
+            }
+        }
+    }
+
+    #[inline]
+    fn get(&self, i: usize) -> f32 {
+        match self {
+            Values::F16(v) => v[i].to_f32(),
+            Values::F32(v) => v[i],
+        }
+    }
+
+    fn bytes(&self) -> u64 {
+        match self {
+            Values::F16(v) => v.len() as u64 * 2,
+            Values::F32(v) => v.len() as u64 * 4,
+        }
+    }
+}
+
+/// Which codec, and how hard it compresses.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Codec {
+    /// Haar wavelets on each of the 57 channels; `threshold` is the RMS error a dropped
+    /// coefficient may add to its block, as a fraction of the channel's free-space value.
+    Haar { threshold: f64 },
+    /// `rank` principal components per site.
+    Pca { rank: usize },
+    /// `rank` principal components, their fields compressed with Haar wavelets.
+    PcaHaar { rank: usize, threshold: f64 },
+    /// Per base solution, its three colours decorrelated (3 components each), then Haar
+    /// wavelets on the 57 fields: the minor colour components are small and mostly dropped.
+    ColourHaar { threshold: f64 },
+}
+
+/// What to compress to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CompressTarget {
+    pub codec: Codec,
+    pub precision: Precision,
+    /// The Haar threshold for the details of blocks that do not meet the region (their mean
+    /// is kept by the threshold as everywhere). Infinite: block means alone there.
+    pub far_threshold: f64,
+}
+
+impl CompressTarget {
+    /// `codec` with f16 values and block means alone away from the region.
+    pub fn new(codec: Codec) -> CompressTarget {
+        CompressTarget {
+            codec,
+            precision: Precision::F16,
+            far_threshold: f64::INFINITY,
+        }
+    }
+
+    fn validate(&self) -> Result<(), RelightError> {
+        let bad = |what: String| Err(RelightError::Target(what));
+        let threshold_ok = |t: f64| !t.is_nan() && t >= 0.0;
+        match self.codec {
+            Codec::Haar { threshold }
+            | Codec::PcaHaar { threshold, .. }
+            | Codec::ColourHaar { threshold }
+                if !(threshold.is_finite() && threshold >= 0.0) =>
+            {
+                return bad(format!(
+                    "Haar threshold {threshold} must be a finite number ≥ 0"
+                ))
+            }
+            Codec::Pca { rank } | Codec::PcaHaar { rank, .. }
+                if !(1..=CHANNELS).contains(&rank) =>
+            {
+                return bad(format!("rank {rank} must lie in 1..={CHANNELS}"))
+            }
+            _ => {}
+        }
+        if self.precision == Precision::Packed && matches!(self.codec, Codec::Pca { .. }) {
+            return bad("packed values need a Haar codec (PCA alone stores plain fields)".into());
+        }
+        if !threshold_ok(self.far_threshold) {
+            return bad(format!(
+                "far threshold {} must be ≥ 0 (infinite: block means alone)",
+                self.far_threshold
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// From fields back to channels.
+#[derive(Debug, Clone, PartialEq)]
+enum Transform {
+    /// Field `f` is channel `f`.
+    Identity,
+    /// `channel = mean + Σ_f components[channel · rank + f] · field_f`.
+    Linear {
+        mean: Vec<f32>,
+        components: Vec<f32>,
+        rank: usize,
+    },
+}
+
+/// Fields at every site, site-major (`site · fields + field`).
+#[derive(Debug, Clone, PartialEq)]
+struct DenseFields {
+    dims: Dims,
+    fields: usize,
+    values: Values,
+}
+
+impl DenseFields {
+    #[inline]
+    fn sample_into(&self, fp: &Footprint, terms: &[(u32, [f32; 3])], out: &mut [f32; 3]) {
+        let (sites, tri) = (fp.sites(self.dims), fp.weights());
+        for &(f, w) in terms {
+            let v: f32 = (0..8)
+                .map(|k| tri[k] * self.values.get(sites[k] * self.fields + f as usize))
+                .sum();
+            for c in 0..3 {
+                out[c] += w[c] * v;
+            }
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Store {
+    Dense(DenseFields),
+    Haar(HaarFields),
+}
+
+/// A combination projected onto a compressed set's fields (made by
+/// [`CompressedBasis::project`]): colour c of a lookup is
+/// `constant[c] + Σ_terms weights[c] · field`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProjectedWeights {
+    /// Fields of the set it was projected for.
+    fields: usize,
+    constant: [f32; 3],
+    /// `(field, per-colour weight)`, sorted by field, zero terms left out.
+    terms: Vec<(u32, [f32; 3])>,
+}
+
+impl ProjectedWeights {
+    /// The part of the combination that does not vary over the grid (the mean's share).
+    pub fn constant(&self) -> [f32; 3] {
+        self.constant
+    }
+
+    /// `(field, per-colour weight)` of every field a lookup reads, sorted by field.
+    pub fn terms(&self) -> &[(u32, [f32; 3])] {
+        &self.terms
+    }
+}
+
+/// A compressed basis set.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CompressedBasis {
+    pub dims: Dims,
+    pub bounds: Bounds,
+    /// The medium and schedule the basis set was solved with.
+    pub medium: MediumParams,
+    pub options: BasisOptions,
+    pub target: CompressTarget,
+    transform: Transform,
+    store: Store,
+}
+
+/// Compresses `basis`, spending the bits on `region` (see [`CompressTarget`]).
+pub fn compress(
+    basis: &BasisSet,
+    region: &Region,
+    target: &CompressTarget,
+) -> Result<CompressedBasis, RelightError> {
+    target.validate()?;
+    if region.dims != basis.dims {
+        return Err(RelightError::Mismatch(format!(
+            "region of a {} grid for a {} basis set",
+            region.dims, basis.dims
+        )));
+    }
+    let dims = basis.dims;
+    let far = target.far_threshold as f32;
+    let (transform, store) = match target.codec {
+        Codec::Haar { threshold } => {
+            let ch = basis.channels();
+            let scales: Vec<f32> = (0..CHANNELS)
+                .map(|c| {
+                    if c < 3 {
+                        AMBIENT_FREE_SPACE as f32
+                    } else {
+                        1.0
+                    }
+                })
+                .collect();
+            let haar = HaarFields::encode(
+                dims,
+                &|f, s| ch[f][s],
+                &scales,
+                threshold as f32,
+                far,
+                region,
+                target.precision,
+            )?;
+            (Transform::Identity, Store::Haar(haar))
+        }
+        Codec::Pca { .. } | Codec::PcaHaar { .. } | Codec::ColourHaar { .. } => {
+            let structure = match target.codec {
+                Codec::Pca { rank } | Codec::PcaHaar { rank, .. } => {
+                    pca::Structure::Global { rank }
+                }
+                _ => pca::Structure::PerBasis,
+            };
+            let p = pca::fit(basis, region, structure)?;
+            let rank = p.rank;
+            let store = match target.codec {
+                Codec::PcaHaar { threshold, .. } | Codec::ColourHaar { threshold } => {
+                    let coefs = &p.coefficients;
+                    Store::Haar(HaarFields::encode(
+                        dims,
+                        &|f, s| coefs[s * rank + f],
+                        &vec![1.0; rank],
+                        threshold as f32,
+                        far,
+                        region,
+                        target.precision,
+                    )?)
+                }
+                _ => Store::Dense(DenseFields {
+                    dims,
+                    fields: rank,
+                    values: Values::new(p.coefficients, target.precision),
+                }),
+            };
+            let transform = Transform::Linear {
+                mean: p.mean,
+                components: p.components,
+                rank,
+            };
+            (transform, store)
+        }
+    };
+    Ok(CompressedBasis {
+        dims,
+        bounds: basis.bounds,
+        medium: basis.medium.clone(),
+        options: basis.options,
+        target: *target,
+        transform,
+        store,
+    })
+}
+
+impl CompressedBasis {
+    /// Bytes of compressed data held (fields, their index, and the map back to channels).
+    pub fn bytes(&self) -> u64 {
+        let store = match &self.store {
+            Store::Dense(d) => d.values.bytes(),
+            Store::Haar(h) => h.bytes(),
+        };
+        let transform = match &self.transform {
+            Transform::Identity => 0,
+            Transform::Linear {
+                mean, components, ..
+            } => (mean.len() + components.len()) as u64 * 4,
+        };
+        store + transform
+    }
+
+    /// Fields stored (57 for Haar alone, the rank for PCA).
+    pub fn fields(&self) -> usize {
+        match &self.transform {
+            Transform::Identity => CHANNELS,
+            Transform::Linear { rank, .. } => *rank,
+        }
+    }
+
+    /// Haar coefficients kept (0 without Haar).
+    pub fn haar_coefficients(&self) -> usize {
+        match &self.store {
+            Store::Haar(h) => h.coefficients(),
+            Store::Dense(_) => 0,
+        }
+    }
+
+    /// Projects a combination onto the fields: once per instance and sun.
+    pub fn project(&self, weights: &BasisWeights) -> ProjectedWeights {
+        match &self.transform {
+            Transform::Identity => {
+                let mut terms = Vec::new();
+                for (j, w) in weights.terms() {
+                    for c in 0..3 {
+                        let mut v = [0.0f32; 3];
+                        v[c] = w as f32;
+                        terms.push(((3 * j + c) as u32, v));
+                    }
+                }
+                ProjectedWeights {
+                    fields: CHANNELS,
+                    constant: [0.0; 3],
+                    terms,
+                }
+            }
+            Transform::Linear {
+                mean,
+                components,
+                rank,
+            } => {
+                let mut constant = [0.0f64; 3];
+                let mut per_field = vec![[0.0f64; 3]; *rank];
+                for (j, w) in weights.terms() {
+                    for c in 0..3 {
+                        let ch = 3 * j + c;
+                        constant[c] += w * mean[ch] as f64;
+                        for (f, p) in per_field.iter_mut().enumerate() {
+                            p[c] += w * components[ch * rank + f] as f64;
+                        }
+                    }
+                }
+                ProjectedWeights {
+                    fields: *rank,
+                    constant: constant.map(|v| v as f32),
+                    terms: per_field
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, p)| p.iter().any(|&v| v != 0.0))
+                        .map(|(f, p)| (f as u32, p.map(|v| v as f32)))
+                        .collect(),
+                }
+            }
+        }
+    }
+
+    /// The relit light at grid coordinates `g` (in sites, clamped to the grid), decoding only
+    /// the footprint. `w` must come from this set's [`CompressedBasis::project`].
+    #[inline]
+    pub fn sample_grid(&self, g: [f32; 3], w: &ProjectedWeights) -> [f32; 3] {
+        assert_eq!(
+            w.fields,
+            self.fields(),
+            "weights projected for a compressed set with another number of fields"
+        );
+        let fp = Footprint::at(self.dims, g);
+        let mut out = w.constant;
+        match &self.store {
+            Store::Dense(d) => d.sample_into(&fp, &w.terms, &mut out),
+            Store::Haar(h) => h.sample_into(&fp, &w.terms, &mut out),
+        }
+        out
+    }
+
+    /// The relit light at model-space point `p` (placement as [`BasisSet::placement`]).
+    pub fn sample(&self, p: [f32; 3], w: &ProjectedWeights) -> [f32; 3] {
+        self.sample_grid(Placement::new(self.dims, self.bounds).grid_coords(p), w)
+    }
+
+    /// [`CompressedBasis::sample_grid`] through a full decode of the block (Haar) instead of
+    /// the footprint kernel: the reference the fast path is tested against.
+    pub fn sample_grid_by_full_decode(&self, g: [f32; 3], w: &ProjectedWeights) -> [f32; 3] {
+        match &self.store {
+            Store::Dense(_) => self.sample_grid(g, w),
+            Store::Haar(h) => {
+                let mut out = w.constant;
+                h.sample_by_full_decode(&Footprint::at(self.dims, g), &w.terms, &mut out);
+                out
+            }
+        }
+    }
+
+    /// Decodes every channel at every site (Haar: each site from the block that owns it).
+    pub fn decompress(&self) -> Result<BasisSet, RelightError> {
+        let n = self.dims.sites();
+        sylva_core::check_memory(
+            &format!("decompressing a basis set on a {} grid", self.dims),
+            BasisSet::memory_needed(self.dims) + (self.fields() * n * 4) as u64,
+        )?;
+        let fields: Vec<Vec<f32>> = (0..self.fields())
+            .into_par_iter()
+            .map(|f| match &self.store {
+                Store::Haar(h) => h.decode_field(f),
+                Store::Dense(d) => (0..n).map(|s| d.values.get(s * d.fields + f)).collect(),
+            })
+            .collect();
+        let channels = match &self.transform {
+            Transform::Identity => fields,
+            Transform::Linear {
+                mean,
+                components,
+                rank,
+            } => (0..CHANNELS)
+                .into_par_iter()
+                .map(|ch| {
+                    (0..n)
+                        .map(|s| {
+                            let mut v = mean[ch] as f64;
+                            for f in 0..*rank {
+                                v += components[ch * rank + f] as f64 * fields[f][s] as f64;
+                            }
+                            v as f32
+                        })
+                        .collect()
+                })
+                .collect(),
+        };
+        BasisSet::new(
+            self.dims,
+            self.bounds,
+            self.medium.clone(),
+            self.options,
+            channels,
+        )
+    }
+}
+
+/// Travel directions of `n` suns spread evenly over the sky (above the horizon, equal areas
+/// on the hemisphere, a Fibonacci spiral): light travelling down.
+pub fn sky_directions(n: usize) -> Vec<[f64; 3]> {
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    (0..n)
+        .map(|i| {
+            let y = (i as f64 + 0.5) / n as f64;
+            let r = (1.0 - y * y).sqrt();
+            let phi = golden * i as f64;
+            [-r * phi.cos(), -y, -r * phi.sin()]
+        })
+        .collect()
+}
+
+/// Relit error of a compressed set against the original.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ErrorReport {
+    /// Root mean square difference over points, colours and combinations.
+    pub rmse: f64,
+    /// Largest absolute difference.
+    pub max: f64,
+    /// Mean of the original values (for scale).
+    pub mean: f64,
+    /// Lookups compared (points × combinations).
+    pub lookups: usize,
+}
+
+/// Compares relit lookups of `compressed` with `original` at `points` random points whose
+/// lower corner lies in `region` (site plus a uniform offset in the cell), for every
+/// combination in `weights`. Deterministic for a given seed, whatever the thread count.
+pub fn relit_error(
+    original: &BasisSet,
+    compressed: &CompressedBasis,
+    region: &Region,
+    weights: &[BasisWeights],
+    points: usize,
+    seed: u64,
+) -> Result<ErrorReport, RelightError> {
+    if region.dims != original.dims || compressed.dims != original.dims {
+        return Err(RelightError::Mismatch(format!(
+            "grids differ: original {}, compressed {}, region {}",
+            original.dims, compressed.dims, region.dims
+        )));
+    }
+    let sites = region.sites();
+    if sites.is_empty() || points == 0 || weights.is_empty() {
+        return Err(RelightError::Mismatch(
+            "no points to compare: empty region, no points or no combinations".into(),
+        ));
+    }
+    let projected: Vec<ProjectedWeights> = weights.iter().map(|w| compressed.project(w)).collect();
+    const PER_CHUNK: usize = 1024;
+    let chunks = points.div_ceil(PER_CHUNK);
+    let parts: Vec<(f64, f64, f64, usize)> = (0..chunks)
+        .into_par_iter()
+        .map(|k| {
+            let mut rng = sylva_core::SplitMix64::for_chunk(seed, k as u64);
+            let (mut sq, mut max, mut sum, mut n) = (0.0f64, 0.0f64, 0.0f64, 0usize);
+            for _ in k * PER_CHUNK..((k + 1) * PER_CHUNK).min(points) {
+                let s = sites[(rng.next_u64() % sites.len() as u64) as usize];
+                let (x, y, z) = original.dims.coords(s);
+                let g = [x, y, z].map(|c| c as f32 + rng.next_f64() as f32);
+                for (w, p) in weights.iter().zip(&projected) {
+                    let a = original.sample(g, w);
+                    let b = compressed.sample_grid(g, p);
+                    for c in 0..3 {
+                        let d = (a[c] - b[c]) as f64;
+                        sq += d * d;
+                        max = max.max(d.abs());
+                        sum += a[c] as f64;
+                    }
+                    n += 1;
+                }
+            }
+            (sq, max, sum, n)
+        })
+        .collect();
+    let (mut sq, mut max, mut sum, mut n) = (0.0, 0.0f64, 0.0, 0);
+    for (a, b, c, d) in parts {
+        sq += a;
+        max = max.max(b);
+        sum += c;
+        n += d;
+    }
+    Ok(ErrorReport {
+        rmse: (sq / (3 * n) as f64).sqrt(),
+        max,
+        mean: sum / (3 * n) as f64,
+        lookups: n,
+    })
+}

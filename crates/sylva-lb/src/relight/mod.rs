@@ -1,0 +1,136 @@
+//! Relighting (paper 004 §3.1 and §4.2, SPEC §3): per density grid, 19 base solutions that
+//! any sun direction combines linearly, and their compression.
+//!
+//! * [`polyhedron`]: the 32-face polyhedron spanned by the 18 lattice directions, the face a
+//!   sun direction crosses with its barycentric weights, and the exact weights
+//!   `max(0, n_i · d)`.
+//! * [`basis`]: [`BasisSet`] (B_0 … B_18, three colours each), the driver that solves it through
+//!   any LB backend, [`BasisWeights`] and the uncompressed combination, and its file format.
+//! * [`footprint`]: model space to grid coordinates, and the 2×2×2 sites of a lookup.
+//! * [`region`]: the sites where light matters (in and near the medium), where compression
+//!   error is measured and where it is spent.
+//! * [`compress`]: Haar wavelets on 4³ blocks, PCA across the 57 channels, and both combined,
+//!   with footprint decoding for trilinear lookups and relighting in the reduced space.
+//!
+//! **Normalisation.** [`BasisWeights::exact`] and [`BasisWeights::three_basis`] give weights of
+//! `B_1..B_18` that sum to 1. Each `B_j` holds exactly 1 at an unobstructed site (its boundary
+//! light streams through unchanged), so these combinations are 1 in free space: the
+//! normalisation the renderer applies to a direct sun solve (unobstructed sun = 1). `B_0` holds
+//! 18 in free space; [`BasisWeights::with_ambient`]`(a)` adds `a / 18 · B_0`, i.e. `a` in free
+//! space. [`BasisWeights::free_space`] states the free-space value of any combination.
+
+pub mod basis;
+pub mod compress;
+pub mod footprint;
+pub mod polyhedron;
+pub mod region;
+
+use std::path::PathBuf;
+
+use thiserror::Error;
+
+pub use basis::{
+    solve_basis, Ambient, BasisOptions, BasisProgress, BasisReport, BasisSet, BasisWeights,
+};
+pub use compress::{
+    compress, relit_error, sky_directions, Codec, CompressTarget, CompressedBasis, ErrorReport,
+    Precision, ProjectedWeights,
+};
+pub use footprint::{Footprint, Placement};
+pub use polyhedron::{exact_weights, face_hit, faces, DirectionError, Face, FaceHit};
+pub use region::Region;
+
+/// Base solutions per grid: `B_0` (ambient) and `B_1..B_18`.
+pub const BASES: usize = crate::lattice::Q;
+/// Values per site of a basis set: 19 bases × 3 colours, channel `3 j + colour`.
+pub const CHANNELS: usize = 3 * BASES;
+
+/// Channel names of a basis grid file, in storage order.
+pub const CHANNEL_NAMES: [&str; CHANNELS] = [
+    "B0 red",
+    "B0 green",
+    "B0 blue",
+    "B1 red",
+    "B1 green",
+    "B1 blue",
+    "B2 red",
+    "B2 green",
+    "B2 blue",
+    "B3 red",
+    "B3 green",
+    "B3 blue",
+    "B4 red",
+    "B4 green",
+    "B4 blue",
+    "B5 red",
+    "B5 green",
+    "B5 blue",
+    "B6 red",
+    "B6 green",
+    "B6 blue",
+    "B7 red",
+    "B7 green",
+    "B7 blue",
+    "B8 red",
+    "B8 green",
+    "B8 blue",
+    "B9 red",
+    "B9 green",
+    "B9 blue",
+    "B10 red",
+    "B10 green",
+    "B10 blue",
+    "B11 red",
+    "B11 green",
+    "B11 blue",
+    "B12 red",
+    "B12 green",
+    "B12 blue",
+    "B13 red",
+    "B13 green",
+    "B13 blue",
+    "B14 red",
+    "B14 green",
+    "B14 blue",
+    "B15 red",
+    "B15 green",
+    "B15 blue",
+    "B16 red",
+    "B16 green",
+    "B16 blue",
+    "B17 red",
+    "B17 green",
+    "B17 blue",
+    "B18 red",
+    "B18 green",
+    "B18 blue",
+];
+
+#[derive(Debug, Error)]
+pub enum RelightError {
+    #[error(transparent)]
+    Direction(#[from] DirectionError),
+    #[error("basis weight w_{index} = {value} is not a finite number")]
+    Weight { index: usize, value: f64 },
+    #[error("boundary f_0 = {0} on the shell is not a combination of base solutions (they all have f_0 = 0)")]
+    RestBoundary(f32),
+    #[error(transparent)]
+    Params(#[from] crate::ParamError),
+    #[error(transparent)]
+    Memory(#[from] sylva_core::MemoryError),
+    #[error("solving base solution B_{basis}: {source}")]
+    Solve {
+        basis: usize,
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+    #[error("base solution B_{basis}: the solver returned {what}")]
+    SolverResult { basis: usize, what: String },
+    #[error("{0}")]
+    Mismatch(String),
+    #[error(transparent)]
+    File(#[from] crate::GridFileError),
+    #[error("{}: {what}", .path.display())]
+    Format { path: PathBuf, what: String },
+    #[error("compression target: {0}")]
+    Target(String),
+}
