@@ -3,8 +3,9 @@
 //!
 //! * [`pipeline`]: the pipeline as a library. [`load_scene`] (with a sun override),
 //!   [`PreparedScene::new`] (LB lighting of every model, cached, on any
-//!   [`sylva_lb::LbSolver`]; the kd-trees), [`PreparedScene::render`] (any camera, any image
-//!   region), [`tone_map_modes`] and [`write_images`]; progress through [`Progress`].
+//!   [`sylva_lb::LbSolver`]; the kd-trees, traced on the CPU or a GPU: [`Tracer`]),
+//!   [`PreparedScene::render`] (any camera, any image region), [`tone_map_modes`] and
+//!   [`write_images`]; progress through [`Progress`].
 //! * [`lighting`]: per model, the LB lighting grid (voxelize, solve, cache on disk) and its
 //!   trilinear lookup in model space.
 //! * [`indirect`]: [`IndirectLight`], the light scattered in the canopy as shading needs it,
@@ -29,7 +30,7 @@ pub mod tonemap;
 pub use indirect::{IndirectLight, ModelGridLight, NoIndirectLight};
 pub use pipeline::{
     load_scene, mode_path, resolution, tone_map_modes, write_images, LbPlan, ModeImage,
-    PipelineError, PrepareOptions, PreparedScene, Progress, Silent, WrittenImage,
+    PipelineError, PrepareOptions, PreparedScene, Progress, Silent, Tracer, WrittenImage,
 };
 pub use render::{
     mean_luminance, Frame, FrameTimings, Mode, Region, RenderError, RenderSettings, Renderer,

@@ -11,7 +11,9 @@ use sylva_core::{MemoryError, Sun};
 use sylva_geom::{Camera, Model, Scene};
 use sylva_lb::{LbSolver, ParamError, Preset};
 use sylva_scene::SceneError;
-use sylva_trace::{KdTracer, SceneAccel, TraceError, TraversalConfig};
+use sylva_trace::{KdTracer, RayQuery, SceneAccel, TraceError, TraversalConfig};
+use sylva_trace_gpu::{GpuTracer, TraceGpuError};
+use sylva_wgpu::GpuContext;
 
 use crate::indirect::{IndirectLight, ModelGridLight};
 use crate::lighting::{
@@ -76,6 +78,10 @@ pub enum PipelineError {
     Trace(#[from] TraceError),
     #[error(transparent)]
     Render(#[from] RenderError),
+    #[error("putting the scene on the GPU")]
+    TraceGpu(#[from] TraceGpuError),
+    #[error("the GPU failed while tracing ({0}); those rays were traced on the CPU, but the frame is not returned as a GPU frame")]
+    GpuFailed(String),
 }
 
 /// Loads a scene file or built-in scene by name and builds it; `sun` replaces its sun.
@@ -127,8 +133,10 @@ pub struct LbPlan<'a> {
 pub struct PrepareOptions<'a> {
     /// LB lighting; `None`: no indirect light on plants (the local-light mode needs none).
     pub lb: Option<LbPlan<'a>>,
-    /// How the CPU tracer walks its kd-trees.
+    /// How the tracer walks its kd-trees (on either device).
     pub traversal: TraversalConfig,
+    /// Trace rays on this GPU ([`GpuTracer`]); `None`: on the CPU ([`KdTracer`]).
+    pub trace_gpu: Option<&'a GpuContext>,
     /// Scale of the LB indirect light.
     pub indirect: f32,
     /// Sky light on the ground as a fraction of the sun's.
@@ -144,6 +152,7 @@ impl Default for PrepareOptions<'_> {
         PrepareOptions {
             lb: None,
             traversal: TraversalConfig::default(),
+            trace_gpu: None,
             indirect: s.indirect,
             sky_ambient: s.sky_ambient,
             largest_frame: None,
@@ -151,11 +160,71 @@ impl Default for PrepareOptions<'_> {
     }
 }
 
+/// What answers a frame's ray queries: the CPU tracer, or the GPU tracer (which keeps the
+/// CPU tracer over the same kd-trees).
+pub enum Tracer {
+    Cpu(Box<KdTracer>),
+    Gpu(Box<GpuTracer>),
+}
+
+impl Tracer {
+    /// The CPU tracer: the scene's kd-trees and their traversal (on the GPU too: it built
+    /// them).
+    pub fn cpu(&self) -> &KdTracer {
+        match self {
+            Tracer::Cpu(t) => t.as_ref(),
+            Tracer::Gpu(t) => t.cpu(),
+        }
+    }
+
+    pub fn query(&self) -> &dyn RayQuery {
+        match self {
+            Tracer::Cpu(t) => t.as_ref(),
+            Tracer::Gpu(t) => t.as_ref(),
+        }
+    }
+
+    /// `"cpu"` or `"gpu"`.
+    pub fn device(&self) -> &'static str {
+        match self {
+            Tracer::Cpu(_) => "cpu",
+            Tracer::Gpu(_) => "gpu",
+        }
+    }
+
+    /// The GPU adapter's name (none on the CPU).
+    pub fn adapter(&self) -> Option<String> {
+        match self {
+            Tracer::Cpu(_) => None,
+            Tracer::Gpu(t) => Some(t.context().adapter_name().to_string()),
+        }
+    }
+
+    /// One line for reports.
+    pub fn describe(&self) -> String {
+        match self {
+            Tracer::Cpu(_) => format!("CPU, {} threads", rayon::current_num_threads()),
+            Tracer::Gpu(t) => format!(
+                "GPU {}, scene {} on the device",
+                t.context().describe(),
+                sylva_core::format_bytes(t.scene().device_bytes())
+            ),
+        }
+    }
+
+    pub fn gpu(&self) -> Option<&GpuTracer> {
+        match self {
+            Tracer::Cpu(_) => None,
+            Tracer::Gpu(t) => Some(t),
+        }
+    }
+}
+
 /// A scene ready to render: its LB lighting and acceleration structure built.
 pub struct PreparedScene {
     pub scene: Scene,
-    /// The CPU tracer: the scene's kd-trees and their traversal.
-    pub tracer: KdTracer,
+    /// What traces the rays (the kd-trees, on the CPU or also on a GPU).
+    pub tracer: Tracer,
     /// Per-model LB grids (none without LB).
     pub light: ModelGridLight,
     /// Unit vector towards the sun.
@@ -224,14 +293,18 @@ impl PreparedScene {
             lighting.resize_with(scene.models.len(), || None);
         }
 
-        let accel = {
+        let tracer = {
             let _span = tracing::info_span!(stage::ACCEL_BUILD).entered();
-            SceneAccel::build(&scene)?
+            let cpu = KdTracer::new(SceneAccel::build(&scene)?, opts.traversal);
+            match opts.trace_gpu {
+                Some(ctx) => Tracer::Gpu(Box::new(GpuTracer::new(ctx.clone(), cpu)?)),
+                None => Tracer::Cpu(Box::new(cpu)),
+            }
         };
-        let light = ModelGridLight::new(lighting, &scene.models, accel.instances());
+        let light = ModelGridLight::new(lighting, &scene.models, tracer.cpu().accel.instances());
         Ok(PreparedScene {
             materials: shade_materials(&scene.models),
-            tracer: KdTracer::new(accel, opts.traversal),
+            tracer,
             light,
             to_sun,
             shading,
@@ -259,7 +332,7 @@ impl PreparedScene {
         let sun_colour = Vec3::from_array(sylva_core::blackbody_rgb(sylva_core::SUN_TEMPERATURE_K));
         Renderer::new(
             &self.scene,
-            &self.tracer,
+            self.tracer.query(),
             &self.light,
             &self.materials,
             self.to_sun,
@@ -279,6 +352,9 @@ impl PreparedScene {
         progress.start("render", 3 * tile_count(settings.region));
         let frame = self.renderer().render(settings, &|n| progress.advance(n));
         progress.finish();
+        if let Some(e) = self.tracer.gpu().and_then(GpuTracer::take_error) {
+            return Err(PipelineError::GpuFailed(e));
+        }
         Ok(frame?)
     }
 

@@ -94,7 +94,7 @@ pub fn run(a: BenchTraceArgs) -> Result<()> {
         };
         results.push(m);
     }
-    let mem = p.tracer.accel.memory();
+    let mem = p.tracer.cpu().accel.memory();
     let threads = rayon::current_num_threads();
     let one = &results[0];
     if a.json {
@@ -105,7 +105,18 @@ pub fn run(a: BenchTraceArgs) -> Result<()> {
         o.insert("height".into(), prepared.height.into());
         o.insert("threads".into(), threads.into());
         o.insert("runs".into(), a.runs.into());
-        o.insert("stack_size".into(), p.tracer.traversal.stack_size.into());
+        o.insert(
+            "stack_size".into(),
+            p.tracer.cpu().traversal.stack_size.into(),
+        );
+        o.insert("device".into(), p.tracer.device().into());
+        if let Some(adapter) = p.tracer.adapter() {
+            o.insert("adapter".into(), adapter.into());
+        }
+        if let Some(gpu) = p.tracer.gpu() {
+            o.insert("gpu_scene_bytes".into(), gpu.scene().device_bytes().into());
+            o.insert("cpu_answered_rays".into(), gpu.cpu_answered().into());
+        }
         o.insert("lb".into(), (!a.no_lb).into());
         o.insert("accel_build_seconds".into(), accel_seconds.into());
         o.insert("lb_seconds".into(), lb_seconds.into());
@@ -128,11 +139,12 @@ pub fn run(a: BenchTraceArgs) -> Result<()> {
     }
     let mut o = String::new();
     o += &format!(
-        "{} at {}x{}, {threads} threads, stack {}, LB {}; medians of {} runs\n",
+        "{} at {}x{}, rays on {}, stack {}, LB {}; medians of {} runs\n",
         p.scene.name,
         prepared.width,
         prepared.height,
-        p.tracer.traversal.stack_size,
+        p.tracer.describe(),
+        p.tracer.cpu().traversal.stack_size,
         if a.no_lb { "off" } else { "on" },
         a.runs
     );

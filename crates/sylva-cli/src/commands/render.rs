@@ -61,9 +61,9 @@ pub struct FrameArgs {
     /// Seed of the sub-pixel jitter (rays per pixel other than 1 and 4).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Where the LB lighting is solved: cpu, gpu (the best adapter, a software one such as
-    /// lavapipe included) or auto (a hardware GPU if present, else the CPU). Cache entries
-    /// are kept per device.
+    /// Where the LB lighting is solved and the rays are traced: cpu, gpu (the best adapter,
+    /// a software one such as lavapipe included) or auto (a hardware GPU if present, else the
+    /// CPU). LB cache entries are kept per device.
     #[arg(long, value_enum, default_value = "auto")]
     pub device: super::device::DeviceArg,
     /// GPU state storage of the LB solve: f32, or f16 (half the memory traffic).
@@ -145,8 +145,9 @@ pub fn prepare(
         scene.sun.elevation_deg(),
         scene.sun.azimuth_deg()
     ));
+    let gpu = super::device::open_gpu(a.device)?;
     let solver: Option<Box<dyn LbSolver>> = if need_lb {
-        let solver = super::device::open_solver(a.device, a.precision)?;
+        let solver = super::device::solver_for(gpu.as_ref(), a.device, a.precision)?;
         say(format!("LB solver: {}", solver.describe()));
         Some(solver)
     } else {
@@ -159,6 +160,7 @@ pub fn prepare(
             cache_dir: (!a.no_cache).then_some(a.cache_dir.as_path()),
         }),
         traversal: TraversalConfig::with_stack(a.stack),
+        trace_gpu: gpu.as_ref(),
         indirect: a.indirect,
         sky_ambient: a.sky_ambient,
         largest_frame: Some((width, height, rays_per_pixel)),
@@ -190,6 +192,7 @@ pub fn prepare(
         },
     );
     let scene = PreparedScene::new(scene, &opts, &progress)?;
+    say(format!("ray tracer: {}", scene.tracer.describe()));
     Ok(Prepared {
         scene,
         width,
@@ -259,7 +262,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         );
     }
     let t = &frame.timings;
-    let mem = prepared.tracer.accel.memory();
+    let mem = prepared.tracer.cpu().accel.memory();
     println!("stage                 seconds");
     for (stage, s) in [
         ("scene build", clock.seconds(stage::SCENE_BUILD)),
