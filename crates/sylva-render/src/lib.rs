@@ -14,10 +14,13 @@
 //!   albedo and sky parts the comparison modes combine.
 //! * [`render`]: primary rays, shadow rays (through a [`sylva_trace::RayQuery`]) and
 //!   shading over 8×8 tiles; the modes of 000 Fig. 2.
+//! * [`gpu_frame`]: the same frame on a GPU, one kernel per band (`shade.wgsl` mirrors the
+//!   CPU's shading function by function).
 //! * [`tonemap`]: Reinhard's global operator and sRGB encoding.
 //! * [`output`]: PNG (8-bit sRGB) and EXR (linear) files, written atomically.
 //! * [`stages`]: the stages as `tracing` spans and [`StageClock`], which times them.
 
+pub mod gpu_frame;
 pub mod indirect;
 pub mod lighting;
 pub mod output;

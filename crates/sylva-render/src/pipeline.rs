@@ -15,6 +15,7 @@ use sylva_trace::{KdTracer, RayQuery, SceneAccel, TraceError, TraversalConfig};
 use sylva_trace_gpu::{GpuTracer, TraceGpuError};
 use sylva_wgpu::GpuContext;
 
+use crate::gpu_frame::{FrameError, GpuFrame};
 use crate::indirect::{IndirectLight, ModelGridLight};
 use crate::lighting::{
     model_lighting, LightingError, LightingOptions, LightingReport, LightingSource,
@@ -82,6 +83,8 @@ pub enum PipelineError {
     TraceGpu(#[from] TraceGpuError),
     #[error("the GPU failed while tracing ({0}); those rays were traced on the CPU, but the frame is not returned as a GPU frame")]
     GpuFailed(String),
+    #[error(transparent)]
+    Gpu(#[from] sylva_wgpu::GpuError),
 }
 
 /// Loads a scene file or built-in scene by name and builds it; `sun` replaces its sun.
@@ -137,6 +140,9 @@ pub struct PrepareOptions<'a> {
     pub traversal: TraversalConfig,
     /// Trace rays on this GPU ([`GpuTracer`]); `None`: on the CPU ([`KdTracer`]).
     pub trace_gpu: Option<&'a GpuContext>,
+    /// With `trace_gpu`, shade on the GPU too ([`GpuFrame`]: the whole frame in one kernel);
+    /// otherwise the GPU answers ray queries and the CPU shades.
+    pub shade_on_gpu: bool,
     /// Scale of the LB indirect light.
     pub indirect: f32,
     /// Sky light on the ground as a fraction of the sun's.
@@ -153,6 +159,7 @@ impl Default for PrepareOptions<'_> {
             lb: None,
             traversal: TraversalConfig::default(),
             trace_gpu: None,
+            shade_on_gpu: true,
             indirect: s.indirect,
             sky_ambient: s.sky_ambient,
             largest_frame: None,
@@ -227,6 +234,8 @@ pub struct PreparedScene {
     pub tracer: Tracer,
     /// Per-model LB grids (none without LB).
     pub light: ModelGridLight,
+    /// The frame kernel when frames are shaded on the GPU.
+    pub gpu_frame: Option<GpuFrame>,
     /// Unit vector towards the sun.
     pub to_sun: Vec3,
     pub shading: ShadingParams,
@@ -302,8 +311,17 @@ impl PreparedScene {
             }
         };
         let light = ModelGridLight::new(lighting, &scene.models, tracer.cpu().accel.instances());
+        let materials = shade_materials(&scene.models);
+        let gpu_frame = match tracer.gpu() {
+            Some(t) if opts.shade_on_gpu => {
+                let _span = tracing::info_span!(stage::ACCEL_BUILD).entered();
+                Some(GpuFrame::new(t, &scene, &materials, &light)?)
+            }
+            _ => None,
+        };
         Ok(PreparedScene {
-            materials: shade_materials(&scene.models),
+            materials,
+            gpu_frame,
             tracer,
             light,
             to_sun,
@@ -329,10 +347,15 @@ impl PreparedScene {
 
     /// The renderer over this scene's tracer and LB light, lit by the 6500 K sun.
     pub fn renderer(&self) -> Renderer<'_> {
+        self.renderer_with(self.tracer.query())
+    }
+
+    /// The renderer answering its ray queries with `query`.
+    fn renderer_with<'s>(&'s self, query: &'s dyn RayQuery) -> Renderer<'s> {
         let sun_colour = Vec3::from_array(sylva_core::blackbody_rgb(sylva_core::SUN_TEMPERATURE_K));
         Renderer::new(
             &self.scene,
-            self.tracer.query(),
+            query,
             &self.light,
             &self.materials,
             self.to_sun,
@@ -350,7 +373,19 @@ impl PreparedScene {
     ) -> Result<Frame, PipelineError> {
         let _span = tracing::info_span!(stage::FRAME).entered();
         progress.start("render", 3 * tile_count(settings.region));
-        let frame = self.renderer().render(settings, &|n| progress.advance(n));
+        let advance = |n| progress.advance(n);
+        let frame = match (&self.gpu_frame, self.tracer.gpu()) {
+            (Some(gpu_frame), Some(tracer)) => {
+                // Pixels the kernel hands back are rendered by the CPU tracer and shading.
+                let cpu = self.renderer_with(self.tracer.cpu());
+                match gpu_frame.render(tracer, &cpu, settings, &advance) {
+                    Ok(f) => Ok(f),
+                    Err(FrameError::Render(e)) => Err(e),
+                    Err(FrameError::Gpu(e)) => return Err(e.into()),
+                }
+            }
+            _ => self.renderer().render(settings, &advance),
+        };
         progress.finish();
         if let Some(e) = self.tracer.gpu().and_then(GpuTracer::take_error) {
             return Err(PipelineError::GpuFailed(e));

@@ -69,6 +69,10 @@ pub struct FrameArgs {
     /// GPU state storage of the LB solve: f32, or f16 (half the memory traffic).
     #[arg(long, value_enum, default_value = "f32")]
     pub precision: super::device::PrecisionArg,
+    /// On a GPU, trace the rays there but shade on the CPU (default: the whole frame in one
+    /// GPU kernel).
+    #[arg(long)]
+    pub cpu_shading: bool,
 }
 
 #[derive(Args, Debug)]
@@ -161,6 +165,7 @@ pub fn prepare(
         }),
         traversal: TraversalConfig::with_stack(a.stack),
         trace_gpu: gpu.as_ref(),
+        shade_on_gpu: !a.cpu_shading,
         indirect: a.indirect,
         sky_ambient: a.sky_ambient,
         largest_frame: Some((width, height, rays_per_pixel)),
@@ -192,7 +197,18 @@ pub fn prepare(
         },
     );
     let scene = PreparedScene::new(scene, &opts, &progress)?;
-    say(format!("ray tracer: {}", scene.tracer.describe()));
+    say(format!(
+        "ray tracer: {}{}",
+        scene.tracer.describe(),
+        match (&scene.gpu_frame, scene.tracer.gpu()) {
+            (Some(f), _) => format!(
+                "; shading on the GPU ({} of shading data)",
+                sylva_core::format_bytes(f.device_bytes())
+            ),
+            (None, Some(_)) => "; shading on the CPU".into(),
+            _ => String::new(),
+        }
+    ));
     Ok(Prepared {
         scene,
         width,
@@ -271,9 +287,14 @@ pub fn run(a: RenderArgs) -> Result<()> {
         ("primary rays", t.primary_seconds),
         ("shadow rays", t.shadow_seconds),
         ("shading", t.shading_seconds),
+        ("GPU frame", t.fused_seconds),
         ("tone mapping", clock.seconds(stage::TONE_MAPPING)),
         ("image output", clock.seconds(stage::IMAGE_OUTPUT)),
     ] {
+        // A GPU frame is one pass (rays and shading); the CPU's passes are separate.
+        if stage == "GPU frame" && s == 0.0 {
+            continue;
+        }
         println!("  {stage:<20}{s:>8.3}");
     }
     println!("  {:<20}{:>8.3}", "total", t_all.elapsed().as_secs_f64());
