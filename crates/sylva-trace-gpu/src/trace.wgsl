@@ -417,6 +417,32 @@ fn first_visit(m: ptr<function, Mailbox>, id: u32) -> bool {
     return true;
 }
 
+// A top-level leaf's instances met by the ray, sorted by box entry (stable: ties keep leaf
+// order), as SceneAccel::entries.
+struct Candidates {
+    t: array<f32, SORTED>,
+    i: array<u32, SORTED>,
+    n: u32,
+}
+
+// Inserts instance `i` entered at `t`; false when the list is full (the caller enters it at
+// once).
+fn candidates_insert(c: ptr<function, Candidates>, t: f32, i: u32) -> bool {
+    if ((*c).n == SORTED) {
+        return false;
+    }
+    var j = (*c).n;
+    while (j > 0u && (*c).t[j - 1u] > t) {
+        (*c).t[j] = (*c).t[j - 1u];
+        (*c).i[j] = (*c).i[j - 1u];
+        j -= 1u;
+    }
+    (*c).t[j] = t;
+    (*c).i[j] = i;
+    (*c).n += 1u;
+    return true;
+}
+
 struct Closest {
     best: Best,
     fallback: bool,
@@ -445,39 +471,24 @@ fn closest_hit(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32) -> Closest {
             }
             // The leaf's instances whose box the ray meets before the closest hit, nearest
             // entry first (the first SORTED of them; further ones are entered at once).
-            var cand_t: array<f32, SORTED>;
-            var cand_i: array<u32, SORTED>;
-            var n = 0u;
+            var cand = Candidates();
             let t_end = best.t;
             let off = top.prim_base + leaf.y;
             for (var k = 0u; k < (leaf.x >> 2u); k++) {
                 let i = prim_at(off + k);
                 let hit = ray_box(o, inv, box_at(2u * i).xyz, box_at(2u * i + 1u).xyz, t_min, t_end);
-                if (hit.z == 0.0) {
-                    continue;
-                }
-                if (n < SORTED) {
-                    var j = n;
-                    while (j > 0u && cand_t[j - 1u] > hit.x) {
-                        cand_t[j] = cand_t[j - 1u];
-                        cand_i[j] = cand_i[j - 1u];
-                        j -= 1u;
-                    }
-                    cand_t[j] = hit.x;
-                    cand_i[j] = i;
-                    n += 1u;
-                } else if (first_visit(&mailbox, i)) {
+                if (hit.z != 0.0 && !candidates_insert(&cand, hit.x, i) && first_visit(&mailbox, i)) {
                     let r = to_model(i, o, d);
                     let f = model_closest(r.model, r.o, r.d, t_min, i, &best);
                     fallback = fallback || f;
                 }
             }
-            for (var k = 0u; k < n; k++) {
+            for (var k = 0u; k < cand.n; k++) {
                 // Equal entry still enters: a hit at exactly best.t may win the tie.
-                if (cand_t[k] > best.t) {
+                if (cand.t[k] > best.t) {
                     break;
                 }
-                let i = cand_i[k];
+                let i = cand.i[k];
                 if (first_visit(&mailbox, i)) {
                     let r = to_model(i, o, d);
                     let f = model_closest(r.model, r.o, r.d, t_min, i, &best);
@@ -521,27 +532,12 @@ fn any_hit(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, start: u32) -> ve
         if (leaf.x == 0u) {
             break;
         }
-        var cand_t: array<f32, SORTED>;
-        var cand_i: array<u32, SORTED>;
-        var n = 0u;
+        var cand = Candidates();
         let off = top.prim_base + leaf.y;
         for (var k = 0u; k < (leaf.x >> 2u); k++) {
             let i = prim_at(off + k);
             let hit = ray_box(o, inv, box_at(2u * i).xyz, box_at(2u * i + 1u).xyz, t_min, t_max);
-            if (hit.z == 0.0) {
-                continue;
-            }
-            if (n < SORTED) {
-                var j = n;
-                while (j > 0u && cand_t[j - 1u] > hit.x) {
-                    cand_t[j] = cand_t[j - 1u];
-                    cand_i[j] = cand_i[j - 1u];
-                    j -= 1u;
-                }
-                cand_t[j] = hit.x;
-                cand_i[j] = i;
-                n += 1u;
-            } else if (first_visit(&mailbox, i)) {
+            if (hit.z != 0.0 && !candidates_insert(&cand, hit.x, i) && first_visit(&mailbox, i)) {
                 let r = to_model(i, o, d);
                 let a = model_any(r.model, r.o, r.d, t_min, t_max);
                 if (a.x == 1u) {
@@ -550,8 +546,8 @@ fn any_hit(o: vec3<f32>, d: vec3<f32>, t_min: f32, t_max: f32, start: u32) -> ve
                 fallback = fallback | a.y;
             }
         }
-        for (var k = 0u; k < n; k++) {
-            let i = cand_i[k];
+        for (var k = 0u; k < cand.n; k++) {
+            let i = cand.i[k];
             if (first_visit(&mailbox, i)) {
                 let r = to_model(i, o, d);
                 let a = model_any(r.model, r.o, r.d, t_min, t_max);
