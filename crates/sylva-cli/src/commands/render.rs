@@ -292,7 +292,9 @@ pub fn run(a: RenderArgs) -> Result<()> {
         ("image output", clock.seconds(stage::IMAGE_OUTPUT)),
     ] {
         // A GPU frame is one pass (rays and shading); the CPU's passes are separate.
-        if stage == "GPU frame" && s == 0.0 {
+        let pass = ["primary rays", "shadow rays", "shading"].contains(&stage);
+        let gpu = t.fused_seconds > 0.0;
+        if (stage == "GPU frame" && !gpu) || (pass && gpu) {
             continue;
         }
         println!("  {stage:<20}{s:>8.3}");
