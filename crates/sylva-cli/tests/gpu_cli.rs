@@ -1,5 +1,6 @@
-//! `--device` for `sylva lb solve` and `sylva bench lb`. GPU runs use any adapter (lavapipe
-//! in CI); where none exists the GPU halves print why and pass.
+//! `--device` for `sylva lb solve`, `sylva bench lb`, `sylva render` and `sylva bench trace`.
+//! GPU runs use any adapter (lavapipe in CI); where none exists the GPU halves print why and
+//! pass.
 
 mod common;
 use common::sylva;
@@ -165,6 +166,7 @@ fn render_solves_lb_on_the_device_asked_for() {
     let (ok, stdout, err, cpu_png, _) = render("cpu");
     assert!(ok, "{err}");
     assert!(stdout.contains("LB solver: CPU, kernel"), "{stdout}");
+    assert!(stdout.contains("ray tracer: CPU"), "{stdout}");
     let Some(_) = adapter() else {
         let (ok, _, err, _, _) = render("gpu");
         assert!(!ok && err.contains("no GPU adapter"), "{err}");
@@ -173,6 +175,7 @@ fn render_solves_lb_on_the_device_asked_for() {
     let (ok, stdout, err, gpu_png, cache) = render("gpu");
     assert!(ok, "{err}");
     assert!(stdout.contains("LB solver: GPU"), "{stdout}");
+    assert!(stdout.contains("ray tracer: GPU"), "{stdout}");
     // The GPU's entry records its solver; CPU and GPU light the model alike.
     let entry = std::fs::read_dir(&cache).unwrap().next().unwrap().unwrap();
     let file = sylva_lb::GridFile::read(&entry.path()).unwrap();
@@ -189,4 +192,48 @@ fn render_solves_lb_on_the_device_asked_for() {
         .max()
         .unwrap();
     assert!(worst <= 1, "CPU and GPU images differ by {worst} levels");
+}
+
+#[test]
+fn bench_trace_reports_device_and_adapter() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("rose.toml");
+    std::fs::write(
+        &scene,
+        "[[models]]\nname = \"rose\"\nspecies = \"dogrose\"\n\n[[instances]]\nmodel = \"rose\"\nposition = [0.0, 0.0, 0.0]\n",
+    )
+    .unwrap();
+    let bench = |device: &str| {
+        sylva(&[
+            "bench",
+            "trace",
+            scene.to_str().unwrap(),
+            "--width",
+            "24",
+            "--runs",
+            "1",
+            "--no-lb",
+            "--device",
+            device,
+            "--json",
+        ])
+    };
+    let (ok, out, err) = bench("cpu");
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["device"], "cpu");
+    assert!(v.get("adapter").is_none(), "{out}");
+    let Some(_) = adapter() else {
+        let (ok, _, err) = bench("gpu");
+        assert!(!ok && err.contains("no GPU adapter"), "{err}");
+        return;
+    };
+    let (ok, out, err) = bench("gpu");
+    assert!(ok, "{err}");
+    let w: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(w["device"], "gpu");
+    assert!(!w["adapter"].as_str().unwrap().is_empty(), "{out}");
+    // Same rays on either device.
+    assert_eq!(v["primary_rays"], w["primary_rays"]);
+    assert_eq!(v["shadow_rays"], w["shadow_rays"]);
 }

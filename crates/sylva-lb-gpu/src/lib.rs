@@ -22,7 +22,7 @@ pub mod solver;
 pub use sylva_wgpu::{AdapterChoice, ContextOptions, GpuContext, GpuError};
 
 pub use lattice::{device_memory_needed, solve_lighting_gpu, GpuLattice, Precision};
-pub use solver::{select_solver, GpuSolver, SelectedSolver};
+pub use solver::{select_solver, solver_on, GpuSolver, SelectedSolver};
 pub use sylva_wgpu::Device;
 
 use thiserror::Error;

@@ -130,13 +130,21 @@ pub struct SelectedSolver {
 /// `precision`. f16 is a GPU format: asking for it where the CPU runs is an error.
 pub fn select_solver(device: Device, precision: Precision) -> Result<SelectedSolver, LbGpuError> {
     let opened = open_device(device)?;
-    let solver: Box<dyn LbSolver> = match opened.gpu {
+    Ok(SelectedSolver {
+        solver: solver_on(opened.gpu, precision)?,
+        note: opened.note,
+    })
+}
+
+/// The LB backend on an opened GPU (`None`: the CPU), for callers that share the device
+/// with other GPU work (the render's ray tracer). f16 on the CPU is an error.
+pub fn solver_on(
+    gpu: Option<GpuContext>,
+    precision: Precision,
+) -> Result<Box<dyn LbSolver>, LbGpuError> {
+    Ok(match gpu {
         Some(ctx) => Box::new(GpuSolver::new(ctx, precision)?),
         None if precision == Precision::F16 => return Err(LbGpuError::F16OnCpu),
         None => Box::new(CpuSolver),
-    };
-    Ok(SelectedSolver {
-        solver,
-        note: opened.note,
     })
 }

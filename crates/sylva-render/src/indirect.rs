@@ -82,6 +82,16 @@ impl ModelGridLight {
     pub fn model(&self, m: usize) -> Option<&ModelLighting> {
         self.lighting.get(m).and_then(Option::as_ref)
     }
+
+    /// Model `m`'s bounds in model space (where its grid ends on the ground).
+    pub(crate) fn model_bounds(&self, m: usize) -> Aabb {
+        self.model_bounds[m]
+    }
+
+    /// The ground index (for the GPU frame); `None` when there is none.
+    pub(crate) fn ground_index(&self) -> Option<&GroundIndex> {
+        (!self.ground_index.cells.is_empty()).then_some(&self.ground_index)
+    }
 }
 
 impl IndirectLight for ModelGridLight {
@@ -140,13 +150,14 @@ impl IndirectLight for ModelGridLight {
 /// A uniform grid over the ground (x, z) listing the instances whose world box covers each
 /// cell: the ground's LB lookup visits a handful of trees, not all of them.
 #[derive(Debug, Default)]
-struct GroundIndex {
-    origin: Vec2,
-    end: Vec2,
-    inv_cell: f32,
-    nx: usize,
-    nz: usize,
-    cells: Vec<Vec<u32>>,
+pub(crate) struct GroundIndex {
+    pub(crate) origin: Vec2,
+    pub(crate) end: Vec2,
+    pub(crate) inv_cell: f32,
+    pub(crate) nx: usize,
+    pub(crate) nz: usize,
+    /// Per cell, row by row in z, the instances whose box covers it.
+    pub(crate) cells: Vec<Vec<u32>>,
 }
 
 impl GroundIndex {

@@ -3,8 +3,9 @@
 //!
 //! * [`pipeline`]: the pipeline as a library. [`load_scene`] (with a sun override),
 //!   [`PreparedScene::new`] (LB lighting of every model, cached, on any
-//!   [`sylva_lb::LbSolver`]; the kd-trees), [`PreparedScene::render`] (any camera, any image
-//!   region), [`tone_map_modes`] and [`write_images`]; progress through [`Progress`].
+//!   [`sylva_lb::LbSolver`]; the kd-trees, traced on the CPU or a GPU: [`Tracer`]),
+//!   [`PreparedScene::render`] (any camera, any image region), [`tone_map_modes`] and
+//!   [`write_images`]; progress through [`Progress`].
 //! * [`lighting`]: per model, the LB lighting grid (voxelize, solve, cache on disk) and its
 //!   trilinear lookup in model space.
 //! * [`indirect`]: [`IndirectLight`], the light scattered in the canopy as shading needs it,
@@ -13,10 +14,13 @@
 //!   albedo and sky parts the comparison modes combine.
 //! * [`render`]: primary rays, shadow rays (through a [`sylva_trace::RayQuery`]) and
 //!   shading over 8×8 tiles; the modes of 000 Fig. 2.
+//! * [`gpu_frame`]: the same frame on a GPU, one kernel per band (`shade.wgsl` mirrors the
+//!   CPU's shading function by function).
 //! * [`tonemap`]: Reinhard's global operator and sRGB encoding.
 //! * [`output`]: PNG (8-bit sRGB) and EXR (linear) files, written atomically.
 //! * [`stages`]: the stages as `tracing` spans and [`StageClock`], which times them.
 
+pub mod gpu_frame;
 pub mod indirect;
 pub mod lighting;
 pub mod output;
@@ -29,7 +33,7 @@ pub mod tonemap;
 pub use indirect::{IndirectLight, ModelGridLight, NoIndirectLight};
 pub use pipeline::{
     load_scene, mode_path, resolution, tone_map_modes, write_images, LbPlan, ModeImage,
-    PipelineError, PrepareOptions, PreparedScene, Progress, Silent, WrittenImage,
+    PipelineError, PrepareOptions, PreparedScene, Progress, Silent, Tracer, WrittenImage,
 };
 pub use render::{
     mean_luminance, Frame, FrameTimings, Mode, Region, RenderError, RenderSettings, Renderer,

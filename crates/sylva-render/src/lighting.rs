@@ -190,6 +190,18 @@ impl ModelLighting {
             as u64
     }
 
+    /// What the GPU frame uploads: dims, origin, sites per unit, last site per axis, and the
+    /// values (RGB per site, site order `(x * ny + y) * nz + z`).
+    pub(crate) fn raw(&self) -> (Dims, Vec3, Vec3, Vec3, &[[f32; 3]]) {
+        (
+            self.dims,
+            self.origin,
+            self.inv_cell,
+            self.last,
+            &self.values,
+        )
+    }
+
     /// Normalised light at site `(x, y, z)`.
     pub fn site(&self, x: usize, y: usize, z: usize) -> [f32; 3] {
         self.values[self.dims.index(x, y, z)]

@@ -11,8 +11,11 @@ use sylva_core::{MemoryError, Sun};
 use sylva_geom::{Camera, Model, Scene};
 use sylva_lb::{LbSolver, ParamError, Preset};
 use sylva_scene::SceneError;
-use sylva_trace::{KdTracer, SceneAccel, TraceError, TraversalConfig};
+use sylva_trace::{KdTracer, RayQuery, SceneAccel, TraceError, TraversalConfig};
+use sylva_trace_gpu::{GpuTracer, TraceGpuError};
+use sylva_wgpu::GpuContext;
 
+use crate::gpu_frame::{FrameError, GpuFrame};
 use crate::indirect::{IndirectLight, ModelGridLight};
 use crate::lighting::{
     model_lighting, LightingError, LightingOptions, LightingReport, LightingSource,
@@ -76,6 +79,12 @@ pub enum PipelineError {
     Trace(#[from] TraceError),
     #[error(transparent)]
     Render(#[from] RenderError),
+    #[error("putting the scene on the GPU")]
+    TraceGpu(#[from] TraceGpuError),
+    #[error("the GPU failed while tracing ({0}); those rays were traced on the CPU, but the frame is not returned as a GPU frame")]
+    GpuFailed(String),
+    #[error(transparent)]
+    Gpu(#[from] sylva_wgpu::GpuError),
 }
 
 /// Loads a scene file or built-in scene by name and builds it; `sun` replaces its sun.
@@ -127,8 +136,13 @@ pub struct LbPlan<'a> {
 pub struct PrepareOptions<'a> {
     /// LB lighting; `None`: no indirect light on plants (the local-light mode needs none).
     pub lb: Option<LbPlan<'a>>,
-    /// How the CPU tracer walks its kd-trees.
+    /// How the tracer walks its kd-trees (on either device).
     pub traversal: TraversalConfig,
+    /// Trace rays on this GPU ([`GpuTracer`]); `None`: on the CPU ([`KdTracer`]).
+    pub trace_gpu: Option<&'a GpuContext>,
+    /// With `trace_gpu`, shade on the GPU too ([`GpuFrame`]: the whole frame in one kernel);
+    /// otherwise the GPU answers ray queries and the CPU shades.
+    pub shade_on_gpu: bool,
     /// Scale of the LB indirect light.
     pub indirect: f32,
     /// Sky light on the ground as a fraction of the sun's.
@@ -144,6 +158,8 @@ impl Default for PrepareOptions<'_> {
         PrepareOptions {
             lb: None,
             traversal: TraversalConfig::default(),
+            trace_gpu: None,
+            shade_on_gpu: true,
             indirect: s.indirect,
             sky_ambient: s.sky_ambient,
             largest_frame: None,
@@ -151,13 +167,75 @@ impl Default for PrepareOptions<'_> {
     }
 }
 
+/// What answers a frame's ray queries: the CPU tracer, or the GPU tracer (which keeps the
+/// CPU tracer over the same kd-trees).
+pub enum Tracer {
+    Cpu(Box<KdTracer>),
+    Gpu(Box<GpuTracer>),
+}
+
+impl Tracer {
+    /// The CPU tracer: the scene's kd-trees and their traversal (on the GPU too: it built
+    /// them).
+    pub fn cpu(&self) -> &KdTracer {
+        match self {
+            Tracer::Cpu(t) => t.as_ref(),
+            Tracer::Gpu(t) => t.cpu(),
+        }
+    }
+
+    pub fn query(&self) -> &dyn RayQuery {
+        match self {
+            Tracer::Cpu(t) => t.as_ref(),
+            Tracer::Gpu(t) => t.as_ref(),
+        }
+    }
+
+    /// `"cpu"` or `"gpu"`.
+    pub fn device(&self) -> &'static str {
+        match self {
+            Tracer::Cpu(_) => "cpu",
+            Tracer::Gpu(_) => "gpu",
+        }
+    }
+
+    /// The GPU adapter's name (none on the CPU).
+    pub fn adapter(&self) -> Option<String> {
+        match self {
+            Tracer::Cpu(_) => None,
+            Tracer::Gpu(t) => Some(t.context().adapter_name().to_string()),
+        }
+    }
+
+    /// One line for reports.
+    pub fn describe(&self) -> String {
+        match self {
+            Tracer::Cpu(_) => format!("CPU, {} threads", rayon::current_num_threads()),
+            Tracer::Gpu(t) => format!(
+                "GPU {}, scene {} on the device",
+                t.context().describe(),
+                sylva_core::format_bytes(t.scene().device_bytes())
+            ),
+        }
+    }
+
+    pub fn gpu(&self) -> Option<&GpuTracer> {
+        match self {
+            Tracer::Cpu(_) => None,
+            Tracer::Gpu(t) => Some(t),
+        }
+    }
+}
+
 /// A scene ready to render: its LB lighting and acceleration structure built.
 pub struct PreparedScene {
     pub scene: Scene,
-    /// The CPU tracer: the scene's kd-trees and their traversal.
-    pub tracer: KdTracer,
+    /// What traces the rays (the kd-trees, on the CPU or also on a GPU).
+    pub tracer: Tracer,
     /// Per-model LB grids (none without LB).
     pub light: ModelGridLight,
+    /// The frame kernel when frames are shaded on the GPU.
+    pub gpu_frame: Option<GpuFrame>,
     /// Unit vector towards the sun.
     pub to_sun: Vec3,
     pub shading: ShadingParams,
@@ -224,14 +302,27 @@ impl PreparedScene {
             lighting.resize_with(scene.models.len(), || None);
         }
 
-        let accel = {
+        let tracer = {
             let _span = tracing::info_span!(stage::ACCEL_BUILD).entered();
-            SceneAccel::build(&scene)?
+            let cpu = KdTracer::new(SceneAccel::build(&scene)?, opts.traversal);
+            match opts.trace_gpu {
+                Some(ctx) => Tracer::Gpu(Box::new(GpuTracer::new(ctx.clone(), cpu)?)),
+                None => Tracer::Cpu(Box::new(cpu)),
+            }
         };
-        let light = ModelGridLight::new(lighting, &scene.models, accel.instances());
+        let light = ModelGridLight::new(lighting, &scene.models, tracer.cpu().accel.instances());
+        let materials = shade_materials(&scene.models);
+        let gpu_frame = match tracer.gpu() {
+            Some(t) if opts.shade_on_gpu => {
+                let _span = tracing::info_span!(stage::ACCEL_BUILD).entered();
+                Some(GpuFrame::new(t, &scene, &materials, &light)?)
+            }
+            _ => None,
+        };
         Ok(PreparedScene {
-            materials: shade_materials(&scene.models),
-            tracer: KdTracer::new(accel, opts.traversal),
+            materials,
+            gpu_frame,
+            tracer,
             light,
             to_sun,
             shading,
@@ -256,10 +347,15 @@ impl PreparedScene {
 
     /// The renderer over this scene's tracer and LB light, lit by the 6500 K sun.
     pub fn renderer(&self) -> Renderer<'_> {
+        self.renderer_with(self.tracer.query())
+    }
+
+    /// The renderer answering its ray queries with `query`.
+    fn renderer_with<'s>(&'s self, query: &'s dyn RayQuery) -> Renderer<'s> {
         let sun_colour = Vec3::from_array(sylva_core::blackbody_rgb(sylva_core::SUN_TEMPERATURE_K));
         Renderer::new(
             &self.scene,
-            &self.tracer,
+            query,
             &self.light,
             &self.materials,
             self.to_sun,
@@ -277,8 +373,23 @@ impl PreparedScene {
     ) -> Result<Frame, PipelineError> {
         let _span = tracing::info_span!(stage::FRAME).entered();
         progress.start("render", 3 * tile_count(settings.region));
-        let frame = self.renderer().render(settings, &|n| progress.advance(n));
+        let advance = |n| progress.advance(n);
+        let frame = match (&self.gpu_frame, self.tracer.gpu()) {
+            (Some(gpu_frame), Some(tracer)) => {
+                // Pixels the kernel hands back are rendered by the CPU tracer and shading.
+                let cpu = self.renderer_with(self.tracer.cpu());
+                match gpu_frame.render(tracer, &cpu, settings, &advance) {
+                    Ok(f) => Ok(f),
+                    Err(FrameError::Render(e)) => Err(e),
+                    Err(FrameError::Gpu(e)) => return Err(e.into()),
+                }
+            }
+            _ => self.renderer().render(settings, &advance),
+        };
         progress.finish();
+        if let Some(e) = self.tracer.gpu().and_then(GpuTracer::take_error) {
+            return Err(PipelineError::GpuFailed(e));
+        }
         Ok(frame?)
     }
 

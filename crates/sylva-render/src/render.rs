@@ -155,17 +155,21 @@ pub struct FrameTimings {
     pub primary_seconds: f64,
     pub shadow_seconds: f64,
     pub shading_seconds: f64,
+    /// A GPU frame's single pass (primary rays, shadow rays and shading in one kernel, with
+    /// the rays' upload and the pixels' read-back); 0 on the CPU.
+    pub fused_seconds: f64,
     pub primary_rays: u64,
     pub shadow_rays: u64,
 }
 
 impl FrameTimings {
+    /// Seconds spent tracing (a fused GPU pass counts whole: its shading is a small part).
     pub fn trace_seconds(&self) -> f64 {
-        self.primary_seconds + self.shadow_seconds
+        self.primary_seconds + self.shadow_seconds + self.fused_seconds
     }
 
     pub fn frame_seconds(&self) -> f64 {
-        self.primary_seconds + self.shadow_seconds + self.shading_seconds
+        self.primary_seconds + self.shadow_seconds + self.shading_seconds + self.fused_seconds
     }
 
     /// Primary and shadow rays per second of tracing, in millions.
@@ -250,6 +254,13 @@ fn sample_offset(n: u32, s: u32, pixel: u64, seed: u64) -> Vec2 {
     } else {
         j
     }
+}
+
+/// Sample `s` of `n` of pixel `(x, y)` of the whole image: the primary ray.
+pub(crate) fn sample_ray(camera: &PinholeCamera, x: u32, y: u32, s: u32, n: u32, seed: u64) -> Ray {
+    let pixel = y as u64 * camera.width as u64 + x as u64;
+    let o = sample_offset(n, s, pixel, seed);
+    camera.ray(x as f32 + o.x, y as f32 + o.y)
 }
 
 /// The inputs of shading one sample, found by the shadow pass.
@@ -338,6 +349,12 @@ impl<'a> Renderer<'a> {
             ground_colour: Vec3::from_array(scene.ground.color),
             sky: Vec3::from_array(scene.sky_color),
         }
+    }
+
+    /// Towards the sun (unit), the sun's colour × irradiance, the ground's colour and the
+    /// sky's: the lights of [`Renderer::shade`], for the GPU frame.
+    pub(crate) fn lights(&self) -> [Vec3; 4] {
+        [self.to_sun, self.sun, self.ground_colour, self.sky]
     }
 
     /// Renders `settings.region` of `settings.camera`'s image. `progress(n)` is called from
@@ -479,16 +496,13 @@ impl<'a> Renderer<'a> {
     ) -> TracedUnit {
         let start = Instant::now();
         let mut primary = TraceStats::default();
-        let w = camera.width as u64;
         let mut tiles: Vec<(TileSamples, Vec<SampleGeom>)> = Vec::with_capacity(unit.len());
         scratch.order.clear();
         for (t, tile) in unit.iter().enumerate() {
             let mut out = Vec::with_capacity(tile.pixels() * n as usize);
             for (x, y) in tile.iter() {
-                let pixel = y as u64 * w + x as u64;
                 for s in 0..n {
-                    let o = sample_offset(n, s, pixel, settings.seed);
-                    out.push((camera.ray(x as f32 + o.x, y as f32 + o.y), None));
+                    out.push((sample_ray(camera, x, y, s, n, settings.seed), None));
                 }
             }
             for group in tile.packets(n) {
@@ -539,6 +553,35 @@ impl<'a> Renderer<'a> {
             shadow,
             busy: [(mid - start).as_secs_f64(), (end - mid).as_secs_f64()],
         }
+    }
+
+    /// Pixel `(x, y)` of the whole image of `settings.camera` traced and shaded on its own,
+    /// sample by sample: the value a frame holds for it, and the shadow rays it traced.
+    pub(crate) fn pixel(
+        &self,
+        camera: &PinholeCamera,
+        x: u32,
+        y: u32,
+        settings: &RenderSettings,
+        stats: &mut TraceStats,
+    ) -> (Radiance, u64) {
+        let n = settings.rays_per_pixel.max(1);
+        let mut acc = Radiance::default();
+        let mut shadow_rays = 0;
+        for s in 0..n {
+            let ray = sample_ray(camera, x, y, s, n, settings.seed);
+            let mut hit = [None];
+            self.query.closest_hits(&[ray], &mut hit, stats);
+            let (mut geom, shadow) = self.sample_geometry(&ray, hit[0].as_ref());
+            if let Some(shadow) = shadow {
+                let mut blocked = [false];
+                self.query.any_hits(&[shadow], &mut blocked, stats);
+                geom.set_lit(!blocked[0]);
+                shadow_rays += 1;
+            }
+            acc += self.shade(&ray, hit[0].as_ref(), &geom, &settings.shading);
+        }
+        (acc * (1.0 / n as f32), shadow_rays)
     }
 
     /// The hit point and viewer-facing normal (not yet lit), and the shadow ray that decides

@@ -106,6 +106,11 @@ impl LinearTexture {
         }
     }
 
+    /// Width, height, wrap and the linear texels row by row (for the GPU frame).
+    pub(crate) fn raw(&self) -> (u32, u32, Wrap, &[Vec3]) {
+        (self.width, self.height, self.wrap, &self.texels)
+    }
+
     fn texel(&self, x: i64, y: i64) -> Vec3 {
         let (x, y) = (
             self.wrap.apply(x, self.width),

@@ -20,7 +20,7 @@ use sylva_geom::Aabb;
 pub const MAX_DEPTH: usize = 56;
 
 /// Relative margin before a leaf's end within which traversal goes on past a hit.
-const TERMINATION_SLACK: f32 = 1e-5;
+pub const TERMINATION_SLACK: f32 = 1e-5;
 
 /// Rays traced together by [`KdTree::traverse_packet`].
 pub const PACKET: usize = 4;
@@ -187,6 +187,13 @@ impl KdNode {
     #[inline(always)]
     fn is_leaf(self) -> bool {
         self.a & 3 == 3
+    }
+
+    /// The two words as stored, `[a, b]`: what a GPU traversal uploads and decodes the same
+    /// way.
+    #[inline]
+    pub fn raw(self) -> [u32; 2] {
+        [self.a, self.b]
     }
 }
 
@@ -536,6 +543,17 @@ impl KdTree {
 
     pub fn bounds(&self) -> Aabb {
         self.bounds
+    }
+
+    /// The nodes, depth first from the root (index 0); see [`KdNode`] for the encoding.
+    pub fn nodes(&self) -> &[KdNode] {
+        &self.nodes
+    }
+
+    /// The leaves' primitive lists, one after another (a leaf holds `count` entries from
+    /// its `offset`).
+    pub fn leaf_indices(&self) -> &[u32] {
+        &self.indices
     }
 
     pub fn stats(&self) -> TreeStats {

@@ -21,7 +21,7 @@ pub mod scene;
 
 pub use camera::PinholeCamera;
 pub use kdtree::{
-    KdTree, TraceStats, TraversalConfig, TreeStats, DEFAULT_STACK_SIZE, MAX_DEPTH, PACKET,
+    KdNode, KdTree, TraceStats, TraversalConfig, TreeStats, DEFAULT_STACK_SIZE, MAX_DEPTH, PACKET,
 };
 pub use model::{AlphaMask, ModelAccel};
 pub use query::{KdTracer, RayQuery, ShadowRay};

@@ -54,6 +54,23 @@ impl AlphaMask {
     pub fn memory_bytes(&self) -> u64 {
         self.bits.capacity() as u64 * 8
     }
+
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    pub fn wrap(&self) -> Wrap {
+        self.wrap
+    }
+
+    /// Texel `y * width + x` is opaque when bit `i % 64` of word `i / 64` is set.
+    pub fn bits(&self) -> &[u64] {
+        &self.bits
+    }
 }
 
 /// Precomputed triangle plus its alpha entry (`u32::MAX`: opaque).
@@ -341,6 +358,23 @@ impl ModelAccel {
 
     pub fn tree(&self) -> &KdTree {
         &self.tree
+    }
+
+    /// Per triangle (mesh order) its Möller-Trumbore data and its entry in
+    /// [`ModelAccel::alpha_triangles`], `u32::MAX` when it is opaque.
+    pub fn triangles(&self) -> impl ExactSizeIterator<Item = (&TriangleData, u32)> + '_ {
+        self.tris.iter().map(|t| (&t.data, t.alpha))
+    }
+
+    /// Per alpha-tested triangle its corners' texture coordinates and its mask in
+    /// [`ModelAccel::alpha_masks`].
+    pub fn alpha_triangles(&self) -> impl ExactSizeIterator<Item = ([Vec2; 3], u32)> + '_ {
+        self.alpha.iter().map(|a| (a.uv, a.mask))
+    }
+
+    /// One opacity bitmask per leaf texture.
+    pub fn alpha_masks(&self) -> &[AlphaMask] {
+        &self.masks
     }
 
     pub fn bounds(&self) -> Aabb {

@@ -127,7 +127,7 @@ impl Default for OccluderCache {
 
 /// Instances of one top-level leaf that closest-hit queries order by entry distance (more
 /// are entered in leaf order first).
-const SORTED_INSTANCES: usize = 16;
+pub const SORTED_INSTANCES: usize = 16;
 
 /// An instance as the tracer sees it.
 #[derive(Debug, Clone, Copy)]
@@ -272,6 +272,11 @@ impl SceneAccel {
 
     pub fn top_stats(&self) -> TreeStats {
         self.top.stats()
+    }
+
+    /// The top-level tree: its leaves hold instance ids.
+    pub fn top_tree(&self) -> &KdTree {
+        &self.top
     }
 
     pub fn ground(&self) -> Option<[f32; 2]> {

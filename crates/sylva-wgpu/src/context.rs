@@ -38,7 +38,10 @@ impl ContextOptions {
     }
 }
 
-/// An opened GPU: adapter description, device, queue and the limits it was granted.
+/// An opened GPU: adapter description, device, queue and the limits it was granted. Clones
+/// share the device (wgpu's handles are reference counted), so the LB solver and the ray
+/// tracer of one render run on one device.
+#[derive(Clone)]
 pub struct GpuContext {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,

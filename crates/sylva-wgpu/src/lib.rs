@@ -1,5 +1,6 @@
 //! GPU access for sylva's compute work, through wgpu: which adapter runs it and the device
-//! opened on it. Shared by the GPU LB solver (`sylva-lb-gpu`) and, later, a GPU ray tracer.
+//! opened on it. Shared by the GPU LB solver (`sylva-lb-gpu`) and the GPU ray tracer
+//! (`sylva-trace-gpu`); one render opens one device for both.
 //!
 //! Owns adapter choice ([`GpuContext`] with [`AdapterChoice`]: hardware only, or any adapter
 //! including software ones such as Mesa's lavapipe), the device and its granted limits,

@@ -30,9 +30,12 @@ struct Measured {
     primary: f64,
     shadow: f64,
     shading: f64,
+    /// A GPU frame's single pass (rays and shading in one kernel).
+    fused: f64,
     mrays: f64,
-    primary_mrays: f64,
-    shadow_mrays: f64,
+    /// Per pass, where passes are separate (CPU shading).
+    primary_mrays: Option<f64>,
+    shadow_mrays: Option<f64>,
     timings: FrameTimings,
     restarts: u64,
     occluder_cache_hits: u64,
@@ -46,6 +49,7 @@ impl Measured {
             "primary_seconds": self.primary,
             "shadow_seconds": self.shadow,
             "shading_seconds": self.shading,
+            "gpu_frame_seconds": self.fused,
             "mrays_per_second": self.mrays,
             "primary_mrays_per_second": self.primary_mrays,
             "shadow_mrays_per_second": self.shadow_mrays,
@@ -85,16 +89,19 @@ pub fn run(a: BenchTraceArgs) -> Result<()> {
             primary: med(&|t| t.primary_seconds),
             shadow: med(&|t| t.shadow_seconds),
             shading: med(&|t| t.shading_seconds),
+            fused: med(&|t| t.fused_seconds),
             mrays: med(&|t| t.mrays_per_second()),
-            primary_mrays: med(&|t| t.primary_rays as f64 / t.primary_seconds * 1e-6),
-            shadow_mrays: med(&|t| t.shadow_rays as f64 / t.shadow_seconds.max(1e-12) * 1e-6),
+            primary_mrays: (frames[0].timings.primary_seconds > 0.0)
+                .then(|| med(&|t| t.primary_rays as f64 / t.primary_seconds * 1e-6)),
+            shadow_mrays: (frames[0].timings.shadow_seconds > 0.0)
+                .then(|| med(&|t| t.shadow_rays as f64 / t.shadow_seconds * 1e-6)),
             timings: t,
             restarts: frames[0].stats.restarts,
             occluder_cache_hits: frames[0].stats.occluder_cache_hits,
         };
         results.push(m);
     }
-    let mem = p.tracer.accel.memory();
+    let mem = p.tracer.cpu().accel.memory();
     let threads = rayon::current_num_threads();
     let one = &results[0];
     if a.json {
@@ -105,7 +112,23 @@ pub fn run(a: BenchTraceArgs) -> Result<()> {
         o.insert("height".into(), prepared.height.into());
         o.insert("threads".into(), threads.into());
         o.insert("runs".into(), a.runs.into());
-        o.insert("stack_size".into(), p.tracer.traversal.stack_size.into());
+        o.insert(
+            "stack_size".into(),
+            p.tracer.cpu().traversal.stack_size.into(),
+        );
+        o.insert("device".into(), p.tracer.device().into());
+        if let Some(adapter) = p.tracer.adapter() {
+            o.insert("adapter".into(), adapter.into());
+        }
+        if let Some(gpu) = p.tracer.gpu() {
+            o.insert("gpu_scene_bytes".into(), gpu.scene().device_bytes().into());
+            o.insert("cpu_answered_rays".into(), gpu.cpu_answered().into());
+            o.insert("gpu_shading".into(), p.gpu_frame.is_some().into());
+            if let Some(f) = &p.gpu_frame {
+                o.insert("gpu_shading_bytes".into(), f.device_bytes().into());
+                o.insert("cpu_rendered_pixels".into(), f.cpu_pixels().into());
+            }
+        }
         o.insert("lb".into(), (!a.no_lb).into());
         o.insert("accel_build_seconds".into(), accel_seconds.into());
         o.insert("lb_seconds".into(), lb_seconds.into());
@@ -128,11 +151,12 @@ pub fn run(a: BenchTraceArgs) -> Result<()> {
     }
     let mut o = String::new();
     o += &format!(
-        "{} at {}x{}, {threads} threads, stack {}, LB {}; medians of {} runs\n",
+        "{} at {}x{}, rays on {}, stack {}, LB {}; medians of {} runs\n",
         p.scene.name,
         prepared.width,
         prepared.height,
-        p.tracer.traversal.stack_size,
+        p.tracer.describe(),
+        p.tracer.cpu().traversal.stack_size,
         if a.no_lb { "off" } else { "on" },
         a.runs
     );
@@ -144,10 +168,16 @@ pub fn run(a: BenchTraceArgs) -> Result<()> {
         p.scene.models.len()
     );
     for m in &results {
-        o += &format!(
-            "{} ray/pixel: frame {:.3} s (primary {:.3}, shadow {:.3}, shading {:.3}); {:.2} Mrays/s (primary {:.2}, shadow {:.2}); {} kd-restarts\n",
-            m.rpp, m.frame, m.primary, m.shadow, m.shading, m.mrays, m.primary_mrays, m.shadow_mrays, m.restarts
-        );
+        o += &match (m.primary_mrays, m.shadow_mrays) {
+            (Some(p), Some(s)) => format!(
+                "{} ray/pixel: frame {:.3} s (primary {:.3}, shadow {:.3}, shading {:.3}); {:.2} Mrays/s (primary {p:.2}, shadow {s:.2}); {} kd-restarts\n",
+                m.rpp, m.frame, m.primary, m.shadow, m.shading, m.mrays, m.restarts
+            ),
+            _ => format!(
+                "{} ray/pixel: frame {:.4} s (one GPU pass: rays, shadow rays and shading); {:.2} Mrays/s ({} primary + {} shadow rays)\n",
+                m.rpp, m.frame, m.mrays, m.timings.primary_rays, m.timings.shadow_rays
+            ),
+        };
     }
     o += &format!(
         "memory: {} models ({} instances of {} triangles); scene {}, kd-trees {} + top {}, LB grids {}, peak RSS {}\n",

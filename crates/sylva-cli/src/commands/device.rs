@@ -1,10 +1,12 @@
 //! `--device cpu|gpu|auto` and `--precision f32|f16`: which LB backend runs the solver
-//! (chosen by `sylva_lb_gpu::select_solver`).
+//! (chosen by `sylva_lb_gpu::select_solver`), and for `render` and `bench trace` also where
+//! rays are traced (one device opened for both).
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::ValueEnum;
 use sylva_lb::LbSolver;
-use sylva_lb_gpu::{select_solver, Device, LbGpuError, Precision};
+use sylva_lb_gpu::{select_solver, solver_on, Device, LbGpuError, Precision};
+use sylva_wgpu::{open_device, GpuContext};
 
 /// Where the LB solver runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -26,28 +28,62 @@ pub enum PrecisionArg {
     F16,
 }
 
-/// The LB backend `device` and `precision` ask for; a note about the choice (a software
-/// adapter, `auto` falling back to the CPU) goes to stderr.
-pub fn open_solver(device: DeviceArg, precision: PrecisionArg) -> Result<Box<dyn LbSolver>> {
-    let device = match device {
+fn device(d: DeviceArg) -> Device {
+    match d {
         DeviceArg::Cpu => Device::Cpu,
         DeviceArg::Gpu => Device::Gpu,
         DeviceArg::Auto => Device::Auto,
-    };
-    let precision = match precision {
+    }
+}
+
+fn precision(p: PrecisionArg) -> Precision {
+    match p {
         PrecisionArg::F32 => Precision::F32,
         PrecisionArg::F16 => Precision::F16,
-    };
-    let selected = match select_solver(device, precision) {
-        Ok(s) => s,
-        Err(LbGpuError::F16OnCpu) => {
-            anyhow::bail!("--precision f16 is a GPU state format; the CPU solver stores f32")
+    }
+}
+
+fn solver_error(e: LbGpuError, device: Device) -> anyhow::Error {
+    match e {
+        LbGpuError::F16OnCpu => {
+            anyhow::anyhow!("--precision f16 is a GPU state format; the CPU solver stores f32")
         }
-        Err(e) if device == Device::Gpu => return Err(e).context("--device gpu"),
-        Err(e) => return Err(e.into()),
-    };
+        e if device == Device::Gpu => anyhow::Error::new(e).context("--device gpu"),
+        e => e.into(),
+    }
+}
+
+/// The LB backend `device` and `precision` ask for; a note about the choice (a software
+/// adapter, `auto` falling back to the CPU) goes to stderr.
+pub fn open_solver(
+    device_arg: DeviceArg,
+    precision_arg: PrecisionArg,
+) -> Result<Box<dyn LbSolver>> {
+    let d = device(device_arg);
+    let selected = select_solver(d, precision(precision_arg)).map_err(|e| solver_error(e, d))?;
     if let Some(note) = &selected.note {
         eprintln!("note: {note}");
     }
     Ok(selected.solver)
+}
+
+/// The GPU `device` asks for (`None`: the CPU), opened once for the LB solver and the ray
+/// tracer; a note about the choice goes to stderr.
+pub fn open_gpu(device_arg: DeviceArg) -> Result<Option<GpuContext>> {
+    let d = device(device_arg);
+    let opened = open_device(d).map_err(|e| solver_error(e.into(), d))?;
+    if let Some(note) = &opened.note {
+        eprintln!("note: {note}");
+    }
+    Ok(opened.gpu)
+}
+
+/// The LB backend on `gpu` (or the CPU) storing its state at `precision_arg`.
+pub fn solver_for(
+    gpu: Option<&GpuContext>,
+    device_arg: DeviceArg,
+    precision_arg: PrecisionArg,
+) -> Result<Box<dyn LbSolver>> {
+    solver_on(gpu.cloned(), precision(precision_arg))
+        .map_err(|e| solver_error(e, device(device_arg)))
 }

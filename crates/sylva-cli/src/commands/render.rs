@@ -61,14 +61,18 @@ pub struct FrameArgs {
     /// Seed of the sub-pixel jitter (rays per pixel other than 1 and 4).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Where the LB lighting is solved: cpu, gpu (the best adapter, a software one such as
-    /// lavapipe included) or auto (a hardware GPU if present, else the CPU). Cache entries
-    /// are kept per device.
+    /// Where the LB lighting is solved and the rays are traced: cpu, gpu (the best adapter,
+    /// a software one such as lavapipe included) or auto (a hardware GPU if present, else the
+    /// CPU). LB cache entries are kept per device.
     #[arg(long, value_enum, default_value = "auto")]
     pub device: super::device::DeviceArg,
     /// GPU state storage of the LB solve: f32, or f16 (half the memory traffic).
     #[arg(long, value_enum, default_value = "f32")]
     pub precision: super::device::PrecisionArg,
+    /// On a GPU, trace the rays there but shade on the CPU (default: the whole frame in one
+    /// GPU kernel).
+    #[arg(long)]
+    pub cpu_shading: bool,
 }
 
 #[derive(Args, Debug)]
@@ -145,8 +149,9 @@ pub fn prepare(
         scene.sun.elevation_deg(),
         scene.sun.azimuth_deg()
     ));
+    let gpu = super::device::open_gpu(a.device)?;
     let solver: Option<Box<dyn LbSolver>> = if need_lb {
-        let solver = super::device::open_solver(a.device, a.precision)?;
+        let solver = super::device::solver_for(gpu.as_ref(), a.device, a.precision)?;
         say(format!("LB solver: {}", solver.describe()));
         Some(solver)
     } else {
@@ -159,6 +164,8 @@ pub fn prepare(
             cache_dir: (!a.no_cache).then_some(a.cache_dir.as_path()),
         }),
         traversal: TraversalConfig::with_stack(a.stack),
+        trace_gpu: gpu.as_ref(),
+        shade_on_gpu: !a.cpu_shading,
         indirect: a.indirect,
         sky_ambient: a.sky_ambient,
         largest_frame: Some((width, height, rays_per_pixel)),
@@ -190,6 +197,18 @@ pub fn prepare(
         },
     );
     let scene = PreparedScene::new(scene, &opts, &progress)?;
+    say(format!(
+        "ray tracer: {}{}",
+        scene.tracer.describe(),
+        match (&scene.gpu_frame, scene.tracer.gpu()) {
+            (Some(f), _) => format!(
+                "; shading on the GPU ({} of shading data)",
+                sylva_core::format_bytes(f.device_bytes())
+            ),
+            (None, Some(_)) => "; shading on the CPU".into(),
+            _ => String::new(),
+        }
+    ));
     Ok(Prepared {
         scene,
         width,
@@ -259,7 +278,7 @@ pub fn run(a: RenderArgs) -> Result<()> {
         );
     }
     let t = &frame.timings;
-    let mem = prepared.tracer.accel.memory();
+    let mem = prepared.tracer.cpu().accel.memory();
     println!("stage                 seconds");
     for (stage, s) in [
         ("scene build", clock.seconds(stage::SCENE_BUILD)),
@@ -268,9 +287,16 @@ pub fn run(a: RenderArgs) -> Result<()> {
         ("primary rays", t.primary_seconds),
         ("shadow rays", t.shadow_seconds),
         ("shading", t.shading_seconds),
+        ("GPU frame", t.fused_seconds),
         ("tone mapping", clock.seconds(stage::TONE_MAPPING)),
         ("image output", clock.seconds(stage::IMAGE_OUTPUT)),
     ] {
+        // A GPU frame is one pass (rays and shading); the CPU's passes are separate.
+        let pass = ["primary rays", "shadow rays", "shading"].contains(&stage);
+        let gpu = t.fused_seconds > 0.0;
+        if (stage == "GPU frame" && !gpu) || (pass && gpu) {
+            continue;
+        }
         println!("  {stage:<20}{s:>8.3}");
     }
     println!("  {:<20}{:>8.3}", "total", t_all.elapsed().as_secs_f64());

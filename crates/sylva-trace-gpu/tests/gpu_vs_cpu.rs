@@ -1,0 +1,372 @@
+//! The GPU tracer against the CPU tracer (the oracle): the same closest hit (t, instance,
+//! triangle, u, v) and the same shadow answer for every ray, over instanced scenes with
+//! alpha-tested leaves, short stacks that restart, crowded top-level leaves, ties between
+//! instances, arrays split over many bindings, and rays the kernel hands back to the CPU.
+//!
+//! On a software adapter (lavapipe, as in CI: IEEE rounding, no fused multiply-add) the
+//! answers must be bit-identical. A hardware GPU may contract `a * b + c` into one rounding,
+//! which moves last bits: there 99.9 % must be identical and the rest may differ only where
+//! two candidates lie within rounding of each other. Without any adapter the tests print why
+//! and pass.
+
+#[path = "../../sylva-trace/tests/common/mod.rs"]
+mod common;
+
+use common::*;
+use glam::Vec3;
+use sylva_geom::{Instance, Mesh, Model, Texture, Wrap};
+use sylva_grow::Species;
+use sylva_trace::{
+    Hit, KdTracer, Ray, RayQuery, SceneAccel, ShadowRay, TraceStats, TraversalConfig,
+};
+use sylva_trace_gpu::GpuTracer;
+use sylva_wgpu::{AdapterChoice, ContextOptions, GpuContext, GpuError};
+
+fn context_with(opts: ContextOptions) -> Option<GpuContext> {
+    match GpuContext::new(&opts) {
+        Ok(ctx) => {
+            eprintln!("GPU tracer tests on {}", ctx.describe());
+            Some(ctx)
+        }
+        Err(e @ GpuError::NoAdapter { .. }) => {
+            eprintln!("skipping GPU test: {e}");
+            None
+        }
+        Err(e) => panic!("opening the GPU failed: {e}"),
+    }
+}
+
+fn context() -> Option<GpuContext> {
+    context_with(ContextOptions::new(AdapterChoice::Any))
+}
+
+/// Red maples (alpha-tested leaves, clamped textures), rotated and scaled, on a ground, and
+/// a soup of leaves with a repeating checker texture whose coordinates run past [0, 1].
+fn forest() -> SceneAccel {
+    let maple = Species::builtin("red_maple")
+        .expect("built-in species")
+        .build_model()
+        .expect("red maple generates");
+    let h = maple.bounds.max.y;
+    let mut soup_mesh = Mesh::default();
+    let mut r = rng(5);
+    for _ in 0..300 {
+        let c = Vec3::new(
+            uniform(&mut r, -0.5, 0.5),
+            uniform(&mut r, 0.0, 1.0),
+            uniform(&mut r, -0.5, 0.5),
+        ) * h;
+        let uv = |r: &mut sylva_core::SplitMix64| [uniform(r, -2.0, 3.0), uniform(r, -2.0, 3.0)];
+        let a = soup_mesh.push_vertex(c + unit(&mut r) * 0.05 * h, Vec3::Y, uv(&mut r));
+        let b = soup_mesh.push_vertex(c + unit(&mut r) * 0.05 * h, Vec3::Y, uv(&mut r));
+        let d = soup_mesh.push_vertex(c + unit(&mut r) * 0.05 * h, Vec3::Y, uv(&mut r));
+        soup_mesh.push_triangle(a, b, d, 0);
+    }
+    let mut checker = checker_texture(8);
+    checker.wrap = Wrap::Repeat;
+    let soup = Model::new("leaf soup", soup_mesh, vec![leaf_material(checker)]);
+    let mut instances = Vec::new();
+    for k in 0..8 {
+        instances.push(Instance {
+            model: 0,
+            position: Vec3::new(
+                (k % 3) as f32 * 0.45 * h - 0.45 * h + uniform(&mut r, -0.1, 0.1) * h,
+                0.0,
+                (k / 3) as f32 * 0.45 * h - 0.45 * h,
+            ),
+            rotation_deg: uniform(&mut r, 0.0, 360.0),
+            scale: uniform(&mut r, 0.8, 1.2),
+        });
+    }
+    instances.push(Instance {
+        model: 1,
+        position: Vec3::new(0.2 * h, 0.1 * h, 0.5 * h),
+        rotation_deg: 30.0,
+        scale: 0.7,
+    });
+    let half = 1.5 * h;
+    SceneAccel::from_parts(&[maple, soup], &instances, Some([half, half])).unwrap()
+}
+
+/// Camera rays into the scene's box, random rays through it, segments, axis-parallel and
+/// invalid rays.
+fn rays(accel: &SceneAccel, seed: u64) -> Vec<Ray> {
+    let b = accel.top_tree().bounds();
+    let (c, size) = ((b.min + b.max) * 0.5, (b.max - b.min).max_element());
+    let mut r = rng(seed);
+    let mut out = Vec::new();
+    let eye = c + Vec3::new(0.9, 0.35, 1.1) * size;
+    let forward = (c - eye).normalize();
+    let right = forward.cross(Vec3::Y).normalize();
+    let up = right.cross(forward);
+    for j in 0..48 {
+        for i in 0..64 {
+            let (x, y) = (i as f32 / 63.0 - 0.5, 0.5 - j as f32 / 47.0);
+            out.push(Ray::new(
+                eye,
+                (forward + right * x * 0.8 + up * y * 0.6).normalize(),
+            ));
+        }
+    }
+    for _ in 0..2000 {
+        let o = c + unit(&mut r) * uniform(&mut r, 0.0, size);
+        let d = unit(&mut r);
+        out.push(Ray::new(o, d));
+        out.push(Ray::segment(
+            o,
+            d,
+            uniform(&mut r, 0.0, 0.1) * size,
+            uniform(&mut r, 0.1, 0.6) * size,
+        ));
+    }
+    for k in 0..300 {
+        let o = c + unit(&mut r) * uniform(&mut r, 0.0, 0.5 * size);
+        let mut d = unit(&mut r);
+        d[k % 3] = 0.0;
+        if k % 2 == 0 {
+            d[(k + 1) % 3] = 0.0;
+        }
+        out.push(Ray::new(o, d));
+    }
+    out.push(Ray::new(c, Vec3::ZERO));
+    out.push(Ray::new(Vec3::new(f32::NAN, 0.0, 0.0), Vec3::X));
+    out.push(Ray::segment(c, Vec3::X, 2.0, 1.0));
+    out
+}
+
+fn identical(a: Option<Hit>, b: Option<Hit>) -> bool {
+    match (a, b) {
+        (None, None) => true,
+        (Some(a), Some(b)) => {
+            a.t.to_bits() == b.t.to_bits()
+                && a.instance == b.instance
+                && a.triangle == b.triangle
+                && a.u.to_bits() == b.u.to_bits()
+                && a.v.to_bits() == b.v.to_bits()
+        }
+        _ => false,
+    }
+}
+
+/// Closest hits and shadow answers of `gpu` against `cpu` for `rays` and shadow rays from
+/// their hits; returns the CPU's work counters.
+fn compare(gpu: &GpuTracer, cpu: &KdTracer, rays: &[Ray], strict: bool, what: &str) -> TraceStats {
+    let mut cs = TraceStats::default();
+    let mut want = vec![None; rays.len()];
+    cpu.closest_hits(rays, &mut want, &mut cs);
+    let mut gs = TraceStats::default();
+    let mut got = vec![None; rays.len()];
+    gpu.closest_hits(rays, &mut got, &mut gs);
+    assert_eq!(gs.rays, rays.len() as u64);
+    // Every ray was answered by the kernel, none handed back to the CPU.
+    assert_eq!(gpu.take_error(), None, "{what}");
+    assert_eq!(gpu.cpu_answered(), 0, "{what}");
+    let hits = want.iter().filter(|h| h.is_some()).count();
+    assert!(
+        hits > rays.len() / 4,
+        "{what}: the rays should hit ({hits})"
+    );
+    let mut differ = 0;
+    for (k, (g, w)) in got.iter().zip(&want).enumerate() {
+        if identical(*g, *w) {
+            continue;
+        }
+        differ += 1;
+        // Only a rounding-level tie may differ, and only off lavapipe.
+        let near = matches!((g, w), (Some(g), Some(w)) if (g.t - w.t).abs() <= 1e-5 * w.t.abs());
+        assert!(
+            !strict && near,
+            "{what}: ray {k} {:?}: GPU {g:?}, CPU {w:?}",
+            rays[k]
+        );
+    }
+    assert!(
+        differ * 1000 <= rays.len(),
+        "{what}: {differ} of {} hits differ",
+        rays.len()
+    );
+
+    // Shadow rays from the hits towards a sun, starting on the instance hit.
+    let sun = Vec3::new(0.3, 0.8, 0.5).normalize();
+    let shadow: Vec<ShadowRay> = rays
+        .iter()
+        .zip(&want)
+        .filter_map(|(r, h)| {
+            let h = (*h)?;
+            let p = r.at(h.t) + Vec3::Y * 1e-3;
+            Some(ShadowRay {
+                ray: Ray::new(p, sun),
+                from: (!h.is_ground()).then_some(h.instance),
+            })
+        })
+        .chain(rays.iter().map(|r| ShadowRay {
+            ray: *r,
+            from: None,
+        }))
+        .collect();
+    let mut want_b = vec![false; shadow.len()];
+    cpu.any_hits(&shadow, &mut want_b, &mut cs);
+    let mut got_b = vec![false; shadow.len()];
+    gpu.any_hits(&shadow, &mut got_b, &mut gs);
+    let blocked = want_b.iter().filter(|&&b| b).count();
+    assert!(
+        blocked > 0 && blocked < shadow.len(),
+        "{what}: {blocked} of {} blocked",
+        shadow.len()
+    );
+    let differ = got_b.iter().zip(&want_b).filter(|(a, b)| a != b).count();
+    if strict {
+        assert_eq!(differ, 0, "{what}: shadow answers differ");
+    } else {
+        assert!(
+            differ * 1000 <= shadow.len(),
+            "{what}: {differ} shadow answers differ"
+        );
+    }
+    cs
+}
+
+#[test]
+fn hits_equal_the_cpu_tracer_for_every_stack_size() {
+    let Some(ctx) = context() else { return };
+    let strict = ctx.is_software();
+    let accel = forest();
+    let rays = rays(&accel, 11);
+    for stack in [1, 5, sylva_trace::MAX_DEPTH] {
+        let cfg = TraversalConfig::with_stack(stack);
+        let cpu = KdTracer::new(accel.clone(), cfg);
+        let gpu = GpuTracer::new(ctx.clone(), KdTracer::new(accel.clone(), cfg)).unwrap();
+        let stats = compare(&gpu, &cpu, &rays, strict, &format!("forest, stack {stack}"));
+        // The rays meet transparent texels and, with short stacks, restart.
+        assert!(stats.alpha_rejects > 100, "{stats:?}");
+        if stack == 1 {
+            assert!(stats.restarts > 100, "{stats:?}");
+        }
+    }
+}
+
+#[test]
+fn crowded_leaves_and_tied_instances_agree() {
+    let Some(ctx) = context() else { return };
+    let accel = crowded_scene();
+    let mut r = rng(3);
+    let rays: Vec<Ray> = (0..6000).map(|_| random_ray(&mut r, 1.5)).collect();
+    let cfg = TraversalConfig::default();
+    let cpu = KdTracer::new(accel.clone(), cfg);
+    let gpu = GpuTracer::new(ctx.clone(), KdTracer::new(accel, cfg)).unwrap();
+    compare(&gpu, &cpu, &rays, ctx.is_software(), "crowded");
+}
+
+#[test]
+fn arrays_split_over_many_bindings_give_the_same_hits() {
+    let Some(ctx) = context_with(ContextOptions {
+        max_binding_bytes: Some(2 << 20),
+        ..ContextOptions::new(AdapterChoice::Any)
+    }) else {
+        return;
+    };
+    let accel = forest();
+    let cfg = TraversalConfig::default();
+    let cpu = KdTracer::new(accel.clone(), cfg);
+    match GpuTracer::new(ctx.clone(), KdTracer::new(accel, cfg)) {
+        Ok(gpu) => {
+            eprintln!(
+                "scene arrays split into up to {} parts",
+                gpu.scene().max_parts()
+            );
+            assert!(gpu.scene().max_parts() > 1, "{}", gpu.scene().max_parts());
+            compare(
+                &gpu,
+                &cpu,
+                &rays(&cpu.accel, 12),
+                ctx.is_software(),
+                "split",
+            );
+        }
+        // An adapter with few storage bindings per stage refuses, saying why.
+        Err(e) => {
+            eprintln!("{e}");
+            assert!(e.to_string().contains("storage bindings"), "{e}")
+        }
+    }
+}
+
+#[test]
+fn rays_lying_in_a_split_plane_are_answered_by_the_cpu() {
+    let Some(ctx) = context() else { return };
+    let accel = forest();
+    // The top-level root's split plane: a ray inside it, parallel to it, meets a NaN split
+    // distance, which the CPU resolves by visiting every leaf.
+    let [a, b] = accel.top_tree().nodes()[0].raw();
+    let axis = (a & 3) as usize;
+    assert!(axis < 3, "the top-level root splits");
+    let split = f32::from_bits(b);
+    let c = (accel.top_tree().bounds().min + accel.top_tree().bounds().max) * 0.5;
+    let mut rays = Vec::new();
+    for k in 0..16 {
+        let mut o = c + Vec3::new(0.0, 0.02 * k as f32, 0.0);
+        o[axis] = split;
+        let mut d = Vec3::new(1.0, -0.2 - 0.01 * k as f32, 0.7);
+        d[axis] = 0.0;
+        rays.push(Ray::new(o, d.normalize()));
+    }
+    let cfg = TraversalConfig::default();
+    let cpu = KdTracer::new(accel.clone(), cfg);
+    let gpu = GpuTracer::new(ctx, KdTracer::new(accel, cfg)).unwrap();
+    let (mut want, mut got) = (vec![None; rays.len()], vec![None; rays.len()]);
+    cpu.closest_hits(&rays, &mut want, &mut TraceStats::default());
+    gpu.closest_hits(&rays, &mut got, &mut TraceStats::default());
+    assert!(
+        gpu.cpu_answered() >= rays.len() as u64,
+        "{}",
+        gpu.cpu_answered()
+    );
+    for (g, w) in got.iter().zip(&want) {
+        assert!(identical(*g, *w), "GPU {g:?}, CPU {w:?}");
+    }
+}
+
+#[test]
+fn tiny_texture_masks_keep_their_bits() {
+    // One 3×3 mask (9 bits in the first word), repeat wrap, on a unit quad: the GPU reads
+    // the same bits as AlphaMask::opaque at every texel.
+    let Some(ctx) = context() else { return };
+    let tex = Texture::from_fn(3, 3, Wrap::Repeat, |u, v| {
+        let (i, j) = ((u * 3.0) as u32, (v * 3.0) as u32);
+        [0, 0, 0, if (i * 3 + j) % 4 == 1 { 0 } else { 255 }]
+    });
+    let mut m = Mesh::default();
+    let a = m.push_vertex(Vec3::new(-1.0, 0.0, 1.0), Vec3::Z, [0.0, 0.0]);
+    let b = m.push_vertex(Vec3::new(1.0, 0.0, 1.0), Vec3::Z, [2.0, 0.0]);
+    let c = m.push_vertex(Vec3::new(1.0, 2.0, 1.0), Vec3::Z, [2.0, 2.0]);
+    let d = m.push_vertex(Vec3::new(-1.0, 2.0, 1.0), Vec3::Z, [0.0, 2.0]);
+    m.push_triangle(a, b, c, 0);
+    m.push_triangle(a, c, d, 0);
+    let model = Model::new("quad", m, vec![leaf_material(tex)]);
+    let inst = Instance {
+        model: 0,
+        position: Vec3::ZERO,
+        rotation_deg: 0.0,
+        scale: 1.0,
+    };
+    let accel = SceneAccel::from_parts(&[model], &[inst], None).unwrap();
+    let rays: Vec<Ray> = (0..60)
+        .flat_map(|j| {
+            (0..60).map(move |i| {
+                let o = Vec3::new(-1.0 + (i as f32 + 0.5) / 30.0, (j as f32 + 0.5) / 30.0, 3.0);
+                Ray::new(o, -Vec3::Z)
+            })
+        })
+        .collect();
+    let cfg = TraversalConfig::default();
+    let cpu = KdTracer::new(accel.clone(), cfg);
+    let gpu = GpuTracer::new(ctx, KdTracer::new(accel, cfg)).unwrap();
+    let (mut want, mut got) = (vec![None; rays.len()], vec![None; rays.len()]);
+    cpu.closest_hits(&rays, &mut want, &mut TraceStats::default());
+    gpu.closest_hits(&rays, &mut got, &mut TraceStats::default());
+    let holes = want.iter().filter(|h| h.is_none()).count();
+    assert!(holes > 100 && holes < 3000, "{holes} transparent");
+    for (k, (g, w)) in got.iter().zip(&want).enumerate() {
+        assert_eq!(g.is_some(), w.is_some(), "ray {k}");
+    }
+}
