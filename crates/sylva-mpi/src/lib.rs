@@ -8,6 +8,8 @@
 //!   at rank 0: bit-identical to a one-process frame.
 //! * [`lighting`]: every model's LB lighting, colours solved as queue jobs, the cache at rank
 //!   0, the grids broadcast to every rank.
+//! * [`model`]: frame times on N ranks from measured per-tile costs, fixed strips (the
+//!   paper's split) against units on demand.
 //! * [`launch`]: whether this process was started by `mpirun` as one of several.
 //!
 //! Whatever fails on one rank is returned there as a [`DistError`]; the caller prints it and
@@ -17,6 +19,7 @@ pub mod comm;
 pub mod frame;
 pub mod launch;
 pub mod lighting;
+pub mod model;
 #[cfg(feature = "mpi")]
 pub mod mpi;
 pub mod queue;

@@ -27,9 +27,10 @@ const NO_JOB: u64 = u64::MAX;
 /// The serving thread's longest sleep between polls when nothing arrives.
 const MAX_IDLE: Duration = Duration::from_millis(1);
 
-/// Test hook: `SYLVA_MPI_FAIL_RANK=R` makes rank R fail its first job with an error,
-/// `SYLVA_MPI_FAIL_RANK=R:panic` with a panic (the MPI tests check that the job then ends
-/// with the message instead of hanging). Not for users.
+/// Test hook: `SYLVA_MPI_FAIL_RANK=R` makes rank R fail with an error as it enters the work
+/// queue (while the other ranks wait for it), `SYLVA_MPI_FAIL_RANK=R:panic` with a panic:
+/// the MPI tests check that the job then ends with the message instead of hanging. Not for
+/// users.
 pub const FAIL_RANK_ENV: &str = "SYLVA_MPI_FAIL_RANK";
 
 /// Who ran one job, and how long it took there.
@@ -88,6 +89,7 @@ pub fn run_queue(
     run: &mut dyn FnMut(usize) -> Result<Vec<u8>, DistError>,
     on_done: &(dyn Fn(usize) + Sync),
 ) -> Result<Option<QueueOutcome>, DistError> {
+    fail_if_asked(comm.rank())?;
     if comm.rank() != 0 {
         work(comm, run)?;
         return Ok(None);
@@ -123,14 +125,10 @@ pub fn run_queue(
             }
         }
         let mut guard = StopOnDrop(&stop, true);
-        let mut first = true;
         loop {
             let job = next.fetch_add(1, Ordering::SeqCst);
             if job >= jobs || stop.load(Ordering::SeqCst) {
                 break;
-            }
-            if std::mem::take(&mut first) {
-                fail_if_asked(0)?;
             }
             let t = Instant::now();
             let result = run(job)?;
@@ -231,7 +229,6 @@ fn work(
     run: &mut dyn FnMut(usize) -> Result<Vec<u8>, DistError>,
 ) -> Result<(), DistError> {
     comm.send(0, TAG_REQUEST, Vec::new())?;
-    let mut first = true;
     loop {
         let (_, answer) = comm.recv(Some(0), TAG_JOB)?;
         let mut r = Reader::new(&answer, "job answer");
@@ -241,9 +238,6 @@ fn work(
             break;
         }
         comm.send(0, TAG_REQUEST, Vec::new())?;
-        if std::mem::take(&mut first) {
-            fail_if_asked(comm.rank())?;
-        }
         let t = Instant::now();
         let result = run(job as usize)?;
         let mut w = Writer::default();
