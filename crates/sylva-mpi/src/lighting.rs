@@ -13,7 +13,7 @@
 use std::time::Instant;
 
 use sylva_geom::Scene;
-use sylva_lb::LightingGrid;
+use sylva_lb::{DensityGrid, LightingGrid};
 use sylva_render::lighting::{
     CacheLookup, LightingPlan, LightingReport, LightingSource, ModelLighting,
 };
@@ -23,15 +23,34 @@ use crate::comm::{agree, Comm, CommError, Reader, Writer};
 use crate::queue::run_queue;
 use crate::DistError;
 
-/// One solve of the LB precomputation: a model's colour under the sun. Relighting's base
-/// solutions (004: 19 boundary conditions per colour) would add a boundary index here and
-/// list 19 × 3 jobs per model; the queue, the gathering and the broadcast stay as they are.
+/// A solve that needs one model's density grid: what the LB queue runs. [`solve_model_jobs`]
+/// runs any list of them; the result of each is one value per site of its model's grid.
+pub trait ModelJob: Sync {
+    /// Index into the scene's models (and their [`LightingPlan`]s).
+    fn model(&self) -> usize;
+}
+
+/// One solve of the LB precomputation: a model's colour under the sun.
+///
+/// Relighting's base solutions (004: `sylva_lb::relight::BasisJob`, a base solution in a
+/// colour) are listed the same way: a job type holding the model and its `BasisJob`,
+/// implementing [`ModelJob`], listed per model from `BasisJob::all` (or
+/// `BasisAssembly::missing` after a partial cache hit) and run by [`solve_model_jobs`], whose
+/// `solve` calls `solve_basis_jobs` with that one job; rank 0 puts the values in each model's
+/// `BasisAssembly`. The queue, the density grids kept between jobs, the gathering and the
+/// broadcast stay as they are.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct LbJob {
     /// Index into the scene's models.
     pub model: usize,
     /// 0, 1, 2: R, G, B.
     pub colour: usize,
+}
+
+impl ModelJob for LbJob {
+    fn model(&self) -> usize {
+        self.model
+    }
 }
 
 /// The jobs that light `models` (indices into `plans`): each colour that does not repeat an
@@ -46,6 +65,87 @@ pub fn lb_jobs(plans: &[LightingPlan], models: &[usize]) -> Vec<LbJob> {
         }
     }
     jobs
+}
+
+/// One job's values (one per site of its model's grid) and the seconds it took where it ran.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JobValues {
+    pub values: Vec<f32>,
+    pub seconds: f64,
+}
+
+/// What computes one job on the rank that gets it: `solve(job, plan, density)`, one value
+/// per site of the model's grid.
+pub type SolveModelJob<'f, J> =
+    dyn FnMut(&J, &LightingPlan, &DensityGrid) -> Result<Vec<f32>, DistError> + 'f;
+
+/// Runs `jobs` across the ranks through the work queue (every rank calls it with the same
+/// list): `solve(job, plan, density)` computes a job on whichever rank gets it, the model's
+/// density grid voxelized there and kept while that rank's next job is of the same model.
+/// Rank 0 gets `Some` of every job's values in job order (each checked to have one value per
+/// site), with `on_done(job)` as each arrives; the other ranks get `None`.
+pub fn solve_model_jobs<J: ModelJob>(
+    comm: &dyn Comm,
+    plans: &[LightingPlan],
+    jobs: &[J],
+    solve: &mut SolveModelJob<'_, J>,
+    on_done: &(dyn Fn(usize) + Sync),
+) -> Result<Option<Vec<JobValues>>, DistError> {
+    if let Some(job) = jobs.iter().find(|j| j.model() >= plans.len()) {
+        return Err(CommError::Protocol(format!(
+            "an LB job of model {} of {}",
+            job.model(),
+            plans.len()
+        ))
+        .into());
+    }
+    let mut density: Option<(usize, DensityGrid)> = None;
+    let outcome = run_queue(
+        comm,
+        jobs.len(),
+        &mut |j| {
+            let job = &jobs[j];
+            let plan = &plans[job.model()];
+            if density.as_ref().map(|d| d.0) != Some(job.model()) {
+                // One grid held at a time.
+                density = None;
+                let grid = plan
+                    .density()
+                    .map_err(|source| lighting_error(plan, source))?;
+                density = Some((job.model(), grid));
+            }
+            let grid = &density.as_ref().expect("density").1;
+            let mut w = Writer::default();
+            w.f32s(&solve(job, plan, grid)?);
+            Ok(w.0)
+        },
+        on_done,
+    )?;
+    drop(density);
+    let Some(outcome) = outcome else {
+        return Ok(None);
+    };
+    jobs.iter()
+        .zip(&outcome.results)
+        .zip(&outcome.done)
+        .map(|((job, result), done)| {
+            let mut r = Reader::new(result, "LB job values");
+            let values = r.f32s(plans[job.model()].dims().sites())?;
+            r.end()?;
+            Ok(JobValues {
+                values,
+                seconds: done.seconds,
+            })
+        })
+        .collect::<Result<Vec<_>, DistError>>()
+        .map(Some)
+}
+
+fn lighting_error(plan: &LightingPlan, source: sylva_render::lighting::LightingError) -> DistError {
+    DistError::Pipeline(sylva_render::PipelineError::Lighting {
+        model: plan.model.name.clone(),
+        source,
+    })
 }
 
 /// Every model's lighting, in scene order, on every rank (every rank calls it with the same
@@ -116,39 +216,19 @@ pub fn light_models(
     }
     let jobs = lb_jobs(&plans, &missing);
 
-    // The solves: one density grid kept at a time (a rank often gets a model's colours in a
-    // row).
     if root && !jobs.is_empty() {
         progress.start("LB solves", jobs.len() as u64);
     }
-    let mut density: Option<(usize, sylva_lb::DensityGrid)> = None;
-    let outcome = run_queue(
+    let outcome = solve_model_jobs(
         comm,
-        jobs.len(),
-        &mut |j| {
-            let job = jobs[j];
-            let plan = &plans[job.model];
-            let lighting_error = |source| {
-                DistError::Pipeline(sylva_render::PipelineError::Lighting {
-                    model: plan.model.name.clone(),
-                    source,
-                })
-            };
-            if density.as_ref().map(|d| d.0) != Some(job.model) {
-                density = None;
-                density = Some((job.model, plan.density().map_err(lighting_error)?));
-            }
-            let grid = &density.as_ref().expect("density").1;
-            let totals = plan
-                .solve_colour(grid, job.colour, lb.solver, &mut |_, _| {})
-                .map_err(lighting_error)?;
-            let mut w = Writer::default();
-            w.f32s(&totals);
-            Ok(w.0)
+        &plans,
+        &jobs,
+        &mut |job, plan, grid| {
+            plan.solve_colour(grid, job.colour, lb.solver, &mut |_, _| {})
+                .map_err(|source| lighting_error(plan, source))
         },
         &|_| progress.advance(1),
     );
-    drop(density);
     if root && !jobs.is_empty() {
         progress.finish();
     }
@@ -159,14 +239,11 @@ pub fn light_models(
     let mut lighting = Vec::with_capacity(plans.len());
     let mut solved: Vec<Option<LightingGrid>> = (0..plans.len()).map(|_| None).collect();
     let mut seconds = vec![0f64; plans.len()];
-    if let Some(outcome) = &outcome {
+    if let Some(outcome) = outcome {
         let mut colours: Vec<[Option<Vec<f32>>; 3]> =
             (0..plans.len()).map(|_| Default::default()).collect();
-        for ((job, result), done) in jobs.iter().zip(&outcome.results).zip(&outcome.done) {
-            let sites = plans[job.model].dims().sites();
-            let mut r = Reader::new(result, "LB colour");
-            colours[job.model][job.colour] = Some(r.f32s(sites)?);
-            r.end()?;
+        for (job, done) in jobs.iter().zip(outcome) {
+            colours[job.model][job.colour] = Some(done.values);
             seconds[job.model] += done.seconds;
         }
         for &m in &missing {
@@ -178,12 +255,8 @@ pub fn light_models(
                     .expect("every listed colour was solved")
             });
             let grid = plan.assemble(c);
-            plan.store(&grid, lb.solver).map_err(|source| {
-                DistError::Pipeline(sylva_render::PipelineError::Lighting {
-                    model: plan.model.name.clone(),
-                    source,
-                })
-            })?;
+            plan.store(&grid, lb.solver)
+                .map_err(|source| lighting_error(plan, source))?;
             solved[m] = Some(grid);
         }
     }

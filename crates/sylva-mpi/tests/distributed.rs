@@ -7,9 +7,12 @@ use std::path::Path;
 
 use sylva_geom::Scene;
 use sylva_lb::CpuSolver;
+use sylva_mpi::lighting::{solve_model_jobs, ModelJob};
 use sylva_mpi::{light_models, render_frame, Comm, CommError, DistError, LocalComm};
+use sylva_render::lighting::LightingPlan;
 use sylva_render::{
-    load_scene, Frame, LbPlan, PrepareOptions, PreparedScene, Region, RenderSettings, Silent,
+    lighting_options, load_scene, scene_to_sun, Frame, LbPlan, PrepareOptions, PreparedScene,
+    Region, RenderSettings, Silent,
 };
 
 const SCENE: &str = r#"
@@ -212,4 +215,97 @@ fn ranks_with_different_frames_refuse_and_the_abort_ends_the_others() {
         assert!(results[0].is_ok(), "rank 0 is released by the abort");
         assert!(results[1].is_err(), "rank 1 aborted");
     });
+}
+
+/// A job kind other than `LbJob`, as relighting's base solutions will be: a model's density
+/// scaled by a factor. Listed, queued and gathered by `solve_model_jobs` alone.
+struct ScaledDensity {
+    model: usize,
+    scale: f32,
+}
+
+impl ModelJob for ScaledDensity {
+    fn model(&self) -> usize {
+        self.model
+    }
+}
+
+#[test]
+fn any_list_of_model_jobs_runs_through_the_queue_in_job_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_file = dir.path().join("roses.toml");
+    std::fs::write(&scene_file, SCENE).unwrap();
+    let scene = load_scene(scene_file.to_str().unwrap(), None).unwrap();
+    let lb = LbPlan {
+        solver: &CpuSolver,
+        grid: None,
+        cache_dir: None,
+    };
+    let opts = lighting_options(&scene, &lb);
+    let plans: Vec<LightingPlan> = scene
+        .models
+        .iter()
+        .map(|m| LightingPlan::new(m, scene_to_sun(&scene), &opts, &CpuSolver).unwrap())
+        .collect();
+    // Models interleaved, so ranks switch density grids.
+    let jobs: Vec<ScaledDensity> = (0..7)
+        .map(|k| ScaledDensity {
+            model: k % 2,
+            scale: k as f32 + 0.5,
+        })
+        .collect();
+    let want: Vec<Vec<f32>> = jobs
+        .iter()
+        .map(|j| {
+            let d = plans[j.model].density().unwrap();
+            d.density.iter().map(|v| v * j.scale).collect()
+        })
+        .collect();
+    assert!(want.iter().any(|w| w.iter().any(|&v| v > 0.0)));
+
+    for ranks in [2, 3] {
+        let group = LocalComm::group(ranks);
+        let got = std::thread::scope(|s| {
+            let handles: Vec<_> = group
+                .iter()
+                .map(|c| {
+                    let (plans, jobs) = (&plans, &jobs);
+                    s.spawn(move || {
+                        solve_model_jobs(
+                            c,
+                            plans,
+                            jobs,
+                            &mut |job, plan, grid| {
+                                assert_eq!(grid.dims, plan.dims());
+                                Ok(grid.density.iter().map(|v| v * job.scale).collect())
+                            },
+                            &|_| {},
+                        )
+                        .unwrap()
+                    })
+                })
+                .collect();
+            let mut results: Vec<_> = handles.into_iter().map(|h| h.join().unwrap()).collect();
+            assert!(results[1..].iter().all(Option::is_none));
+            results.swap_remove(0).unwrap()
+        });
+        let values: Vec<Vec<f32>> = got.into_iter().map(|v| v.values).collect();
+        assert!(values == want, "{ranks} ranks");
+    }
+
+    // A job of a model the plans do not have is refused before anything runs.
+    let group = LocalComm::group(1);
+    let bad = [ScaledDensity {
+        model: 2,
+        scale: 1.0,
+    }];
+    let err = solve_model_jobs(
+        &group[0],
+        &plans,
+        &bad,
+        &mut |_, _, _| Ok(Vec::new()),
+        &|_| {},
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("model 2 of 2"), "{err}");
 }
