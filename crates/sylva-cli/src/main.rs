@@ -47,11 +47,62 @@ enum Command {
     Bench(commands::bench::BenchArgs),
 }
 
+/// Whether `command` runs across MPI ranks, and its name for messages.
+fn distributed(command: &Command) -> Result<(), &'static str> {
+    match command {
+        Command::Render(_) => Ok(()),
+        Command::Bench(b) if b.is_trace() => Ok(()),
+        Command::Bench(_) => Err("bench (other than bench trace)"),
+        Command::Scene(_) => Err("scene"),
+        Command::Species(_) => Err("species"),
+        Command::Voxelize(_) => Err("voxelize"),
+        Command::Lb(_) => Err("lb"),
+        Command::Spp(_) => Err("spp"),
+        Command::Export(_) => Err("export"),
+    }
+}
+
+fn run(command: Command, comm: Option<&dyn sylva_mpi::Comm>) -> anyhow::Result<()> {
+    match command {
+        Command::Lb(a) => commands::lb::run(a),
+        Command::Voxelize(a) => commands::voxelize::run(a),
+        Command::Spp(a) => commands::spp::run(a),
+        Command::Scene(a) => commands::scene::run(a),
+        Command::Species(a) => commands::species::run(a),
+        Command::Bench(a) => commands::bench::run(a, comm),
+        Command::Export(a) => commands::export::run(a),
+        Command::Render(a) => commands::render::run(a, comm),
+    }
+}
+
 fn main() -> std::process::ExitCode {
     // Before any thread exists: it may set an environment variable.
     sylva_wgpu::quiet_headless_probing();
     let cli = Cli::parse();
-    if let Some(n) = cli.threads {
+    // One of several processes started by mpirun: the command must split its work.
+    let ranks = sylva_mpi::launch::launched_size().filter(|&n| n > 1);
+    if let Some(n) = ranks {
+        if let Err(what) = distributed(&cli.command) {
+            return commands::finish(Err(anyhow::anyhow!(
+                "started by mpirun as one of {n} processes, but `sylva {what}` does not split \
+                 its work across processes: run it without mpirun (render and bench trace do)"
+            )));
+        }
+        if !cfg!(feature = "mpi") {
+            return commands::finish(Err(anyhow::anyhow!(
+                "started by mpirun as one of {n} processes, but this sylva was built without \
+                 MPI: every process would render the whole image. Build it with \
+                 `cargo build --release --features mpi` (README: Across machines with MPI)"
+            )));
+        }
+    }
+    // Under mpirun, the ranks on one machine share its cores unless told otherwise.
+    let threads = cli.threads.or_else(|| {
+        let local = sylva_mpi::launch::local_size().filter(|_| ranks.is_some())?;
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        Some((cores / local.max(1)).max(1))
+    });
+    if let Some(n) = threads {
         if n == 0 {
             return commands::finish(Err(anyhow::anyhow!("--threads must be at least 1")));
         }
@@ -62,15 +113,36 @@ fn main() -> std::process::ExitCode {
             return commands::finish(Err(e.into()));
         }
     }
-    let result = match cli.command {
-        Command::Lb(a) => commands::lb::run(a),
-        Command::Voxelize(a) => commands::voxelize::run(a),
-        Command::Spp(a) => commands::spp::run(a),
-        Command::Scene(a) => commands::scene::run(a),
-        Command::Species(a) => commands::species::run(a),
-        Command::Bench(a) => commands::bench::run(a),
-        Command::Export(a) => commands::export::run(a),
-        Command::Render(a) => commands::render::run(a),
+    if ranks.is_some() {
+        return run_mpi(cli.command);
+    }
+    commands::finish(run(cli.command, None))
+}
+
+/// Runs a command as one MPI rank: a failure on any rank is printed there and ends the
+/// whole job (MPI_Abort), so no rank waits forever for it.
+#[cfg(feature = "mpi")]
+fn run_mpi(command: Command) -> std::process::ExitCode {
+    use sylva_mpi::Comm;
+    let mpi = match sylva_mpi::mpi::Mpi::init() {
+        Ok(m) => m,
+        Err(e) => return commands::finish(Err(anyhow::Error::new(e).context("starting MPI"))),
     };
-    commands::finish(result)
+    match run(command, Some(&mpi)) {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            let (rank, size) = (mpi.rank(), mpi.size());
+            eprintln!("error: rank {rank} of {size}: {e}");
+            for cause in e.chain().skip(1) {
+                eprintln!("  caused by: {cause}");
+            }
+            eprintln!("sylva: rank {rank} failed; aborting the MPI job");
+            mpi.abort(1)
+        }
+    }
+}
+
+#[cfg(not(feature = "mpi"))]
+fn run_mpi(_command: Command) -> std::process::ExitCode {
+    unreachable!("refused above without the mpi feature")
 }

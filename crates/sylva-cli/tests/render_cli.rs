@@ -166,3 +166,43 @@ fn bench_trace_json_has_the_fields() {
     assert_eq!(v["rpp4"]["primary_rays"], 4 * 64 * 40);
     assert_eq!(v["memory"]["unique_models"], 1);
 }
+
+/// Runs `sylva ARGS` as if `mpirun` had started it as one of two processes (the variable Open
+/// MPI sets; the check comes before MPI would start): (success, stderr).
+fn as_one_of_two(args: &[&str]) -> (bool, String) {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .args(args)
+        .env("OMPI_COMM_WORLD_SIZE", "2")
+        .output()
+        .expect("run sylva");
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn under_mpirun_commands_that_do_not_split_their_work_refuse() {
+    for args in [&["scene", "list"][..], &["bench", "scene", "demo"]] {
+        let (ok, err) = as_one_of_two(args);
+        assert!(!ok, "{args:?}");
+        assert!(
+            err.contains("started by mpirun as one of 2 processes")
+                && err.contains("does not split its work across processes"),
+            "{args:?}: {err}"
+        );
+    }
+}
+
+#[cfg(not(feature = "mpi"))]
+#[test]
+fn a_build_without_mpi_refuses_to_render_under_mpirun() {
+    for args in [&["render", "demo"][..], &["bench", "trace", "demo"]] {
+        let (ok, err) = as_one_of_two(args);
+        assert!(!ok, "{args:?}");
+        assert!(
+            err.contains("this sylva was built without MPI") && err.contains("--features mpi"),
+            "{args:?}: {err}"
+        );
+    }
+}

@@ -9,6 +9,9 @@ use crate::lattice::Q;
 use crate::solver::{solve_lighting, Boundary, Lattice, SolveError, SolveOptions, SolveReport};
 use crate::{DensityGrid, LightingGrid, MediumParams};
 
+/// The colours of a medium: R, G, B.
+pub const COLOURS: usize = 3;
+
 /// Why a backend could not solve: the solver's own checks, or the device's failure.
 #[derive(Debug, thiserror::Error)]
 pub enum LbSolverError {
@@ -47,6 +50,33 @@ pub trait LbSolver: Send + Sync {
         opts: &SolveOptions,
         progress: &mut dyn FnMut(usize, usize, f64),
     ) -> Result<(LightingGrid, Vec<SolveReport>), LbSolverError>;
+
+    /// Colour `colour` (0, 1, 2: R, G, B) of [`LbSolver::solve_lighting`] alone: its site
+    /// totals and report, bit for bit what the three-colour solve gives for that colour. For
+    /// solving a model's colours in different processes (the work queue of `sylva-mpi`).
+    /// `progress(step, residual)`.
+    ///
+    /// The default solves a medium whose three colours are all `colour`'s: the shared colour
+    /// loop ([`crate::solver::solve_colours`]) solves it once and copies it.
+    fn solve_colour(
+        &self,
+        grid: &DensityGrid,
+        medium: &MediumParams,
+        colour: usize,
+        boundary: Boundary,
+        opts: &SolveOptions,
+        progress: &mut dyn FnMut(usize, f64),
+    ) -> Result<(Vec<f32>, SolveReport), LbSolverError> {
+        assert!(colour < COLOURS, "colour {colour} of {COLOURS}");
+        let one = MediumParams {
+            colours: [medium.colours[colour]; COLOURS],
+            ..medium.clone()
+        };
+        let (lighting, reports) =
+            self.solve_lighting(grid, &one, boundary, opts, &mut |_, s, r| progress(s, r))?;
+        let [totals, _, _] = lighting.colours;
+        Ok((totals, reports[0]))
+    }
 
     /// `repeats` timed runs of `steps` steps of colour 0 of `medium` on `grid` (reset between
     /// runs), and the device's copy bandwidth: what `sylva bench lb` reports.
@@ -176,6 +206,17 @@ mod tests {
         assert_eq!(last, 2 * 4, "progress counts over all runs");
         assert_eq!(b.bytes_per_update, 156);
         assert!(b.copy_gbs > 0.0 && b.runs.iter().all(|&s| s > 0.0));
+
+        // Each colour alone is that colour of the three-colour solve, bit for bit.
+        for c in 0..COLOURS {
+            let mut steps = 0;
+            let (totals, report) = solver
+                .solve_colour(&grid, &medium, c, boundary, &opts, &mut |s, _| steps = s)
+                .unwrap();
+            assert!(totals == want.colours[c], "colour {c}");
+            assert_eq!(report.steps, want_reports[c].steps);
+            assert_eq!(steps, opts.max_steps);
+        }
 
         // The solver's checks come back as its errors.
         let bad = SolveOptions {

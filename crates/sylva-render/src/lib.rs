@@ -32,8 +32,9 @@ pub mod tonemap;
 
 pub use indirect::{IndirectLight, ModelGridLight, NoIndirectLight};
 pub use pipeline::{
-    load_scene, mode_path, resolution, tone_map_modes, write_images, LbPlan, ModeImage,
-    PipelineError, PrepareOptions, PreparedScene, Progress, Silent, Tracer, WrittenImage,
+    light_models, lighting_options, load_scene, mode_path, resolution, scene_to_sun,
+    tone_map_modes, write_images, LbPlan, ModeImage, PipelineError, PrepareOptions, PreparedScene,
+    Progress, Silent, Tracer, WrittenImage,
 };
 pub use render::{
     mean_luminance, Frame, FrameTimings, Mode, Region, RenderError, RenderSettings, Renderer,

@@ -444,6 +444,219 @@ fn read_entry(path: &Path, key: u64, placement: &GridPlacement) -> Result<Lighti
     Ok(grid)
 }
 
+/// What a model's cache entry holds.
+#[derive(Debug)]
+pub enum CacheLookup {
+    /// A valid entry: the raw solver result.
+    Hit(LightingGrid),
+    /// No cache, or no entry yet.
+    Miss,
+    /// An entry that cannot be used: the reason, naming the file.
+    Bad(String),
+}
+
+/// One model's LB lighting as separate steps, for whoever schedules the solves: the cache
+/// entry, the density grid, each colour's solve, the cache write and the normalisation.
+/// [`model_lighting`] runs them in order in one process; `sylva-mpi` solves the colours of
+/// many models in different processes and assembles them with [`LightingPlan::assemble`].
+/// A colour solved alone is bit for bit that colour of the three-colour solve
+/// ([`LbSolver::solve_colour`]), so both give the same grids and cache entries.
+#[derive(Debug, Clone)]
+pub struct LightingPlan<'a> {
+    pub model: &'a Model,
+    /// The cache key ([`cache_key`]).
+    pub key: u64,
+    placement: GridPlacement,
+    medium: MediumParams,
+    /// The quantised unit sun direction.
+    sun: DVec3,
+    opts: LightingOptions,
+    /// The cache entry; `None` without a cache.
+    path: Option<PathBuf>,
+}
+
+impl<'a> LightingPlan<'a> {
+    /// The plan of lighting `model` under the sun towards `sun_to` with `opts` on `solver`
+    /// (its [`LbSolver::cache_tag`] is part of the key). Creates the cache directory.
+    pub fn new(
+        model: &'a Model,
+        sun_to: Vec3,
+        opts: &LightingOptions,
+        solver: &dyn LbSolver,
+    ) -> Result<LightingPlan<'a>, LightingError> {
+        let medium = medium(&opts.preset)?;
+        let (sun_q, sun) = quantise_sun(sun_to)?;
+        let key = key_of(model, sun_q, opts.grid, &medium, &solver.cache_tag());
+        let placement = placement_for(model, opts.grid)?;
+        let path = match &opts.cache_dir {
+            Some(dir) => {
+                std::fs::create_dir_all(dir).map_err(|source| LightingError::CacheDir {
+                    dir: dir.clone(),
+                    source,
+                })?;
+                Some(cache_path(dir, model, key))
+            }
+            None => None,
+        };
+        Ok(LightingPlan {
+            model,
+            key,
+            placement,
+            medium,
+            sun,
+            opts: opts.clone(),
+            path,
+        })
+    }
+
+    /// The lighting grid's size.
+    pub fn dims(&self) -> Dims {
+        self.placement.dims
+    }
+
+    /// The cache entry (read or to be written); `None` without a cache.
+    pub fn cache_path(&self) -> Option<&Path> {
+        self.path.as_deref()
+    }
+
+    /// The cache entry, if there is a usable one.
+    pub fn lookup(&self) -> CacheLookup {
+        let Some(path) = &self.path else {
+            return CacheLookup::Miss;
+        };
+        match path.try_exists() {
+            Ok(false) => CacheLookup::Miss,
+            Ok(true) => match read_entry(path, self.key, &self.placement) {
+                Ok(grid) => CacheLookup::Hit(grid),
+                Err(reason) => CacheLookup::Bad(reason),
+            },
+            Err(e) => CacheLookup::Bad(format!("cannot read {}: {e}", path.display())),
+        }
+    }
+
+    /// The colours a solve computes, each with the colour whose result it takes: a colour
+    /// with the same parameters as an earlier one takes that one's (as
+    /// [`sylva_lb::solver::solve_colours`] does).
+    pub fn colour_sources(&self) -> [usize; 3] {
+        let c = &self.medium.colours;
+        std::array::from_fn(|i| (0..i).find(|&p| c[p] == c[i]).unwrap_or(i))
+    }
+
+    /// The model's density grid, its memory (with the solve's) checked first.
+    pub fn density(&self) -> Result<DensityGrid, LightingError> {
+        let dims = self.dims();
+        sylva_core::check_memory(
+            &format!(
+                "the LB lighting of model '{}' on a {dims} grid",
+                self.model.name
+            ),
+            memory_needed(dims) + sylva_voxel::memory_needed(dims),
+        )?;
+        let density = voxelize(
+            self.model,
+            &VoxelizeOptions {
+                grid: self.opts.grid,
+                alpha_test: true,
+            },
+        )?;
+        debug_assert_eq!(density.dims, dims);
+        debug_assert_eq!(density.bounds, self.placement.bounds());
+        Ok(density)
+    }
+
+    fn boundary(&self) -> Boundary {
+        Boundary::sun((-self.sun).to_array(), 1.0)
+    }
+
+    fn solve_error(&self, source: LbSolverError) -> LightingError {
+        LightingError::Solve {
+            model: self.model.name.clone(),
+            source,
+        }
+    }
+
+    /// All three colours on `solver`; `progress(colour, step, max_steps)`.
+    pub fn solve(
+        &self,
+        density: &DensityGrid,
+        solver: &dyn LbSolver,
+        progress: &mut dyn FnMut(usize, usize, usize),
+    ) -> Result<LightingGrid, LightingError> {
+        solve_density(density, &self.medium, self.sun, solver, progress)
+            .map_err(|e| self.solve_error(e))
+    }
+
+    /// Colour `colour` alone on `solver`: its site totals. `progress(step, max_steps)`.
+    pub fn solve_colour(
+        &self,
+        density: &DensityGrid,
+        colour: usize,
+        solver: &dyn LbSolver,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<Vec<f32>, LightingError> {
+        let opts = solve_options(density.dims);
+        let max = opts.max_steps;
+        let (totals, _) = solver
+            .solve_colour(
+                density,
+                &self.medium,
+                colour,
+                self.boundary(),
+                &opts,
+                &mut |s, _| progress(s, max),
+            )
+            .map_err(|e| self.solve_error(e))?;
+        Ok(totals)
+    }
+
+    /// The lighting grid of three colours' site totals, placed in model space.
+    pub fn assemble(&self, colours: [Vec<f32>; 3]) -> LightingGrid {
+        LightingGrid {
+            dims: self.placement.dims,
+            bounds: self.placement.bounds(),
+            colours,
+        }
+    }
+
+    /// Writes `grid` (solved on `solver`) as the cache entry, atomically; nothing without a
+    /// cache.
+    pub fn store(&self, grid: &LightingGrid, solver: &dyn LbSolver) -> Result<(), LightingError> {
+        let Some(path) = &self.path else {
+            return Ok(());
+        };
+        let sun = self.sun;
+        let metadata = vec![
+            (KEY_METADATA.to_string(), format!("{:016x}", self.key)),
+            ("source".to_string(), self.model.name.clone()),
+            ("preset".to_string(), self.opts.preset.clone()),
+            ("grid".to_string(), self.opts.grid.to_string()),
+            (
+                "sun_to".to_string(),
+                format!("{:.6},{:.6},{:.6}", sun.x, sun.y, sun.z),
+            ),
+            (
+                "steps".to_string(),
+                solve_options(self.dims()).max_steps.to_string(),
+            ),
+            ("solver".to_string(), solver.describe()),
+        ];
+        GridFile::from_lighting(grid, Element::F32, metadata)
+            .write(path)
+            .map_err(|e| LightingError::CacheWrite {
+                path: path.clone(),
+                source: match e {
+                    GridFileError::Io { source, .. } => source,
+                    e => std::io::Error::other(e.to_string()),
+                },
+            })
+    }
+
+    /// The solver result normalised so that unobstructed sunlight is 1.
+    pub fn lighting(&self, grid: &LightingGrid) -> ModelLighting {
+        normalise(grid, self.sun)
+    }
+}
+
 /// One model's LB lighting under the sun towards `sun_to` (model frame): from the cache when
 /// it holds a valid entry, otherwise voxelized, solved on `solver` and (with a cache) stored.
 /// `progress(colour, step, max_steps)` follows the solve.
@@ -455,102 +668,25 @@ pub fn model_lighting(
     progress: &mut dyn FnMut(usize, usize, usize),
 ) -> Result<(ModelLighting, LightingReport), LightingError> {
     let t0 = Instant::now();
-    let medium = medium(&opts.preset)?;
-    let (sun_q, sun) = quantise_sun(sun_to)?;
-    let key = key_of(model, sun_q, opts.grid, &medium, &solver.cache_tag());
-    let placement = placement_for(model, opts.grid)?;
-    let dims = placement.dims;
-
-    let path = match &opts.cache_dir {
-        Some(dir) => {
-            std::fs::create_dir_all(dir).map_err(|source| LightingError::CacheDir {
-                dir: dir.clone(),
-                source,
-            })?;
-            Some(cache_path(dir, model, key))
-        }
-        None => None,
-    };
-    let mut source = LightingSource::Computed;
-    if let Some(path) = &path {
-        match path.try_exists() {
-            Ok(false) => {}
-            Ok(true) => match read_entry(path, key, &placement) {
-                Ok(grid) => {
-                    let lighting = normalise(&grid, sun);
-                    let report = LightingReport {
-                        source: LightingSource::Cached,
-                        seconds: t0.elapsed().as_secs_f64(),
-                        path: Some(path.clone()),
-                        dims,
-                    };
-                    return Ok((lighting, report));
-                }
-                Err(reason) => source = LightingSource::Recomputed { reason },
-            },
-            Err(e) => {
-                source = LightingSource::Recomputed {
-                    reason: format!("cannot read {}: {e}", path.display()),
-                }
-            }
-        }
-    }
-
-    sylva_core::check_memory(
-        &format!("the LB lighting of model '{}' on a {dims} grid", model.name),
-        memory_needed(dims) + sylva_voxel::memory_needed(dims),
-    )?;
-    let density = voxelize(
-        model,
-        &VoxelizeOptions {
-            grid: opts.grid,
-            alpha_test: true,
-        },
-    )?;
-    debug_assert_eq!(density.dims, dims);
-    debug_assert_eq!(density.bounds, placement.bounds());
-    let grid = solve_density(&density, &medium, sun, solver, progress).map_err(|source| {
-        LightingError::Solve {
-            model: model.name.clone(),
-            source,
-        }
-    })?;
-    drop(density);
-
-    if let Some(path) = &path {
-        let metadata = vec![
-            (KEY_METADATA.to_string(), format!("{key:016x}")),
-            ("source".to_string(), model.name.clone()),
-            ("preset".to_string(), opts.preset.clone()),
-            ("grid".to_string(), opts.grid.to_string()),
-            (
-                "sun_to".to_string(),
-                format!("{:.6},{:.6},{:.6}", sun.x, sun.y, sun.z),
-            ),
-            (
-                "steps".to_string(),
-                solve_options(dims).max_steps.to_string(),
-            ),
-            ("solver".to_string(), solver.describe()),
-        ];
-        GridFile::from_lighting(&grid, Element::F32, metadata)
-            .write(path)
-            .map_err(|e| LightingError::CacheWrite {
-                path: path.clone(),
-                source: match e {
-                    GridFileError::Io { source, .. } => source,
-                    e => std::io::Error::other(e.to_string()),
-                },
-            })?;
-    }
-    let lighting = normalise(&grid, sun);
-    let report = LightingReport {
+    let plan = LightingPlan::new(model, sun_to, opts, solver)?;
+    let report = |source| LightingReport {
         source,
         seconds: t0.elapsed().as_secs_f64(),
-        path,
-        dims,
+        path: plan.cache_path().map(Path::to_path_buf),
+        dims: plan.dims(),
     };
-    Ok((lighting, report))
+    let source = match plan.lookup() {
+        CacheLookup::Hit(grid) => {
+            return Ok((plan.lighting(&grid), report(LightingSource::Cached)));
+        }
+        CacheLookup::Miss => LightingSource::Computed,
+        CacheLookup::Bad(reason) => LightingSource::Recomputed { reason },
+    };
+    let density = plan.density()?;
+    let grid = plan.solve(&density, solver, progress)?;
+    drop(density);
+    plan.store(&grid, solver)?;
+    Ok((plan.lighting(&grid), report(source)))
 }
 
 #[cfg(test)]

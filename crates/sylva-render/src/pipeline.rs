@@ -18,7 +18,7 @@ use sylva_wgpu::GpuContext;
 use crate::gpu_frame::{FrameError, GpuFrame};
 use crate::indirect::{IndirectLight, ModelGridLight};
 use crate::lighting::{
-    model_lighting, LightingError, LightingOptions, LightingReport, LightingSource,
+    model_lighting, LightingError, LightingOptions, LightingReport, LightingSource, ModelLighting,
 };
 use crate::output::{write_exr, write_png, OutputError};
 use crate::render::{
@@ -245,14 +245,94 @@ pub struct PreparedScene {
     pub lb_models_cached: usize,
 }
 
+/// The unit vector towards the scene's sun.
+pub fn scene_to_sun(scene: &Scene) -> Vec3 {
+    let s = scene.sun.to_sun();
+    Vec3::new(s.x as f32, s.y as f32, s.z as f32)
+}
+
+/// The lighting options of `lb` for `scene`.
+pub fn lighting_options(scene: &Scene, lb: &LbPlan) -> LightingOptions {
+    LightingOptions {
+        grid: lb.grid.unwrap_or(scene.lb.grid as usize),
+        preset: scene.lb.preset.clone(),
+        cache_dir: lb.cache_dir.map(PathBuf::from),
+    }
+}
+
+/// Every model's LB lighting, in scene order, each from the cache when it can
+/// ([`model_lighting`]); and how many came from the cache.
+pub fn light_models(
+    scene: &Scene,
+    lb: &LbPlan,
+    progress: &dyn Progress,
+) -> Result<(Vec<ModelLighting>, usize), PipelineError> {
+    let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
+    let lopts = lighting_options(scene, lb);
+    let to_sun = scene_to_sun(scene);
+    let mut lighting = Vec::with_capacity(scene.models.len());
+    let mut cached = 0;
+    for model in &scene.models {
+        let _m = tracing::info_span!(stage::LB_MODEL, model = %model.name).entered();
+        progress.start(&format!("LB {}", model.name), 3);
+        let lit = model_lighting(model, to_sun, &lopts, lb.solver, &mut |c, step, max| {
+            progress.set((c * max + step) as u64, 3 * max as u64)
+        });
+        progress.finish();
+        let (l, report) = lit.map_err(|source| PipelineError::Lighting {
+            model: model.name.clone(),
+            source,
+        })?;
+        cached += (report.source == LightingSource::Cached) as usize;
+        progress.model_lit(model, &report);
+        lighting.push(l);
+    }
+    Ok((lighting, cached))
+}
+
 impl PreparedScene {
     /// Checks the frame's memory and the shading constants, lights every model (in scene
-    /// order, each from the cache when it can: [`model_lighting`]) and builds the kd-trees.
+    /// order, each from the cache when it can: [`light_models`]) and builds the kd-trees.
     pub fn new(
         scene: Scene,
         opts: &PrepareOptions,
         progress: &dyn Progress,
     ) -> Result<PreparedScene, PipelineError> {
+        let shading = Self::check(&scene, opts)?;
+        let (lighting, cached) = match &opts.lb {
+            Some(lb) => {
+                let (lit, cached) = light_models(&scene, lb, progress)?;
+                (lit.into_iter().map(Some).collect(), cached)
+            }
+            None => ((0..scene.models.len()).map(|_| None).collect(), 0),
+        };
+        Self::build(scene, opts, shading, lighting, cached)
+    }
+
+    /// A scene whose models were lit elsewhere (`lighting` in scene order; `cached` of them
+    /// from a cache): [`PreparedScene::new`] without the LB work, which `opts.lb` is not
+    /// used for.
+    pub fn with_lighting(
+        scene: Scene,
+        opts: &PrepareOptions,
+        lighting: Vec<ModelLighting>,
+        cached: usize,
+    ) -> Result<PreparedScene, PipelineError> {
+        assert_eq!(lighting.len(), scene.models.len(), "one lighting per model");
+        let shading = Self::check(&scene, opts)?;
+        Self::build(
+            scene,
+            opts,
+            shading,
+            lighting.into_iter().map(Some).collect(),
+            cached,
+        )
+    }
+
+    /// What [`PreparedScene::new`] checks before any LB or acceleration work: the largest
+    /// frame's memory, the scene's LB preset and the shading constants; the shading they
+    /// give.
+    pub fn check(scene: &Scene, opts: &PrepareOptions) -> Result<ShadingParams, PipelineError> {
         if let Some((w, h, rpp)) = opts.largest_frame {
             sylva_core::check_memory(
                 &format!("a {w}x{h} frame at {rpp} rays/pixel"),
@@ -271,37 +351,17 @@ impl PreparedScene {
             ..ShadingParams::default()
         };
         shading.validate().map_err(PipelineError::Shading)?;
-        let s = scene.sun.to_sun();
-        let to_sun = Vec3::new(s.x as f32, s.y as f32, s.z as f32);
+        Ok(shading)
+    }
 
-        let mut lighting = Vec::with_capacity(scene.models.len());
-        let mut lb_models_cached = 0;
-        if let Some(lb) = &opts.lb {
-            let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
-            let lopts = LightingOptions {
-                grid: lb.grid.unwrap_or(scene.lb.grid as usize),
-                preset: scene.lb.preset.clone(),
-                cache_dir: lb.cache_dir.map(PathBuf::from),
-            };
-            for model in &scene.models {
-                let _m = tracing::info_span!(stage::LB_MODEL, model = %model.name).entered();
-                progress.start(&format!("LB {}", model.name), 3);
-                let lit = model_lighting(model, to_sun, &lopts, lb.solver, &mut |c, step, max| {
-                    progress.set((c * max + step) as u64, 3 * max as u64)
-                });
-                progress.finish();
-                let (l, report) = lit.map_err(|source| PipelineError::Lighting {
-                    model: model.name.clone(),
-                    source,
-                })?;
-                lb_models_cached += (report.source == LightingSource::Cached) as usize;
-                progress.model_lit(model, &report);
-                lighting.push(Some(l));
-            }
-        } else {
-            lighting.resize_with(scene.models.len(), || None);
-        }
-
+    fn build(
+        scene: Scene,
+        opts: &PrepareOptions,
+        shading: ShadingParams,
+        lighting: Vec<Option<ModelLighting>>,
+        lb_models_cached: usize,
+    ) -> Result<PreparedScene, PipelineError> {
+        let to_sun = scene_to_sun(&scene);
         let tracer = {
             let _span = tracing::info_span!(stage::ACCEL_BUILD).entered();
             let cpu = KdTracer::new(SceneAccel::build(&scene)?, opts.traversal);

@@ -13,6 +13,13 @@ pub struct BenchArgs {
     command: BenchCommand,
 }
 
+impl BenchArgs {
+    /// `bench trace`: the one benchmark that runs across MPI ranks.
+    pub fn is_trace(&self) -> bool {
+        matches!(self.command, BenchCommand::Trace(_))
+    }
+}
+
 #[derive(Subcommand)]
 enum BenchCommand {
     /// The LB solver on one colour of a dense medium (every site collides), against this
@@ -75,12 +82,12 @@ struct LbBench {
     adapter: Option<String>,
 }
 
-pub fn run(args: BenchArgs) -> Result<()> {
+pub fn run(args: BenchArgs, comm: Option<&dyn sylva_mpi::Comm>) -> Result<()> {
     match args.command {
         BenchCommand::Lb(a) => bench_lb(a),
         BenchCommand::Scene(a) => super::bench_scene::run(a),
         BenchCommand::Voxelize(a) => super::bench_voxel::run(a),
-        BenchCommand::Trace(a) => super::bench_trace::run(a),
+        BenchCommand::Trace(a) => super::bench_trace::run(a, comm),
     }
 }
 

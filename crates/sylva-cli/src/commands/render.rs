@@ -9,10 +9,11 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use sylva_geom::Model;
 use sylva_lb::LbSolver;
+use sylva_mpi::Comm;
 use sylva_render::lighting::{LightingReport, LightingSource};
 use sylva_render::{
     load_scene, resolution, stage, tone_map_modes, write_images, LbPlan, Mode, PrepareOptions,
-    PreparedScene, ShadingParams, StageClock, ToneMap,
+    PreparedScene, Progress, ShadingParams, Silent, StageClock, ToneMap,
 };
 use sylva_trace::TraversalConfig;
 
@@ -112,16 +113,20 @@ pub struct Prepared {
 /// Loads the scene, lights every model (from the cache when it can) and builds its
 /// kd-trees, printing what it does (to stdout, or stderr when stdout is for JSON).
 /// `rays_per_pixel`: the most a frame will use (default: the scene camera's); the frame's
-/// memory is checked for it before any LB or kd-tree work.
+/// memory is checked for it before any LB or kd-tree work. Under MPI (`comm`) the models'
+/// LB colours are solved across the ranks and only rank 0 prints.
 pub fn prepare(
     a: &FrameArgs,
     need_lb: bool,
     rays_per_pixel: Option<u32>,
     to_stdout: bool,
+    comm: Option<&dyn Comm>,
 ) -> Result<Prepared> {
+    let root = comm.is_none_or(|c| c.rank() == 0);
     // Machine-readable runs keep stdout for their JSON.
     let say = |s: String| {
-        if to_stdout {
+        if !root {
+        } else if to_stdout {
             println!("{s}")
         } else {
             eprintln!("{s}")
@@ -196,7 +201,20 @@ pub fn prepare(
             }
         },
     );
-    let scene = PreparedScene::new(scene, &opts, &progress)?;
+    let scene = match comm {
+        None => PreparedScene::new(scene, &opts, &progress)?,
+        Some(comm) => {
+            let progress: &dyn Progress = if root { &progress } else { &Silent };
+            match &opts.lb {
+                Some(lb) => {
+                    PreparedScene::check(&scene, &opts)?;
+                    let (lighting, cached) = sylva_mpi::light_models(comm, &scene, lb, progress)?;
+                    PreparedScene::with_lighting(scene, &opts, lighting, cached)?
+                }
+                None => PreparedScene::new(scene, &opts, progress)?,
+            }
+        }
+    };
     say(format!(
         "ray tracer: {}{}",
         scene.tracer.describe(),
@@ -216,7 +234,7 @@ pub fn prepare(
     })
 }
 
-pub fn run(a: RenderArgs) -> Result<()> {
+pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
     let modes: Vec<Mode> = match a.mode.as_str() {
         "all" => Mode::ALL.to_vec(),
         m => vec![Mode::parse(m)
@@ -244,14 +262,32 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let clock = StageClock::global();
     clock.reset();
     let t_all = Instant::now();
-    let p = prepare(&a.frame, modes.iter().any(|m| m.needs_lb()), a.rpp, true)?;
+    let p = prepare(
+        &a.frame,
+        modes.iter().any(|m| m.needs_lb()),
+        a.rpp,
+        true,
+        comm,
+    )?;
     let prepared = &p.scene;
     let rpp = a.rpp.unwrap_or(prepared.scene.camera.rays_per_pixel);
     let camera = prepared.camera(p.width, p.height);
-    let frame = prepared.render(
-        &prepared.settings(camera, rpp, a.frame.seed),
-        &Bars::new(|_: &Model, _: &LightingReport| {}),
-    )?;
+    let settings = prepared.settings(camera, rpp, a.frame.seed);
+    let bars = Bars::new(|_: &Model, _: &LightingReport| {});
+    let (frame, split) = match comm {
+        None => (prepared.render(&settings, &bars)?, None),
+        Some(comm) => {
+            let progress: &dyn Progress = if comm.rank() == 0 { &bars } else { &Silent };
+            match sylva_mpi::render_frame(comm, prepared, &settings, progress)? {
+                Some(d) => {
+                    let split = split_summary(&d);
+                    (d.frame, Some(split))
+                }
+                // Rank 0 writes the image.
+                None => return Ok(()),
+            }
+        }
+    };
 
     let base = a.output.clone().unwrap_or_else(|| {
         PathBuf::from(format!(
@@ -300,6 +336,9 @@ pub fn run(a: RenderArgs) -> Result<()> {
         println!("  {stage:<20}{s:>8.3}");
     }
     println!("  {:<20}{:>8.3}", "total", t_all.elapsed().as_secs_f64());
+    if let Some(split) = split {
+        println!("{split}");
+    }
     println!(
         "{}x{} at {rpp} rays/pixel: {} primary + {} shadow rays, {:.2} Mrays/s; frame {:.3} s; {} kd-restarts; kd-trees {}, LB grids {}",
         frame.width,
@@ -313,4 +352,24 @@ pub fn run(a: RenderArgs) -> Result<()> {
         sylva_core::format_bytes(prepared.lighting_bytes()),
     );
     Ok(())
+}
+
+/// One line on how a frame was split across MPI ranks.
+pub fn split_summary(d: &sylva_mpi::DistributedFrame) -> String {
+    let ranks: Vec<String> = d
+        .ranks
+        .iter()
+        .enumerate()
+        .map(|(r, w)| format!("rank {r}: {} units {:.3} s", w.units, w.seconds))
+        .collect();
+    format!(
+        "MPI: {} ranks, {} units of {}x{} tiles, frame {:.3} s wall; {}; imbalance {:.1} %",
+        d.ranks.len(),
+        d.layout.units(),
+        d.layout.edge,
+        d.layout.edge,
+        d.wall_seconds,
+        ranks.join(", "),
+        100.0 * d.imbalance()
+    )
 }

@@ -1,0 +1,237 @@
+//! `mpirun -np N sylva render|bench trace` (built with `--features mpi`; CI runs these with
+//! 2 and 3 ranks): the image and the LB cache are those of one process, bit for bit; a rank
+//! that fails ends the whole job with its message instead of leaving the others waiting.
+#![cfg(feature = "mpi")]
+
+mod common;
+
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::sylva;
+
+const SCENE: &str = r#"
+name = "roses"
+
+[[models]]
+name = "rose"
+species = "dogrose"
+
+[[models]]
+name = "other rose"
+species = "dogrose"
+seed = 5
+
+[[instances]]
+model = "rose"
+position = [-1.0, 0.0, 0.0]
+
+[[instances]]
+model = "other rose"
+position = [1.2, 0.0, 0.5]
+rotation = 70.0
+
+[ground]
+size = [20.0, 20.0]
+
+[camera]
+position = [0.0, 3.0, -7.0]
+look_at = [0.0, 0.8, 0.0]
+fov = 40.0
+resolution = [75, 45]
+"#;
+
+/// A job is killed (and the test fails) after this long: what "never a hang" means here.
+const LIMIT: Duration = Duration::from_secs(180);
+
+/// `mpirun -np N sylva ARGS` with `env` passed to every rank; (success, stdout, stderr).
+fn mpirun(np: usize, args: &[&str], env: &[(&str, &str)]) -> (bool, String, String) {
+    let mut cmd = Command::new("mpirun");
+    // Oversubscribe: more ranks than cores is fine for tests; root needs its own flag.
+    cmd.args(["--oversubscribe", "-np", &np.to_string()]);
+    if unsafe { libc::geteuid() } == 0 {
+        cmd.arg("--allow-run-as-root");
+    }
+    for (k, v) in env {
+        cmd.args(["-x", &format!("{k}={v}")]);
+    }
+    cmd.arg(env!("CARGO_BIN_EXE_sylva")).args(args);
+    let out_dir = tempfile::tempdir().unwrap();
+    let (out_path, err_path) = (out_dir.path().join("out"), out_dir.path().join("err"));
+    let mut child = cmd
+        .stdin(Stdio::null())
+        .stdout(std::fs::File::create(&out_path).unwrap())
+        .stderr(std::fs::File::create(&err_path).unwrap())
+        .spawn()
+        .expect("mpirun (Debian: apt-get install openmpi-bin libopenmpi-dev)");
+    let t = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if t.elapsed() > LIMIT {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            panic!(
+                "mpirun -np {np} sylva {args:?} still running after {LIMIT:?}: a hang\nstderr:\n{}",
+                std::fs::read_to_string(&err_path).unwrap_or_default()
+            );
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    (
+        status.success(),
+        std::fs::read_to_string(&out_path).unwrap(),
+        std::fs::read_to_string(&err_path).unwrap(),
+    )
+}
+
+fn write_scene(dir: &Path) -> String {
+    let p = dir.join("roses.toml");
+    std::fs::write(&p, SCENE).unwrap();
+    p.to_str().unwrap().to_string()
+}
+
+/// Cache entries by file name and bytes.
+fn entries(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut v: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| {
+            let e = e.unwrap();
+            let name = e.file_name().to_string_lossy().into_owned();
+            (name, std::fs::read(e.path()).unwrap())
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+fn render_args<'a>(scene: &'a str, out: &'a str, cache: &'a str) -> Vec<&'a str> {
+    vec![
+        "render",
+        scene,
+        "-o",
+        out,
+        "--hdr",
+        "--rpp",
+        "4",
+        "--lb-grid",
+        "12",
+        "--cache-dir",
+        cache,
+        "--device",
+        "cpu",
+        "--threads",
+        "1",
+    ]
+}
+
+#[test]
+fn mpi_render_and_lb_are_bit_identical_to_one_process() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write_scene(dir.path());
+    let d = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let (one_png, one_cache) = (d("one.png"), d("one-cache"));
+    let (ok, out, err) = sylva(&render_args(&scene, &one_png, &one_cache));
+    assert!(ok, "{out}\n{err}");
+    let want_exr = std::fs::read(d("one.exr")).unwrap();
+    let want_png = std::fs::read(&one_png).unwrap();
+
+    for np in [2, 3] {
+        let (png, cache) = (d(&format!("np{np}.png")), d(&format!("np{np}-cache")));
+        for pass in 0..2 {
+            let (ok, out, err) = mpirun(np, &render_args(&scene, &png, &cache), &[]);
+            assert!(ok, "np {np} pass {pass}:\n{out}\n{err}");
+            // Rank 0 alone prints: one summary.
+            assert_eq!(out.matches("wrote ").count(), 1, "{out}");
+            assert!(out.contains(&format!("MPI: {np} ranks")), "{out}");
+            let lb_lines = |how: &str| out.lines().filter(|l| l.contains(how)).count();
+            if pass == 0 {
+                assert_eq!(lb_lines("grid solved in"), 2, "{out}");
+            } else {
+                assert_eq!(lb_lines("grid from cache"), 2, "{out}");
+            }
+            let exr = std::fs::read(d(&format!("np{np}.exr"))).unwrap();
+            assert!(exr == want_exr, "np {np}: the linear image differs");
+            assert!(
+                std::fs::read(&png).unwrap() == want_png,
+                "np {np}: the PNG differs"
+            );
+            // The LB colours were solved across ranks; the cache holds what one process
+            // writes.
+            assert!(entries(Path::new(&cache)) == entries(Path::new(&one_cache)));
+        }
+    }
+}
+
+#[test]
+fn mpi_bench_trace_reports_per_rank_seconds() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write_scene(dir.path());
+    let args = [
+        "bench",
+        "trace",
+        &scene,
+        "--no-lb",
+        "--runs",
+        "1",
+        "--json",
+        "--threads",
+        "1",
+    ];
+    let (ok, out, err) = mpirun(2, &args, &[]);
+    assert!(ok, "{out}\n{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).expect("one JSON object");
+    assert_eq!(v["ranks"], 2);
+    for m in [&v["mpi"], &v["rpp4"]["mpi"]] {
+        assert_eq!(m["ranks"], 2, "{v}");
+        let secs = m["rank_seconds"].as_array().unwrap();
+        assert_eq!(secs.len(), 2);
+        assert!(secs.iter().all(|s| s.as_f64().unwrap() > 0.0), "{m}");
+        let units: u64 = m["rank_units"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|u| u.as_u64().unwrap())
+            .sum();
+        assert_eq!(units, m["units"].as_u64().unwrap());
+        assert!(m["imbalance"].as_f64().unwrap() >= 0.0);
+    }
+    assert!(v["frame_seconds"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn a_failing_rank_ends_the_job_with_its_message() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write_scene(dir.path());
+    let png = dir.path().join("x.png");
+    let cache = dir.path().join("cache");
+    let args = render_args(&scene, png.to_str().unwrap(), cache.to_str().unwrap());
+    // An error on a worker rank, on rank 0 (which serves the queue), a panic.
+    for (np, fail, want) in [
+        (
+            3,
+            "1",
+            "error: rank 1 of 3: rank 1: failure injected by SYLVA_MPI_FAIL_RANK",
+        ),
+        (
+            2,
+            "0",
+            "error: rank 0 of 2: rank 0: failure injected by SYLVA_MPI_FAIL_RANK",
+        ),
+        (
+            3,
+            "2:panic",
+            "rank 2: panic injected by SYLVA_MPI_FAIL_RANK",
+        ),
+    ] {
+        let (ok, out, err) = mpirun(np, &args, &[("SYLVA_MPI_FAIL_RANK", fail)]);
+        assert!(
+            !ok,
+            "np {np}, failing {fail}: the job must fail\n{out}\n{err}"
+        );
+        assert!(err.contains(want), "np {np}, failing {fail}:\n{err}");
+        assert!(!png.exists(), "no image from a failed job");
+    }
+}

@@ -1,0 +1,309 @@
+//! LB precomputation across ranks: every model's lighting, its colours solved as jobs of the
+//! work queue, shared with every rank.
+//!
+//! Rank 0 owns the cache: it reads the entries it has, lists the solves the rest need as jobs
+//! (models × colours today; relighting's base solutions only add jobs to the list, see
+//! [`LbJob`]), hands them out on demand, assembles each model's colours, writes the cache
+//! entry, and broadcasts every model's grid, cached or solved, to the other ranks. No rank
+//! relies on seeing rank 0's files, so ranks on machines without a shared filesystem get the
+//! same grids. A colour solved alone is bit for bit that colour of a three-colour solve
+//! ([`sylva_lb::LbSolver::solve_colour`]), so the grids, the cache entries and the pictures
+//! are those of one process.
+
+use std::time::Instant;
+
+use sylva_geom::Scene;
+use sylva_lb::{DensityGrid, LightingGrid};
+use sylva_render::lighting::{
+    CacheLookup, LightingPlan, LightingReport, LightingSource, ModelLighting,
+};
+use sylva_render::{lighting_options, scene_to_sun, stage, LbPlan, Progress};
+
+use crate::comm::{agree, Comm, CommError, Reader, Writer};
+use crate::queue::run_queue;
+use crate::DistError;
+
+/// A solve that needs one model's density grid: what the LB queue runs. [`solve_model_jobs`]
+/// runs any list of them; the result of each is one value per site of its model's grid.
+pub trait ModelJob: Sync {
+    /// Index into the scene's models (and their [`LightingPlan`]s).
+    fn model(&self) -> usize;
+}
+
+/// One solve of the LB precomputation: a model's colour under the sun.
+///
+/// Relighting's base solutions (004: `sylva_lb::relight::BasisJob`, a base solution in a
+/// colour) are listed the same way: a job type holding the model and its `BasisJob`,
+/// implementing [`ModelJob`], listed per model from `BasisJob::all` (or
+/// `BasisAssembly::missing` after a partial cache hit) and run by [`solve_model_jobs`], whose
+/// `solve` calls `solve_basis_jobs` with that one job; rank 0 puts the values in each model's
+/// `BasisAssembly`. The queue, the density grids kept between jobs, the gathering and the
+/// broadcast stay as they are.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LbJob {
+    /// Index into the scene's models.
+    pub model: usize,
+    /// 0, 1, 2: R, G, B.
+    pub colour: usize,
+}
+
+impl ModelJob for LbJob {
+    fn model(&self) -> usize {
+        self.model
+    }
+}
+
+/// The jobs that light `models` (indices into `plans`): each colour that does not repeat an
+/// earlier colour's parameters.
+pub fn lb_jobs(plans: &[LightingPlan], models: &[usize]) -> Vec<LbJob> {
+    let mut jobs = Vec::new();
+    for &model in models {
+        for (colour, &source) in plans[model].colour_sources().iter().enumerate() {
+            if source == colour {
+                jobs.push(LbJob { model, colour });
+            }
+        }
+    }
+    jobs
+}
+
+/// One job's values (one per site of its model's grid) and the seconds it took where it ran.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JobValues {
+    pub values: Vec<f32>,
+    pub seconds: f64,
+}
+
+/// What computes one job on the rank that gets it: `solve(job, plan, density)`, one value
+/// per site of the model's grid.
+pub type SolveModelJob<'f, J> =
+    dyn FnMut(&J, &LightingPlan, &DensityGrid) -> Result<Vec<f32>, DistError> + 'f;
+
+/// Runs `jobs` across the ranks through the work queue (every rank calls it with the same
+/// list): `solve(job, plan, density)` computes a job on whichever rank gets it, the model's
+/// density grid voxelized there and kept while that rank's next job is of the same model.
+/// Rank 0 gets `Some` of every job's values in job order (each checked to have one value per
+/// site), with `on_done(job)` as each arrives; the other ranks get `None`.
+pub fn solve_model_jobs<J: ModelJob>(
+    comm: &dyn Comm,
+    plans: &[LightingPlan],
+    jobs: &[J],
+    solve: &mut SolveModelJob<'_, J>,
+    on_done: &(dyn Fn(usize) + Sync),
+) -> Result<Option<Vec<JobValues>>, DistError> {
+    if let Some(job) = jobs.iter().find(|j| j.model() >= plans.len()) {
+        return Err(CommError::Protocol(format!(
+            "an LB job of model {} of {}",
+            job.model(),
+            plans.len()
+        ))
+        .into());
+    }
+    let mut density: Option<(usize, DensityGrid)> = None;
+    let outcome = run_queue(
+        comm,
+        jobs.len(),
+        &mut |j| {
+            let job = &jobs[j];
+            let plan = &plans[job.model()];
+            if density.as_ref().map(|d| d.0) != Some(job.model()) {
+                // One grid held at a time.
+                density = None;
+                let grid = plan
+                    .density()
+                    .map_err(|source| lighting_error(plan, source))?;
+                density = Some((job.model(), grid));
+            }
+            let grid = &density.as_ref().expect("density").1;
+            let mut w = Writer::default();
+            w.f32s(&solve(job, plan, grid)?);
+            Ok(w.0)
+        },
+        on_done,
+    )?;
+    drop(density);
+    let Some(outcome) = outcome else {
+        return Ok(None);
+    };
+    jobs.iter()
+        .zip(&outcome.results)
+        .zip(&outcome.done)
+        .map(|((job, result), done)| {
+            let mut r = Reader::new(result, "LB job values");
+            let values = r.f32s(plans[job.model()].dims().sites())?;
+            r.end()?;
+            Ok(JobValues {
+                values,
+                seconds: done.seconds,
+            })
+        })
+        .collect::<Result<Vec<_>, DistError>>()
+        .map(Some)
+}
+
+fn lighting_error(plan: &LightingPlan, source: sylva_render::lighting::LightingError) -> DistError {
+    DistError::Pipeline(sylva_render::PipelineError::Lighting {
+        model: plan.model.name.clone(),
+        source,
+    })
+}
+
+/// Every model's lighting, in scene order, on every rank (every rank calls it with the same
+/// scene and plan; that is checked, and every rank must solve on the same kind of device,
+/// since CPU and GPU results differ in the last bits). Rank 0 reads and writes `lb`'s cache
+/// and reports each model to `progress` (`model_lit`); the count is the models that came
+/// from the cache.
+pub fn light_models(
+    comm: &dyn Comm,
+    scene: &Scene,
+    lb: &LbPlan,
+    progress: &dyn Progress,
+) -> Result<(Vec<ModelLighting>, usize), DistError> {
+    let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
+    let root = comm.rank() == 0;
+    agree(comm, "the LB solver", &lb.solver.cache_tag())?;
+    let mut opts = lighting_options(scene, lb);
+    agree(
+        comm,
+        "the LB settings",
+        &format!(
+            "{} ({} models) grid {} preset {} sun {:?}",
+            scene.name,
+            scene.models.len(),
+            opts.grid,
+            opts.preset,
+            scene_to_sun(scene)
+        ),
+    )?;
+    if !root {
+        opts.cache_dir = None;
+    }
+    let to_sun = scene_to_sun(scene);
+    let plans = scene
+        .models
+        .iter()
+        .map(|m| {
+            LightingPlan::new(m, to_sun, &opts, lb.solver).map_err(|source| {
+                DistError::Pipeline(sylva_render::PipelineError::Lighting {
+                    model: m.name.clone(),
+                    source,
+                })
+            })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+
+    // Rank 0: the cache; everyone: the models to solve.
+    let mut lookups: Vec<CacheLookup> = Vec::new();
+    let mut todo = Writer::default();
+    if root {
+        lookups = plans.iter().map(|p| p.lookup()).collect();
+        let missing: Vec<usize> = (0..plans.len())
+            .filter(|&m| !matches!(lookups[m], CacheLookup::Hit(_)))
+            .collect();
+        todo.u64(missing.len() as u64);
+        for m in missing {
+            todo.u64(m as u64);
+        }
+    }
+    comm.broadcast(0, &mut todo.0)?;
+    let mut r = Reader::new(&todo.0, "models to solve");
+    let missing = (0..r.u64()?)
+        .map(|_| r.u64().map(|m| m as usize))
+        .collect::<Result<Vec<_>, _>>()?;
+    r.end()?;
+    if missing.iter().any(|&m| m >= plans.len()) {
+        return Err(CommError::Protocol(format!("models to solve {missing:?}")).into());
+    }
+    let jobs = lb_jobs(&plans, &missing);
+
+    if root && !jobs.is_empty() {
+        progress.start("LB solves", jobs.len() as u64);
+    }
+    let outcome = solve_model_jobs(
+        comm,
+        &plans,
+        &jobs,
+        &mut |job, plan, grid| {
+            plan.solve_colour(grid, job.colour, lb.solver, &mut |_, _| {})
+                .map_err(|source| lighting_error(plan, source))
+        },
+        &|_| progress.advance(1),
+    );
+    if root && !jobs.is_empty() {
+        progress.finish();
+    }
+    let outcome = outcome?;
+
+    // Rank 0: each model's grid, from the cache or assembled and stored; then to everyone.
+    let mut cached = 0;
+    let mut lighting = Vec::with_capacity(plans.len());
+    let mut solved: Vec<Option<LightingGrid>> = (0..plans.len()).map(|_| None).collect();
+    let mut seconds = vec![0f64; plans.len()];
+    if let Some(outcome) = outcome {
+        let mut colours: Vec<[Option<Vec<f32>>; 3]> =
+            (0..plans.len()).map(|_| Default::default()).collect();
+        for (job, done) in jobs.iter().zip(outcome) {
+            colours[job.model][job.colour] = Some(done.values);
+            seconds[job.model] += done.seconds;
+        }
+        for &m in &missing {
+            let plan = &plans[m];
+            let sources = plan.colour_sources();
+            let c: [Vec<f32>; 3] = std::array::from_fn(|i| {
+                colours[m][sources[i]]
+                    .clone()
+                    .expect("every listed colour was solved")
+            });
+            let grid = plan.assemble(c);
+            plan.store(&grid, lb.solver)
+                .map_err(|source| lighting_error(plan, source))?;
+            solved[m] = Some(grid);
+        }
+    }
+    for (m, plan) in plans.iter().enumerate() {
+        let t = Instant::now();
+        let mut data = Writer::default();
+        let mut from_cache = None;
+        if root {
+            let (grid, source) = match std::mem::replace(&mut lookups[m], CacheLookup::Miss) {
+                CacheLookup::Hit(grid) => (grid, LightingSource::Cached),
+                CacheLookup::Miss => (solved[m].take().expect("solved"), LightingSource::Computed),
+                CacheLookup::Bad(reason) => (
+                    solved[m].take().expect("solved"),
+                    LightingSource::Recomputed { reason },
+                ),
+            };
+            for c in &grid.colours {
+                data.f32s(c);
+            }
+            from_cache = Some((grid, source));
+        }
+        comm.broadcast(0, &mut data.0)?;
+        let grid = match from_cache {
+            Some((grid, source)) => {
+                cached += (source == LightingSource::Cached) as usize;
+                let report = LightingReport {
+                    source,
+                    seconds: seconds[m] + t.elapsed().as_secs_f64(),
+                    path: plan.cache_path().map(|p| p.to_path_buf()),
+                    dims: plan.dims(),
+                };
+                progress.model_lit(plan.model, &report);
+                grid
+            }
+            None => {
+                let sites = plan.dims().sites();
+                let mut r = Reader::new(&data.0, "LB grid");
+                let c = [r.f32s(sites)?, r.f32s(sites)?, r.f32s(sites)?];
+                r.end()?;
+                plan.assemble(c)
+            }
+        };
+        lighting.push(plan.lighting(&grid));
+    }
+    // Everyone reports rank 0's count.
+    let mut count = (cached as u64).to_le_bytes().to_vec();
+    comm.broadcast(0, &mut count)?;
+    let cached = Reader::new(&count, "cached models").u64()? as usize;
+    Ok((lighting, cached))
+}
