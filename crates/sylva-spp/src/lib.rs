@@ -29,6 +29,7 @@ pub mod quadrature;
 pub mod slab;
 pub mod spp;
 pub mod tables;
+pub mod trees;
 
 pub use error::SppError;
 pub use full::FullModel;
