@@ -29,4 +29,5 @@ pub mod render;
 pub mod scene;
 pub mod species;
 pub mod spp;
+pub mod spp_trees;
 pub mod voxelize;
