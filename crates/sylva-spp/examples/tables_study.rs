@@ -63,6 +63,10 @@ fn mean_of_rms(s: &[(f64, f64)]) -> (f64, f64) {
     )
 }
 
+/// A reading of the depth average: its name, the depths for a thickness, and whether the
+/// per-sample RMS values are averaged (instead of the squared errors pooled).
+type Reading = (&'static str, Box<dyn Fn(f64) -> Vec<f64>>, bool);
+
 fn steps(from: f64, to: f64, step: f64) -> Vec<f64> {
     let n = ((to - from) / step + 1e-9).floor() as usize;
     (0..=n).map(|k| from + k as f64 * step).collect()
@@ -111,7 +115,7 @@ fn main() {
     println!(
         "\n2. Table 2 (g = 0, simplified model) under readings of the depth average (percent):"
     );
-    let readings: [(&str, Box<dyn Fn(f64) -> Vec<f64>>, bool); 5] = [
+    let readings: [Reading; 5] = [
         (
             "ours: z = 0..min(w,10) step 0.5, RMS",
             Box::new(|w: f64| steps(0.0, w.min(10.0), 0.5)),

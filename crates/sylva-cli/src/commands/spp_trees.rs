@@ -132,7 +132,7 @@ pub fn run(a: TreesArgs) -> Result<()> {
 }
 
 /// A scene by file or built-in name, or else one tree of a built-in species.
-fn load_scene_or_species(name: &str) -> Result<sylva_geom::Scene> {
+pub fn load_scene_or_species(name: &str) -> Result<sylva_geom::Scene> {
     match sylva_render::load_scene(name, None) {
         Err(sylva_render::PipelineError::Scene(sylva_scene::SceneError::NotFound(_))) => {
             let text = sylva_scene::builtin_scenes::single_tree(name).with_context(|| {

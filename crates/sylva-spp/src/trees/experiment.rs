@@ -241,7 +241,8 @@ pub struct PaperRow {
 
 /// `scene` with its instances copied onto a `k × k` lattice in x and z (003's "repeated the
 /// same tree model periodically"), `spacing` apart (default: the wider of the instances'
-/// x and z extents, so neighbouring crowns just touch), centred on the original.
+/// x and z extents, so neighbouring crowns just touch), centred on the original. The camera
+/// moves `k` times as far from what it looks at, and the ground grows to hold the lattice.
 pub fn repeated(scene: &Scene, k: usize, spacing: Option<f32>) -> Result<Scene, TreeError> {
     if !(1..=64).contains(&k) {
         return Err(TreeError::invalid(
@@ -282,7 +283,13 @@ pub fn repeated(scene: &Scene, k: usize, spacing: Option<f32>) -> Result<Scene, 
         }
     }
     if k > 1 {
-        out.name = format!("{} ×{}²", scene.name, k);
+        out.name = format!("{}-{k}x{k}", scene.name);
+        let c = &mut out.camera;
+        c.position = c.look_at + (c.position - c.look_at) * k as f32;
+        if let Some(size) = &mut out.ground.size {
+            let grow = (k - 1) as f32 * step;
+            *size = [size[0] + grow, size[1] + grow];
+        }
     }
     Ok(out)
 }

@@ -390,6 +390,26 @@ impl SppSystem {
         Ok(system)
     }
 
+    /// Steps 2 to 5 for `scene` as `accel` traces it (its instances in order), lit by the
+    /// scene's sun: what a renderer needs for [`SppLight`].
+    pub fn for_scene(
+        scene: &sylva_geom::Scene,
+        accel: &SceneAccel,
+        config: SystemConfig,
+    ) -> Result<SppSystem, TreeError> {
+        let meshes = SceneMeshes::new(&scene.models, accel);
+        let mut system = SppSystem::build(&scene.models, &scene.instances, accel, &meshes, config)?;
+        let t = scene.sun.travel();
+        system.set_light(
+            &scene.models,
+            accel,
+            &meshes,
+            Vec3::new(t.x as f32, t.y as f32, t.z as f32),
+        )?;
+        system.update_sky();
+        Ok(system)
+    }
+
     /// Step 5: maps along the light `dir` (the direction light travels in) for every
     /// prototype, then depth, thickness and G at every grid point.
     pub fn set_light(
@@ -531,13 +551,26 @@ impl SppSystem {
     }
 
     /// The sky's light reaching a ground point `p`: the lowest value of the grids of the
-    /// instances standing over it (1 in the open).
+    /// instances standing over it (1 in the open). A grid ends at its instance's box while
+    /// the shade goes on, so, as the LB light does, the value fades to 1 over the outer 20 %
+    /// of the box's footprint and no edge shows.
     pub fn ground_sky(&self, p: Vec3) -> f32 {
         let mut f = 1.0f32;
         for &i in self.vertical.at(p) {
             let b = &self.boxes[i as usize];
             if p.x >= b.min.x && p.x <= b.max.x && p.z >= b.min.z && p.z <= b.max.z {
-                f = f.min(self.sky(i as usize, Vec3::new(p.x, b.min.y.max(p.y), p.z)));
+                let sky = self.sky(i as usize, Vec3::new(p.x, b.min.y.max(p.y), p.z));
+                let edge = (p.x - b.min.x)
+                    .min(b.max.x - p.x)
+                    .min(p.z - b.min.z)
+                    .min(b.max.z - p.z);
+                let width = 0.2 * (b.max.x - b.min.x).min(b.max.z - b.min.z);
+                let w = if width > 0.0 {
+                    (edge / width).clamp(0.0, 1.0)
+                } else {
+                    1.0
+                };
+                f = f.min(1.0 + (sky - 1.0) * w);
             }
         }
         f
@@ -592,6 +625,19 @@ pub struct SppLight<'a> {
     pub system: &'a SppSystem,
     /// One model per colour (the leaves' albedo per colour).
     pub colours: [TreeSpp; 3],
+}
+
+impl<'a> SppLight<'a> {
+    /// The light of `system` for leaves of albedo `σs/σt` per colour of the LB preset
+    /// `preset` (the scene's `[lb] preset`), so that it compares with the LB light.
+    pub fn with_preset(system: &'a SppSystem, preset: &str) -> Result<SppLight<'a>, TreeError> {
+        let params = sylva_lb::Preset::parse(preset)?.params();
+        let mut colours = [TreeSpp::new(0.0)?; 3];
+        for (c, p) in colours.iter_mut().zip(&params.colours) {
+            *c = TreeSpp::new(p.sigma_s / p.sigma_t())?;
+        }
+        Ok(SppLight { system, colours })
+    }
 }
 
 impl sylva_render::IndirectLight for SppLight<'_> {
