@@ -372,3 +372,77 @@ fn bad_input_is_an_error() {
     empty.instances.clear();
     assert!(experiment::run(&empty, &ok, &Silent).is_err());
 }
+
+#[test]
+fn the_spp_light_is_the_slab_model_inside_a_slab_shaped_tree() {
+    use sylva_render::IndirectLight;
+    use sylva_spp::trees::shading::TreeSpp;
+    use sylva_spp::trees::system::SppLight;
+    // A slab-shaped tree 4 mean free paths thick (top at y = 1), lit from above. Over many
+    // columns (one column's leaf count is Poisson, and a column keeps its count at every
+    // height, so few columns share one error at all depths), the light map's depth at `h`
+    // below the top is `σh` and its thickness `σ`; the renderer's SPP light is eq. 19's
+    // diffuse field at each column's depth and thickness (per colour of the leaf preset)
+    // times G (not the field of the mean slab: it is not linear in the thickness), and it
+    // falls with depth. The sky under the slab is what gets through it.
+    let (models, accel, meshes, sigma) = slab_tree(3.0, 0.1, 4.0, 11);
+    let mut system = SppSystem::build(
+        &models,
+        &single_instance(),
+        &accel,
+        &meshes,
+        SystemConfig::default(),
+    )
+    .unwrap();
+    system
+        .set_light(&models, &accel, &meshes, Vec3::NEG_Y)
+        .unwrap();
+    system.update_sky();
+    let light = SppLight::with_preset(&system, "leaf").unwrap();
+    let inst = &accel.instances()[0];
+    let params = sylva_lb::Preset::Leaf.params();
+    let n = 16;
+    let column = |i: usize| -2.0 + 4.0 * i as f32 / (n - 1) as f32;
+    let mut previous = Vec3::splat(f32::INFINITY);
+    for y in [0.85f32, 0.6, 0.35, 0.15] {
+        let expected_depth = sigma * (1.0 - y as f64);
+        let (mut got, mut want) = (Vec3::ZERO, Vec3::ZERO);
+        let (mut depth, mut thickness) = (0.0, 0.0);
+        for i in 0..n {
+            for k in 0..n {
+                let p = Vec3::new(column(i), y, column(k));
+                got += light.plant(0, inst, p).unwrap();
+                let (d, w) = system.light_depth(p);
+                depth += d as f64;
+                thickness += w as f64;
+                let g = system.g(0, p).clamp(0.0, 1.0) as f64;
+                let mut c = [0.0f32; 3];
+                for (c, cp) in c.iter_mut().zip(&params.colours) {
+                    let spp = TreeSpp::new(cp.sigma_s / cp.sigma_t()).unwrap();
+                    let (ep, em) = spp.diffuse(d as f64, w as f64).unwrap();
+                    *c = (2.0 * g * (ep + em)) as f32;
+                }
+                want += Vec3::from_array(c);
+            }
+        }
+        let count = (n * n) as f64;
+        let (depth, thickness) = (depth / count, thickness / count);
+        assert!(
+            (depth - expected_depth).abs() < 0.15 && (thickness / sigma - 1.0).abs() < 0.05,
+            "y {y}: map depth {depth}, thickness {thickness}; expected {expected_depth}, {sigma}"
+        );
+        assert!(
+            ((got - want).abs() / want).max_element() < 1e-4,
+            "y {y}: SPP light {got}, slab model {want}"
+        );
+        assert!(got.cmplt(previous).all(), "not falling with depth at y {y}");
+        previous = got;
+    }
+    // Straight down through the slab the sky's light gets through as e^{−d} averaged over
+    // the downward sample directions: e^{−σ} ≈ 2 % straight down, more obliquely through
+    // the sides, but far below the open sky's 1.
+    let under = light.ground_sky(Vec3::new(0.0, 0.0, 0.0));
+    assert!(under < 0.1, "sky under the slab {under}");
+    assert_eq!(light.ground_sky(Vec3::new(20.0, 0.0, 0.0)), 1.0);
+    assert!(SppLight::with_preset(&system, "no such preset").is_err());
+}

@@ -112,6 +112,9 @@ struct SppBench {
     display_ms: f64,
     /// The frame's shading pass alone (where the SPP light is evaluated), ms.
     shading_ms: f64,
+    /// The baseline: the same frame without indirect light on the plants, ms.
+    baseline_display_ms: f64,
+    baseline_shading_ms: f64,
     /// Leaf meshes grouped once for the maps (not in the paper's steps), ms.
     meshes_ms: f64,
     accel_build_ms: f64,
@@ -172,12 +175,19 @@ pub fn run(a: BenchSppArgs) -> Result<()> {
     let light = SppLight::with_preset(&system, &scene.lb.preset)?;
     let camera = prepared.camera(a.width, a.height);
     let settings = prepared.settings(camera, 1, 1);
+    // The baseline, alternated with the SPP frame: the same frame with no indirect light
+    // on the plants (the scene is prepared without LB grids), sun and sky only.
     prepared.render_with(&light, &settings, &Silent)?;
+    prepared.render(&settings, &Silent)?;
     let (mut frame, mut shading) = (Vec::new(), Vec::new());
+    let (mut base_frame, mut base_shading) = (Vec::new(), Vec::new());
     for _ in 0..a.runs {
         let f = prepared.render_with(&light, &settings, &Silent)?;
         frame.push(f.timings.frame_seconds());
         shading.push(f.timings.shading_seconds);
+        let f = prepared.render(&settings, &Silent)?;
+        base_frame.push(f.timings.frame_seconds());
+        base_shading.push(f.timings.shading_seconds);
     }
     let b = SppBench {
         scene: scene.name.clone(),
@@ -195,6 +205,8 @@ pub fn run(a: BenchSppArgs) -> Result<()> {
         sun_ms: 1e3 * median(sun),
         display_ms: 1e3 * median(frame),
         shading_ms: 1e3 * median(shading),
+        baseline_display_ms: 1e3 * median(base_frame),
+        baseline_shading_ms: 1e3 * median(base_shading),
         meshes_ms,
         accel_build_ms,
         memory_bytes: system.memory_bytes(),
@@ -212,6 +224,13 @@ pub fn run(a: BenchSppArgs) -> Result<()> {
     println!(
         "  sylva               {:>12} {:>8} {:>8.1} ms {:>5.1} ms {:>5.1} ms {:>5.0} ms ({}x{} ray traced; shading {:.0} ms)",
         b.polygons, b.cells, b.preprocess_ms, b.sky_ms, b.sun_ms, b.display_ms, b.width, b.height, b.shading_ms
+    );
+    println!(
+        "  baseline: the same frame without indirect light {:.0} ms (shading {:.0} ms); SPP frame / baseline {:.2}, shading {:.2}",
+        b.baseline_display_ms,
+        b.baseline_shading_ms,
+        b.display_ms / b.baseline_display_ms,
+        b.shading_ms / b.baseline_shading_ms
     );
     for p in &b.paper {
         println!(
