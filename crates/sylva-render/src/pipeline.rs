@@ -407,16 +407,26 @@ impl PreparedScene {
 
     /// The renderer over this scene's tracer and LB light, lit by the 6500 K sun.
     pub fn renderer(&self) -> Renderer<'_> {
-        self.renderer_with(self.tracer.query())
+        self.renderer_over(self.tracer.query(), &self.light)
     }
 
-    /// The renderer answering its ray queries with `query`.
-    fn renderer_with<'s>(&'s self, query: &'s dyn RayQuery) -> Renderer<'s> {
+    /// The renderer over this scene's tracer with another indirect light (the plane-parallel
+    /// light of `sylva-spp`, say), lit by the 6500 K sun.
+    pub fn renderer_with<'a>(&'a self, light: &'a dyn IndirectLight) -> Renderer<'a> {
+        self.renderer_over(self.tracer.query(), light)
+    }
+
+    /// The renderer answering its ray queries with `query`, lit indirectly by `light`.
+    fn renderer_over<'s>(
+        &'s self,
+        query: &'s dyn RayQuery,
+        light: &'s dyn IndirectLight,
+    ) -> Renderer<'s> {
         let sun_colour = Vec3::from_array(sylva_core::blackbody_rgb(sylva_core::SUN_TEMPERATURE_K));
         Renderer::new(
             &self.scene,
             query,
-            &self.light,
+            light,
             &self.materials,
             self.to_sun,
             sun_colour,
@@ -431,20 +441,43 @@ impl PreparedScene {
         settings: &RenderSettings,
         progress: &dyn Progress,
     ) -> Result<Frame, PipelineError> {
+        self.render_frame(None, settings, progress)
+    }
+
+    /// [`PreparedScene::render`] with another indirect light. The GPU frame shades with the
+    /// scene's own LB grids, so another light is shaded on the CPU (rays still go to the
+    /// GPU tracer when there is one).
+    pub fn render_with(
+        &self,
+        light: &dyn IndirectLight,
+        settings: &RenderSettings,
+        progress: &dyn Progress,
+    ) -> Result<Frame, PipelineError> {
+        self.render_frame(Some(light), settings, progress)
+    }
+
+    fn render_frame(
+        &self,
+        light: Option<&dyn IndirectLight>,
+        settings: &RenderSettings,
+        progress: &dyn Progress,
+    ) -> Result<Frame, PipelineError> {
         let _span = tracing::info_span!(stage::FRAME).entered();
         progress.start("render", 3 * tile_count(settings.region));
         let advance = |n| progress.advance(n);
-        let frame = match (&self.gpu_frame, self.tracer.gpu()) {
-            (Some(gpu_frame), Some(tracer)) => {
+        let frame = match (light, &self.gpu_frame, self.tracer.gpu()) {
+            (None, Some(gpu_frame), Some(tracer)) => {
                 // Pixels the kernel hands back are rendered by the CPU tracer and shading.
-                let cpu = self.renderer_with(self.tracer.cpu());
+                let cpu = self.renderer_over(self.tracer.cpu(), &self.light);
                 match gpu_frame.render(tracer, &cpu, settings, &advance) {
                     Ok(f) => Ok(f),
                     Err(FrameError::Render(e)) => Err(e),
                     Err(FrameError::Gpu(e)) => return Err(e.into()),
                 }
             }
-            _ => self.renderer().render(settings, &advance),
+            (light, _, _) => self
+                .renderer_with(light.unwrap_or(&self.light))
+                .render(settings, &advance),
         };
         progress.finish();
         if let Some(e) = self.tracer.gpu().and_then(GpuTracer::take_error) {

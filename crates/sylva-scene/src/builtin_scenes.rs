@@ -299,3 +299,39 @@ rays_per_pixel = 1
 grid = 128
 preset = "leaf"
 "#;
+
+/// Scene TOML of one tree of built-in species `species` at the origin (the camera framing a
+/// tree of about 15 m, the LB grid at 128), or `None` when there is no such species: for
+/// commands that study a single tree (`sylva spp trees red_maple`).
+pub fn single_tree(species: &str) -> Option<String> {
+    let s = sylva_grow::Species::builtin(species)?;
+    Some(format!(
+        r#"# One {display} at the origin.
+name = "{name}"
+
+[[models]]
+name = "{name}"
+species = "{name}"
+
+[[instances]]
+model = "{name}"
+position = [0.0, 0.0, 0.0]
+
+[ground]
+size = [60.0, 60.0]
+color = [0.16, 0.14, 0.08]
+
+[camera]
+position = [0.0, 6.0, -30.0]
+look_at = [0.0, 7.0, 0.0]
+fov = 40.0
+resolution = [512, 512]
+
+[lb]
+grid = 128
+preset = "leaf"
+"#,
+        display = s.display_name,
+        name = s.name,
+    ))
+}

@@ -273,3 +273,13 @@ fn scene_build_is_deterministic_across_thread_counts() {
         assert_eq!(x.mesh.geometry_hash(), y.mesh.geometry_hash());
     }
 }
+
+#[test]
+fn single_tree_scenes_build_for_every_species_and_not_for_others() {
+    let text = builtin_scenes::single_tree("Red Maple").expect("a built-in species");
+    let desc = SceneDesc::parse(&text, "single tree", None).unwrap();
+    let scene = desc.build().unwrap();
+    assert_eq!(scene.instances.len(), 1);
+    assert_eq!(scene.models[0].name, "red_maple");
+    assert!(builtin_scenes::single_tree("oak_of_nowhere").is_none());
+}

@@ -1,6 +1,6 @@
-//! Plane-parallel scattering in homogeneous slabs: the full discrete-ordinates model, the simplified (SPP) model and a Monte Carlo reference (paper 003).
+//! Plane-parallel scattering (paper 003): the full discrete-ordinates model, the simplified (SPP) model and a Monte Carlo reference in slabs, and the SPP model applied to trees.
 //!
-//! This crate owns the physics of paper 003 §3 and Appendix A.1:
+//! This crate owns the physics of paper 003:
 //!
 //! * [`full::FullModel`]: eq. 7 (discrete directions, Henyey-Greenstein phase function eq. 2)
 //!   solved per azimuthal Fourier mode by eigenvalue decomposition, boundary conditions eq. 21,
@@ -11,8 +11,12 @@
 //!   reference for both solvers, deterministic for a seed whatever the thread count.
 //! * [`tables`]: 003 Tables 1 and 2 (RMS error of the simplified and refined SPP against the full
 //!   model) recomputed beside the paper's values.
+//! * [`trees`]: §4-5, the model on trees: depth and thickness per leaf mesh (eq. 29), the
+//!   G-factor (eqs. 23-28, A.2-A.3), deep opacity maps, instance grids and eq. 31, shading
+//!   (eq. 32), the renderer's SPP light, and the Monte Carlo test of Table 3 (eq. 30) with
+//!   sylva's LB lighting beside it.
 //!
-//! Conventions: `z` is the depth below the lit face (`0 <= z <= w`); a direction is given by
+//! Slab conventions: `z` is the depth below the lit face (`0 <= z <= w`); a direction is given by
 //! `mu`, the cosine of its angle with +z (so `mu > 0` travels deeper, the paper's Ω+), and `phi`,
 //! its azimuth measured from the plane of incidence (`phi = 0` is the azimuth the sun's light
 //! travels in). The incident light is `δ(s - s0)`: a unit flux through a surface normal to the
@@ -29,6 +33,7 @@ pub mod quadrature;
 pub mod slab;
 pub mod spp;
 pub mod tables;
+pub mod trees;
 
 pub use error::SppError;
 pub use full::FullModel;

@@ -68,10 +68,20 @@ impl SppModel {
     /// Solves the SPP model for `slab`.
     pub fn new(slab: Slab) -> Result<Self, SppError> {
         slab.validate()?;
+        let t = fraction_into_lower_hemisphere(slab.g, slab.mu0);
+        Self::with_forward_fraction(slab, t)
+    }
+
+    /// Solves the SPP model for `slab` with eq. 10's `T` given (the fraction of light
+    /// scattered from the beam that keeps going down, in [0, 1]) instead of computed from
+    /// `slab.g`: for many slabs sharing one phase function and incidence (the meshes of a
+    /// tree), and for phase functions that are not Henyey-Greenstein.
+    pub fn with_forward_fraction(slab: Slab, t: f64) -> Result<Self, SppError> {
+        slab.validate()?;
+        crate::error::check_range("T", t, 0.0, 1.0, "the forward fraction must be in [0, 1]")?;
         let sigma_t = slab.sigma_t;
         let sigma_s = slab.albedo.min(MAX_ALBEDO) * sigma_t;
         let mu0 = slab.mu0;
-        let t = fraction_into_lower_hemisphere(slab.g, mu0);
         let r = 1.0 - t;
         // Eq. 17: (λ mu0)² = (σt - δσ)(σt - σs), δσ = σs (T - R).
         let kappa = ((sigma_t - sigma_s * (t - r)) * (sigma_t - sigma_s))

@@ -575,6 +575,87 @@ impl ModelAccel {
         found
     }
 
+    /// Every opaque hit of the model-space ray with `t_min < t ≤ t_max` (same arithmetic and
+    /// alpha rule as the closest-hit query), appended to `out` as instance `instance`, each
+    /// triangle once, in no particular order.
+    #[allow(clippy::too_many_arguments)] // mirrors `closest`
+    pub(crate) fn all(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        instance: u32,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+        out: &mut Vec<crate::Hit>,
+    ) {
+        let inv = inverse_dir(dir);
+        let start = out.len();
+        let (mut tests, mut rejects) = (0u64, 0u64);
+        self.tree
+            .traverse(origin, inv, t_min, t_max, cfg, stats, |prims| {
+                for &p in prims {
+                    tests += 1;
+                    let tri = &self.tris[p as usize];
+                    let Some((t, u, v)) = intersect_triangle(origin, dir, &tri.data, t_min, t_max)
+                    else {
+                        continue;
+                    };
+                    if !self.passes_alpha(tri.alpha, u, v) {
+                        rejects += 1;
+                        continue;
+                    }
+                    out.push(crate::Hit {
+                        t,
+                        instance,
+                        triangle: p,
+                        u,
+                        v,
+                    });
+                }
+                // Never stop early: every leaf along the segment is wanted.
+                f32::INFINITY
+            });
+        // A triangle straddling several leaves was found in each (at the same t).
+        let found = &mut out[start..];
+        found.sort_unstable_by_key(|h| h.triangle);
+        let mut kept = start;
+        for k in start..out.len() {
+            if k == start || out[k].triangle != out[kept - 1].triangle {
+                out[kept] = out[k];
+                kept += 1;
+            }
+        }
+        out.truncate(kept);
+        stats.triangle_tests += tests;
+        stats.alpha_rejects += rejects;
+    }
+
+    /// Every opaque hit of a model-space ray on this model alone (instance id 0), sorted by
+    /// `t` (ties: lower triangle first), each triangle once.
+    pub fn all_hits(
+        &self,
+        ray: &crate::Ray,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+        out: &mut Vec<crate::Hit>,
+    ) {
+        out.clear();
+        stats.rays += 1;
+        if !ray.is_valid() {
+            return;
+        }
+        self.all(
+            ray.origin, ray.dir, ray.t_min, ray.t_max, 0, cfg, stats, out,
+        );
+        out.sort_unstable_by(|a, b| {
+            (a.t, a.triangle)
+                .partial_cmp(&(b.t, b.triangle))
+                .expect("finite t")
+        });
+    }
+
     /// Closest hit of a model-space ray on this model alone (instance id 0).
     pub fn closest_hit(
         &self,

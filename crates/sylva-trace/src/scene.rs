@@ -727,6 +727,53 @@ impl SceneAccel {
         n
     }
 
+    /// Every opaque hit on the instances (the ground excluded) with `t_min < t ≤ t_max`,
+    /// sorted by `(t, instance, triangle)`, each triangle of each instance once, into `out`
+    /// (cleared first). For counting the surfaces a line crosses (paper 003 eq. 29, deep
+    /// opacity maps); invalid rays hit nothing.
+    pub fn all_hits(
+        &self,
+        ray: &Ray,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+        out: &mut Vec<Hit>,
+    ) {
+        out.clear();
+        stats.rays += 1;
+        if !ray.is_valid() {
+            return;
+        }
+        let (o, d) = (ray.origin, ray.dir);
+        let inv_d = inverse_dir(d);
+        let mut visited: Vec<u32> = Vec::new();
+        let mut inner = TraceStats::default();
+        self.top
+            .traverse(o, inv_d, ray.t_min, ray.t_max, cfg, stats, |prims| {
+                for &i in prims {
+                    let [bmin, bmax] = self.boxes[i as usize];
+                    if ray_box(o, inv_d, bmin, bmax, ray.t_min, ray.t_max).is_none()
+                        || visited.contains(&i)
+                    {
+                        continue;
+                    }
+                    visited.push(i);
+                    let inst = &self.instances[i as usize];
+                    let mo = inst.to_model.transform_point3(o);
+                    let md = inst.to_model.transform_vector3(d);
+                    self.models[inst.model as usize]
+                        .all(mo, md, ray.t_min, ray.t_max, i, cfg, &mut inner, out);
+                }
+                f32::INFINITY
+            });
+        *stats += inner;
+        stats.instance_visits += visited.len() as u64;
+        out.sort_unstable_by(|a, b| {
+            (a.t, a.instance, a.triangle)
+                .partial_cmp(&(b.t, b.instance, b.triangle))
+                .expect("finite t")
+        });
+    }
+
     /// Reference closest hit: every triangle of every instance, in model space with the same
     /// arithmetic as the trees (so results are bit-identical), same tie rule.
     pub fn brute_closest_hit(&self, ray: &Ray) -> Option<Hit> {

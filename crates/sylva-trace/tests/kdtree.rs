@@ -268,3 +268,93 @@ fn tree_statistics_are_sane() {
         assert!(same(kd, bf), "triangle {i}");
     }
 }
+
+/// Every opaque hit of `ray` on `accel`'s instances by testing every triangle of every
+/// instance in model space (the trees' arithmetic), sorted like `all_hits`.
+fn brute_all_hits(accel: &SceneAccel, models: &[&Model], ray: &Ray) -> Vec<(u32, u32, f32)> {
+    let mut out = Vec::new();
+    for (k, inst) in accel.instances().iter().enumerate() {
+        let m = &models[inst.model as usize].mesh;
+        let o = inst.to_model.transform_point3(ray.origin);
+        let d = inst.to_model.transform_vector3(ray.dir);
+        for (t, tri) in m.indices.iter().enumerate() {
+            let p = tri.map(|i| Vec3::from_array(m.positions[i as usize]));
+            let data = sylva_trace::TriangleData::new(p[0], p[1], p[2]);
+            if data.is_degenerate() {
+                continue;
+            }
+            let Some((th, u, v)) =
+                sylva_trace::intersect_triangle(o, d, &data, ray.t_min, ray.t_max)
+            else {
+                continue;
+            };
+            if accel.models()[inst.model as usize].is_opaque_at(t as u32, u, v) {
+                out.push((k as u32, t as u32, th));
+            }
+        }
+    }
+    out.sort_by(|a, b| (a.2, a.0, a.1).partial_cmp(&(b.2, b.0, b.1)).unwrap());
+    out
+}
+
+#[test]
+fn all_hits_equal_brute_force_with_alpha_and_instances() {
+    // Alpha-tested leaves (the maple) and opaque soups, translated, rotated and scaled, some
+    // overlapping: every opaque surface a line crosses, each once, in order.
+    let maple = red_maple().clone();
+    let soup_model = soup(400, 31);
+    let models = vec![maple, soup_model];
+    let instances = vec![
+        Instance {
+            model: 0,
+            position: Vec3::ZERO,
+            rotation_deg: 0.0,
+            scale: 1.0,
+        },
+        Instance {
+            model: 0,
+            position: Vec3::new(3.0, 0.0, 1.0),
+            rotation_deg: 50.0,
+            scale: 0.8,
+        },
+        Instance {
+            model: 1,
+            position: Vec3::new(0.5, 6.0, 0.0),
+            rotation_deg: 10.0,
+            scale: 2.0,
+        },
+    ];
+    let accel = SceneAccel::from_parts(&models, &instances, Some([9.0, 9.0])).unwrap();
+    let refs: Vec<&Model> = models.iter().collect();
+    let b = models[0].bounds;
+    let ext = (b.max - b.min).max_element() * 0.5;
+    let mut r = rng(41);
+    let (mut multi, mut alpha_rejects) = (0, 0);
+    let mut out = Vec::new();
+    for k in 0..120 {
+        let mut ray = random_ray(&mut r, ext);
+        ray.origin += (b.min + b.max) * 0.5;
+        if k % 5 == 0 {
+            ray.t_max = uniform(&mut r, 1.0, 10.0);
+        }
+        let mut st = TraceStats::default();
+        accel.all_hits(&ray, TraversalConfig::default(), &mut st, &mut out);
+        alpha_rejects += st.alpha_rejects;
+        let got: Vec<(u32, u32, f32)> = out.iter().map(|h| (h.instance, h.triangle, h.t)).collect();
+        assert_eq!(got, brute_all_hits(&accel, &refs, &ray), "ray {k}");
+        // The first of them is the closest hit (the ground aside).
+        let closest = accel.closest_hit(&ray, TraversalConfig::UNBOUNDED, &mut st);
+        if let (Some(first), Some(c)) = (out.first(), closest.filter(|h| !h.is_ground())) {
+            assert_eq!(
+                (first.instance, first.triangle, first.t),
+                (c.instance, c.triangle, c.t)
+            );
+        }
+        multi += (out.len() > 3) as usize;
+    }
+    assert!(
+        multi > 20,
+        "too few rays crossing several surfaces: {multi}"
+    );
+    assert!(alpha_rejects > 0, "the alpha rule never ran");
+}

@@ -32,6 +32,10 @@ enum BenchCommand {
     /// Rendering a scene's view: acceleration build, frame time at 1 and 4 rays per pixel,
     /// primary and shadow rays per second, memory (default scene: demo; try beech, catalpa).
     Trace(super::bench_trace::BenchTraceArgs),
+    /// 003's rendering system step by step (deep opacity maps and instance grids, sky, sun,
+    /// a frame with the plane-parallel light) beside the paper's Table 4 (default: red_maple
+    /// on a 4 × 4 lattice, 22 directions).
+    Spp(super::bench_spp::BenchSppArgs),
 }
 
 #[derive(Args)]
@@ -88,6 +92,7 @@ pub fn run(args: BenchArgs, comm: Option<&dyn sylva_mpi::Comm>) -> Result<()> {
         BenchCommand::Scene(a) => super::bench_scene::run(a),
         BenchCommand::Voxelize(a) => super::bench_voxel::run(a),
         BenchCommand::Trace(a) => super::bench_trace::run(a, comm),
+        BenchCommand::Spp(a) => super::bench_spp::run(a),
     }
 }
 

@@ -19,6 +19,7 @@ pub fn finish(result: anyhow::Result<()>) -> ExitCode {
 
 pub mod bench;
 pub mod bench_scene;
+pub mod bench_spp;
 pub mod bench_trace;
 pub mod bench_voxel;
 pub mod device;
@@ -29,4 +30,5 @@ pub mod render;
 pub mod scene;
 pub mod species;
 pub mod spp;
+pub mod spp_trees;
 pub mod voxelize;

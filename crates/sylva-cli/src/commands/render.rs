@@ -15,6 +15,7 @@ use sylva_render::{
     load_scene, resolution, stage, tone_map_modes, write_images, LbPlan, Mode, PrepareOptions,
     PreparedScene, Progress, ShadingParams, Silent, StageClock, ToneMap,
 };
+use sylva_spp::trees::system::{SppLight, SppSystem, SystemConfig};
 use sylva_trace::TraversalConfig;
 
 use super::progress::Bars;
@@ -101,6 +102,12 @@ pub struct RenderArgs {
     /// Reinhard white point in scaled luminance (default: the image's brightest pixel).
     #[arg(long)]
     pub white: Option<f32>,
+    /// The indirect light on plants: `lb` (the LB grids, 000) or `spp` (the plane-parallel
+    /// model with the G-factor, 003 §5: deep opacity maps in 16 directions, 16³ instance
+    /// grids; leaf albedo from the scene's [lb] preset). With `spp`, the `lb` mode shows the
+    /// SPP light alone.
+    #[arg(long, default_value = "lb", value_parser = ["lb", "spp"])]
+    pub light: String,
 }
 
 /// A scene prepared for the frames `a` asks for, and the image size.
@@ -262,9 +269,13 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
     let clock = StageClock::global();
     clock.reset();
     let t_all = Instant::now();
+    let spp = a.light == "spp";
+    if spp && comm.is_some() {
+        bail!("--light spp renders in one process: run it without mpirun");
+    }
     let p = prepare(
         &a.frame,
-        modes.iter().any(|m| m.needs_lb()),
+        !spp && modes.iter().any(|m| m.needs_lb()),
         a.rpp,
         true,
         comm,
@@ -274,7 +285,20 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
     let camera = prepared.camera(p.width, p.height);
     let settings = prepared.settings(camera, rpp, a.frame.seed);
     let bars = Bars::new(|_: &Model, _: &LightingReport| {});
+    let mut spp_seconds = None;
     let (frame, split) = match comm {
+        None if spp => {
+            let t = Instant::now();
+            let system = SppSystem::for_scene(
+                &prepared.scene,
+                &prepared.tracer.cpu().accel,
+                SystemConfig::default(),
+            )
+            .context("the plane-parallel light (003 §5)")?;
+            let light = SppLight::with_preset(&system, &prepared.scene.lb.preset)?;
+            spp_seconds = Some(t.elapsed().as_secs_f64());
+            (prepared.render_with(&light, &settings, &bars)?, None)
+        }
         None => (prepared.render(&settings, &bars)?, None),
         Some(comm) => {
             let progress: &dyn Progress = if comm.rank() == 0 { &bars } else { &Silent };
@@ -319,6 +343,7 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
     for (stage, s) in [
         ("scene build", clock.seconds(stage::SCENE_BUILD)),
         ("LB precompute", clock.seconds(stage::LB_PRECOMPUTE)),
+        ("SPP maps and grids", spp_seconds.unwrap_or(0.0)),
         ("acceleration build", clock.seconds(stage::ACCEL_BUILD)),
         ("primary rays", t.primary_seconds),
         ("shadow rays", t.shadow_seconds),

@@ -1,5 +1,6 @@
-//! `sylva spp`: plane-parallel scattering in slabs (paper 003 §3): radiance from the full,
-//! simplified and refined models, and 003 Tables 1 and 2 recomputed.
+//! `sylva spp`: plane-parallel scattering (paper 003): radiance in slabs from the full,
+//! simplified and refined models, 003 Tables 1 and 2 recomputed, and Table 3 on trees
+//! (`spp trees`, in `spp_trees.rs`).
 
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
@@ -24,6 +25,10 @@ enum SppCommand {
     Table1(TableArgs),
     /// Recompute 003 Table 2 (SPP error vs the full model by albedo and thickness, g = 0).
     Table2(TableArgs),
+    /// 003 Table 3 on a scene's trees: per-leaf irradiance from a Monte Carlo reference
+    /// against SPPG, SPP, single scattering and sylva's LB lighting (eq. 30), e.g.
+    /// `sylva spp trees catalpa` and `sylva spp trees catalpa --repeat 3`.
+    Trees(super::spp_trees::TreesArgs),
 }
 
 #[derive(clap::Args)]
@@ -87,6 +92,7 @@ struct TableArgs {
 pub fn run(args: SppArgs) -> Result<()> {
     match args.cmd {
         SppCommand::Slab(a) => slab(a),
+        SppCommand::Trees(a) => super::spp_trees::run(a),
         SppCommand::Table1(a) => {
             let rows = tables::table1(&RmsProtocol::paper()).context("computing Table 1")?;
             let text = if a.json {
@@ -108,7 +114,7 @@ pub fn run(args: SppArgs) -> Result<()> {
     }
 }
 
-fn emit(text: &str, out: Option<PathBuf>) -> Result<()> {
+pub fn emit(text: &str, out: Option<PathBuf>) -> Result<()> {
     match out {
         Some(path) => sylva_core::atomic_write(&path, text.as_bytes())
             .with_context(|| format!("writing {}", path.display())),
