@@ -91,6 +91,7 @@ pub trait LbSolver: Send + Sync {
         assert!(colour < COLOURS, "colour {colour} of {COLOURS}");
         let one = MediumParams {
             colours: [medium.colours[colour]; COLOURS],
+            brown: medium.brown.map(|b| [b[colour]; COLOURS]),
             ..medium.clone()
         };
         let (lighting, reports) =

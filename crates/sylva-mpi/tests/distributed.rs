@@ -53,6 +53,7 @@ fn options(cache: &Path) -> PrepareOptions<'_> {
     PrepareOptions {
         lb: Some(LbPlan {
             solver: &CpuSolver,
+            light: sylva_render::Light::Physical,
             grid: None,
             cache_dir: Some(cache),
         }),
@@ -238,6 +239,7 @@ fn any_list_of_model_jobs_runs_through_the_queue_in_job_order() {
     let scene = load_scene(scene_file.to_str().unwrap(), None).unwrap();
     let lb = LbPlan {
         solver: &CpuSolver,
+        light: sylva_render::Light::Physical,
         grid: None,
         cache_dir: None,
     };
@@ -245,7 +247,7 @@ fn any_list_of_model_jobs_runs_through_the_queue_in_job_order() {
     let plans: Vec<LightingPlan> = scene
         .models
         .iter()
-        .map(|m| LightingPlan::new(m, scene_to_sun(&scene), &opts, &CpuSolver).unwrap())
+        .map(|m| LightingPlan::new(m, &sylva_render::scene_illumination(&scene), &opts, &CpuSolver).unwrap())
         .collect();
     // Models interleaved, so ranks switch density grids.
     let jobs: Vec<ScaledDensity> = (0..7)

@@ -10,7 +10,7 @@ use clap::Args;
 use sylva_geom::Model;
 use sylva_lb::LbSolver;
 use sylva_mpi::Comm;
-use sylva_render::lighting::{LightingReport, LightingSource};
+use sylva_render::lighting::{Light, LightingReport, LightingSource};
 use sylva_render::{
     load_scene, resolution, stage, tone_map_modes, write_images, LbPlan, Mode, PrepareOptions,
     PreparedScene, Progress, ShadingParams, Silent, StageClock, ToneMap,
@@ -45,10 +45,15 @@ pub struct FrameArgs {
     /// Short-stack entries of the kd-tree traversal (000 Fig. 1 uses 5).
     #[arg(long, default_value_t = sylva_trace::DEFAULT_STACK_SIZE)]
     pub stack: usize,
-    /// Scale of the LB indirect light.
+    /// Light model: physical (one material model for renderer, LB and export: exact direct
+    /// sun plus the LB's scattered, sky and ground light; docs/light.md) or paper (000: the
+    /// preset's LB total light, specular highlights; its images used --indirect 0.5).
+    #[arg(long, value_parser = ["physical", "paper"], default_value = "physical")]
+    pub light: String,
+    /// Scale of the LB indirect light (1: as computed).
     #[arg(long, default_value_t = ShadingParams::default().indirect)]
     pub indirect: f32,
-    /// Sky light on the ground as a fraction of the sun's.
+    /// Paper light: sky light on the ground as a fraction of the sun's.
     #[arg(long, default_value_t = ShadingParams::default().sky_ambient)]
     pub sky_ambient: f32,
     /// LB grid sites along each model's longest edge (default: the scene's [lb] grid).
@@ -169,15 +174,18 @@ pub fn prepare(
     } else {
         None
     };
+    let light = Light::parse(&a.light).context("--light")?;
     let opts = PrepareOptions {
         lb: solver.as_deref().map(|solver| LbPlan {
             solver,
             grid: a.lb_grid,
             cache_dir: (!a.no_cache).then_some(a.cache_dir.as_path()),
+            light,
         }),
         traversal: TraversalConfig::with_stack(a.stack),
         trace_gpu: gpu.as_ref(),
         shade_on_gpu: !a.cpu_shading,
+        light,
         indirect: a.indirect,
         sky_ambient: a.sky_ambient,
         largest_frame: Some((width, height, rays_per_pixel)),
