@@ -23,6 +23,9 @@
 //!   area in the cell; the single-scattering albedo and asymmetry from the surfaces'
 //!   reflectance and transmittance.
 
+// Colour and direction indices address several arrays at once.
+#![allow(clippy::needless_range_loop)]
+
 use rayon::prelude::*;
 
 use crate::grid::{DensityGrid, Dims, LightingGrid};
@@ -976,7 +979,7 @@ mod tests {
             [-0.557, -0.766, -0.321],
         ] {
             let b = sun_boundaries(d, [1.0, 2.0, 0.5]);
-            let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) as f64;
+            let len = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
             for (c, e) in [1.0, 2.0, 0.5].into_iter().enumerate() {
                 let flux: f64 = (1..Q)
                     .map(|m| {

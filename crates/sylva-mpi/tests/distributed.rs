@@ -11,8 +11,8 @@ use sylva_mpi::lighting::{solve_model_jobs, ModelJob};
 use sylva_mpi::{light_models, render_frame, Comm, CommError, DistError, LocalComm};
 use sylva_render::lighting::LightingPlan;
 use sylva_render::{
-    lighting_options, load_scene, scene_to_sun, Frame, LbPlan, PrepareOptions, PreparedScene,
-    Region, RenderSettings, Silent,
+    lighting_options, load_scene, Frame, LbPlan, PrepareOptions, PreparedScene, Region,
+    RenderSettings, Silent,
 };
 
 const SCENE: &str = r#"
@@ -247,7 +247,15 @@ fn any_list_of_model_jobs_runs_through_the_queue_in_job_order() {
     let plans: Vec<LightingPlan> = scene
         .models
         .iter()
-        .map(|m| LightingPlan::new(m, &sylva_render::scene_illumination(&scene), &opts, &CpuSolver).unwrap())
+        .map(|m| {
+            LightingPlan::new(
+                m,
+                &sylva_render::scene_illumination(&scene),
+                &opts,
+                &CpuSolver,
+            )
+            .unwrap()
+        })
         .collect();
     // Models interleaved, so ranks switch density grids.
     let jobs: Vec<ScaledDensity> = (0..7)

@@ -878,11 +878,7 @@ impl<'a> LightingPlan<'a> {
         }
         let c = &self.solve.medium.colours;
         let b = &self.solve.boundaries;
-        std::array::from_fn(|i| {
-            (0..i)
-                .find(|&p| c[p] == c[i] && b[p] == b[i])
-                .unwrap_or(i)
-        })
+        std::array::from_fn(|i| (0..i).find(|&p| c[p] == c[i] && b[p] == b[i]).unwrap_or(i))
     }
 
     /// The model's density grid, its memory (with the solve's) checked first.

@@ -236,7 +236,11 @@ impl Tracer {
 /// The light around `scene`'s plants under its own sun of intensity 1
 /// ([`illumination`]): what the LB grids are solved for.
 pub fn scene_illumination(scene: &Scene) -> Illumination {
-    illumination(scene, scene_to_sun(scene), ShadingParams::default().sun_irradiance)
+    illumination(
+        scene,
+        scene_to_sun(scene),
+        ShadingParams::default().sun_irradiance,
+    )
 }
 
 /// The light around `scene`'s plants: its 6500 K sun of irradiance `sun_irradiance` towards

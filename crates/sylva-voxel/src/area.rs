@@ -174,7 +174,8 @@ pub fn plant_area(
             let p = t.map(|i| DVec3::from_array(mesh.positions[i as usize].map(f64::from)));
             let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
             let area_cells = 0.5 * e1.cross(e2).length() * inv_cell * inv_cell;
-            if !(area_cells > 0.0) {
+            // Degenerate (zero or NaN area) triangles hold no area.
+            if area_cells.is_nan() || area_cells <= 0.0 {
                 return;
             }
             let longest = e1.length().max(e2.length()).max((p[2] - p[1]).length()) * inv_cell;
