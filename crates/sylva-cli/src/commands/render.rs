@@ -46,9 +46,12 @@ pub struct FrameArgs {
     #[arg(long, default_value_t = sylva_trace::DEFAULT_STACK_SIZE)]
     pub stack: usize,
     /// Light model: physical (one material model for renderer, LB and export: exact direct
-    /// sun plus the LB's scattered, sky and ground light; docs/light.md) or paper (000: the
-    /// preset's LB total light, specular highlights; its images used --indirect 0.5).
-    #[arg(long, value_parser = ["physical", "paper"], default_value = "physical")]
+    /// sun plus the LB's scattered, sky and ground light; docs/light.md), paper (000: the
+    /// preset's LB total light, specular highlights; its images used --indirect 0.5) or spp
+    /// (the paper's shading with the plane-parallel light and G-factor of 003 §5 instead of
+    /// LB grids: deep opacity maps in 16 directions, 16³ instance grids, leaf albedo from the
+    /// scene's [lb] preset; the `lb` mode shows the SPP light alone).
+    #[arg(long, value_parser = ["physical", "paper", "spp"], default_value = "physical")]
     pub light: String,
     /// Scale of the LB indirect light (1: as computed).
     #[arg(long, default_value_t = ShadingParams::default().indirect)]
@@ -107,12 +110,6 @@ pub struct RenderArgs {
     /// Reinhard white point in scaled luminance (default: the image's brightest pixel).
     #[arg(long)]
     pub white: Option<f32>,
-    /// The indirect light on plants: `lb` (the LB grids, 000) or `spp` (the plane-parallel
-    /// model with the G-factor, 003 §5: deep opacity maps in 16 directions, 16³ instance
-    /// grids; leaf albedo from the scene's [lb] preset). With `spp`, the `lb` mode shows the
-    /// SPP light alone.
-    #[arg(long, default_value = "lb", value_parser = ["lb", "spp"])]
-    pub light: String,
 }
 
 /// A scene prepared for the frames `a` asks for, and the image size.
@@ -174,7 +171,11 @@ pub fn prepare(
     } else {
         None
     };
-    let light = Light::parse(&a.light).context("--light")?;
+    // The SPP light replaces the paper's LB grids under the paper's shading.
+    let light = match a.light.as_str() {
+        "spp" => Light::Paper,
+        l => Light::parse(l).context("--light")?,
+    };
     let opts = PrepareOptions {
         lb: solver.as_deref().map(|solver| LbPlan {
             solver,
@@ -277,7 +278,7 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
     let clock = StageClock::global();
     clock.reset();
     let t_all = Instant::now();
-    let spp = a.light == "spp";
+    let spp = a.frame.light == "spp";
     if spp && comm.is_some() {
         bail!("--light spp renders in one process: run it without mpirun");
     }
