@@ -19,17 +19,25 @@ fn export_demo_to_mitsuba() {
         "8",
     ]);
     assert!(ok, "{err}");
-    assert!(stdout.contains("wrote 16 files"), "{stdout}");
+    // 16 as before, plus each leaf's 2R and 2T textures (linear EXR).
+    assert!(stdout.contains("wrote 22 files"), "{stdout}");
     assert!(stdout.contains("mitsuba"), "{stdout}");
     let xml = fs::read_to_string(out.join("scene.xml")).unwrap();
     assert!(xml.contains("<default name=\"spp\" value=\"8\"/>"));
-    // The demo's LB preset is `leaf`: diff_trans = 1 + luminance-weighted g ≈ 1.016.
-    assert!(xml.contains("name=\"diff_trans\" value=\"1.015"), "{xml}");
+    // Leaves: an even blend of a reflector of 2R and a pure transmitter (diff_trans 2) of 2T.
+    assert_eq!(xml.matches("type=\"blendbsdf\"").count(), 3, "{xml}");
+    assert_eq!(xml.matches("name=\"diff_trans\" value=\"2\"").count(), 3);
     for m in ["maple", "pine", "rose"] {
         assert!(out.join(format!("meshes/{m}_leaf.ply")).is_file(), "{m}");
         assert!(out.join(format!("meshes/{m}_wood.ply")).is_file(), "{m}");
         assert!(out.join(format!("textures/{m}_leaf_alpha.png")).is_file());
         assert!(out.join(format!("textures/{m}_wood.png")).is_file());
+        let exrs = fs::read_dir(out.join("textures"))
+            .unwrap()
+            .filter_map(|e| e.ok()?.file_name().into_string().ok())
+            .filter(|f| f.starts_with(m) && f.ends_with(".exr"))
+            .count();
+        assert_eq!(exrs, 2, "{m}: reflectance and transmittance");
     }
     assert_eq!(xml.matches("type=\"instance\"").count(), 12);
 }
@@ -122,10 +130,10 @@ fn export_refuses_bad_output_dir_and_unknown_format() {
         "demo",
         "-f",
         "mitsuba",
-        "--leaf-transmission",
-        "3",
+        "--sun-irradiance",
+        "nan",
         "-o",
         dir.path().join("y").to_str().unwrap(),
     ]);
-    assert!(!ok && err.contains("[0, 2]"), "{err}");
+    assert!(!ok && err.contains("sun irradiance"), "{err}");
 }

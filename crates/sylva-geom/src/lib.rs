@@ -2,7 +2,8 @@
 //!
 //! * [`mesh`]: [`Aabb`], indexed triangle [`Mesh`]es and [`Model`]s (mesh + materials +
 //!   bounds).
-//! * [`material`]: leaf and wood [`Material`]s.
+//! * [`material`]: leaf and wood [`Material`]s and their [`Optics`] (per-colour reflectance
+//!   and transmittance: the one material model of renderer, LB and export).
 //! * [`texture`]: RGBA8 [`Texture`]s with their wrap and filter modes, and THE texel opacity
 //!   rule ([`is_opaque`]) the voxelizer, the tracer's alpha test and the cache keys share.
 //! * [`scene`]: the built [`Scene`]: models, [`Instance`]s, [`Ground`], sun, sky, [`Camera`]
@@ -16,7 +17,7 @@ pub mod mesh;
 pub mod scene;
 pub mod texture;
 
-pub use material::{Material, MaterialKind};
+pub use material::{Material, MaterialKind, Optics, FOREST_LEAF_TRANSMISSION};
 pub use mesh::{Aabb, Mesh, Model};
 pub use scene::{Camera, Ground, Instance, LbSettings, ModelOrigin, Scene};
 pub use texture::{is_opaque, nearest_texel_coords, Filter, Texture, Wrap, OPAQUE_ALPHA};

@@ -182,6 +182,23 @@ impl Texture {
         self.mean_opaque_color().map(srgb_to_linear)
     }
 
+    /// Mean linear colour over opaque texels (each texel decoded, then averaged): the
+    /// mean albedo of the surface the texture paints; black when no texel is opaque.
+    pub fn mean_opaque_albedo(&self) -> [f32; 3] {
+        let mut sum = [0f64; 3];
+        let mut n = 0usize;
+        for p in self.pixels.iter().filter(|p| is_opaque(**p)) {
+            for c in 0..3 {
+                sum[c] += srgb_to_linear(p[c] as f32 / 255.0) as f64;
+            }
+            n += 1;
+        }
+        if n == 0 {
+            return [0.0; 3];
+        }
+        sum.map(|s| (s / n as f64) as f32)
+    }
+
     pub fn memory_bytes(&self) -> u64 {
         self.pixels.capacity() as u64 * 4
     }

@@ -5,7 +5,7 @@
 use crate::textures::{bark_texture, leaf_texture, BarkPattern, LeafOutline};
 use crate::weber_penn::{self, GenerateError, Params, LEAF, WOOD};
 use std::sync::Arc;
-use sylva_geom::{Material, MaterialKind, Mesh, Model};
+use sylva_geom::{Material, MaterialKind, Mesh, Model, Optics, FOREST_LEAF_TRANSMISSION};
 
 /// A plant species: how to grow it and how it looks.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -20,6 +20,9 @@ pub struct Species {
     pub leaf_outline: LeafOutline,
     /// Leaf colour, sRGB.
     pub leaf_color: [u8; 3],
+    /// Leaf transmittance / reflectance per colour (linear R, G, B): a leaf reflects its
+    /// texture colour and transmits this much of it (docs/light.md).
+    pub leaf_transmission: [f32; 3],
     pub bark_pattern: BarkPattern,
     /// Bark colour, sRGB.
     pub bark_color: [u8; 3],
@@ -92,6 +95,7 @@ impl Species {
             params,
             seed,
             leaf_color: [75, 125, 45],
+            leaf_transmission: FOREST_LEAF_TRANSMISSION,
             bark_pattern: BarkPattern::Furrowed,
             bark_color: [105, 85, 65],
             reference_triangles: None,
@@ -120,6 +124,7 @@ impl Species {
                 base_color: bark.mean_opaque_linear(),
                 texture: Some(bark),
                 two_sided: false,
+                optics: Optics::OPAQUE,
             },
             Material {
                 name: format!("{} leaf", self.display_name),
@@ -127,12 +132,21 @@ impl Species {
                 base_color: leaf.mean_opaque_linear(),
                 texture: Some(leaf),
                 two_sided: true,
+                optics: Optics::leaf(self.leaf_transmission),
             },
         ];
         debug_assert_eq!(m[WOOD as usize].kind, MaterialKind::Wood);
         debug_assert_eq!(m[LEAF as usize].kind, MaterialKind::Leaf);
         m.shrink_to_fit();
         m
+    }
+
+    /// The species with leaves of transmittance / reflectance `t` per colour.
+    pub fn with_leaf_transmission(self, t: [f32; 3]) -> Species {
+        Species {
+            leaf_transmission: t,
+            ..self
+        }
     }
 
     /// Mesh + materials.
@@ -163,6 +177,7 @@ fn builtin(
         seed,
         leaf_outline: leaf.0,
         leaf_color: leaf.1,
+        leaf_transmission: FOREST_LEAF_TRANSMISSION,
         bark_pattern: bark.0,
         bark_color: bark.1,
         reference_triangles,
@@ -541,4 +556,13 @@ fn dogrose() -> Species {
         None,
         "paper 002 §3.2.2 (Xfrog dogrose, Rosa canina)",
     )
+    .with_leaf_transmission(DOGROSE_LEAF_TRANSMISSION)
 }
+
+/// The dogrose's leaf transmittance / reflectance, `(1 + g) / (1 - g)` from the asymmetry
+/// `g = (T - R) / (T + R)` = (-0.231, 0.103, -0.750) of 002 Table 1.
+pub const DOGROSE_LEAF_TRANSMISSION: [f32; 3] = [
+    (1.0 - 0.231) / (1.0 + 0.231),
+    (1.0 + 0.103) / (1.0 - 0.103),
+    (1.0 - 0.750) / (1.0 + 0.750),
+];

@@ -165,8 +165,9 @@ fn mitsuba_xml_is_consistent_with_its_files_and_the_scene() {
         assert!(out.join(f).is_file(), "{f} is referenced but missing");
         referenced += 1;
     }
-    // 2 models × 2 PLYs, 2 × (wood colour, leaf colour, leaf alpha) textures.
-    assert_eq!(referenced, 4 + 6);
+    // 2 models × 2 PLYs, 2 × (wood colour, leaf alpha, leaf 2R, leaf 2T) textures (the leaf
+    // colour PNG is written for viewers; the BSDF reads the linear EXRs).
+    assert_eq!(referenced, 4 + 8);
 
     // Ids: every ref resolves; instances refer to shapegroups.
     let mut ids: HashMap<&str, roxmltree::Node> = HashMap::new();
@@ -287,10 +288,10 @@ fn mitsuba_xml_is_consistent_with_its_files_and_the_scene() {
     assert_eq!(leaf.attribute("type"), Some("mask"));
     assert!(named(leaf, "string", "filename").ends_with("_alpha.png"));
     let thin = leaf
-        .children()
+        .descendants()
         .find(|n| n.attribute("type") == Some("principledthin"))
         .unwrap();
-    assert_eq!(named(thin, "float", "diff_trans"), "1");
+    assert_eq!(named(thin, "float", "diff_trans"), "2");
     let wood = ids["bsdf-rose_b_wood"];
     assert_eq!(wood.attribute("type"), Some("diffuse"));
     assert_eq!(named(wood, "string", "wrap_mode"), "repeat");
@@ -548,9 +549,9 @@ fn untextured_two_sided_and_bad_input() {
 
     // Bad options are refused before anything is written.
     let mut bad = opts;
-    bad.leaf_diff_trans = 2.5;
+    bad.max_depth = -7;
     let e = mitsuba::write(&scene, &tmp.path().join("bad"), &bad, &mut |_| true).unwrap_err();
-    assert!(e.to_string().contains("2.5"), "{e}");
+    assert!(e.to_string().contains("-7"), "{e}");
     assert!(!tmp.path().join("bad").exists());
 
     // A defective model is reported by name, not written.
@@ -580,4 +581,88 @@ fn cancelling_leaves_no_partial_file() {
     let e = mitsuba::write(&scene, &dir, &opts, &mut |_| false).unwrap_err();
     assert!(matches!(e, ExportError::Cancelled), "{e}");
     assert!(!dir.join(mitsuba::XML_FILE).exists());
+}
+
+#[test]
+fn leaf_reflectance_and_transmittance_round_trip_through_the_mitsuba_export() {
+    // Each leaf is an even blend of a two-sided diffuse of 2R and a pure transmitter
+    // (principledthin, diff_trans 2) of 2T: the EXRs hold exactly 2 × the linear texel
+    // colour times the material's reflect and transmit factors.
+    let tmp = tempfile::tempdir().unwrap();
+    let scene = small_scene(tmp.path());
+    let out = tmp.path().join("mi");
+    let opts = mitsuba::MitsubaOptions::for_scene(&scene);
+    mitsuba::write(&scene, &out, &opts, &mut |_| true).unwrap();
+    let text = fs::read_to_string(out.join(mitsuba::XML_FILE)).unwrap();
+    let doc = roxmltree::Document::parse(&text).unwrap();
+    let file_of = |n: roxmltree::Node, name: &str| -> String {
+        let t = n
+            .children()
+            .find(|t| t.has_tag_name("texture") && t.attribute("name") == Some(name))
+            .unwrap_or_else(|| panic!("no texture {name}"));
+        t.children()
+            .find(|s| s.attribute("name") == Some("filename"))
+            .unwrap()
+            .attribute("value")
+            .unwrap()
+            .to_string()
+    };
+    let read = |f: &str| image::open(out.join(f)).unwrap().into_rgb32f();
+    let leaves: Vec<_> = scene
+        .models
+        .iter()
+        .flat_map(|m| m.materials.iter())
+        .filter(|m| m.is_leaf())
+        .collect();
+    let mut checked = 0;
+    for blend in doc
+        .descendants()
+        .filter(|n| n.has_tag_name("bsdf") && n.attribute("type") == Some("blendbsdf"))
+    {
+        let kids: Vec<_> = blend.children().filter(|n| n.is_element()).collect();
+        let weight = kids.iter().find(|n| n.has_tag_name("float")).unwrap();
+        assert_eq!(weight.attribute("value"), Some("0.5"));
+        let bsdf = |ty: &str| {
+            *kids
+                .iter()
+                .find(|n| n.attribute("type") == Some(ty))
+                .unwrap_or_else(|| panic!("no {ty} in the blend"))
+        };
+        let diffuse = bsdf("twosided")
+            .children()
+            .find(|n| n.attribute("type") == Some("diffuse"))
+            .unwrap();
+        let thin = bsdf("principledthin");
+        let diff_trans = thin
+            .children()
+            .find(|n| n.attribute("name") == Some("diff_trans"))
+            .unwrap();
+        assert_eq!(diff_trans.attribute("value"), Some("2"));
+        let r2 = read(&file_of(diffuse, "reflectance"));
+        let t2 = read(&file_of(thin, "base_color"));
+        // The material whose texture these are: same size, 2 × its linear colour.
+        let lin = |v: u8| sylva_core::colour::srgb_to_linear(v as f32 / 255.0);
+        let material = leaves
+            .iter()
+            .find(|m| {
+                let t = m.texture.as_ref().unwrap();
+                t.width == r2.width()
+                    && t.height == r2.height()
+                    && t.pixels.iter().zip(r2.pixels()).all(|(p, q)| {
+                        (0..3).all(|c| (q[c] - 2.0 * lin(p[c]) * m.optics.reflect[c]).abs() < 1e-5)
+                    })
+            })
+            .expect("the reflectance texture is 2R of a leaf material");
+        let t = material.texture.as_ref().unwrap();
+        for (p, q) in t.pixels.iter().zip(t2.pixels()) {
+            for c in 0..3 {
+                let want = 2.0 * lin(p[c]) * material.optics.transmit[c];
+                assert!((q[c] - want).abs() < 1e-5, "T texel {} vs {want}", q[c]);
+            }
+        }
+        // Leaves transmit: the species' T/R is not zero.
+        assert!(material.optics.transmit.iter().all(|&f| f > 0.0));
+        checked += 1;
+    }
+    assert_eq!(checked, leaves.len());
 }

@@ -16,8 +16,8 @@ use sylva_lb::collision::{Omega, ReducedOmega};
 use sylva_lb::kernel::CubicOmega;
 use sylva_lb::lattice::Q;
 use sylva_lb::{
-    Boundary, ColourParams, DensityGrid, Dims, LightingGrid, MediumParams, RunMonitor, SolveError,
-    SolveOptions, SolveReport,
+    Boundary, ColourParams, DensityGrid, Dims, Floor, LightingGrid, MediumParams, RunMonitor,
+    SolveError, SolveOptions, SolveReport,
 };
 
 use crate::shader::{self, Layout, REDUCE_THREADS};
@@ -104,6 +104,8 @@ pub struct GpuLattice<'c> {
     /// CPU-equivalent steps since the last reset.
     steps: usize,
     boundary: Boundary,
+    /// This colour's floor radiance per `(x, z)` (`sylva_lb::Floor`), if any.
+    floor: Option<Vec<f32>>,
     keep_f0: [f32; 2],
 }
 
@@ -154,9 +156,8 @@ fn whole(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
 
 /// The host-side (f32) constants of one colour: green and brown Ω in the cubic factorised
 /// form, 19 coefficients each, padded to five vec4.
-fn omega_coefficients(p: &ColourParams) -> [[f32; 20]; 2] {
-    let wood = ColourParams { g: -1.0, ..*p };
-    [p, &wood].map(|c| {
+fn omega_coefficients(green: &ColourParams, brown: &ColourParams) -> [[f32; 20]; 2] {
+    [green, brown].map(|c| {
         let k = CubicOmega::new(&ReducedOmega::new(&Omega::new(c))).coefficients();
         let mut out = [0.0f32; 20];
         out[..19].copy_from_slice(&k);
@@ -447,20 +448,26 @@ impl<'c> GpuLattice<'c> {
             current: 0,
             steps: 0,
             boundary,
+            floor: None,
             keep_f0: [
                 if medium.zero_f0_on_green { 0.0 } else { 1.0 },
                 if medium.zero_f0_on_brown { 0.0 } else { 1.0 },
             ],
         };
-        lattice.set_colour(&medium.colours[colour])?;
+        lattice.set_colour(&medium.colours[colour], &medium.brown_colour(colour))?;
         lattice.reset(boundary)?;
         Ok(lattice)
     }
 
-    /// Switches to another colour's scattering parameters (the medium stays); call
-    /// [`GpuLattice::reset`] before solving again.
-    pub fn set_colour(&mut self, p: &ColourParams) -> Result<(), LbGpuError> {
-        p.validate("").map_err(SolveError::from)?;
+    /// Switches to another colour's scattering parameters of green and brown sites (the
+    /// medium stays); call [`GpuLattice::reset`] before solving again.
+    pub fn set_colour(
+        &mut self,
+        green: &ColourParams,
+        brown: &ColourParams,
+    ) -> Result<(), LbGpuError> {
+        green.validate("").map_err(SolveError::from)?;
+        brown.validate("brown ").map_err(SolveError::from)?;
         let d = self.dims;
         let mut words = vec![
             d.nx as u32,
@@ -472,7 +479,7 @@ impl<'c> GpuLattice<'c> {
             0,
             0,
         ];
-        for set in omega_coefficients(p) {
+        for set in omega_coefficients(green, brown) {
             words.extend(set.iter().map(|v| v.to_bits()));
         }
         debug_assert_eq!(words.len() * 4, 192);
@@ -482,20 +489,41 @@ impl<'c> GpuLattice<'c> {
         Ok(())
     }
 
-    /// Interior back to zero, shell to `boundary` (both states).
+    /// Sets this colour's floor radiance per `(x, z)` (`None`: the bottom face emits the
+    /// boundary); takes effect at the next [`GpuLattice::reset`].
+    pub fn set_floor(&mut self, floor: Option<Vec<f32>>) {
+        if let Some(f) = &floor {
+            assert_eq!(f.len(), self.dims.nx * self.dims.nz, "one value per (x, z)");
+        }
+        self.floor = floor;
+    }
+
+    /// The value shell site `(x, y, z)` holds in direction `m`: the boundary's, or the
+    /// floor's on the bottom face.
+    fn shell_value(&self, x: usize, y: usize, z: usize, m: usize) -> f32 {
+        match &self.floor {
+            Some(f) if y == 0 => Floor::value(f[x * self.dims.nz + z], m, &self.boundary),
+            _ => self.boundary.values[m],
+        }
+    }
+
+    /// Interior back to zero, shell to `boundary` and the floor (both states).
     pub fn reset(&mut self, boundary: Boundary) -> Result<(), LbGpuError> {
         validate_boundary(&boundary)?;
         self.boundary = boundary;
         let d = self.dims;
-        let mut shell = vec![false; d.sites()];
-        for (i, s) in shell.iter_mut().enumerate() {
-            let (x, y, z) = d.coords(i);
-            *s = d.on_shell(x, y, z);
-        }
         let elem = self.precision.bytes();
         for m in 0..Q {
-            let v = boundary.values[m];
-            let values: Vec<f32> = shell.iter().map(|&s| if s { v } else { 0.0 }).collect();
+            let values: Vec<f32> = (0..d.sites())
+                .map(|i| {
+                    let (x, y, z) = d.coords(i);
+                    if d.on_shell(x, y, z) {
+                        self.shell_value(x, y, z, m)
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
             let bytes: Vec<u8> = match self.precision {
                 Precision::F32 => bytemuck::cast_slice(&values).to_vec(),
                 Precision::F16 => {
@@ -622,13 +650,12 @@ impl<'c> GpuLattice<'c> {
     pub fn site_totals(&self) -> Result<Vec<f32>, LbGpuError> {
         let d = self.dims;
         if self.steps == 0 {
-            // X_0 itself: the boundary on the shell, zero inside.
-            let shell_total = self.boundary.values.iter().fold(0.0f32, |a, &v| a + v);
+            // X_0 itself: the boundary (and floor) on the shell, zero inside.
             return Ok((0..d.sites())
                 .map(|i| {
                     let (x, y, z) = d.coords(i);
                     if d.on_shell(x, y, z) {
-                        shell_total
+                        (0..Q).fold(0.0f32, |a, m| a + self.shell_value(x, y, z, m))
                     } else {
                         0.0
                     }
@@ -656,31 +683,47 @@ impl<'c> GpuLattice<'c> {
     }
 }
 
-/// Lights `grid` in all three colours on the GPU, as [`sylva_lb::solve_lighting`] does on
-/// the CPU (colours with identical parameters are solved once). `progress(colour, step,
-/// residual)`.
+/// Lights `grid` in all three colours on the GPU, each under its own boundary, as
+/// [`sylva_lb::solver::solve_lighting_rgb`] does on the CPU (colours with identical
+/// parameters and boundaries are solved once). `progress(colour, step, residual)`.
+#[allow(clippy::too_many_arguments)]
 pub fn solve_lighting_gpu(
     ctx: &GpuContext,
     grid: &DensityGrid,
     medium: &MediumParams,
-    boundary: Boundary,
+    boundaries: &[Boundary; 3],
+    floor: Option<&Floor>,
     opts: &SolveOptions,
     precision: Precision,
     progress: &mut dyn FnMut(usize, usize, f64),
 ) -> Result<(LightingGrid, Vec<SolveReport>), LbGpuError> {
     medium.validate().map_err(SolveError::from)?;
     validate_options(opts)?;
-    sylva_lb::solver::solve_colours(grid, medium, |c, lattice: Option<GpuLattice>| {
-        let mut lat = match lattice {
-            Some(mut l) => {
-                l.set_colour(&medium.colours[c])?;
-                l.reset(boundary)?;
-                l
+    if let Some(f) = floor {
+        f.validate(grid.dims)?;
+    }
+    sylva_lb::solver::solve_colours(
+        grid,
+        medium,
+        boundaries,
+        floor,
+        None,
+        |c, lattice: Option<GpuLattice>| {
+            let boundary = boundaries[c];
+            let mut lat = match lattice {
+                Some(mut l) => {
+                    l.set_colour(&medium.colours[c], &medium.brown_colour(c))?;
+                    l
+                }
+                None => GpuLattice::new(ctx, grid, medium, c, boundary, precision)?,
+            };
+            if floor.is_some() {
+                lat.set_floor(floor.map(|f| f.radiance[c].clone()));
             }
-            None => GpuLattice::new(ctx, grid, medium, c, boundary, precision)?,
-        };
-        let report = lat.run(opts, &mut |s, r| progress(c, s, r))?;
-        let totals = lat.site_totals()?;
-        Ok((lat, totals, report))
-    })
+            lat.reset(boundary)?;
+            let report = lat.run(opts, &mut |s, r| progress(c, s, r))?;
+            let totals = lat.site_totals()?;
+            Ok((lat, totals, report))
+        },
+    )
 }

@@ -2,7 +2,10 @@
 //! and `f32|f16` turned into the backend that runs (here, where both backends are visible).
 
 use sylva_lb::backend::{CpuSolver, LbBenchmark, LbSolver, LbSolverError};
-use sylva_lb::{Boundary, DensityGrid, LightingGrid, MediumParams, SolveOptions, SolveReport};
+use sylva_lb::{
+    Boundary, DensityGrid, Floor, LightingGrid, MediumParams, SolveOptions, SolveReport,
+    VolumeSource,
+};
 use sylva_wgpu::{open_device, Device, GpuContext};
 
 use crate::lattice::{solve_lighting_gpu, GpuLattice, Precision};
@@ -42,19 +45,28 @@ impl GpuSolver {
 }
 
 impl LbSolver for GpuSolver {
-    fn solve_lighting(
+    fn solve_lighting_rgb(
         &self,
         grid: &DensityGrid,
         medium: &MediumParams,
-        boundary: Boundary,
+        boundaries: &[Boundary; 3],
+        floor: Option<&Floor>,
+        source: Option<&VolumeSource>,
         opts: &SolveOptions,
         progress: &mut dyn FnMut(usize, usize, f64),
     ) -> Result<(LightingGrid, Vec<SolveReport>), LbSolverError> {
+        if source.is_some() {
+            // The WGSL kernel has no source term yet: volume sources run on the CPU kernel
+            // (docs/gpu.md).
+            return CpuSolver
+                .solve_lighting_rgb(grid, medium, boundaries, floor, source, opts, progress);
+        }
         Ok(solve_lighting_gpu(
             &self.ctx,
             grid,
             medium,
-            boundary,
+            boundaries,
+            floor,
             opts,
             self.precision,
             progress,

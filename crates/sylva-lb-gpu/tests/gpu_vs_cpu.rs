@@ -6,8 +6,8 @@
 
 use sylva_lb::lattice::Q;
 use sylva_lb::{
-    solve_lighting, Boundary, ColourParams, DensityGrid, Dims, Lattice, LbSolver, LbSolverError,
-    MediumParams, Preset, SolveOptions, StopReason,
+    solve_lighting, Boundary, ColourParams, DensityGrid, Dims, Floor, Lattice, LbSolver,
+    LbSolverError, MediumParams, Preset, SolveOptions, StopReason,
 };
 use sylva_lb_gpu::{
     select_solver, solve_lighting_gpu, AdapterChoice, ContextOptions, Device, GpuContext, GpuError,
@@ -76,6 +76,7 @@ fn anisotropic_medium(zero_f0_on_brown: bool) -> MediumParams {
         zero_f0_on_green: true,
         zero_f0_on_brown,
         brown_threshold: 0.5,
+        brown: None,
     }
 }
 
@@ -111,7 +112,8 @@ fn three_colours_agree_with_the_cpu_on_green_brown_and_empty_sites() {
             &ctx,
             &grid,
             &medium,
-            sun(),
+            &[sun(); 3],
+            None,
             &opts,
             Precision::F32,
             &mut |_, _, _| {},
@@ -130,6 +132,82 @@ fn three_colours_agree_with_the_cpu_on_green_brown_and_empty_sites() {
         assert!(cpu.colours[0].iter().any(|&v| v > 0.01));
         assert_ne!(cpu.colours[0], cpu.colours[1]);
     }
+}
+
+#[test]
+fn per_colour_boundaries_and_bark_parameters_agree_with_the_cpu() {
+    // The physical light (docs/light.md): brown sites with their own albedo and asymmetry,
+    // and a boundary per colour (sun plus coloured sky and ground).
+    let Some(ctx) = context() else { return };
+    let dims = Dims::new(12, 14, 10).unwrap();
+    let grid = mixed_grid(dims);
+    let opts = SolveOptions {
+        max_steps: 20,
+        tolerance: None,
+    };
+    let medium = MediumParams {
+        brown: Some([0.2, 0.15, 0.1].map(|s| ColourParams {
+            sigma_a: 1.0 - s,
+            sigma_s: s,
+            g: -4.0 / 9.0,
+        })),
+        ..anisotropic_medium(true)
+    };
+    let sky = [0.5f32, 0.7, 0.9];
+    let boundaries: [Boundary; 3] = std::array::from_fn(|c| {
+        let mut b = sun();
+        for (m, v) in b.values.iter_mut().enumerate().skip(1) {
+            *v += sky[c] * (m as f32 / 18.0);
+        }
+        b
+    });
+    // A ground whose light varies over the floor (a plant's shadow on it).
+    let floor = Floor {
+        nx: dims.nx,
+        nz: dims.nz,
+        radiance: std::array::from_fn(|c| {
+            (0..dims.nx * dims.nz)
+                .map(|i| 0.1 * (c + 1) as f32 * (1.0 + (i % 7) as f32 / 7.0))
+                .collect()
+        }),
+    };
+    let (cpu, _) = sylva_lb::solve_lighting_rgb(
+        &grid,
+        &medium,
+        &boundaries,
+        Some(&floor),
+        None,
+        &opts,
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    let (gpu, _) = solve_lighting_gpu(
+        &ctx,
+        &grid,
+        &medium,
+        &boundaries,
+        Some(&floor),
+        &opts,
+        Precision::F32,
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    for c in 0..3 {
+        let err = max_relative_error(&gpu.colours[c], &cpu.colours[c]);
+        assert!(err < 1e-5, "colour {c}: {err}");
+    }
+    // The bark parameters matter: the same solve with the default brown sites differs.
+    let (default_brown, _) = sylva_lb::solve_lighting_rgb(
+        &grid,
+        &anisotropic_medium(true),
+        &boundaries,
+        Some(&floor),
+        None,
+        &opts,
+        &mut |_, _, _| {},
+    )
+    .unwrap();
+    assert!(max_relative_error(&default_brown.colours[0], &cpu.colours[0]) > 1e-3);
 }
 
 #[test]
@@ -315,7 +393,8 @@ fn f16_storage_stays_within_its_documented_error() {
         &ctx,
         &grid,
         &medium,
-        sun(),
+        &[sun(); 3],
+        None,
         &opts,
         Precision::F32,
         &mut |_, _, _| {},
@@ -325,7 +404,8 @@ fn f16_storage_stays_within_its_documented_error() {
         &ctx,
         &grid,
         &medium,
-        sun(),
+        &[sun(); 3],
+        None,
         &opts,
         Precision::F16,
         &mut |_, _, _| {},

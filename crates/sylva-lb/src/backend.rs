@@ -6,7 +6,10 @@
 
 use crate::bandwidth::copy_bandwidth_gbs;
 use crate::lattice::Q;
-use crate::solver::{solve_lighting, Boundary, Lattice, SolveError, SolveOptions, SolveReport};
+use crate::solver::{
+    solve_lighting_rgb, Boundary, Floor, Lattice, SolveError, SolveOptions, SolveReport,
+    VolumeSource,
+};
 use crate::{DensityGrid, LightingGrid, MediumParams};
 
 /// The colours of a medium: R, G, B.
@@ -49,6 +52,24 @@ pub trait LbSolver: Send + Sync {
         boundary: Boundary,
         opts: &SolveOptions,
         progress: &mut dyn FnMut(usize, usize, f64),
+    ) -> Result<(LightingGrid, Vec<SolveReport>), LbSolverError> {
+        self.solve_lighting_rgb(grid, medium, &[boundary; 3], None, None, opts, progress)
+    }
+
+    /// The three-colour solve with a boundary per colour (sky and ground light have colours
+    /// of their own), an optional floor (the ground's light from the bottom face) and an
+    /// optional volume source (light emitted inside the medium):
+    /// [`crate::solver::solve_lighting_rgb`].
+    #[allow(clippy::too_many_arguments)]
+    fn solve_lighting_rgb(
+        &self,
+        grid: &DensityGrid,
+        medium: &MediumParams,
+        boundaries: &[Boundary; 3],
+        floor: Option<&Floor>,
+        source: Option<&VolumeSource>,
+        opts: &SolveOptions,
+        progress: &mut dyn FnMut(usize, usize, f64),
     ) -> Result<(LightingGrid, Vec<SolveReport>), LbSolverError>;
 
     /// Colour `colour` (0, 1, 2: R, G, B) of [`LbSolver::solve_lighting`] alone: its site
@@ -70,6 +91,7 @@ pub trait LbSolver: Send + Sync {
         assert!(colour < COLOURS, "colour {colour} of {COLOURS}");
         let one = MediumParams {
             colours: [medium.colours[colour]; COLOURS],
+            brown: medium.brown.map(|b| [b[colour]; COLOURS]),
             ..medium.clone()
         };
         let (lighting, reports) =
@@ -112,15 +134,19 @@ pub trait LbSolver: Send + Sync {
 pub struct CpuSolver;
 
 impl LbSolver for CpuSolver {
-    fn solve_lighting(
+    fn solve_lighting_rgb(
         &self,
         grid: &DensityGrid,
         medium: &MediumParams,
-        boundary: Boundary,
+        boundaries: &[Boundary; 3],
+        floor: Option<&Floor>,
+        source: Option<&VolumeSource>,
         opts: &SolveOptions,
         progress: &mut dyn FnMut(usize, usize, f64),
     ) -> Result<(LightingGrid, Vec<SolveReport>), LbSolverError> {
-        Ok(solve_lighting(grid, medium, boundary, opts, progress)?)
+        Ok(solve_lighting_rgb(
+            grid, medium, boundaries, floor, source, opts, progress,
+        )?)
     }
 
     fn benchmark(
@@ -186,7 +212,7 @@ mod tests {
         let boundary = Boundary::sun([0.3, -0.9, 0.3], 1.0);
         let opts = SolveOptions::papers(dims);
         let (want, want_reports) =
-            solve_lighting(&grid, &medium, boundary, &opts, &mut |_, _, _| {}).unwrap();
+            crate::solve_lighting(&grid, &medium, boundary, &opts, &mut |_, _, _| {}).unwrap();
         let solver: &dyn LbSolver = &CpuSolver;
         let mut calls = 0;
         let (got, reports) = solver

@@ -89,6 +89,13 @@ impl Dims {
         (index / (self.nz * self.ny), y, z)
     }
 
+    /// Whether site `index` lies on the outer shell.
+    #[inline]
+    pub fn on_shell_index(&self, index: usize) -> bool {
+        let (x, y, z) = self.coords(index);
+        self.on_shell(x, y, z)
+    }
+
     /// Sites of the outer shell hold the boundary values.
     #[inline]
     pub fn on_shell(&self, x: usize, y: usize, z: usize) -> bool {

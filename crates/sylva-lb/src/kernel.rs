@@ -191,6 +191,18 @@ pub struct RowParams<'a> {
     /// Multiplier of the post-collision `f_0` on green / brown sites (0 zeroes it).
     pub keep_f0_green: f32,
     pub keep_f0_brown: f32,
+    /// A volume source on this row, if any.
+    pub source: Option<RowSource<'a>>,
+}
+
+/// A volume source on one row ([`crate::solver::VolumeSource`]): every step, site `k` adds
+/// `strength[k] · profile[m]` to its post-collision value of direction `m`, with the green or
+/// brown profile by its site code.
+pub struct RowSource<'a> {
+    /// Per site of the row (`nz` values; 0 on empty and shell sites).
+    pub strength: &'a [f32],
+    pub green: &'a [f32; Q],
+    pub brown: &'a [f32; Q],
 }
 
 /// Where a row's 19 results go: for each direction, the start of the target run in the next
@@ -353,6 +365,20 @@ unsafe fn collide_chunk<A: MulAdd, const L: usize>(
 ) -> [f32; L] {
     let fin = |m: usize| load::<L>(src.add(m * run_stride(nz) + 1 + k0));
     let code: &[f32; L] = codes[k0..k0 + L].try_into().expect("chunk");
+    // The volume source, added to every direction's result.
+    let mut out = |m: usize, v: [f32; L]| match &rp.source {
+        None => out(m, v),
+        Some(source) => {
+            let strength: &[f32; L] = source.strength[k0..k0 + L].try_into().expect("chunk");
+            let (g, b) = (source.green[m], source.brown[m]);
+            let mut r = v;
+            for l in 0..L {
+                let profile = if code[l] < 0.0 { b } else { g };
+                r[l] += strength[l] * profile;
+            }
+            out(m, r)
+        }
+    };
     // Folds without early exit so they vectorise.
     let any_medium = code.iter().fold(false, |a, &c| a | (c != 0.0));
     let any_brown = code.iter().fold(false, |a, &c| a | (c < 0.0));

@@ -18,6 +18,7 @@ pub mod grid;
 pub mod grid_file;
 pub mod kernel;
 pub mod lattice;
+pub mod light;
 pub mod params;
 pub mod preview;
 pub mod relight;
@@ -29,6 +30,6 @@ pub use grid::{Bounds, DensityGrid, Dims, GridError, LightingGrid};
 pub use grid_file::{Element, GridFile, GridFileError, GridKind};
 pub use params::{ColourParams, MediumParams, ParamError, Preset};
 pub use solver::{
-    solve_lighting, Boundary, Flows, Lattice, RunMonitor, SolveError, SolveOptions, SolveReport,
-    StopReason,
+    solve_lighting, solve_lighting_rgb, Boundary, Floor, Flows, Lattice, RunMonitor, SolveError,
+    SolveOptions, SolveReport, StopReason, VolumeSource,
 };

@@ -94,12 +94,31 @@ pub struct MediumParams {
     pub zero_f0_on_brown: bool,
     /// A site is brown when its wood fraction exceeds this (000 §3: "a significant portion").
     pub brown_threshold: f64,
+    /// Per-colour coefficients of brown (wood) sites; `None`: the green ones with g = -1
+    /// (000 §3). The physical model (docs/light.md) gives bark its own albedo.
+    pub brown: Option<[ColourParams; 3]>,
 }
 
 impl MediumParams {
+    /// The coefficients brown sites use for colour `c`.
+    pub fn brown_colour(&self, c: usize) -> ColourParams {
+        match &self.brown {
+            Some(b) => b[c],
+            None => ColourParams {
+                g: -1.0,
+                ..self.colours[c]
+            },
+        }
+    }
+
     pub fn validate(&self) -> Result<(), ParamError> {
         for (c, name) in self.colours.iter().zip(COLOUR_NAMES) {
             c.validate(&format!("{name} "))?;
+        }
+        if let Some(b) = &self.brown {
+            for (c, name) in b.iter().zip(COLOUR_NAMES) {
+                c.validate(&format!("brown {name} "))?;
+            }
         }
         let t = self.brown_threshold;
         if !t.is_finite() {
@@ -195,6 +214,7 @@ impl Preset {
             zero_f0_on_green: plant_like,
             zero_f0_on_brown: true,
             brown_threshold: 0.5,
+            brown: None,
         }
     }
 }

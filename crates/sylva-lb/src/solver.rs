@@ -10,9 +10,10 @@ use crate::collision::{Omega, ReducedOmega};
 use crate::grid::{DensityGrid, Dims, LightingGrid};
 use crate::kernel::{
     process_row, row_targets, run_stride, stream_shell_row, CubicOmega, KernelIsa, RowParams,
+    RowSource,
 };
 use crate::lattice::{unit, Q};
-use crate::params::{ColourParams, MediumParams, ParamError};
+use crate::params::{MediumParams, ParamError};
 
 #[derive(Debug, Error)]
 pub enum SolveError {
@@ -26,6 +27,10 @@ pub enum SolveError {
     Tolerance(f64),
     #[error("step count must be at least 1")]
     Steps,
+    #[error("floor: {0}")]
+    Floor(String),
+    #[error("volume source: {0}")]
+    Source(String),
 }
 
 /// Fixed directional densities of the shell sites (002 §3).
@@ -65,6 +70,135 @@ impl Boundary {
             }
         }
         Ok(())
+    }
+}
+
+/// The ground under a grid as its bottom face emits it: per site `(x, z)` of the `y = 0`
+/// shell row and per colour, the radiance `L` of the ground there. Those sites send
+/// `4 L w_m` along the upward directions `m` (`c_y = 1`) instead of the uniform boundary's
+/// values, so the ground's light can be shadowed where a plant stands over it; their other
+/// directions keep the boundary's values (none of them enters the interior).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Floor {
+    pub nx: usize,
+    pub nz: usize,
+    /// Radiance per colour, site order `x · nz + z`.
+    pub radiance: [Vec<f32>; 3],
+}
+
+impl Floor {
+    /// Checks the size against `dims` and that every value is finite and ≥ 0.
+    pub fn validate(&self, dims: Dims) -> Result<(), SolveError> {
+        if self.nx != dims.nx || self.nz != dims.nz {
+            return Err(SolveError::Floor(format!(
+                "a {}×{} floor does not fit a {dims} grid",
+                self.nx, self.nz
+            )));
+        }
+        for (c, r) in self.radiance.iter().enumerate() {
+            if r.len() != self.nx * self.nz {
+                return Err(SolveError::Floor(format!(
+                    "colour {c} has {} values, the floor {}",
+                    r.len(),
+                    self.nx * self.nz
+                )));
+            }
+            if let Some(i) = r.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+                return Err(SolveError::Floor(format!(
+                    "radiance at ({}, {}) is {}: it must be finite and ≥ 0",
+                    i / self.nz,
+                    i % self.nz,
+                    r[i]
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// The value a floor site of radiance `radiance` holds in direction `m`, given the
+    /// uniform `boundary`.
+    #[inline]
+    pub fn value(radiance: f32, m: usize, boundary: &Boundary) -> f32 {
+        if crate::lattice::C[m][1] == 1 {
+            (4.0 * radiance as f64 * crate::lattice::weight(m)) as f32
+        } else {
+            boundary.values[m]
+        }
+    }
+}
+
+/// A light source inside the medium, per colour: every step, each interior site `i` adds
+/// `strength[i] · profile[m]` to its post-collision value of direction `m` (the brown
+/// profile on brown sites, the green one elsewhere). Sunlight scattered at its first
+/// collision, computed along the sun's exact direction, enters the LB this way
+/// ([`crate::light::first_collision_source`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct VolumeSource {
+    /// Per colour, per site (site order); 0 on the shell.
+    pub strength: [Vec<f32>; 3],
+    /// Per colour, the share of a unit strength each direction gets on green sites.
+    pub green: [[f32; Q]; 3],
+    /// The same on brown sites.
+    pub brown: [[f32; Q]; 3],
+}
+
+impl VolumeSource {
+    /// Checks the size against `dims`, that every value is finite and ≥ 0 and that shell
+    /// sites hold none.
+    pub fn validate(&self, dims: Dims) -> Result<(), SolveError> {
+        for c in 0..3 {
+            let s = &self.strength[c];
+            if s.len() != dims.sites() {
+                return Err(SolveError::Source(format!(
+                    "colour {c} has {} strengths, the {dims} grid {} sites",
+                    s.len(),
+                    dims.sites()
+                )));
+            }
+            if let Some(i) = s.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
+                let (x, y, z) = dims.coords(i);
+                return Err(SolveError::Source(format!(
+                    "strength at ({x}, {y}, {z}) is {}: it must be finite and ≥ 0",
+                    s[i]
+                )));
+            }
+            if let Some(i) = (0..dims.sites()).find(|&i| {
+                let (x, y, z) = dims.coords(i);
+                dims.on_shell(x, y, z) && s[i] != 0.0
+            }) {
+                let (x, y, z) = dims.coords(i);
+                return Err(SolveError::Source(format!(
+                    "shell site ({x}, {y}, {z}) has a strength: the shell only holds the boundary"
+                )));
+            }
+            for p in [&self.green[c], &self.brown[c]] {
+                if !p.iter().all(|v| v.is_finite() && *v >= 0.0) {
+                    return Err(SolveError::Source(format!(
+                        "colour {c}: direction profile {p:?} must be finite and ≥ 0"
+                    )));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One colour's [`VolumeSource`], as a lattice holds it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ColourSource {
+    pub strength: Vec<f32>,
+    pub green: [f32; Q],
+    pub brown: [f32; Q],
+}
+
+impl VolumeSource {
+    /// Colour `c`'s part.
+    pub fn colour(&self, c: usize) -> ColourSource {
+        ColourSource {
+            strength: self.strength[c].clone(),
+            green: self.green[c],
+            brown: self.brown[c],
+        }
     }
 }
 
@@ -207,10 +341,50 @@ pub struct Flows {
     pub outflow: f64,
     /// Density removed by zeroing `f_0`.
     pub absorbed: f64,
+    /// Density a volume source added.
+    pub sourced: f64,
 }
 
 /// Planes of the intermediate state that [`Lattice::step_pair`] keeps.
 const RING: usize = 4;
+
+/// Fills the 19 runs of a row block: the boundary everywhere (`whole`, a shell row) or only
+/// at the two z-ends (an interior row), zero elsewhere.
+fn fill_row(block: &mut [f32], nz: usize, boundary: &Boundary, whole: bool) {
+    let stride = run_stride(nz);
+    for m in 0..Q {
+        let run = &mut block[m * stride + 1..m * stride + 1 + nz];
+        let v = boundary.values[m];
+        if whole {
+            run.fill(v);
+        } else {
+            run.fill(0.0);
+            run[0] = v;
+            run[nz - 1] = v;
+        }
+    }
+}
+
+/// Writes the floor's upward values into the `y = 0` row block of plane `x`.
+fn fill_floor_row(
+    block: &mut [f32],
+    nz: usize,
+    boundary: &Boundary,
+    floor: Option<&[f32]>,
+    x: usize,
+) {
+    let Some(floor) = floor else { return };
+    let stride = run_stride(nz);
+    for m in 0..Q {
+        if crate::lattice::C[m][1] != 1 {
+            continue;
+        }
+        let run = &mut block[m * stride + 1..m * stride + 1 + nz];
+        for (z, v) in run.iter_mut().enumerate() {
+            *v = Floor::value(floor[x * nz + z], m, boundary);
+        }
+    }
+}
 
 /// Bytes of memory a solve over `dims` holds: two states, the site codes and the
 /// three-colour result.
@@ -254,6 +428,10 @@ pub struct Lattice {
     keep_f0_brown: f32,
     isa: KernelIsa,
     boundary: Boundary,
+    /// This colour's floor radiance per `(x, z)`, if the bottom face emits one.
+    floor: Option<Vec<f32>>,
+    /// This colour's volume source, if any.
+    source: Option<ColourSource>,
 }
 
 impl Lattice {
@@ -285,10 +463,8 @@ impl Lattice {
                 rho
             };
         });
-        let p = medium.colours[colour];
-        let wood = ColourParams { g: -1.0, ..p };
-        let dense_green = Omega::new(&p);
-        let dense_brown = Omega::new(&wood);
+        let dense_green = Omega::new(&medium.colours[colour]);
+        let dense_brown = Omega::new(&medium.brown_colour(colour));
         let len = dims.nx * dims.ny * Q * run_stride(dims.nz);
         let mut lattice = Lattice {
             dims,
@@ -304,48 +480,58 @@ impl Lattice {
             keep_f0_brown: if medium.zero_f0_on_brown { 0.0 } else { 1.0 },
             isa: KernelIsa::detect(),
             boundary,
+            floor: None,
+            source: None,
         };
         lattice.reset(boundary);
         Ok(lattice)
     }
 
-    /// Interior back to zero, shell to `boundary` (both states), keeping the medium.
+    /// Interior back to zero, shell to `boundary` (both states), keeping the medium and
+    /// the floor.
     pub fn reset(&mut self, boundary: Boundary) {
         self.boundary = boundary;
         let dims = self.dims;
         let nz = dims.nz;
         let stride = run_stride(nz);
-        let fill = |block: &mut [f32], whole_row: bool| {
-            for m in 0..Q {
-                let run = &mut block[m * stride + 1..m * stride + 1 + nz];
-                let v = boundary.values[m];
-                if whole_row {
-                    run.fill(v);
-                } else {
-                    run.fill(0.0);
-                    run[0] = v;
-                    run[nz - 1] = v;
-                }
-            }
-        };
+        let floor = self.floor.as_deref();
         for state in &mut self.states {
             state
                 .par_chunks_mut(Q * stride)
                 .enumerate()
                 .for_each(|(row, block)| {
                     let (x, y) = (row / dims.ny, row % dims.ny);
-                    fill(
-                        block,
-                        x == 0 || y == 0 || x == dims.nx - 1 || y == dims.ny - 1,
-                    );
+                    let whole = x == 0 || y == 0 || x == dims.nx - 1 || y == dims.ny - 1;
+                    fill_row(block, nz, &boundary, whole);
+                    if y == 0 {
+                        fill_floor_row(block, nz, &boundary, floor, x);
+                    }
                 });
         }
-        // Ring planes stand for interior planes: only their shell rows are whole boundary.
+        // Ring planes stand for interior planes: only their shell rows are whole boundary
+        // (the floor row is refreshed for each plane as the sweep reaches it).
         for (row, block) in self.ring.chunks_mut(Q * stride).enumerate() {
             let y = row % dims.ny;
-            fill(block, y == 0 || y == dims.ny - 1);
+            fill_row(block, nz, &boundary, y == 0 || y == dims.ny - 1);
         }
         self.current = 0;
+    }
+
+    /// Sets this colour's volume source (`None`: none); it acts from the next step on.
+    pub fn set_source(&mut self, source: Option<ColourSource>) {
+        if let Some(s) = &source {
+            assert_eq!(s.strength.len(), self.dims.sites(), "one strength per site");
+        }
+        self.source = source;
+    }
+
+    /// Sets this colour's floor radiance per `(x, z)` (`None`: the bottom face emits the
+    /// boundary); takes effect at the next [`Lattice::reset`].
+    pub fn set_floor(&mut self, floor: Option<Vec<f32>>) {
+        if let Some(f) = &floor {
+            assert_eq!(f.len(), self.dims.nx * self.dims.nz, "one value per (x, z)");
+        }
+        self.floor = floor;
     }
 
     /// Chooses the portable kernel even where AVX2 exists (for comparisons).
@@ -426,15 +612,20 @@ impl Lattice {
             stream_shell_row(block, planes, ny, nz, y);
             return 0.0;
         }
+        let row = x * ny + y;
         let params = RowParams {
             green: &self.green,
             brown: &self.brown,
             keep_f0_green: self.keep_f0_green,
             keep_f0_brown: self.keep_f0_brown,
             boundary: &self.boundary.values,
+            source: self.source.as_ref().map(|s| RowSource {
+                strength: &s.strength[row * nz..(row + 1) * nz],
+                green: &s.green,
+                brown: &s.brown,
+            }),
         };
         let targets = row_targets(planes, sink.as_mut_ptr(), ny, nz, y);
-        let row = x * ny + y;
         process_row(
             self.isa,
             block.as_ptr(),
@@ -543,6 +734,18 @@ impl Lattice {
         let (mut first, mut second) = (vec![0.0f64; nx], vec![0.0f64; nx]);
         let this = &*self;
         for x in 0..nx + 2 {
+            // The ring slot that step t + 1 reads this stage stands for plane x - 2: give its
+            // floor row that plane's values (step t writes the other three slots).
+            if self.floor.is_some() && x >= 2 && interior(x - 2) {
+                let p = x - 2;
+                let block = Q * run_stride(nz);
+                // SAFETY: slot p % RING, row 0, lies inside the ring, and nothing else
+                // touches it during this stage.
+                let row = unsafe {
+                    std::slice::from_raw_parts_mut(r.ptr().add((p % RING) * plane_len), block)
+                };
+                fill_floor_row(row, nz, &self.boundary, self.floor.as_deref(), p);
+            }
             // Rows 0..ny: step t of plane x; rows ny..2ny: step t + 1 of plane x - 2.
             let jobs: Vec<(usize, bool)> = [(x, x < nx), (x.wrapping_sub(2), x >= 2)]
                 .into_iter()
@@ -654,6 +857,13 @@ impl Lattice {
             let acc: f64 = omega.0[m].iter().zip(&f).map(|(o, v)| o * v).sum();
             *p = f[m] + rho * acc;
         }
+        if let Some(s) = &self.source {
+            let i = self.dims.index(x, y, z);
+            let profile = if code < 0.0 { &s.brown } else { &s.green };
+            for (m, p) in post.iter_mut().enumerate() {
+                *p += s.strength[i] as f64 * profile[m] as f64;
+            }
+        }
         let raw_f0 = post[0];
         post[0] *= keep as f64;
         (post, raw_f0)
@@ -667,6 +877,7 @@ impl Lattice {
             inflow: 0.0,
             outflow: 0.0,
             absorbed: 0.0,
+            sourced: 0.0,
         };
         let inside = |v: isize, n: usize| v >= 1 && v <= n as isize - 2;
         for x in 0..dims.nx {
@@ -677,6 +888,12 @@ impl Lattice {
                     let (post, raw_f0) = self.post_collision(state, x, y, z);
                     if !shell && code != 0.0 {
                         flows.absorbed += raw_f0 - post[0];
+                    }
+                    if let (Some(s), false) = (&self.source, shell) {
+                        let profile = if code < 0.0 { &s.brown } else { &s.green };
+                        let i = dims.index(x, y, z);
+                        flows.sourced +=
+                            s.strength[i] as f64 * profile.iter().map(|&v| v as f64).sum::<f64>();
                     }
                     for (m, c) in crate::lattice::C.iter().enumerate().skip(1) {
                         let t = (
@@ -722,19 +939,34 @@ impl Lattice {
 }
 
 /// The three colours of `medium`, each solved by `solve(colour, lattice)` once, except that a
-/// colour with the same parameters as an earlier one copies its result. `solve` gets the
-/// lattice the previous solve returned (one lattice's memory, reused colour after colour)
-/// and returns it with the colour's site totals and report. CPU and GPU solvers share this.
+/// colour with the same parameters (green and brown) and boundary as an earlier one copies
+/// its result. `solve` gets the lattice the previous solve returned (one lattice's memory,
+/// reused colour after colour) and returns it with the colour's site totals and report. CPU
+/// and GPU solvers share this.
 pub fn solve_colours<L, E>(
     grid: &DensityGrid,
     medium: &MediumParams,
+    boundaries: &[Boundary; 3],
+    floor: Option<&Floor>,
+    source: Option<&VolumeSource>,
     mut solve: impl FnMut(usize, Option<L>) -> Result<(L, Vec<f32>, SolveReport), E>,
 ) -> Result<(LightingGrid, Vec<SolveReport>), E> {
     let mut colours: [Vec<f32>; 3] = Default::default();
     let mut reports: Vec<SolveReport> = Vec::with_capacity(3);
     let mut lattice: Option<L> = None;
+    let same = |p: usize, c: usize| {
+        medium.colours[p] == medium.colours[c]
+            && medium.brown_colour(p) == medium.brown_colour(c)
+            && boundaries[p] == boundaries[c]
+            && floor.is_none_or(|f| f.radiance[p] == f.radiance[c])
+            && source.is_none_or(|s| {
+                s.strength[p] == s.strength[c]
+                    && s.green[p] == s.green[c]
+                    && s.brown[p] == s.brown[c]
+            })
+    };
     for c in 0..3 {
-        if let Some(prev) = (0..c).find(|&p| medium.colours[p] == medium.colours[c]) {
+        if let Some(prev) = (0..c).find(|&p| same(p, c)) {
             colours[c] = colours[prev].clone();
             reports.push(reports[prev]);
             continue;
@@ -763,23 +995,55 @@ pub fn solve_lighting(
     opts: &SolveOptions,
     progress: &mut dyn FnMut(usize, usize, f64),
 ) -> Result<(LightingGrid, Vec<SolveReport>), SolveError> {
+    solve_lighting_rgb(grid, medium, &[boundary; 3], None, None, opts, progress)
+}
+
+/// Lights `grid` in all three colours, colour `c` under `boundaries[c]` (the LB is solved
+/// per colour anyway; sky and ground light have colours of their own), with a `floor`, the
+/// ground's light from the bottom face, and with a `source`, light emitted inside the
+/// medium. Colours with identical parameters, boundaries and sources are solved once.
+/// `progress(colour, step, residual)`.
+pub fn solve_lighting_rgb(
+    grid: &DensityGrid,
+    medium: &MediumParams,
+    boundaries: &[Boundary; 3],
+    floor: Option<&Floor>,
+    source: Option<&VolumeSource>,
+    opts: &SolveOptions,
+    progress: &mut dyn FnMut(usize, usize, f64),
+) -> Result<(LightingGrid, Vec<SolveReport>), SolveError> {
     medium.validate()?;
     opts.validate()?;
-    solve_colours(grid, medium, |c, lattice: Option<Lattice>| {
-        let mut lat = match lattice {
-            Some(mut l) => {
-                let p = medium.colours[c];
-                l.dense_green = Omega::new(&p);
-                l.dense_brown = Omega::new(&ColourParams { g: -1.0, ..p });
-                l.green = CubicOmega::new(&ReducedOmega::new(&l.dense_green));
-                l.brown = CubicOmega::new(&ReducedOmega::new(&l.dense_brown));
-                l.reset(boundary);
-                l
-            }
-            None => Lattice::new(grid, medium, c, boundary)?,
-        };
-        let report = lat.run(opts, &mut |s, r| progress(c, s, r))?;
-        let totals = lat.site_totals();
-        Ok((lat, totals, report))
-    })
+    if let Some(f) = floor {
+        f.validate(grid.dims)?;
+    }
+    if let Some(s) = source {
+        s.validate(grid.dims)?;
+    }
+    solve_colours(
+        grid,
+        medium,
+        boundaries,
+        floor,
+        source,
+        |c, lattice: Option<Lattice>| {
+            let boundary = boundaries[c];
+            let mut lat = match lattice {
+                Some(mut l) => {
+                    l.dense_green = Omega::new(&medium.colours[c]);
+                    l.dense_brown = Omega::new(&medium.brown_colour(c));
+                    l.green = CubicOmega::new(&ReducedOmega::new(&l.dense_green));
+                    l.brown = CubicOmega::new(&ReducedOmega::new(&l.dense_brown));
+                    l
+                }
+                None => Lattice::new(grid, medium, c, boundary)?,
+            };
+            lat.set_floor(floor.map(|f| f.radiance[c].clone()));
+            lat.set_source(source.map(|s| s.colour(c)));
+            lat.reset(boundary);
+            let report = lat.run(opts, &mut |s, r| progress(c, s, r))?;
+            let totals = lat.site_totals();
+            Ok((lat, totals, report))
+        },
+    )
 }

@@ -14,6 +14,7 @@ fn medium(c: ColourParams, zero_f0: bool) -> MediumParams {
         zero_f0_on_green: zero_f0,
         zero_f0_on_brown: zero_f0,
         brown_threshold: 0.5,
+        brown: None,
     }
 }
 

@@ -17,7 +17,7 @@ use sylva_lb::{DensityGrid, LightingGrid};
 use sylva_render::lighting::{
     CacheLookup, LightingPlan, LightingReport, LightingSource, ModelLighting,
 };
-use sylva_render::{lighting_options, scene_to_sun, stage, LbPlan, Progress};
+use sylva_render::{lighting_options, scene_illumination, scene_to_sun, stage, LbPlan, Progress};
 
 use crate::comm::{agree, Comm, CommError, Reader, Writer};
 use crate::queue::run_queue;
@@ -167,10 +167,11 @@ pub fn light_models(
         comm,
         "the LB settings",
         &format!(
-            "{} ({} models) grid {} preset {} sun {:?}",
+            "{} ({} models) grid {} light {} preset {} sun {:?}",
             scene.name,
             scene.models.len(),
             opts.grid,
+            opts.light.name(),
             opts.preset,
             scene_to_sun(scene)
         ),
@@ -178,12 +179,12 @@ pub fn light_models(
     if !root {
         opts.cache_dir = None;
     }
-    let to_sun = scene_to_sun(scene);
+    let illum = scene_illumination(scene);
     let plans = scene
         .models
         .iter()
         .map(|m| {
-            LightingPlan::new(m, to_sun, &opts, lb.solver).map_err(|source| {
+            LightingPlan::new(m, &illum, &opts, lb.solver).map_err(|source| {
                 DistError::Pipeline(sylva_render::PipelineError::Lighting {
                     model: m.name.clone(),
                     source,

@@ -11,8 +11,8 @@ use sylva_mpi::lighting::{solve_model_jobs, ModelJob};
 use sylva_mpi::{light_models, render_frame, Comm, CommError, DistError, LocalComm};
 use sylva_render::lighting::LightingPlan;
 use sylva_render::{
-    lighting_options, load_scene, scene_to_sun, Frame, LbPlan, PrepareOptions, PreparedScene,
-    Region, RenderSettings, Silent,
+    lighting_options, load_scene, Frame, LbPlan, PrepareOptions, PreparedScene, Region,
+    RenderSettings, Silent,
 };
 
 const SCENE: &str = r#"
@@ -53,6 +53,7 @@ fn options(cache: &Path) -> PrepareOptions<'_> {
     PrepareOptions {
         lb: Some(LbPlan {
             solver: &CpuSolver,
+            light: sylva_render::Light::Physical,
             grid: None,
             cache_dir: Some(cache),
         }),
@@ -238,6 +239,7 @@ fn any_list_of_model_jobs_runs_through_the_queue_in_job_order() {
     let scene = load_scene(scene_file.to_str().unwrap(), None).unwrap();
     let lb = LbPlan {
         solver: &CpuSolver,
+        light: sylva_render::Light::Physical,
         grid: None,
         cache_dir: None,
     };
@@ -245,7 +247,15 @@ fn any_list_of_model_jobs_runs_through_the_queue_in_job_order() {
     let plans: Vec<LightingPlan> = scene
         .models
         .iter()
-        .map(|m| LightingPlan::new(m, scene_to_sun(&scene), &opts, &CpuSolver).unwrap())
+        .map(|m| {
+            LightingPlan::new(
+                m,
+                &sylva_render::scene_illumination(&scene),
+                &opts,
+                &CpuSolver,
+            )
+            .unwrap()
+        })
         .collect();
     // Models interleaved, so ranks switch density grids.
     let jobs: Vec<ScaledDensity> = (0..7)

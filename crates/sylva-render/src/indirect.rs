@@ -1,11 +1,11 @@
-//! Indirect light where the renderer needs it: on a plant (the light scattered in the canopy,
-//! RGB, normalised so unobstructed sunlight is 1) and on the ground (how much of the sky's
-//! light gets through the trees). [`IndirectLight`] is the interface; [`ModelGridLight`], one
+//! Indirect light where the renderer needs it: on a plant (the model's LB light at the point:
+//! the physical light's scattered, sky and ground light in LB units, or the paper's light
+//! normalised so unobstructed sunlight is 1; see [`crate::lighting`]) and on the ground (how
+//! much of the sky's light gets through the trees, per colour). [`IndirectLight`] is the interface; [`ModelGridLight`], one
 //! LB grid per unique model placed by each instance's transform (000 §4.3), is today's
 //! implementation, and [`NoIndirectLight`] the absence of any.
 
 use glam::{Affine3A, Vec2, Vec3};
-use sylva_core::colour::luminance;
 use sylva_geom::{Aabb, Model};
 use sylva_trace::TraceInstance;
 
@@ -13,13 +13,13 @@ use crate::lighting::ModelLighting;
 
 /// Indirect light sources for shading. Implementations are read from many threads at once.
 pub trait IndirectLight: Sync {
-    /// The normalised RGB indirect light at world point `world` on instance `instance`
-    /// (`placed`: its model and transforms, as traced); `None` when this plant gets none.
+    /// The RGB LB light at world point `world` on instance `instance` (`placed`: its model
+    /// and transforms, as traced); `None` when this plant gets none.
     fn plant(&self, instance: u32, placed: &TraceInstance, world: Vec3) -> Option<Vec3>;
 
-    /// The fraction of the sky's light reaching the ground at world point `p`, in [0, 1]:
-    /// 1 in the open.
-    fn ground_sky(&self, p: Vec3) -> f32;
+    /// The fraction of the sky's light reaching the ground at world point `p`, per colour
+    /// in [0, 1]: 1 in the open.
+    fn ground_sky(&self, p: Vec3) -> Vec3;
 
     /// Bytes held.
     fn memory_bytes(&self) -> u64;
@@ -34,8 +34,8 @@ impl IndirectLight for NoIndirectLight {
         None
     }
 
-    fn ground_sky(&self, _: Vec3) -> f32 {
-        1.0
+    fn ground_sky(&self, _: Vec3) -> Vec3 {
+        Vec3::ONE
     }
 
     fn memory_bytes(&self) -> u64 {
@@ -100,10 +100,11 @@ impl IndirectLight for ModelGridLight {
         Some(l.sample(placed.to_model.transform_point3(world)))
     }
 
-    /// The product, over the trees whose LB grid covers `point`, of their LB luminance there
-    /// (1 in free space, less in a crown's shade), clamped to [0, 1].
-    fn ground_sky(&self, point: Vec3) -> f32 {
-        let mut f = 1.0f32;
+    /// The product, over the trees whose LB grid covers `point`, of the share of the open
+    /// sky's light their grid lets through there ([`ModelLighting::ground_sky`]: 1 in free
+    /// space, less in a crown's shade).
+    fn ground_sky(&self, point: Vec3) -> Vec3 {
+        let mut f = Vec3::ONE;
         for &i in self.ground_index.at(point) {
             let (model, to_model) = &self.instances[i as usize];
             let Some(l) = &self.lighting[*model as usize] else {
@@ -131,8 +132,7 @@ impl IndirectLight for ModelGridLight {
                 } else {
                     1.0
                 };
-                let lb = luminance(l.sample(pm).to_array()).clamp(0.0, 1.0);
-                f *= 1.0 - w * (1.0 - lb);
+                f *= Vec3::ONE - w * (Vec3::ONE - l.ground_sky(pm));
             }
         }
         f

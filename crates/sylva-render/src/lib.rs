@@ -7,11 +7,12 @@
 //!   [`PreparedScene::render`] (any camera, any image region), [`tone_map_modes`] and
 //!   [`write_images`]; progress through [`Progress`].
 //! * [`lighting`]: per model, the LB lighting grid (voxelize, solve, cache on disk) and its
-//!   trilinear lookup in model space.
+//!   trilinear lookup in model space; the light models ([`Light`]: physical, the default, and
+//!   paper 000's) and the plant medium from the materials' optics (docs/light.md).
 //! * [`indirect`]: [`IndirectLight`], the light scattered in the canopy as shading needs it,
 //!   and [`ModelGridLight`], one LB grid per model.
-//! * [`shade`]: local sunlight (two-sided leaves, transmission, specular) and the indirect,
-//!   albedo and sky parts the comparison modes combine.
+//! * [`shade`]: local sunlight (two-sided leaves reflecting and transmitting) and the
+//!   indirect, albedo and sky parts the comparison modes combine.
 //! * [`render`]: primary rays, shadow rays (through a [`sylva_trace::RayQuery`]) and
 //!   shading over 8×8 tiles; the modes of 000 Fig. 2.
 //! * [`gpu_frame`]: the same frame on a GPU, one kernel per band (`shade.wgsl` mirrors the
@@ -31,10 +32,11 @@ pub mod stages;
 pub mod tonemap;
 
 pub use indirect::{IndirectLight, ModelGridLight, NoIndirectLight};
+pub use lighting::{Illumination, Light};
 pub use pipeline::{
-    light_models, lighting_options, load_scene, mode_path, resolution, scene_to_sun,
-    tone_map_modes, write_images, LbPlan, ModeImage, PipelineError, PrepareOptions, PreparedScene,
-    Progress, Silent, Tracer, WrittenImage,
+    illumination, light_models, lighting_options, load_scene, mode_path, resolution,
+    scene_illumination, scene_to_sun, tone_map_modes, write_images, LbPlan, ModeImage,
+    PipelineError, PrepareOptions, PreparedScene, Progress, Silent, Tracer, WrittenImage,
 };
 pub use render::{
     mean_luminance, Frame, FrameTimings, Mode, Region, RenderError, RenderSettings, Renderer,

@@ -1,18 +1,29 @@
-//! Per-model LB lighting (000 §4.2-4.3, SPEC §2): voxelize a model, light it with the
-//! lattice-Boltzmann solver under the sun, and look the result up trilinearly in model space.
+//! Per-model LB lighting (000 §4.2-4.3, SPEC §2, docs/light.md): voxelize a model, light it
+//! with the lattice-Boltzmann solver, and look the result up trilinearly in model space.
 //!
-//! * **Normalisation.** Values are divided by the free-space total `Σ_i I·max(0, n_i·d)` with
-//!   `I = 1` (what a site with no medium anywhere upwind holds at steady state), so unobstructed
-//!   sunlight is exactly 1 in every colour, whatever the sun's direction.
+//! Two light models ([`Light`]):
+//!
+//! * **Physical** (the default, docs/light.md). The medium comes from the model itself: per
+//!   site the probability that light crossing it meets a leaf or bark (from their area,
+//!   [`sylva_voxel::plant_area`]), and per colour the leaves' and bark's albedo and asymmetry
+//!   from their [`sylva_geom::Optics`] ([`plant_medium`]). The boundary holds the sun, the sky
+//!   and the open ground's light ([`sylva_lb::light::Environment`]), and the sun's uncollided
+//!   part ([`sylva_lb::light::uncollided`]) is subtracted: the renderer traces direct sunlight
+//!   exactly, so the grid holds what it cannot trace, the scattered sunlight plus the sky's and
+//!   ground's light, as an LB value (fluence in units of the unit sun's irradiance `E0 = π`).
+//!   Everything is linear in the sun, sky and ground.
+//! * **Paper** (000). The scene's LB preset, sub-cell occupancy, a sun-only boundary, and the
+//!   total divided by the free-space total `Σ_i max(0, n_i·d)`, so unobstructed sunlight is 1.
+//!
 //! * **Placement.** Site `(i, j, k)` sits at `bounds.min + (i, j, k) · cell` with
 //!   `cell = (bounds.max - bounds.min) / (dims - 1)` per axis ([`sylva_lb::Bounds`] is the span
 //!   of site centres). Points outside the grid clamp to the nearest site.
-//! * **Cache.** With a cache directory, the raw solver result is stored as
-//!   `<model>-<key>.sgrid` (a lighting [`GridFile`], f32, CRC-checked, `sylva lb info` reads
-//!   it). The key is a stable hash ([`Fnv64`]) over everything the result depends on (see
-//!   [`cache_key`]) and is stored in the file's metadata too. An entry that cannot be read, or
-//!   whose key, dimensions or bounds are not the expected ones, is recomputed and replaced
-//!   atomically; [`LightingSource::Recomputed`] says why.
+//! * **Cache.** With a cache directory, the grid is stored as `<model>-<key>.sgrid` (a
+//!   lighting [`GridFile`], f32, CRC-checked, `sylva lb info` reads it): the physical light as
+//!   it is used, the paper's raw solver result. The key is a stable hash ([`Fnv64`]) over
+//!   everything the result depends on (see [`cache_key`]) and is stored in the file's metadata
+//!   too. An entry that cannot be read, or whose key, dimensions or bounds are not the expected
+//!   ones, is recomputed and replaced atomically; [`LightingSource::Recomputed`] says why.
 //! * **Sun.** The direction is rounded to 1e-5 per component (then renormalised) before it is
 //!   hashed *and* before it is solved with, so a cache entry is a function of its key alone.
 
@@ -20,22 +31,26 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::{DVec3, Vec3};
+use sylva_core::colour::luminance;
 use sylva_core::Fnv64;
 use sylva_geom::{is_opaque, LbSettings, MaterialKind, Model, Wrap, OPAQUE_ALPHA};
-use sylva_lb::solver::{memory_needed, Boundary, SolveOptions};
+use sylva_lb::light::{self, Environment, PlantOptics};
+use sylva_lb::solver::{memory_needed, Boundary, Floor, SolveOptions, VolumeSource};
 use sylva_lb::{
     DensityGrid, Dims, Element, GridFile, GridFileError, GridKind, LightingGrid, MediumParams,
     ParamError, Preset,
 };
 use sylva_lb::{LbSolver, LbSolverError};
 use sylva_voxel::{
-    placement_for, voxelize, GridPlacement, VoxelizeError, VoxelizeOptions, DEFAULT_GRID, SUB,
+    placement_for, voxelize, GridPlacement, Occupancy, VoxelizeError, VoxelizeOptions,
+    DEFAULT_GRID, SUB,
 };
 use thiserror::Error;
 
 /// Bump whenever the solver, the voxelizer or this module changes what a cache entry holds.
 /// 2: the solver backend's [`LbSolver::cache_tag`] is part of the key.
-pub const CACHE_VERSION: u32 = 2;
+/// 3: the physical light (docs/light.md): plant medium, sky and ground, uncollided sun removed.
+pub const CACHE_VERSION: u32 = 3;
 /// Extension of cache entries.
 pub const CACHE_EXTENSION: &str = "sgrid";
 /// Metadata key holding the cache key (16 hex digits) in a cache entry.
@@ -47,8 +62,12 @@ pub const SUN_QUANTUM: f64 = 1e-5;
 pub enum LightingError {
     #[error("LB preset: {0}")]
     Params(#[from] ParamError),
+    #[error("model '{model}': its materials give no valid LB medium: {source}")]
+    Medium { model: String, source: ParamError },
     #[error("sun direction ({}, {}, {}) must be a finite, non-zero vector", .0[0], .0[1], .0[2])]
     Sun([f32; 3]),
+    #[error("light around the plants: {0}")]
+    Illumination(String),
     #[error(transparent)]
     Voxelize(#[from] VoxelizeError),
     #[error(transparent)]
@@ -70,12 +89,43 @@ pub enum LightingError {
     },
 }
 
+/// Which light model plants are lit with (docs/light.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Light {
+    /// One physical material model for the renderer, the LB and the export: exact direct
+    /// sun plus the LB's scattered, sky and ground light, no scale factor.
+    #[default]
+    Physical,
+    /// Paper 000's: the preset's medium lit by the sun alone, its total light (sunlight not
+    /// yet scattered included) scaled by `--indirect` (0.5 in the papers' images here).
+    Paper,
+}
+
+impl Light {
+    pub const ALL: [Light; 2] = [Light::Physical, Light::Paper];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Light::Physical => "physical",
+            Light::Paper => "paper",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Light> {
+        Light::ALL
+            .into_iter()
+            .find(|l| l.name().eq_ignore_ascii_case(s.trim()))
+    }
+}
+
 /// How models are lit.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct LightingOptions {
     /// Sites along each model's longest edge, shell included (scene `[lb] grid`).
     pub grid: usize,
-    /// LB preset name (scene `[lb] preset`).
+    /// The light model.
+    pub light: Light,
+    /// LB preset name (scene `[lb] preset`): the paper model's medium.
     pub preset: String,
     /// Where lighting grids are cached; `None`: always compute, write nothing.
     pub cache_dir: Option<PathBuf>,
@@ -85,6 +135,7 @@ impl Default for LightingOptions {
     fn default() -> Self {
         LightingOptions {
             grid: DEFAULT_GRID,
+            light: Light::Physical,
             preset: "leaf".into(),
             cache_dir: None,
         }
@@ -93,17 +144,65 @@ impl Default for LightingOptions {
 
 impl LightingOptions {
     /// The options a scene's `[lb]` table asks for.
-    pub fn from_scene(lb: &LbSettings, cache_dir: Option<PathBuf>) -> LightingOptions {
+    pub fn from_scene(lb: &LbSettings, light: Light, cache_dir: Option<PathBuf>) -> Self {
         LightingOptions {
             grid: lb.grid as usize,
+            light,
             preset: lb.preset.clone(),
             cache_dir,
         }
     }
 }
 
-/// One model's LB light, normalised so that unobstructed sunlight (free space) is 1.0 per
-/// colour, with its placement in model space.
+/// The light around a model, in its own frame: the sun, the sky and the ground (linear RGB).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Illumination {
+    /// Towards the sun; need not be unit length.
+    pub sun_to: Vec3,
+    /// The sun's irradiance on a surface facing it, per colour, in units of `E0` (its
+    /// colour times its intensity).
+    pub sun: Vec3,
+    /// The sky's radiance.
+    pub sky: Vec3,
+    /// The ground's albedo; `None`: no ground (the sky all round).
+    pub ground: Option<Vec3>,
+}
+
+impl Illumination {
+    /// A white unit sun towards `sun_to`, no sky, a black ground: all the paper model uses.
+    pub fn sun_only(sun_to: Vec3) -> Illumination {
+        Illumination {
+            sun_to,
+            sun: Vec3::ONE,
+            sky: Vec3::ZERO,
+            ground: Some(Vec3::ZERO),
+        }
+    }
+
+    /// As [`Environment`], with the sun towards the unit vector `sun_to`.
+    fn environment(&self, sun_to: DVec3) -> Environment {
+        let d = |v: Vec3| v.as_dvec3().to_array();
+        Environment {
+            sun_travel: (-sun_to).to_array(),
+            sun_irradiance: d(self.sun),
+            sky_radiance: d(self.sky),
+            ground_albedo: self.ground.map(d),
+        }
+    }
+}
+
+/// The physical light's free-field values per colour, what the ground lookup measures
+/// against: the LB value of the open sky's light (`2 L_sky`), and what the bottom shell
+/// holds besides its floor's emission.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct OpenField {
+    sky: Vec3,
+    bottom: Vec3,
+}
+
+/// One model's LB light with its placement in model space: the physical light's scattered,
+/// sky and ground light in LB units (fluence / `E0`), or the paper's light normalised so that
+/// unobstructed sunlight (free space) is 1.0 per colour.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ModelLighting {
     dims: Dims,
@@ -115,11 +214,14 @@ pub struct ModelLighting {
     last: Vec3,
     /// RGB per site, site order `(x * ny + y) * nz + z`.
     values: Vec<[f32; 3]>,
+    /// The physical light's free field; `None` for the paper's.
+    open: Option<OpenField>,
 }
 
 impl ModelLighting {
-    /// Normalises a solver result lit by a sun in direction `sun_to` (towards the sun; it is
-    /// normalised here). A zero or non-finite `sun_to` leaves the values as they are.
+    /// Normalises a paper-model solver result lit by a sun in direction `sun_to` (towards the
+    /// sun; it is normalised here). A zero or non-finite `sun_to` leaves the values as they
+    /// are.
     pub fn from_grid(grid: &LightingGrid, sun_to: Vec3) -> ModelLighting {
         let scale = free_space_total(sun_to.as_dvec3())
             .filter(|&t| t > 0.0)
@@ -153,10 +255,74 @@ impl ModelLighting {
             inv_cell,
             last: Vec3::new((d.nx - 1) as f32, (d.ny - 1) as f32, (d.nz - 1) as f32),
             values,
+            open: None,
         }
     }
 
-    /// Trilinear interpolation of the normalised RGB light at model-space point `p`; points
+    /// A physical-light grid as stored (LB units), lit by `env`.
+    fn physical(grid: &LightingGrid, env: &Environment) -> ModelLighting {
+        let total = |b: &[Boundary; 3], keep: &dyn Fn(usize) -> bool| {
+            Vec3::from_array(std::array::from_fn(|c| {
+                (1..sylva_lb::lattice::Q)
+                    .filter(|&m| keep(m))
+                    .map(|m| b[c].values[m] as f64)
+                    .sum::<f64>() as f32
+            }))
+        };
+        let up = |m: usize| sylva_lb::lattice::C[m][1] == 1;
+        // The bottom shell holds the diffuse boundary on its other directions.
+        let bottom = total(&env.diffuse_boundaries(), &|m| !up(m));
+        ModelLighting {
+            open: Some(OpenField {
+                sky: total(&light::sky_boundaries(env.sky_radiance), &|_| true),
+                bottom,
+            }),
+            ..Self::scaled(grid, 1.0)
+        }
+    }
+
+    /// Whether this is the physical light (LB units, direct sun removed).
+    pub fn is_physical(&self) -> bool {
+        self.open.is_some()
+    }
+
+    /// The fraction of the open sky's light that reaches the ground at model-space point `p`
+    /// (its `y` taken as the ground's), per colour in [0, 1].
+    ///
+    /// Physical light: the bottom shell's value is the floor's emission `L_g` (the ground's
+    /// radiance there) plus a constant; at the lowest interior sites the ground's light is
+    /// about `2 L_g` (from below, and its share of the horizontal directions), so the rest,
+    /// `u - 2 L_g`, is the light from above (sky, scattered sunlight), whose half is the
+    /// ground's irradiance in units of `E0`; divided by the open sky's (`L_sky`). Paper
+    /// light: the luminance of the normalised light (1 in the open, less in a crown's shade).
+    pub fn ground_sky(&self, p: Vec3) -> Vec3 {
+        match &self.open {
+            None => Vec3::splat(luminance(self.sample(p).to_array()).clamp(0.0, 1.0)),
+            Some(open) => {
+                let floor = self.sample(Vec3::new(p.x, self.origin.y, p.z));
+                let lowest = self.sample(Vec3::new(p.x, self.origin.y + self.cell().y, p.z));
+                let ground = (floor - open.bottom).max(Vec3::ZERO);
+                let sky = open.sky * 0.5;
+                Vec3::select(
+                    sky.cmpgt(Vec3::ZERO),
+                    ((lowest - 2.0 * ground) * 0.5 / sky.max(Vec3::splat(f32::MIN_POSITIVE)))
+                        .clamp(Vec3::ZERO, Vec3::ONE),
+                    Vec3::ONE,
+                )
+            }
+        }
+    }
+
+    /// Cell edge per axis (0 along a degenerate axis).
+    fn cell(&self) -> Vec3 {
+        Vec3::select(
+            self.inv_cell.cmpgt(Vec3::ZERO),
+            self.inv_cell.recip(),
+            Vec3::ZERO,
+        )
+    }
+
+    /// Trilinear interpolation of the RGB light at model-space point `p`; points
     /// outside the grid clamp to the nearest site.
     #[inline]
     pub fn sample(&self, p: Vec3) -> Vec3 {
@@ -202,7 +368,7 @@ impl ModelLighting {
         )
     }
 
-    /// Normalised light at site `(x, y, z)`.
+    /// The light at site `(x, y, z)`.
     pub fn site(&self, x: usize, y: usize, z: usize) -> [f32; 3] {
         self.values[self.dims.index(x, y, z)]
     }
@@ -210,12 +376,7 @@ impl ModelLighting {
     /// Model-space centre of site `(x, y, z)`.
     pub fn site_position(&self, x: usize, y: usize, z: usize) -> Vec3 {
         let c = Vec3::new(x as f32, y as f32, z as f32);
-        let cell = Vec3::select(
-            self.inv_cell.cmpgt(Vec3::ZERO),
-            self.inv_cell.recip(),
-            Vec3::ZERO,
-        );
-        self.origin + c * cell
+        self.origin + c * self.cell()
     }
 }
 
@@ -259,19 +420,102 @@ fn quantise_sun(sun_to: Vec3) -> Result<([i64; 3], DVec3), LightingError> {
 /// `Σ_i max(0, n_i · d)` for light travelling along `d = -sun_to`: the total a free-space
 /// site holds under a unit-intensity sun, summed from the boundary values the solver uses.
 fn free_space_total(sun_to: DVec3) -> Option<f64> {
-    let len = sun_to.length();
-    if !(len.is_finite() && len > 0.0) {
-        return None;
-    }
-    let d = -sun_to / len;
-    let b = Boundary::sun(d.to_array(), 1.0);
-    Some(b.values.iter().map(|&v| v as f64).sum())
+    light::sun_total((-sun_to).to_array())
 }
 
-fn medium(preset: &str) -> Result<MediumParams, LightingError> {
+fn preset_medium(preset: &str) -> Result<MediumParams, LightingError> {
     let m = Preset::parse(preset)?.params();
     m.validate()?;
     Ok(m)
+}
+
+/// The mean optics of `model`'s leaves and bark: reflectance and transmittance per colour,
+/// each material weighted by its surface area (leaves by their opaque part: the area times
+/// the texture's opaque fraction).
+pub fn plant_optics(model: &Model) -> PlantOptics {
+    let mut area = vec![0.0f64; model.materials.len()];
+    let mesh = &model.mesh;
+    for (t, &m) in mesh.indices.iter().zip(&mesh.material_ids) {
+        let p = t.map(|i| Vec3::from_array(mesh.positions[i as usize]).as_dvec3());
+        let a = 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length();
+        if a.is_finite() {
+            if let Some(slot) = area.get_mut(m as usize) {
+                *slot += a;
+            }
+        }
+    }
+    let mut sums = [[0.0f64; 3]; 3];
+    let mut weights = [0.0f64; 2];
+    for (mat, a) in model.materials.iter().zip(area) {
+        let (r, t) = (mat.mean_reflectance(), mat.mean_transmittance());
+        if mat.is_leaf() {
+            let w = a * mat.texture.as_ref().map_or(1.0, |t| t.opaque_fraction());
+            weights[0] += w;
+            for c in 0..3 {
+                sums[0][c] += w * r[c] as f64;
+                sums[1][c] += w * t[c] as f64;
+            }
+        } else {
+            weights[1] += a;
+            for c in 0..3 {
+                sums[2][c] += a * r[c] as f64;
+            }
+        }
+    }
+    let mean = |s: [f64; 3], w: f64| if w > 0.0 { s.map(|v| v / w) } else { [0.0; 3] };
+    PlantOptics {
+        leaf_reflectance: mean(sums[0], weights[0]),
+        leaf_transmittance: mean(sums[1], weights[0]),
+        bark_reflectance: mean(sums[2], weights[1]),
+    }
+}
+
+/// The physical LB medium of `model` ([`light::medium_for`] of [`plant_optics`]).
+pub fn plant_medium(model: &Model) -> Result<MediumParams, LightingError> {
+    for m in &model.materials {
+        m.optics
+            .validate(&format!("material '{}'", m.name))
+            .map_err(|e| LightingError::Illumination(format!("model '{}': {e}", model.name)))?;
+    }
+    light::medium_for(&plant_optics(model)).map_err(|source| LightingError::Medium {
+        model: model.name.clone(),
+        source,
+    })
+}
+
+/// The medium, occupancy and boundaries (per colour) of a solve, and (physical light) the
+/// environment whose sun enters as a first-collision source and whose ground is the floor.
+struct SolvePlan {
+    medium: MediumParams,
+    occupancy: Occupancy,
+    boundaries: [Boundary; 3],
+    environment: Option<Environment>,
+}
+
+fn solve_plan(
+    model: &Model,
+    illum: &Illumination,
+    sun: DVec3,
+    opts: &LightingOptions,
+) -> Result<SolvePlan, LightingError> {
+    Ok(match opts.light {
+        Light::Paper => SolvePlan {
+            medium: preset_medium(&opts.preset)?,
+            occupancy: Occupancy::SubCells,
+            boundaries: [Boundary::sun((-sun).to_array(), 1.0); 3],
+            environment: None,
+        },
+        Light::Physical => {
+            let env = illum.environment(sun);
+            env.validate().map_err(LightingError::Illumination)?;
+            SolvePlan {
+                medium: plant_medium(model)?,
+                occupancy: Occupancy::Area,
+                boundaries: env.diffuse_boundaries(),
+                environment: Some(env),
+            }
+        }
+    })
 }
 
 /// How long the solver runs over `dims` (the papers' schedule).
@@ -280,30 +524,42 @@ fn solve_options(dims: Dims) -> SolveOptions {
 }
 
 /// The stable 64-bit key of a model's lighting: [`CACHE_VERSION`] and the grid file version,
-/// the mesh's geometry hash, per material its kind and (for leaves, whose textures are
-/// alpha-tested) the texture's size, wrap and opaque texels, the voxelizer's sub-cell count
-/// and opacity threshold, the grid size, the preset's parameters (bit patterns), the sun
-/// direction rounded to 1e-5, the solve schedule, and the solver backend's
-/// [`LbSolver::cache_tag`] (CPU and GPU results differ in the last bits).
+/// the light model, the mesh's geometry hash, per material its kind and (for leaves, whose
+/// textures are alpha-tested) the texture's size, wrap and opaque texels, the voxelizer's
+/// occupancy rule and opacity threshold, the grid size, the medium's parameters (bit
+/// patterns; the physical medium's come from the materials' colours and optics), the
+/// boundaries per colour (the sun direction rounded to 1e-5, and in the physical light the
+/// sun's, sky's and ground's colours), whether the uncollided sunlight is removed, the solve
+/// schedule, and the solver backend's [`LbSolver::cache_tag`] (CPU and GPU results differ
+/// in the last bits).
 pub fn cache_key(
     model: &Model,
-    sun_to: Vec3,
+    illum: &Illumination,
     opts: &LightingOptions,
     solver: &dyn LbSolver,
 ) -> Result<u64, LightingError> {
-    let medium = medium(&opts.preset)?;
-    let (sun, _) = quantise_sun(sun_to)?;
-    Ok(key_of(model, sun, opts.grid, &medium, &solver.cache_tag()))
+    let (sun_q, sun) = quantise_sun(illum.sun_to)?;
+    let plan = solve_plan(model, illum, sun, opts)?;
+    Ok(key_of(model, sun_q, opts, &plan, &solver.cache_tag()))
 }
 
-fn key_of(model: &Model, sun: [i64; 3], grid: usize, m: &MediumParams, solver: &str) -> u64 {
+fn key_of(
+    model: &Model,
+    sun: [i64; 3],
+    opts: &LightingOptions,
+    plan: &SolvePlan,
+    solver: &str,
+) -> u64 {
+    let (grid, m) = (opts.grid, &plan.medium);
     let mut h = Fnv64::new();
     h.str("sylva-render lighting");
     h.u64(CACHE_VERSION as u64);
+    h.str(opts.light.name());
     h.str(solver);
     h.u64(sylva_lb::grid_file::VERSION as u64);
     h.u64(model.mesh.geometry_hash());
     // Voxelization.
+    h.str(plan.occupancy.name());
     h.u64(SUB as u64);
     h.u64(OPAQUE_ALPHA as u64);
     h.u64(1); // alpha test on
@@ -340,19 +596,39 @@ fn key_of(model: &Model, sun: [i64; 3], grid: usize, m: &MediumParams, solver: &
     }
     h.u64(grid as u64);
     // Medium.
-    for c in &m.colours {
-        h.f64(c.sigma_a);
-        h.f64(c.sigma_s);
-        h.f64(c.g);
+    for c in 0..3 {
+        for p in [m.colours[c], m.brown_colour(c)] {
+            h.f64(p.sigma_a);
+            h.f64(p.sigma_s);
+            h.f64(p.g);
+        }
     }
     h.u64(m.zero_f0_on_green as u64);
     h.u64(m.zero_f0_on_brown as u64);
     h.f64(m.brown_threshold);
-    // Sun and boundary intensity.
+    // Sun and the boundaries (paper: the unit sun; physical: sun, sky and ground colours).
     for c in sun {
         h.u64(c as u64);
     }
-    h.f64(1.0);
+    for b in &plan.boundaries {
+        for v in b.values {
+            h.u64(v.to_bits() as u64);
+        }
+    }
+    if let Some(env) = &plan.environment {
+        // The sun's first-collision source and the floor (the ground's light shadowed by
+        // the plant: the sun straight along its direction, the sky's uncollided light).
+        h.str("physical: first-collision sun source, floor");
+        for v in [env.sun_travel, env.sun_irradiance, env.sky_radiance] {
+            for c in v {
+                h.f64(c);
+            }
+        }
+        for c in env.ground_albedo.unwrap_or([-1.0; 3]) {
+            h.f64(c);
+        }
+        h.f64(light::step_optical_depth_factor());
+    }
     // Solve schedule: the papers' 2 × longest edge, no tolerance.
     h.str("papers:2N");
     h.finish()
@@ -366,29 +642,88 @@ pub fn cache_path(dir: &Path, model: &Model, key: u64) -> PathBuf {
     ))
 }
 
-/// Lights `grid` under a unit sun towards `sun_to` (unit) on `solver`, forwarding progress.
+/// Lights `grid` as `plan` says on `solver`, forwarding progress: the solver's result, less
+/// the uncollided part where the plan removes it.
 fn solve_density(
     grid: &DensityGrid,
-    medium: &MediumParams,
-    sun_to: DVec3,
+    plan: &SolvePlan,
     solver: &dyn LbSolver,
     progress: &mut dyn FnMut(usize, usize, usize),
 ) -> Result<LightingGrid, LbSolverError> {
     let opts = solve_options(grid.dims);
     let max = opts.max_steps;
-    let (lighting, _) = solver.solve_lighting(
+    // Physical light: the ground under the plant, shadowed by it, and the sunlight
+    // scattered at its first collision.
+    let (floor, source) = match &plan.environment {
+        Some(env) => {
+            let (floor, source) = physical_sources(grid, plan, env)?;
+            (floor, Some(source))
+        }
+        None => (None, None),
+    };
+    let (lighting, _) = solver.solve_lighting_rgb(
         grid,
-        medium,
-        Boundary::sun((-sun_to).to_array(), 1.0),
+        &plan.medium,
+        &plan.boundaries,
+        floor.as_ref(),
+        source.as_ref(),
         &opts,
         &mut |c, s, _| progress(c, s, max),
     )?;
     Ok(lighting)
 }
 
-fn normalise(grid: &LightingGrid, sun_to: DVec3) -> ModelLighting {
-    let total = free_space_total(sun_to).expect("a unit sun direction");
-    ModelLighting::scaled(grid, 1.0 / total)
+/// The physical light's floor and first-collision source of `grid` under `plan`.
+fn physical_sources(
+    grid: &DensityGrid,
+    plan: &SolvePlan,
+    env: &Environment,
+) -> Result<(Option<Floor>, VolumeSource), LbSolverError> {
+    Ok((
+        env.floor(grid, &plan.medium)?,
+        light::first_collision_source(grid, &plan.medium, env.sun_travel, env.sun_irradiance)?,
+    ))
+}
+
+/// Colour `colour` of a physical-light plan in all three slots (medium, boundary, floor and
+/// source), so a three-colour solve solves it once and gives that colour of the full solve.
+fn physical_colour(
+    grid: &DensityGrid,
+    plan: &SolvePlan,
+    colour: usize,
+) -> Result<(MediumParams, [Boundary; 3], Option<Floor>, VolumeSource), LbSolverError> {
+    let env = plan
+        .environment
+        .as_ref()
+        .expect("physical_colour is for the physical light");
+    let (floor, source) = physical_sources(grid, plan, env)?;
+    let m = &plan.medium;
+    let medium = MediumParams {
+        colours: [m.colours[colour]; 3],
+        brown: Some([m.brown_colour(colour); 3]),
+        ..m.clone()
+    };
+    let floor = floor.map(|f| Floor {
+        radiance: std::array::from_fn(|_| f.radiance[colour].clone()),
+        ..f
+    });
+    let source = VolumeSource {
+        strength: std::array::from_fn(|_| source.strength[colour].clone()),
+        green: [source.green[colour]; 3],
+        brown: [source.brown[colour]; 3],
+    };
+    Ok((medium, [plan.boundaries[colour]; 3], floor, source))
+}
+
+/// The stored grid as the renderer uses it.
+fn to_model_lighting(grid: &LightingGrid, plan: &SolvePlan, sun_to: DVec3) -> ModelLighting {
+    match &plan.environment {
+        Some(env) => ModelLighting::physical(grid, env),
+        None => {
+            let total = free_space_total(sun_to).expect("a unit sun direction");
+            ModelLighting::scaled(grid, 1.0 / total)
+        }
+    }
 }
 
 /// Reads and checks a cache entry; `Err` is the reason it is unusable, naming the file.
@@ -447,7 +782,7 @@ fn read_entry(path: &Path, key: u64, placement: &GridPlacement) -> Result<Lighti
 /// What a model's cache entry holds.
 #[derive(Debug)]
 pub enum CacheLookup {
-    /// A valid entry: the raw solver result.
+    /// A valid entry: the grid as stored.
     Hit(LightingGrid),
     /// No cache, or no entry yet.
     Miss,
@@ -456,18 +791,17 @@ pub enum CacheLookup {
 }
 
 /// One model's LB lighting as separate steps, for whoever schedules the solves: the cache
-/// entry, the density grid, each colour's solve, the cache write and the normalisation.
-/// [`model_lighting`] runs them in order in one process; `sylva-mpi` solves the colours of
-/// many models in different processes and assembles them with [`LightingPlan::assemble`].
-/// A colour solved alone is bit for bit that colour of the three-colour solve
-/// ([`LbSolver::solve_colour`]), so both give the same grids and cache entries.
-#[derive(Debug, Clone)]
+/// entry, the density grid, each colour's solve, the cache write and the conversion to a
+/// [`ModelLighting`]. [`model_lighting`] runs them in order in one process; `sylva-mpi`
+/// solves the colours of many models in different processes and assembles them with
+/// [`LightingPlan::assemble`]. A colour solved alone is bit for bit that colour of the
+/// three-colour solve, so both give the same grids and cache entries.
 pub struct LightingPlan<'a> {
     pub model: &'a Model,
     /// The cache key ([`cache_key`]).
     pub key: u64,
     placement: GridPlacement,
-    medium: MediumParams,
+    solve: SolvePlan,
     /// The quantised unit sun direction.
     sun: DVec3,
     opts: LightingOptions,
@@ -476,17 +810,17 @@ pub struct LightingPlan<'a> {
 }
 
 impl<'a> LightingPlan<'a> {
-    /// The plan of lighting `model` under the sun towards `sun_to` with `opts` on `solver`
-    /// (its [`LbSolver::cache_tag`] is part of the key). Creates the cache directory.
+    /// The plan of lighting `model` under `illum` with `opts` on `solver` (its
+    /// [`LbSolver::cache_tag`] is part of the key). Creates the cache directory.
     pub fn new(
         model: &'a Model,
-        sun_to: Vec3,
+        illum: &Illumination,
         opts: &LightingOptions,
         solver: &dyn LbSolver,
     ) -> Result<LightingPlan<'a>, LightingError> {
-        let medium = medium(&opts.preset)?;
-        let (sun_q, sun) = quantise_sun(sun_to)?;
-        let key = key_of(model, sun_q, opts.grid, &medium, &solver.cache_tag());
+        let (sun_q, sun) = quantise_sun(illum.sun_to)?;
+        let solve = solve_plan(model, illum, sun, opts)?;
+        let key = key_of(model, sun_q, opts, &solve, &solver.cache_tag());
         let placement = placement_for(model, opts.grid)?;
         let path = match &opts.cache_dir {
             Some(dir) => {
@@ -502,7 +836,7 @@ impl<'a> LightingPlan<'a> {
             model,
             key,
             placement,
-            medium,
+            solve,
             sun,
             opts: opts.clone(),
             path,
@@ -535,11 +869,16 @@ impl<'a> LightingPlan<'a> {
     }
 
     /// The colours a solve computes, each with the colour whose result it takes: a colour
-    /// with the same parameters as an earlier one takes that one's (as
-    /// [`sylva_lb::solver::solve_colours`] does).
+    /// with the same parameters and boundary as an earlier one takes that one's (as
+    /// [`sylva_lb::solver::solve_colours`] does; the physical light's colours are all
+    /// solved, their sources differ).
     pub fn colour_sources(&self) -> [usize; 3] {
-        let c = &self.medium.colours;
-        std::array::from_fn(|i| (0..i).find(|&p| c[p] == c[i]).unwrap_or(i))
+        if self.solve.environment.is_some() {
+            return [0, 1, 2];
+        }
+        let c = &self.solve.medium.colours;
+        let b = &self.solve.boundaries;
+        std::array::from_fn(|i| (0..i).find(|&p| c[p] == c[i] && b[p] == b[i]).unwrap_or(i))
     }
 
     /// The model's density grid, its memory (with the solve's) checked first.
@@ -550,22 +889,21 @@ impl<'a> LightingPlan<'a> {
                 "the LB lighting of model '{}' on a {dims} grid",
                 self.model.name
             ),
-            memory_needed(dims) + sylva_voxel::memory_needed(dims),
+            memory_needed(dims)
+                + sylva_voxel::memory_needed(dims)
+                + light::uncollided_memory_needed(dims),
         )?;
         let density = voxelize(
             self.model,
             &VoxelizeOptions {
                 grid: self.opts.grid,
                 alpha_test: true,
+                occupancy: self.solve.occupancy,
             },
         )?;
         debug_assert_eq!(density.dims, dims);
         debug_assert_eq!(density.bounds, self.placement.bounds());
         Ok(density)
-    }
-
-    fn boundary(&self) -> Boundary {
-        Boundary::sun((-self.sun).to_array(), 1.0)
     }
 
     fn solve_error(&self, source: LbSolverError) -> LightingError {
@@ -582,8 +920,7 @@ impl<'a> LightingPlan<'a> {
         solver: &dyn LbSolver,
         progress: &mut dyn FnMut(usize, usize, usize),
     ) -> Result<LightingGrid, LightingError> {
-        solve_density(density, &self.medium, self.sun, solver, progress)
-            .map_err(|e| self.solve_error(e))
+        solve_density(density, &self.solve, solver, progress).map_err(|e| self.solve_error(e))
     }
 
     /// Colour `colour` alone on `solver`: its site totals. `progress(step, max_steps)`.
@@ -596,16 +933,35 @@ impl<'a> LightingPlan<'a> {
     ) -> Result<Vec<f32>, LightingError> {
         let opts = solve_options(density.dims);
         let max = opts.max_steps;
-        let (totals, _) = solver
-            .solve_colour(
+        if self.solve.environment.is_none() {
+            let (totals, _) = solver
+                .solve_colour(
+                    density,
+                    &self.solve.medium,
+                    colour,
+                    self.solve.boundaries[colour],
+                    &opts,
+                    &mut |s, _| progress(s, max),
+                )
+                .map_err(|e| self.solve_error(e))?;
+            return Ok(totals);
+        }
+        // The physical light: this colour's medium, boundary, floor and source in all three
+        // slots, which the solver solves once.
+        let (medium, boundaries, floor, source) =
+            physical_colour(density, &self.solve, colour).map_err(|e| self.solve_error(e))?;
+        let (lighting, _) = solver
+            .solve_lighting_rgb(
                 density,
-                &self.medium,
-                colour,
-                self.boundary(),
+                &medium,
+                &boundaries,
+                floor.as_ref(),
+                Some(&source),
                 &opts,
-                &mut |s, _| progress(s, max),
+                &mut |_, s, _| progress(s, max),
             )
             .map_err(|e| self.solve_error(e))?;
+        let [totals, _, _] = lighting.colours;
         Ok(totals)
     }
 
@@ -628,7 +984,14 @@ impl<'a> LightingPlan<'a> {
         let metadata = vec![
             (KEY_METADATA.to_string(), format!("{:016x}", self.key)),
             ("source".to_string(), self.model.name.clone()),
-            ("preset".to_string(), self.opts.preset.clone()),
+            ("light".to_string(), self.opts.light.name().to_string()),
+            (
+                "medium".to_string(),
+                match self.opts.light {
+                    Light::Paper => format!("preset {}", self.opts.preset),
+                    Light::Physical => "plant optics".to_string(),
+                },
+            ),
             ("grid".to_string(), self.opts.grid.to_string()),
             (
                 "sun_to".to_string(),
@@ -651,24 +1014,25 @@ impl<'a> LightingPlan<'a> {
             })
     }
 
-    /// The solver result normalised so that unobstructed sunlight is 1.
+    /// The stored grid as the renderer uses it (the paper light normalised so unobstructed
+    /// sunlight is 1; the physical light as it is).
     pub fn lighting(&self, grid: &LightingGrid) -> ModelLighting {
-        normalise(grid, self.sun)
+        to_model_lighting(grid, &self.solve, self.sun)
     }
 }
 
-/// One model's LB lighting under the sun towards `sun_to` (model frame): from the cache when
-/// it holds a valid entry, otherwise voxelized, solved on `solver` and (with a cache) stored.
+/// One model's LB lighting under `illum` (model frame): from the cache when it holds a valid
+/// entry, otherwise voxelized, solved on `solver` and (with a cache) stored.
 /// `progress(colour, step, max_steps)` follows the solve.
 pub fn model_lighting(
     model: &Model,
-    sun_to: Vec3,
+    illum: &Illumination,
     opts: &LightingOptions,
     solver: &dyn LbSolver,
     progress: &mut dyn FnMut(usize, usize, usize),
 ) -> Result<(ModelLighting, LightingReport), LightingError> {
     let t0 = Instant::now();
-    let plan = LightingPlan::new(model, sun_to, opts, solver)?;
+    let plan = LightingPlan::new(model, illum, opts, solver)?;
     let report = |source| LightingReport {
         source,
         seconds: t0.elapsed().as_secs_f64(),
@@ -732,9 +1096,15 @@ mod tests {
         let mat = |name: &str, kind| Material {
             name: name.into(),
             kind,
-            base_color: [0.2, 0.5, 0.1],
+            // A leaf reflects its colour and transmits up to 1.2 times it: R + T ≤ 1.
+            base_color: [0.2, 0.4, 0.1],
             texture: None,
             two_sided: true,
+            optics: if kind == MaterialKind::Leaf {
+                sylva_geom::Optics::FOREST_LEAF
+            } else {
+                sylva_geom::Optics::OPAQUE
+            },
         };
         Model::new(
             "test plate/1",
@@ -749,8 +1119,19 @@ mod tests {
     fn opts(dir: Option<&Path>) -> LightingOptions {
         LightingOptions {
             grid: N,
+            light: Light::Physical,
             preset: "leaf".into(),
             cache_dir: dir.map(Path::to_path_buf),
+        }
+    }
+
+    /// A slightly coloured sun towards `sun_to`, a blue sky and a dark ground.
+    fn illum(sun_to: Vec3) -> Illumination {
+        Illumination {
+            sun_to,
+            sun: Vec3::new(1.04, 0.98, 1.03),
+            sky: Vec3::new(0.55, 0.7, 0.95),
+            ground: Some(Vec3::new(0.16, 0.14, 0.08)),
         }
     }
 
@@ -787,7 +1168,7 @@ mod tests {
         let o = opts(Some(dir.path()));
         let mut calls = 0usize;
         let mut last = (0, 0, 0);
-        let (a, ra) = model_lighting(&m, sun(), &o, &CpuSolver, &mut |c, s, max| {
+        let (a, ra) = model_lighting(&m, &illum(sun()), &o, &CpuSolver, &mut |c, s, max| {
             calls += 1;
             last = (c, s, max);
         })
@@ -795,7 +1176,7 @@ mod tests {
         assert_eq!(ra.source, LightingSource::Computed);
         let path = ra.path.clone().unwrap();
         assert!(path.is_file());
-        let key = cache_key(&m, sun(), &o, &CpuSolver).unwrap();
+        let key = cache_key(&m, &illum(sun()), &o, &CpuSolver).unwrap();
         assert_eq!(
             path.file_name().unwrap().to_str().unwrap(),
             format!("test_plate_1-{key:016x}.sgrid")
@@ -806,8 +1187,10 @@ mod tests {
         assert_eq!(last.2, 2 * a.dims().longest_edge());
 
         let mut calls2 = 0usize;
-        let (b, rb) =
-            model_lighting(&m, sun(), &o, &CpuSolver, &mut |_, _, _| calls2 += 1).unwrap();
+        let (b, rb) = model_lighting(&m, &illum(sun()), &o, &CpuSolver, &mut |_, _, _| {
+            calls2 += 1
+        })
+        .unwrap();
         assert_eq!(rb.source, LightingSource::Cached);
         assert_eq!(rb.path.as_deref(), Some(path.as_path()));
         assert_eq!(calls2, 0, "no solve on a cache hit");
@@ -815,8 +1198,14 @@ mod tests {
         assert_eq!(probe(&a), probe(&b));
 
         // Without a cache: computed, same values, nothing written.
-        let (c, rc) =
-            model_lighting(&m, sun(), &opts(None), &CpuSolver, &mut no_progress()).unwrap();
+        let (c, rc) = model_lighting(
+            &m,
+            &illum(sun()),
+            &opts(None),
+            &CpuSolver,
+            &mut no_progress(),
+        )
+        .unwrap();
         assert_eq!(rc.source, LightingSource::Computed);
         assert_eq!(rc.path, None);
         assert_eq!(probe(&a), probe(&c));
@@ -824,7 +1213,7 @@ mod tests {
     }
 
     fn assert_recomputed(m: &Model, o: &LightingOptions, want: &ModelLighting, path: &Path) {
-        let (l, r) = model_lighting(m, sun(), o, &CpuSolver, &mut no_progress()).unwrap();
+        let (l, r) = model_lighting(m, &illum(sun()), o, &CpuSolver, &mut no_progress()).unwrap();
         match &r.source {
             LightingSource::Recomputed { reason } => {
                 assert!(
@@ -836,7 +1225,7 @@ mod tests {
         }
         assert_eq!(probe(&l), probe(want));
         // The entry was replaced by a valid one.
-        let (_, r2) = model_lighting(m, sun(), o, &CpuSolver, &mut no_progress()).unwrap();
+        let (_, r2) = model_lighting(m, &illum(sun()), o, &CpuSolver, &mut no_progress()).unwrap();
         assert_eq!(r2.source, LightingSource::Cached);
         GridFile::read(path).unwrap();
     }
@@ -846,7 +1235,8 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let m = model(1.0);
         let o = opts(Some(dir.path()));
-        let (orig, r) = model_lighting(&m, sun(), &o, &CpuSolver, &mut no_progress()).unwrap();
+        let (orig, r) =
+            model_lighting(&m, &illum(sun()), &o, &CpuSolver, &mut no_progress()).unwrap();
         let path = r.path.unwrap();
         let good = std::fs::read(&path).unwrap();
 
@@ -891,41 +1281,71 @@ mod tests {
     fn key_tracks_inputs() {
         let m = model(1.0);
         let o = opts(None);
-        let k = cache_key(&m, sun(), &o, &CpuSolver).unwrap();
+        let k = cache_key(&m, &illum(sun()), &o, &CpuSolver).unwrap();
         assert_eq!(
             k,
-            cache_key(&model(1.0), sun(), &o, &CpuSolver).unwrap(),
+            cache_key(&model(1.0), &illum(sun()), &o, &CpuSolver).unwrap(),
             "stable"
         );
         assert_eq!(
             k,
-            cache_key(&m, sun() * 3.0, &o, &CpuSolver).unwrap(),
+            cache_key(&m, &illum(sun() * 3.0), &o, &CpuSolver).unwrap(),
             "length of sun_to"
         );
         assert_eq!(
             k,
-            cache_key(&m, sun() + Vec3::splat(1e-7), &o, &CpuSolver).unwrap(),
+            cache_key(&m, &illum(sun() + Vec3::splat(1e-7)), &o, &CpuSolver).unwrap(),
             "below the rounding"
         );
         let other_sun = Vec3::new(0.3, 0.8, 0.25).normalize();
-        assert_ne!(k, cache_key(&m, other_sun, &o, &CpuSolver).unwrap(), "sun");
+        assert_ne!(
+            k,
+            cache_key(&m, &illum(other_sun), &o, &CpuSolver).unwrap(),
+            "sun"
+        );
         let grid = LightingOptions {
             grid: N + 1,
             ..o.clone()
         };
-        assert_ne!(k, cache_key(&m, sun(), &grid, &CpuSolver).unwrap(), "grid");
-        let preset = LightingOptions {
-            preset: "dogrose".into(),
-            ..o.clone()
-        };
         assert_ne!(
             k,
-            cache_key(&m, sun(), &preset, &CpuSolver).unwrap(),
+            cache_key(&m, &illum(sun()), &grid, &CpuSolver).unwrap(),
+            "grid"
+        );
+        // The preset is the paper light's medium; the physical light's comes from the
+        // materials.
+        let paper = LightingOptions {
+            light: Light::Paper,
+            ..o.clone()
+        };
+        let paper_key = cache_key(&m, &illum(sun()), &paper, &CpuSolver).unwrap();
+        assert_ne!(k, paper_key, "light model");
+        let preset = LightingOptions {
+            preset: "dogrose".into(),
+            ..paper.clone()
+        };
+        assert_ne!(
+            paper_key,
+            cache_key(&m, &illum(sun()), &preset, &CpuSolver).unwrap(),
             "preset"
+        );
+        assert_eq!(
+            k,
+            cache_key(
+                &m,
+                &illum(sun()),
+                &LightingOptions {
+                    preset: "dogrose".into(),
+                    ..o.clone()
+                },
+                &CpuSolver
+            )
+            .unwrap(),
+            "the physical light ignores the preset"
         );
         assert_ne!(
             k,
-            cache_key(&model(1.01), sun(), &o, &CpuSolver).unwrap(),
+            cache_key(&model(1.01), &illum(sun()), &o, &CpuSolver).unwrap(),
             "geometry"
         );
         // Material kind and leaf opacity.
@@ -933,19 +1353,19 @@ mod tests {
         wood.materials[0].kind = MaterialKind::Wood;
         assert_ne!(
             k,
-            cache_key(&wood, sun(), &o, &CpuSolver).unwrap(),
+            cache_key(&wood, &illum(sun()), &o, &CpuSolver).unwrap(),
             "material kind"
         );
         let mut tex = m.clone();
-        let mut t = sylva_geom::Texture::new(2, 2, vec![[10, 200, 10, 255]; 4], Wrap::Clamp);
+        let mut t = sylva_geom::Texture::new(2, 2, vec![[10, 150, 10, 255]; 4], Wrap::Clamp);
         tex.materials[0].texture = Some(std::sync::Arc::new(t.clone()));
-        let kt = cache_key(&tex, sun(), &o, &CpuSolver).unwrap();
+        let kt = cache_key(&tex, &illum(sun()), &o, &CpuSolver).unwrap();
         assert_ne!(k, kt, "texture");
         t.pixels[3][3] = 0;
         tex.materials[0].texture = Some(std::sync::Arc::new(t.clone()));
         assert_ne!(
             kt,
-            cache_key(&tex, sun(), &o, &CpuSolver).unwrap(),
+            cache_key(&tex, &illum(sun()), &o, &CpuSolver).unwrap(),
             "texture alpha"
         );
         // The cache directory and the model's name are not part of the key.
@@ -953,25 +1373,62 @@ mod tests {
             cache_dir: Some("/somewhere".into()),
             ..o.clone()
         };
-        assert_eq!(k, cache_key(&m, sun(), &elsewhere, &CpuSolver).unwrap());
+        assert_eq!(
+            k,
+            cache_key(&m, &illum(sun()), &elsewhere, &CpuSolver).unwrap()
+        );
         let mut renamed = m.clone();
         renamed.name = "other".into();
-        assert_eq!(k, cache_key(&renamed, sun(), &o, &CpuSolver).unwrap());
+        assert_eq!(
+            k,
+            cache_key(&renamed, &illum(sun()), &o, &CpuSolver).unwrap()
+        );
 
         assert!(matches!(
-            cache_key(&m, Vec3::ZERO, &o, &CpuSolver),
+            cache_key(&m, &illum(Vec3::ZERO), &o, &CpuSolver),
             Err(LightingError::Sun(_))
         ));
         assert!(matches!(
-            cache_key(&m, Vec3::new(f32::NAN, 1.0, 0.0), &o, &CpuSolver),
+            cache_key(&m, &illum(Vec3::new(f32::NAN, 1.0, 0.0)), &o, &CpuSolver),
             Err(LightingError::Sun(_))
         ));
         let bad = LightingOptions {
             preset: "granite".into(),
-            ..o
+            ..paper
         };
-        let e = cache_key(&m, sun(), &bad, &CpuSolver).unwrap_err();
+        let e = cache_key(&m, &illum(sun()), &bad, &CpuSolver).unwrap_err();
         assert!(e.to_string().contains("granite"), "{e}");
+    }
+
+    #[test]
+    fn free_space_holds_the_sky_and_ground_light_alone() {
+        // Physical light in free space: the sun's light is all uncollided and removed; what
+        // stays is the open sky's and ground's light, 2 L_sky + 2 L_ground per colour.
+        let dims = Dims::new(11, 12, 9).unwrap();
+        let empty = DensityGrid::empty(dims);
+        let m = model(1.0);
+        for to_sun in [Vec3::Y, sun(), Vec3::new(-0.7, 0.2, 0.6)] {
+            let (_, s) = quantise_sun(to_sun).unwrap();
+            let il = illum(to_sun);
+            let plan = solve_plan(&m, &il, s, &opts(None)).unwrap();
+            let grid = solve_density(&empty, &plan, &CpuSolver, &mut no_progress()).unwrap();
+            let l = to_model_lighting(&grid, &plan, s);
+            assert!(l.is_physical());
+            let env = il.environment(s);
+            let lg = Vec3::from_array(env.ground_radiance().map(|v| v as f32));
+            let want = 2.0 * il.sky + 2.0 * lg;
+            for i in 0..dims.sites() {
+                let (x, y, z) = dims.coords(i);
+                let v = Vec3::from_array(l.site(x, y, z));
+                assert!(
+                    (v - want).abs().max_element() < 1e-5,
+                    "{to_sun}: ({x}, {y}, {z}) {v} vs {want}"
+                );
+            }
+            // The ground under no tree sees the whole sky.
+            let g = l.ground_sky(Vec3::new(0.5, 0.0, 0.5));
+            assert!((g - Vec3::ONE).abs().max_element() < 1e-5, "{g}");
+        }
     }
 
     #[test]
@@ -992,9 +1449,14 @@ mod tests {
             Vec3::new(0.0, -1.0, 0.0),
         ] {
             let (_, s) = quantise_sun(to_sun).unwrap();
-            let medium = Preset::Leaf.params();
-            let grid = solve_density(&empty, &medium, s, &CpuSolver, &mut no_progress()).unwrap();
-            let l = normalise(&grid, s);
+            let paper = LightingOptions {
+                light: Light::Paper,
+                ..opts(None)
+            };
+            let plan = solve_plan(&model(1.0), &illum(to_sun), s, &paper).unwrap();
+            let grid = solve_density(&empty, &plan, &CpuSolver, &mut no_progress()).unwrap();
+            let l = to_model_lighting(&grid, &plan, s);
+            assert!(!l.is_physical());
             for x in 0..dims.nx {
                 for y in 0..dims.ny {
                     for z in 0..dims.nz {
@@ -1022,12 +1484,23 @@ mod tests {
     #[test]
     fn shadow_under_the_plate() {
         let m = model(1.0);
-        let (l, _) =
-            model_lighting(&m, Vec3::Y, &opts(None), &CpuSolver, &mut no_progress()).unwrap();
+        let (l, _) = model_lighting(
+            &m,
+            &illum(Vec3::Y),
+            &opts(None),
+            &CpuSolver,
+            &mut no_progress(),
+        )
+        .unwrap();
         let under = l.sample(Vec3::new(0.6, 0.5, 0.6));
         let above = l.sample(Vec3::new(0.6, 1.05 + 1.0 / N as f32 * 2.0, 0.6));
-        assert!(under.max_element() < 0.9, "under {under}");
-        assert!(under.max_element() < above.min_element(), "{under} {above}");
+        // The plate hides the sky from below (green leaks through it most): less light under
+        // it than above in every colour.
+        assert!(
+            (under - above).max_element() < 0.0
+                && luminance(under.to_array()) < 0.95 * luminance(above.to_array()),
+            "under {under}, above {above}"
+        );
     }
 
     /// A lighting grid holding `f(position)` with unit normalisation.
@@ -1127,7 +1600,7 @@ mod tests {
         let cache = file.join("cache");
         let e = model_lighting(
             &model(1.0),
-            sun(),
+            &illum(sun()),
             &opts(Some(&cache)),
             &CpuSolver,
             &mut no_progress(),
@@ -1140,12 +1613,18 @@ mod tests {
     #[test]
     fn model_errors_pass_through() {
         let empty = Model::new("nothing", Mesh::default(), vec![]);
-        let e =
-            model_lighting(&empty, sun(), &opts(None), &CpuSolver, &mut no_progress()).unwrap_err();
+        let e = model_lighting(
+            &empty,
+            &illum(sun()),
+            &opts(None),
+            &CpuSolver,
+            &mut no_progress(),
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("nothing"), "{e}");
         let e = model_lighting(
             &model(1.0),
-            sun(),
+            &illum(sun()),
             &LightingOptions {
                 grid: 2,
                 ..opts(None)
@@ -1170,6 +1649,7 @@ mod tests {
                 &VoxelizeOptions {
                     grid: n,
                     alpha_test: true,
+                    occupancy: Occupancy::Area,
                 },
             )
             .unwrap();

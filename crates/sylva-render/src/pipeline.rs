@@ -18,7 +18,8 @@ use sylva_wgpu::GpuContext;
 use crate::gpu_frame::{FrameError, GpuFrame};
 use crate::indirect::{IndirectLight, ModelGridLight};
 use crate::lighting::{
-    model_lighting, LightingError, LightingOptions, LightingReport, LightingSource, ModelLighting,
+    model_lighting, Illumination, Light, LightingError, LightingOptions, LightingReport,
+    LightingSource, ModelLighting,
 };
 use crate::output::{write_exr, write_png, OutputError};
 use crate::render::{
@@ -129,6 +130,8 @@ pub struct LbPlan<'a> {
     pub grid: Option<usize>,
     /// The lighting cache; `None`: always solve, write nothing.
     pub cache_dir: Option<&'a std::path::Path>,
+    /// The light model the grids are solved for (docs/light.md).
+    pub light: Light,
 }
 
 /// How [`PreparedScene::new`] prepares a scene.
@@ -143,9 +146,11 @@ pub struct PrepareOptions<'a> {
     /// With `trace_gpu`, shade on the GPU too ([`GpuFrame`]: the whole frame in one kernel);
     /// otherwise the GPU answers ray queries and the CPU shades.
     pub shade_on_gpu: bool,
-    /// Scale of the LB indirect light.
+    /// The light model (docs/light.md); the LB plan's is set to it.
+    pub light: Light,
+    /// Scale of the LB indirect light (1: as computed).
     pub indirect: f32,
-    /// Sky light on the ground as a fraction of the sun's.
+    /// Paper light: sky light on the ground as a fraction of the sun's.
     pub sky_ambient: f32,
     /// The largest frame that will be rendered, `(width, height, rays per pixel)`: its memory
     /// is checked before any LB or acceleration work.
@@ -160,6 +165,7 @@ impl Default for PrepareOptions<'_> {
             traversal: TraversalConfig::default(),
             trace_gpu: None,
             shade_on_gpu: true,
+            light: s.light,
             indirect: s.indirect,
             sky_ambient: s.sky_ambient,
             largest_frame: None,
@@ -227,6 +233,31 @@ impl Tracer {
     }
 }
 
+/// The light around `scene`'s plants under its own sun of intensity 1
+/// ([`illumination`]): what the LB grids are solved for.
+pub fn scene_illumination(scene: &Scene) -> Illumination {
+    illumination(
+        scene,
+        scene_to_sun(scene),
+        ShadingParams::default().sun_irradiance,
+    )
+}
+
+/// The light around `scene`'s plants: its 6500 K sun of irradiance `sun_irradiance` towards
+/// `to_sun`, its sky and its ground.
+pub fn illumination(scene: &Scene, to_sun: Vec3, sun_irradiance: f32) -> Illumination {
+    let sun_colour = Vec3::from_array(sylva_core::blackbody_rgb(sylva_core::SUN_TEMPERATURE_K));
+    Illumination {
+        sun_to: to_sun,
+        sun: sun_colour * sun_irradiance,
+        sky: Vec3::from_array(scene.sky_color),
+        ground: scene
+            .ground
+            .enabled
+            .then(|| Vec3::from_array(scene.ground.color)),
+    }
+}
+
 /// A scene ready to render: its LB lighting and acceleration structure built.
 pub struct PreparedScene {
     pub scene: Scene,
@@ -255,6 +286,7 @@ pub fn scene_to_sun(scene: &Scene) -> Vec3 {
 pub fn lighting_options(scene: &Scene, lb: &LbPlan) -> LightingOptions {
     LightingOptions {
         grid: lb.grid.unwrap_or(scene.lb.grid as usize),
+        light: lb.light,
         preset: scene.lb.preset.clone(),
         cache_dir: lb.cache_dir.map(PathBuf::from),
     }
@@ -269,13 +301,13 @@ pub fn light_models(
 ) -> Result<(Vec<ModelLighting>, usize), PipelineError> {
     let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
     let lopts = lighting_options(scene, lb);
-    let to_sun = scene_to_sun(scene);
+    let illum = scene_illumination(scene);
     let mut lighting = Vec::with_capacity(scene.models.len());
     let mut cached = 0;
     for model in &scene.models {
         let _m = tracing::info_span!(stage::LB_MODEL, model = %model.name).entered();
         progress.start(&format!("LB {}", model.name), 3);
-        let lit = model_lighting(model, to_sun, &lopts, lb.solver, &mut |c, step, max| {
+        let lit = model_lighting(model, &illum, &lopts, lb.solver, &mut |c, step, max| {
             progress.set((c * max + step) as u64, 3 * max as u64)
         });
         progress.finish();
@@ -301,7 +333,11 @@ impl PreparedScene {
         let shading = Self::check(&scene, opts)?;
         let (lighting, cached) = match &opts.lb {
             Some(lb) => {
-                let (lit, cached) = light_models(&scene, lb, progress)?;
+                let lb = LbPlan {
+                    light: opts.light,
+                    ..*lb
+                };
+                let (lit, cached) = light_models(&scene, &lb, progress)?;
                 (lit.into_iter().map(Some).collect(), cached)
             }
             None => ((0..scene.models.len()).map(|_| None).collect(), 0),
@@ -345,6 +381,7 @@ impl PreparedScene {
         })?;
         let g = preset.params().colours.map(|c| c.g as f32);
         let shading = ShadingParams {
+            light: opts.light,
             indirect: opts.indirect,
             sky_ambient: opts.sky_ambient,
             leaf_transmission: transmission_from_g(g),
@@ -373,7 +410,9 @@ impl PreparedScene {
         let light = ModelGridLight::new(lighting, &scene.models, tracer.cpu().accel.instances());
         let materials = shade_materials(&scene.models);
         let gpu_frame = match tracer.gpu() {
-            Some(t) if opts.shade_on_gpu => {
+            // shade.wgsl mirrors the paper light's shading; the physical light's frames are
+            // traced on the GPU and shaded on the CPU (docs/light.md).
+            Some(t) if opts.shade_on_gpu && shading.light == Light::Paper => {
                 let _span = tracing::info_span!(stage::ACCEL_BUILD).entered();
                 Some(GpuFrame::new(t, &scene, &materials, &light)?)
             }

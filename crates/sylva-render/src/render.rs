@@ -20,8 +20,10 @@ use sylva_geom::{Camera, Scene};
 use sylva_trace::{Hit, PinholeCamera, Ray, RayQuery, ShadowRay, TraceError, TraceStats, PACKET};
 
 use crate::indirect::IndirectLight;
+use crate::lighting::Light;
 use crate::shade::{
-    local_light, needs_shadow_ray, Radiance, ShadeMaterial, ShadingParams, SurfacePoint,
+    indirect_light, local_light, needs_shadow_ray, Radiance, ShadeMaterial, ShadingParams,
+    SurfacePoint,
 };
 
 /// Tile edge in pixels.
@@ -626,6 +628,7 @@ impl<'a> Renderer<'a> {
             view,
             colour: Vec3::ONE,
             leaf,
+            optics: sylva_geom::Optics::OPAQUE,
         };
         let shadow = needs_shadow_ray(&probe, self.to_sun)
             .then(|| self.shadow_ray(point, ng, Some(hit.instance)));
@@ -675,11 +678,21 @@ impl<'a> Renderer<'a> {
             SampleGeom::Ground { point, lit } => {
                 let c = self.ground_colour * self.sun;
                 let cos = self.to_sun.y.max(0.0);
-                Radiance {
-                    local: if lit { c * cos } else { Vec3::ZERO },
-                    indirect: c * (p.sky_ambient * self.light.ground_sky(point)),
-                    albedo: c,
-                    sky: Vec3::ZERO,
+                let local = if lit { c * cos } else { Vec3::ZERO };
+                match p.light {
+                    // The open ground takes π L_sky from the sky: L_sky in units of E0.
+                    Light::Physical => Radiance {
+                        local,
+                        indirect: self.ground_colour * self.sky * self.light.ground_sky(point),
+                        albedo: self.ground_colour,
+                        sky: Vec3::ZERO,
+                    },
+                    Light::Paper => Radiance {
+                        local,
+                        indirect: c * (p.sky_ambient * self.light.ground_sky(point).x),
+                        albedo: c,
+                        sky: Vec3::ZERO,
+                    },
                 }
             }
             SampleGeom::Plant { point, normal, lit } => {
@@ -707,10 +720,14 @@ impl<'a> Renderer<'a> {
                     view: -ray.dir,
                     colour,
                     leaf: material.leaf,
+                    optics: material.optics,
                 };
-                let albedo = colour * self.sun;
+                let albedo = match p.light {
+                    Light::Physical => s.albedo(Light::Physical),
+                    Light::Paper => colour * self.sun,
+                };
                 let indirect = match self.light.plant(hit.instance, inst, point) {
-                    Some(l) => l * albedo * p.indirect,
+                    Some(l) => indirect_light(&s, l, self.sun, p),
                     None => Vec3::ZERO,
                 };
                 Radiance {

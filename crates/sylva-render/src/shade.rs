@@ -1,33 +1,44 @@
-//! Shading (SPEC §2, paper 000 §3): the local sunlight at a hit, split into the parts the
-//! comparison modes of 000 Fig. 2 recombine.
+//! Shading (SPEC §2, paper 000 §3, docs/light.md): the light at a hit, split into the parts
+//! the comparison modes of 000 Fig. 2 recombine. Two light models ([`Light`]):
 //!
-//! * Local light: diffuse `k_d (N·L)` and specular `k_s (V·R)^s` with the sun's 6500 K black-body
-//!   colour, zero where the shadow ray is blocked. Leaves are two-sided: the normal faces the
-//!   viewer, and a leaf lit from behind transmits `k_d · T/R · |N·L|` (light through leaves),
-//!   with the transmittance/reflectance ratio `T/R = (1 + g) / (1 - g)` of the LB preset's `g`
-//!   per colour (000 Table 1 defines `g = (T - R) / (T + R)`).
-//! * Indirect light: the model's LB solution at the hit (normalised so free-space sunlight is 1)
-//!   times the texture colour, the sun colour and [`ShadingParams::indirect`].
-//! * Albedo: texture colour × sun colour, what a constant ambient multiplies (the "ambient" mode).
-//! * The ground takes the sun and, as indirect light, a constant sky ambient.
+//! * **Physical** (default). A surface of colour `c` reflects `R = c ⊙ reflect` and (leaves)
+//!   transmits `T = c ⊙ transmit` ([`sylva_geom::Optics`]), both Lambertian, the same
+//!   material the LB medium and the Mitsuba export use. Local light: the sun's `R (N·L)` on
+//!   the lit side, `T |N·L|` through a leaf lit from behind, zero where the shadow ray is
+//!   blocked. Indirect light: a sheet in the LB light `u` (scattered sunlight, sky and ground;
+//!   fluence in units of `E0`) sends `(R + T) u / 4` to either side (bark `R u / 4`), times
+//!   [`ShadingParams::indirect`] (1). The ground reflects its albedo of the sun and of the
+//!   sky's light that reaches it.
+//! * **Paper** (000). Diffuse `k_d (N·L)` and specular `k_s (V·R)^s`; a leaf lit from behind
+//!   transmits `k_d · T/R · |N·L|` with `T/R = (1 + g) / (1 - g)` of the LB preset's `g`;
+//!   indirect light is the normalised LB total times `k_d`, the sun colour and
+//!   [`ShadingParams::indirect`]; the ground takes a constant sky ambient.
+//! * Albedo: what a constant ambient multiplies (the "ambient" mode): physical, the response
+//!   to a uniform unit radiance (`R + T`, bark `R`, ground `ρ`); paper, `k_d` × sun colour.
 
 use glam::{Vec2, Vec3};
 use sylva_core::colour::srgb_to_linear;
-use sylva_geom::{Material, MaterialKind, Model, Texture, Wrap};
+use sylva_geom::{Material, MaterialKind, Model, Optics, Texture, Wrap};
+use sylva_lb::light::SHEET_RADIANCE_PER_FLUENCE;
+
+use crate::lighting::Light;
 
 /// Shading constants that the papers leave open (documented in docs/render.md).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ShadingParams {
     /// Sun irradiance on a surface facing it (luminance units; the sun colour has luminance 1).
     pub sun_irradiance: f32,
-    /// Scale of the LB light added as indirect light.
+    /// The light model.
+    pub light: Light,
+    /// Scale of the LB light added as indirect light (1: as computed).
     pub indirect: f32,
-    /// Constant sky light on the ground, as a fraction of the sun irradiance.
+    /// Paper light: constant sky light on the ground, as a fraction of the sun irradiance.
     pub sky_ambient: f32,
-    /// Specular coefficient and exponent of leaves (waxy cuticle) and of bark.
+    /// Paper light: specular coefficient and exponent of leaves (waxy cuticle) and of bark.
     pub leaf_specular: (f32, f32),
     pub wood_specular: (f32, f32),
-    /// Transmittance / reflectance per colour of leaves (from the LB preset's `g`).
+    /// Paper light: transmittance / reflectance per colour of leaves (from the LB preset's
+    /// `g`).
     pub leaf_transmission: [f32; 3],
 }
 
@@ -35,7 +46,8 @@ impl Default for ShadingParams {
     fn default() -> Self {
         ShadingParams {
             sun_irradiance: 1.0,
-            indirect: 0.5,
+            light: Light::Physical,
+            indirect: 1.0,
             sky_ambient: 0.25,
             leaf_specular: (0.06, 24.0),
             wood_specular: (0.02, 8.0),
@@ -138,6 +150,7 @@ pub struct ShadeMaterial {
     pub leaf: bool,
     pub base: Vec3,
     pub texture: Option<LinearTexture>,
+    pub optics: Optics,
 }
 
 impl ShadeMaterial {
@@ -146,6 +159,7 @@ impl ShadeMaterial {
             leaf: m.kind == MaterialKind::Leaf,
             base: Vec3::from_array(m.base_color),
             texture: m.texture.as_deref().map(LinearTexture::new),
+            optics: m.optics,
         }
     }
 
@@ -209,6 +223,44 @@ pub struct SurfacePoint {
     /// Surface colour (linear).
     pub colour: Vec3,
     pub leaf: bool,
+    /// Reflectance and transmittance as factors of the colour (physical light).
+    pub optics: Optics,
+}
+
+impl SurfacePoint {
+    /// Lambertian reflectance `R`.
+    pub fn reflectance(&self) -> Vec3 {
+        self.colour * Vec3::from_array(self.optics.reflect)
+    }
+
+    /// Lambertian transmittance `T` (zero for opaque surfaces).
+    pub fn transmittance(&self) -> Vec3 {
+        if self.leaf {
+            self.colour * Vec3::from_array(self.optics.transmit)
+        } else {
+            Vec3::ZERO
+        }
+    }
+
+    /// What a uniform unit radiance from all directions makes the surface send back (the
+    /// ambient mode's albedo): physical `R + T`; paper `k_d`.
+    pub fn albedo(&self, light: Light) -> Vec3 {
+        match light {
+            Light::Physical => self.reflectance() + self.transmittance(),
+            Light::Paper => self.colour,
+        }
+    }
+}
+
+/// The indirect light a surface sends to the viewer from the LB light `lb` at its point
+/// (physical: LB units, coloured; paper: normalised, times `sun`, the sun's colour).
+pub fn indirect_light(s: &SurfacePoint, lb: Vec3, sun: Vec3, p: &ShadingParams) -> Vec3 {
+    match p.light {
+        Light::Physical => {
+            lb * s.albedo(Light::Physical) * (SHEET_RADIANCE_PER_FLUENCE * p.indirect)
+        }
+        Light::Paper => lb * s.colour * sun * p.indirect,
+    }
 }
 
 /// How much of the sun's light reaches the viewer from a surface, per unit sun irradiance and
@@ -220,6 +272,13 @@ pub fn local_light(s: &SurfacePoint, to_sun: Vec3, lit: bool, p: &ShadingParams)
         return Vec3::ZERO;
     }
     let cos = s.normal.dot(to_sun);
+    if p.light == Light::Physical {
+        return if cos > 0.0 {
+            s.reflectance() * cos
+        } else {
+            s.transmittance() * (-cos)
+        };
+    }
     if cos > 0.0 {
         let (ks, shininess) = if s.leaf {
             p.leaf_specular
@@ -252,7 +311,65 @@ mod tests {
             view: Vec3::Y,
             colour: Vec3::new(0.2, 0.5, 0.1),
             leaf,
+            optics: if leaf {
+                Optics::leaf([0.5, 1.5, 0.25])
+            } else {
+                Optics::OPAQUE
+            },
         }
+    }
+
+    fn paper() -> ShadingParams {
+        ShadingParams {
+            light: Light::Paper,
+            indirect: 0.5,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn physical_leaves_reflect_r_and_transmit_t() {
+        let p = ShadingParams::default();
+        assert_eq!(p.light, Light::Physical);
+        let sun = Vec3::new(0.6, 0.8, 0.0);
+        let leaf = point(Vec3::Y, true);
+        let (r, t) = (leaf.colour, leaf.colour * Vec3::new(0.5, 1.5, 0.25));
+        // Front-lit: R cos, no specular lobe, whatever the view.
+        for view in [Vec3::Y, Vec3::new(-0.6, 0.8, 0.0)] {
+            let s = SurfacePoint { view, ..leaf };
+            let l = local_light(&s, sun, true, &p);
+            assert!((l - r * 0.8).abs().max_element() < 1e-6, "{l}");
+        }
+        // Back-lit: T |cos|; in shadow nothing.
+        let l = local_light(&leaf, -sun, true, &p);
+        assert!((l - t * 0.8).abs().max_element() < 1e-6, "{l}");
+        assert_eq!(local_light(&leaf, sun, false, &p), Vec3::ZERO);
+        // Bark: R cos in front, nothing behind.
+        let bark = point(Vec3::Y, false);
+        assert!(
+            (local_light(&bark, sun, true, &p) - bark.colour * 0.8)
+                .abs()
+                .max_element()
+                < 1e-6
+        );
+        assert_eq!(local_light(&bark, -sun, true, &p), Vec3::ZERO);
+        // Indirect: (R + T) u / 4, bark R u / 4; the sun's colour is in u already.
+        let u = Vec3::new(0.4, 0.8, 1.2);
+        let i = indirect_light(&leaf, u, Vec3::splat(9.0), &p);
+        assert!((i - (r + t) * u * 0.25).abs().max_element() < 1e-6, "{i}");
+        let i = indirect_light(&bark, u, Vec3::splat(9.0), &p);
+        assert!(
+            (i - bark.colour * u * 0.25).abs().max_element() < 1e-6,
+            "{i}"
+        );
+        assert_eq!(leaf.albedo(Light::Physical), r + t);
+        assert_eq!(leaf.albedo(Light::Paper), leaf.colour);
+        // An isolated leaf under a sky of radiance L alone (ground black): the LB value is
+        // 2 L, the leaf sends (R + T) L / 2, the orientation average of R L (facing the sky)
+        // and T L (facing the ground).
+        let sky = Vec3::new(0.55, 0.7, 0.95);
+        let i = indirect_light(&leaf, 2.0 * sky, Vec3::ONE, &p);
+        assert!((i - (r + t) * sky * 0.5).abs().max_element() < 1e-6);
     }
 
     #[test]
@@ -260,7 +377,7 @@ mod tests {
         let p = ShadingParams {
             leaf_specular: (0.0, 1.0),
             wood_specular: (0.0, 1.0),
-            ..Default::default()
+            ..paper()
         };
         let s = point(Vec3::Y, false);
         let sun = Vec3::new(0.6, 0.8, 0.0);
@@ -277,7 +394,7 @@ mod tests {
 
     #[test]
     fn specular_peaks_in_the_mirror_direction() {
-        let p = ShadingParams::default();
+        let p = paper();
         let mut s = point(Vec3::Y, true);
         s.colour = Vec3::ZERO;
         let sun = Vec3::new(0.6, 0.8, 0.0);

@@ -73,11 +73,14 @@ fn prepare(dir: &Path, gpu: Option<&GpuContext>, shade_on_gpu: bool) -> Prepared
     let opts = PrepareOptions {
         lb: Some(LbPlan {
             solver: &CpuSolver,
+            light: sylva_render::Light::Paper,
             grid: None,
             cache_dir: Some(&dir.join("cache")),
         }),
         trace_gpu: gpu,
         shade_on_gpu,
+        // shade.wgsl implements the paper light; the physical light shades on the CPU.
+        light: sylva_render::Light::Paper,
         ..PrepareOptions::default()
     };
     PreparedScene::new(scene, &opts, &Silent).unwrap()

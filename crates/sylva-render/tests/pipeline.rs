@@ -79,6 +79,7 @@ fn prepare(path: &Path, cache: &Path, progress: &dyn Progress) -> PreparedScene 
     let opts = PrepareOptions {
         lb: Some(LbPlan {
             solver: &CpuSolver,
+            light: sylva_render::Light::Physical,
             grid: None,
             cache_dir: Some(cache),
         }),

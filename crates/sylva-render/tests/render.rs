@@ -7,7 +7,7 @@ use std::path::Path;
 
 use glam::Vec3;
 use sylva_geom::Scene;
-use sylva_render::lighting::{model_lighting, LightingOptions, ModelLighting};
+use sylva_render::lighting::{model_lighting, Light, LightingOptions, ModelLighting};
 use sylva_render::shade::shade_materials;
 use sylva_render::{
     mean_luminance, Frame, Mode, ModelGridLight, Region, RenderError, RenderSettings, Renderer,
@@ -122,9 +122,23 @@ fn close(a: Vec3, b: Vec3) -> bool {
 
 #[test]
 fn lit_and_shadowed_pixels_match_hand_computed_values() {
+    for light in Light::ALL {
+        hand_computed_values(light);
+    }
+}
+
+fn hand_computed_values(light: Light) {
     let dir = tempfile::tempdir().unwrap();
     let scene = board_scene(dir.path(), "");
-    let frame = render(&scene, &[None], 1);
+    let p = ShadingParams {
+        light,
+        ..ShadingParams::default()
+    };
+    let frame = render_with(
+        &scene,
+        &[None],
+        &RenderSettings::full(scene.camera, 1, 7, p),
+    );
     let cam = PinholeCamera::new(&scene.camera).unwrap();
     let px = |p: Vec3| {
         let (x, y) = pixel_of(&cam, p);
@@ -135,13 +149,23 @@ fn lit_and_shadowed_pixels_match_hand_computed_values() {
     };
     let sun = sun_colour();
     let cos = to_sun().y;
-    let p = ShadingParams::default();
+    let physical = light == Light::Physical;
+    // The ground's indirect light: the open sky's (physical: its radiance L_sky is an
+    // irradiance π L_sky, i.e. L_sky in units of E0), or a constant ambient of the sun.
+    let ground_sky = if physical {
+        GROUND * SKY
+    } else {
+        GROUND * sun * p.sky_ambient
+    };
 
-    // Ground in the sun: ground × sun × cos θ; indirect = the sky ambient.
+    // Ground in the sun: ground × sun × cos θ.
     let (lit, _) = px(Vec3::new(6.0, 0.0, 4.0));
     assert!(close(lit.local, GROUND * sun * cos), "{lit:?}");
-    assert!(close(lit.indirect, GROUND * sun * p.sky_ambient));
-    assert!(close(lit.albedo, GROUND * sun));
+    assert!(close(lit.indirect, ground_sky));
+    assert!(close(
+        lit.albedo,
+        if physical { GROUND } else { GROUND * sun }
+    ));
     assert_eq!(lit.sky, Vec3::ZERO);
 
     // The board's shadow: its centre shifted by -2 · (0.3 / 1.0) along x.
@@ -161,9 +185,10 @@ fn lit_and_shadowed_pixels_match_hand_computed_values() {
     };
     assert!(!over_board && (q.x + 0.6).abs() < 0.5 && q.z.abs() < 0.5);
     assert_eq!(shadow.local, Vec3::ZERO, "{shadow:?}");
-    assert!(close(shadow.indirect, GROUND * sun * p.sky_ambient));
+    assert!(close(shadow.indirect, ground_sky));
 
-    // The board, seen from above: Lambert + Phong by hand at the pixel's hit point.
+    // The board, seen from above: Lambert (+ Phong in the paper's light) by hand at the
+    // pixel's hit point.
     let (board, ray) = px(Vec3::new(0.3, 2.0, 0.6));
     let t = (2.0 - ray.origin.y) / ray.dir.y;
     let hit = ray.at(t);
@@ -172,7 +197,11 @@ fn lit_and_shadowed_pixels_match_hand_computed_values() {
     let l = to_sun();
     let r = 2.0 * n.dot(l) * n - l;
     let v = -ray.dir;
-    let (ks, s) = p.wood_specular;
+    let (ks, s) = if physical {
+        (0.0, 1.0)
+    } else {
+        p.wood_specular
+    };
     let want = (KD * cos + Vec3::splat(ks * r.dot(v).max(0.0).powf(s))) * sun;
     assert!(close(board.local, want), "{:?} vs {want:?}", board.local);
     assert_eq!(
@@ -190,15 +219,17 @@ fn lit_and_shadowed_pixels_match_hand_computed_values() {
 fn with_lb(scene: &Scene) -> Vec<Option<ModelLighting>> {
     let opts = LightingOptions {
         grid: 16,
+        light: Light::Physical,
         preset: "leaf".into(),
         cache_dir: None,
     };
+    let illum = sylva_render::illumination(scene, to_sun(), 1.0);
     scene
         .models
         .iter()
         .map(|m| {
             Some(
-                model_lighting(m, to_sun(), &opts, &sylva_lb::CpuSolver, &mut |_, _, _| {})
+                model_lighting(m, &illum, &opts, &sylva_lb::CpuSolver, &mut |_, _, _| {})
                     .unwrap()
                     .0,
             )
@@ -280,8 +311,14 @@ seed = 3
 fn supersampling_averages_sub_pixel_samples() {
     let dir = tempfile::tempdir().unwrap();
     let scene = board_scene(dir.path(), "");
-    let one = render(&scene, &[None], 1);
-    let four = render(&scene, &[None], 4);
+    // The paper light: the board's wood and the ground differ in their local light.
+    let paper = ShadingParams {
+        light: Light::Paper,
+        ..ShadingParams::default()
+    };
+    let at = |rpp| RenderSettings::full(scene.camera, rpp, 7, paper);
+    let one = render_with(&scene, &[None], &at(1));
+    let four = render_with(&scene, &[None], &at(4));
     // Inside the lit ground every sample sees the same radiance: 4 rays average to the 1-ray
     // value; on the board's edge they mix board and ground.
     let cam = PinholeCamera::new(&scene.camera).unwrap();
@@ -335,12 +372,12 @@ resolution = [48, 36]
     let scene = sylva_scene::load(path.to_str().unwrap()).unwrap();
     let lighting = with_lb(&scene);
     let frame = render(&scene, &lighting, 1);
-    let sun = sun_colour();
-    let open_sky = GROUND * sun * ShadingParams::default().sky_ambient;
+    // Physical light: the open ground reflects its albedo of the sky's radiance.
+    let open_sky = GROUND * Vec3::from_array(scene.sky_color);
     let ground: Vec<Vec3> = frame
         .pixels
         .iter()
-        .filter(|r| close(r.albedo, GROUND * sun))
+        .filter(|r| close(r.albedo, GROUND))
         .map(|r| r.indirect)
         .collect();
     assert!(ground.len() > 100);
@@ -351,12 +388,12 @@ resolution = [48, 36]
         "no shade under the rose"
     );
     assert!(ground.iter().all(|g| g.x <= open_sky.x * (1.0 + 1e-5)));
-    // Without LB grids the ground takes the constant sky ambient everywhere.
+    // Without LB grids the ground takes the open sky everywhere.
     let plain = render(&scene, &[None], 1);
     assert!(plain
         .pixels
         .iter()
-        .filter(|r| close(r.albedo, GROUND * sun))
+        .filter(|r| close(r.albedo, GROUND))
         .all(|r| close(r.indirect, open_sky)));
 }
 
@@ -452,7 +489,8 @@ fn any_camera_renders_its_own_view() {
     // camera's view would put other things there.
     let (x, y) = pixel_of(&cam, Vec3::new(0.9, 2.0, 0.0));
     let px = frame.pixels[(y * frame.width + x) as usize];
-    assert!(close(px.albedo, KD * sun_colour()), "{px:?}");
+    // Physical albedo: the wood's reflectance, its colour.
+    assert!(close(px.albedo, KD), "{px:?}");
     // Above the board: sky.
     assert_eq!(frame.pixels[0].sky, SKY);
 }

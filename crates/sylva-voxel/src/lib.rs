@@ -23,6 +23,10 @@
 //! * **Determinism.** Sub-cells are bits in one atomic word per cell, set with `fetch_or`, so
 //!   the result is independent of the order triangles are processed in and of the thread count.
 
+mod area;
+
+pub use area::{plant_area, AreaGrid};
+
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use glam::DVec3;
@@ -43,12 +47,34 @@ pub const MAX_GRID: usize = sylva_lb::grid::MAX_EDGE;
 /// Smallest `N`: the two shell sites plus two interior ones.
 pub const MIN_GRID: usize = 4;
 
+/// What a cell's density measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Occupancy {
+    /// The probability that light crossing the cell meets a leaf or bark, from the leaf and
+    /// bark area in it ([`plant_area`]; docs/light.md): the physical medium.
+    #[default]
+    Area,
+    /// The share of the cell's 3 × 3 × 3 sub-cells that a triangle meets (000 §4.2).
+    SubCells,
+}
+
+impl Occupancy {
+    pub fn name(self) -> &'static str {
+        match self {
+            Occupancy::Area => "area",
+            Occupancy::SubCells => "subcells",
+        }
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct VoxelizeOptions {
     /// `N`: sites along the model's longest edge, shell included.
     pub grid: usize,
     /// Leaf triangles with a texture count only where the texture is opaque.
     pub alpha_test: bool,
+    /// What the density measures.
+    pub occupancy: Occupancy,
 }
 
 impl Default for VoxelizeOptions {
@@ -56,6 +82,7 @@ impl Default for VoxelizeOptions {
         VoxelizeOptions {
             grid: DEFAULT_GRID,
             alpha_test: true,
+            occupancy: Occupancy::Area,
         }
     }
 }
@@ -206,7 +233,12 @@ impl SubcellMasks {
 /// The model's density grid: `opts.grid` sites along its longest edge (see the module docs).
 pub fn voxelize(model: &Model, opts: &VoxelizeOptions) -> Result<DensityGrid, VoxelizeError> {
     let placement = placement_for(model, opts.grid)?;
-    voxelize_masks(model, &placement, opts.alpha_test)?.to_density_grid()
+    match opts.occupancy {
+        Occupancy::Area => plant_area(model, &placement, opts.alpha_test)?.to_density_grid(),
+        Occupancy::SubCells => {
+            voxelize_masks(model, &placement, opts.alpha_test)?.to_density_grid()
+        }
+    }
 }
 
 /// The placement [`voxelize`] uses for `model` with `grid` sites along its longest edge,

@@ -9,8 +9,8 @@ use sylva_geom::{Material, MaterialKind, Mesh, Model, Texture, Wrap};
 use sylva_grow::Species;
 use sylva_lb::Dims;
 use sylva_voxel::{
-    subcell_bit, voxelize, voxelize_masks, GridPlacement, SubcellMasks, VoxelizeError,
-    VoxelizeOptions, SUB, SUBCELLS,
+    plant_area, subcell_bit, voxelize, voxelize_masks, GridPlacement, Occupancy, SubcellMasks,
+    VoxelizeError, VoxelizeOptions, SUB, SUBCELLS,
 };
 
 const WOOD: u8 = 0;
@@ -24,6 +24,7 @@ fn materials(leaf_texture: Option<Texture>) -> Vec<Material> {
             base_color: [0.3, 0.2, 0.1],
             texture: None,
             two_sided: false,
+            optics: sylva_geom::Optics::OPAQUE,
         },
         Material {
             name: "leaf".into(),
@@ -31,6 +32,7 @@ fn materials(leaf_texture: Option<Texture>) -> Vec<Material> {
             base_color: [0.1, 0.5, 0.1],
             texture: leaf_texture.map(Arc::new),
             two_sided: true,
+            optics: sylva_geom::Optics::FOREST_LEAF,
         },
     ]
 }
@@ -139,6 +141,7 @@ fn flat_model_gets_one_interior_cell_across_and_sits_in_its_middle_layer() {
         &VoxelizeOptions {
             grid: 5,
             alpha_test: true,
+            occupancy: Occupancy::SubCells,
         },
     )
     .unwrap();
@@ -196,6 +199,7 @@ fn box_surface_fills_shell_cells_and_leaves_the_inside_empty() {
         &VoxelizeOptions {
             grid: 8,
             alpha_test: true,
+            occupancy: Occupancy::SubCells,
         },
     )
     .unwrap();
@@ -479,6 +483,7 @@ fn random_model(seed: u64, wrap: Wrap) -> Model {
         base_color: [0.1, 0.5, 0.1],
         texture: Some(Arc::new(random_texture(&mut rng, 7, 5, wrap))),
         two_sided: true,
+        optics: sylva_geom::Optics::FOREST_LEAF,
     });
     let mut model = Model::new("random", mesh, mats);
     // Corners pin the bounding box to [0, 10]³ (isolated degenerate triangles: points).
@@ -524,6 +529,7 @@ fn same_grid_on_one_and_two_threads() {
     let opts = VoxelizeOptions {
         grid: 48,
         alpha_test: true,
+        occupancy: Occupancy::SubCells,
     };
     let pool = |n| {
         rayon::ThreadPoolBuilder::new()
@@ -559,6 +565,7 @@ fn bad_input_is_refused_with_a_reason() {
     let opts = |grid| VoxelizeOptions {
         grid,
         alpha_test: true,
+        occupancy: Occupancy::SubCells,
     };
     let empty = Model::new("nothing", Mesh::default(), materials(None));
     let e = voxelize(&empty, &opts(32)).unwrap_err();
@@ -601,4 +608,137 @@ fn bad_input_is_refused_with_a_reason() {
     let tex = Some(half_texture(Wrap::Clamp));
     let e = voxelize(&Model::new("uv", mesh, materials(tex)), &opts(32)).unwrap_err();
     assert!(matches!(e, VoxelizeError::BadUv { triangle: 0, .. }), "{e}");
+}
+
+// ---------- plant area (the physical occupancy) ----------
+
+/// Relative closeness.
+fn near(a: f64, b: f64, rel: f64) -> bool {
+    (a - b).abs() <= rel * b.abs().max(1e-12)
+}
+
+#[test]
+fn leaf_area_lands_in_the_cells_it_lies_in() {
+    let p = unit_placement();
+    let d = p.dims;
+    // A 2 × 2 quad inside cell (1, 1, 1) (x, z in [3.5, 5.5], y = 4.5): area 4 in that cell.
+    let mut mesh = Mesh::default();
+    push_quad(&mut mesh, [3.5, 5.5], 4.5, [3.5, 5.5], LEAF);
+    let model = Model::new("leaf", mesh, materials(None));
+    let a = plant_area(&model, &p, true).unwrap();
+    assert!(
+        near(a.leaf[d.index(1, 1, 1)], 4.0, 1e-6),
+        "{}",
+        a.leaf[d.index(1, 1, 1)]
+    );
+    assert!(near(a.total_leaf_area(), 4.0, 1e-6));
+    assert_eq!(a.total_bark_area(), 0.0);
+    // Across the face x = 6 between cells 1 and 2: 3 in each.
+    let mut mesh = Mesh::default();
+    push_quad(&mut mesh, [4.5, 7.5], 4.5, [3.5, 5.5], LEAF);
+    let model = Model::new("leaf", mesh, materials(None));
+    let a = plant_area(&model, &p, true).unwrap();
+    for x in [1, 2] {
+        let v = a.leaf[d.index(x, 1, 1)];
+        assert!(near(v, 3.0, 1e-6), "cell {x}: {v}");
+    }
+    // Bark goes to the bark channel.
+    let mut mesh = Mesh::default();
+    push_quad(&mut mesh, [3.5, 5.5], 4.5, [3.5, 5.5], WOOD);
+    let model = Model::new("bark", mesh, materials(None));
+    let a = plant_area(&model, &p, true).unwrap();
+    assert!(near(a.total_bark_area(), 4.0, 1e-6));
+    assert_eq!(a.total_leaf_area(), 0.0);
+}
+
+#[test]
+fn leaf_area_counts_only_opaque_texels() {
+    // Left half of the texture transparent: half the area counts.
+    let mut px = vec![[40u8, 160, 40, 255]; 64];
+    for y in 0..8 {
+        for x in 0..4 {
+            px[y * 8 + x][3] = 0;
+        }
+    }
+    let tex = Texture::new(8, 8, px, Wrap::Clamp);
+    let p = unit_placement();
+    let mut mesh = Mesh::default();
+    push_quad(&mut mesh, [3.5, 5.5], 4.5, [3.5, 5.5], LEAF);
+    let model = Model::new("half", mesh, materials(Some(tex)));
+    let a = plant_area(&model, &p, true).unwrap();
+    assert!(
+        near(a.total_leaf_area(), 2.0, 0.02),
+        "{}",
+        a.total_leaf_area()
+    );
+    // Without the alpha test the whole quad counts.
+    let all = plant_area(&model, &p, false).unwrap();
+    assert!(near(all.total_leaf_area(), 4.0, 1e-6));
+}
+
+#[test]
+fn area_density_is_the_collision_probability() {
+    let p = unit_placement();
+    let d = p.dims;
+    let mut mesh = Mesh::default();
+    push_quad(&mut mesh, [3.5, 5.5], 4.5, [3.5, 5.5], LEAF);
+    push_quad(&mut mesh, [3.5, 5.5], 5.0, [3.5, 5.5], WOOD);
+    let model = Model::new("both", mesh, materials(None));
+    let a = plant_area(&model, &p, true).unwrap();
+    let g = a.to_density_grid().unwrap();
+    let i = d.index(1, 1, 1);
+    let (want, wood) = sylva_lb::light::collision_probability(4.0, 4.0, 3.0);
+    assert!(near(g.density[i] as f64, want, 1e-6) && want > 0.0);
+    assert!(near(g.wood[i] as f64, wood, 1e-6));
+    // Bark counts a quarter of its area, leaves half: the wood share is 1/3.
+    assert!(near(wood, 1.0 / 3.0, 1e-12));
+    // Empty cells stay empty.
+    assert_eq!(g.density[d.index(3, 3, 3)], 0.0);
+    // voxelize() with the area occupancy is the same grid.
+    let species = Species::builtin("dogrose").unwrap().build_model().unwrap();
+    let opts = VoxelizeOptions {
+        grid: 24,
+        alpha_test: true,
+        occupancy: Occupancy::Area,
+    };
+    let v = voxelize(&species, &opts).unwrap();
+    let placement = sylva_voxel::placement_for(&species, 24).unwrap();
+    let direct = plant_area(&species, &placement, true)
+        .unwrap()
+        .to_density_grid()
+        .unwrap();
+    assert_eq!(v, direct);
+    assert!(v.density.iter().all(|&x| (0.0..=1.0).contains(&x)));
+}
+
+#[test]
+fn plant_area_is_the_same_on_any_thread_count() {
+    let model = Species::builtin("dogrose").unwrap().build_model().unwrap();
+    let placement = sylva_voxel::placement_for(&model, 32).unwrap();
+    let pool = |n| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .unwrap()
+    };
+    let one = pool(1).install(|| plant_area(&model, &placement, true).unwrap());
+    let two = pool(2).install(|| plant_area(&model, &placement, true).unwrap());
+    assert_eq!(one, two);
+    // The total leaf area is the leaves' opaque area: the triangles' area times the
+    // texture's opaque fraction, to the sampling's accuracy.
+    let leaf = &model.materials[1];
+    let mesh = &model.mesh;
+    let mut area = 0.0f64;
+    for (t, &m) in mesh.indices.iter().zip(&mesh.material_ids) {
+        if m == 1 {
+            let p = t.map(|i| Vec3::from_array(mesh.positions[i as usize]).as_dvec3());
+            area += 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length();
+        }
+    }
+    let opaque = area * leaf.texture.as_ref().unwrap().opaque_fraction();
+    assert!(
+        near(one.total_leaf_area(), opaque, 0.03),
+        "{} vs {opaque}",
+        one.total_leaf_area()
+    );
 }

@@ -136,6 +136,8 @@ pub fn run(a: BenchSppArgs) -> Result<()> {
         scene,
         &PrepareOptions {
             largest_frame: Some((a.width, a.height, 1)),
+            // The SPP light is normalised like the paper's LB light and shaded as it.
+            light: sylva_render::Light::Paper,
             ..PrepareOptions::default()
         },
         &Silent,

@@ -25,6 +25,9 @@ pub struct BenchVoxelArgs {
     /// Count leaves everywhere (skip the texture alpha test), to see what the test costs.
     #[arg(long)]
     no_alpha: bool,
+    /// area (the physical density, default) or subcells (000's sub-cell count).
+    #[arg(long, value_enum, default_value = "area")]
+    occupancy: super::voxelize::OccupancyArg,
 }
 
 #[derive(Serialize)]
@@ -41,6 +44,7 @@ struct VoxelBench {
     mean_density: f64,
     threads: usize,
     alpha_test: bool,
+    occupancy: &'static str,
     runs: Vec<f64>,
 }
 
@@ -54,6 +58,7 @@ pub fn run(a: BenchVoxelArgs) -> Result<()> {
     let opts = VoxelizeOptions {
         grid: a.grid,
         alpha_test: !a.no_alpha,
+        occupancy: a.occupancy.into(),
     };
     let pb = if a.json {
         indicatif::ProgressBar::hidden()
@@ -91,6 +96,7 @@ pub fn run(a: BenchVoxelArgs) -> Result<()> {
         mean_density,
         threads: rayon::current_num_threads(),
         alpha_test: !a.no_alpha,
+        occupancy: opts.occupancy.name(),
         runs,
     };
     if a.json {

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use sylva_core::format_bytes;
 use sylva_io::export::{self, mitsuba, obj, Format};
@@ -43,20 +43,6 @@ pub struct ExportArgs {
     /// like sylva's local shading with a sun of intensity 1.
     #[arg(long, value_name = "E")]
     pub sun_irradiance: Option<f32>,
-    /// Mitsuba: leaf diffuse transmission, principledthin's diff_trans in [0, 2] (0 reflect
-    /// only, 1 reflect and transmit alike, 2 transmit only). Default: 1 + g of the scene's LB
-    /// preset (luminance-weighted), since g = (T - R) / (T + R) gives T / (R + T) = (1 + g) / 2.
-    #[arg(long, value_name = "F")]
-    pub leaf_transmission: Option<f32>,
-}
-
-/// `diff_trans` from the LB preset: g = (T − R)/(T + R) per colour (SPEC §1), weighted by the
-/// luminance of each sRGB primary since Mitsuba's parameter is one number.
-pub fn leaf_diff_trans(preset: &str) -> Result<f32> {
-    let p = sylva_lb::Preset::parse(preset)?.params();
-    let w = [0.2126, 0.7152, 0.0722];
-    let g: f64 = p.colours.iter().zip(w).map(|(c, w)| c.g * w).sum();
-    Ok((1.0 + g).clamp(0.0, 2.0) as f32)
 }
 
 /// Set by Ctrl-C during an export: the writers stop at their next progress report, and the
@@ -123,11 +109,6 @@ pub fn run(args: ExportArgs) -> Result<()> {
             if let Some(e) = args.sun_irradiance {
                 opts.sun_irradiance = e;
             }
-            opts.leaf_diff_trans = match args.leaf_transmission {
-                Some(f) => f,
-                None => leaf_diff_trans(&scene.lb.preset)
-                    .with_context(|| format!("LB preset of scene '{}'", scene.name))?,
-            };
             let pb = bar(scene.models.len() as u64, "models");
             let r = mitsuba::write(&scene, &args.output, &opts, &mut |n| {
                 pb.set_position(n);

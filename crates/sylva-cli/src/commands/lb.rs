@@ -111,6 +111,10 @@ pub struct SolveArgs {
     /// Wood fraction above which a site is brown (g = -1).
     #[arg(long, default_value_t = 0.5)]
     brown_threshold: f64,
+    /// With --model or --scene, what a site's density is: area (collision probability from
+    /// leaf and bark area) or subcells (000's sub-cell count); see `sylva voxelize --help`.
+    #[arg(long, value_enum, default_value = "area")]
+    occupancy: super::voxelize::OccupancyArg,
     /// Steps to run (default: 2 × the longest edge, as in the papers; with --tolerance,
     /// the most steps allowed, default 10 × the longest edge).
     #[arg(long)]
@@ -225,7 +229,7 @@ fn model_grid_n(grid: &str) -> Result<usize> {
 fn load_source(a: &SolveArgs, scene: Option<&SceneDesc>) -> Result<(DensityGrid, String)> {
     if let Some(spec) = &a.source.model {
         let n = model_grid_n(a.grid.as_deref().unwrap_or("128"))?;
-        let v = super::voxelize::load_and_voxelize(spec, n, true)?;
+        let v = super::voxelize::load_and_voxelize(spec, n, true, a.occupancy.into())?;
         println!(
             "voxelized {}: {}",
             v.name,
@@ -240,7 +244,7 @@ fn load_source(a: &SolveArgs, scene: Option<&SceneDesc>) -> Result<(DensityGrid,
         };
         let model = load_scene_model(scene, a.scene_model.as_deref())?;
         let spec = format!("{}: {}", scene.name, model.name);
-        let v = super::voxelize::voxelize_model(&model, &spec, n, true)?;
+        let v = super::voxelize::voxelize_model(&model, &spec, n, true, a.occupancy.into())?;
         println!("voxelized {spec}: {}", super::voxelize::summary(&v.grid));
         return Ok((
             v.grid,

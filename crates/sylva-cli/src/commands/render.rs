@@ -10,7 +10,7 @@ use clap::Args;
 use sylva_geom::Model;
 use sylva_lb::LbSolver;
 use sylva_mpi::Comm;
-use sylva_render::lighting::{LightingReport, LightingSource};
+use sylva_render::lighting::{Light, LightingReport, LightingSource};
 use sylva_render::{
     load_scene, resolution, stage, tone_map_modes, write_images, LbPlan, Mode, PrepareOptions,
     PreparedScene, Progress, ShadingParams, Silent, StageClock, ToneMap,
@@ -45,10 +45,18 @@ pub struct FrameArgs {
     /// Short-stack entries of the kd-tree traversal (000 Fig. 1 uses 5).
     #[arg(long, default_value_t = sylva_trace::DEFAULT_STACK_SIZE)]
     pub stack: usize,
-    /// Scale of the LB indirect light.
+    /// Light model: physical (one material model for renderer, LB and export: exact direct
+    /// sun plus the LB's scattered, sky and ground light; docs/light.md), paper (000: the
+    /// preset's LB total light, specular highlights; its images used --indirect 0.5) or spp
+    /// (the paper's shading with the plane-parallel light and G-factor of 003 §5 instead of
+    /// LB grids: deep opacity maps in 16 directions, 16³ instance grids, leaf albedo from the
+    /// scene's [lb] preset; the `lb` mode shows the SPP light alone).
+    #[arg(long, value_parser = ["physical", "paper", "spp"], default_value = "physical")]
+    pub light: String,
+    /// Scale of the LB indirect light (1: as computed).
     #[arg(long, default_value_t = ShadingParams::default().indirect)]
     pub indirect: f32,
-    /// Sky light on the ground as a fraction of the sun's.
+    /// Paper light: sky light on the ground as a fraction of the sun's.
     #[arg(long, default_value_t = ShadingParams::default().sky_ambient)]
     pub sky_ambient: f32,
     /// LB grid sites along each model's longest edge (default: the scene's [lb] grid).
@@ -102,12 +110,6 @@ pub struct RenderArgs {
     /// Reinhard white point in scaled luminance (default: the image's brightest pixel).
     #[arg(long)]
     pub white: Option<f32>,
-    /// The indirect light on plants: `lb` (the LB grids, 000) or `spp` (the plane-parallel
-    /// model with the G-factor, 003 §5: deep opacity maps in 16 directions, 16³ instance
-    /// grids; leaf albedo from the scene's [lb] preset). With `spp`, the `lb` mode shows the
-    /// SPP light alone.
-    #[arg(long, default_value = "lb", value_parser = ["lb", "spp"])]
-    pub light: String,
 }
 
 /// A scene prepared for the frames `a` asks for, and the image size.
@@ -169,15 +171,22 @@ pub fn prepare(
     } else {
         None
     };
+    // The SPP light replaces the paper's LB grids under the paper's shading.
+    let light = match a.light.as_str() {
+        "spp" => Light::Paper,
+        l => Light::parse(l).context("--light")?,
+    };
     let opts = PrepareOptions {
         lb: solver.as_deref().map(|solver| LbPlan {
             solver,
             grid: a.lb_grid,
             cache_dir: (!a.no_cache).then_some(a.cache_dir.as_path()),
+            light,
         }),
         traversal: TraversalConfig::with_stack(a.stack),
         trace_gpu: gpu.as_ref(),
         shade_on_gpu: !a.cpu_shading,
+        light,
         indirect: a.indirect,
         sky_ambient: a.sky_ambient,
         largest_frame: Some((width, height, rays_per_pixel)),
@@ -269,7 +278,7 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
     let clock = StageClock::global();
     clock.reset();
     let t_all = Instant::now();
-    let spp = a.light == "spp";
+    let spp = a.frame.light == "spp";
     if spp && comm.is_some() {
         bail!("--light spp renders in one process: run it without mpirun");
     }

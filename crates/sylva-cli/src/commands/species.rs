@@ -144,6 +144,7 @@ fn show(name: &str, json: bool, xml: bool) -> anyhow::Result<()> {
             "bounds_max": b.max.to_array(),
             "leaf_outline": s.leaf_outline,
             "leaf_color_srgb": s.leaf_color,
+            "leaf_transmission": s.leaf_transmission,
             "bark_pattern": s.bark_pattern,
             "bark_color_srgb": s.bark_color,
             "params": params,
@@ -178,6 +179,13 @@ fn show(name: &str, json: bool, xml: bool) -> anyhow::Result<()> {
         s.bark_pattern,
         s.bark_color,
         s.seed
+    );
+    outln!(
+        o,
+        "  leaf T/R    {:.3}, {:.3}, {:.3} (transmittance / reflectance, R, G, B)",
+        s.leaf_transmission[0],
+        s.leaf_transmission[1],
+        s.leaf_transmission[2]
     );
     outln!(o, "  parameters (Arbaro names):");
     for (k, v) in s.params.entries() {

@@ -9,7 +9,7 @@ use clap::Args;
 use sylva_geom::Model;
 use sylva_lb::preview::write_density_preview;
 use sylva_lb::{DensityGrid, Element, GridFile};
-use sylva_voxel::{voxelize, VoxelizeOptions, DEFAULT_GRID};
+use sylva_voxel::{voxelize, Occupancy, VoxelizeOptions, DEFAULT_GRID};
 
 use super::progress::bar;
 
@@ -37,6 +37,27 @@ pub struct VoxelizeArgs {
     /// textures.
     #[arg(long)]
     no_alpha: bool,
+    /// What a site's density is: area (the probability that light crossing the cell meets a
+    /// leaf or bark, from their area; docs/light.md) or subcells (the share of 3×3×3
+    /// sub-cells a triangle meets, 000 §4.2).
+    #[arg(long, value_enum, default_value = "area")]
+    occupancy: OccupancyArg,
+}
+
+/// `--occupancy`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum OccupancyArg {
+    Area,
+    Subcells,
+}
+
+impl From<OccupancyArg> for Occupancy {
+    fn from(a: OccupancyArg) -> Occupancy {
+        match a {
+            OccupancyArg::Area => Occupancy::Area,
+            OccupancyArg::Subcells => Occupancy::SubCells,
+        }
+    }
 }
 
 /// A voxelized model and what was spent making it.
@@ -54,7 +75,13 @@ pub struct Voxelized {
 
 /// Voxelizes `model` (named `spec` on the command line) with `n` sites along its longest edge,
 /// with a progress bar; the metadata records where the grid came from.
-pub fn voxelize_model(model: &Model, spec: &str, n: usize, alpha_test: bool) -> Result<Voxelized> {
+pub fn voxelize_model(
+    model: &Model,
+    spec: &str,
+    n: usize,
+    alpha_test: bool,
+    occupancy: Occupancy,
+) -> Result<Voxelized> {
     let t = Instant::now();
     let pb = bar(1, "voxelize");
     pb.set_message(format!("{} triangles", model.triangle_count()));
@@ -63,6 +90,7 @@ pub fn voxelize_model(model: &Model, spec: &str, n: usize, alpha_test: bool) -> 
         &VoxelizeOptions {
             grid: n,
             alpha_test,
+            occupancy,
         },
     )
     .with_context(|| format!("voxelizing '{spec}'"))?;
@@ -79,7 +107,7 @@ pub fn voxelize_model(model: &Model, spec: &str, n: usize, alpha_test: bool) -> 
         ("model_min".to_string(), v3(b.min.to_array())),
         ("model_max".to_string(), v3(b.max.to_array())),
         ("cell_size".to_string(), cell.to_string()),
-        ("subcells".to_string(), "3x3x3".to_string()),
+        ("occupancy".to_string(), occupancy.name().to_string()),
         ("alpha_test".to_string(), alpha_test.to_string()),
     ];
     Ok(Voxelized {
@@ -94,11 +122,16 @@ pub fn voxelize_model(model: &Model, spec: &str, n: usize, alpha_test: bool) -> 
 }
 
 /// Loads `spec` (species name or model file) with a progress bar and voxelizes it.
-pub fn load_and_voxelize(spec: &str, n: usize, alpha_test: bool) -> Result<Voxelized> {
+pub fn load_and_voxelize(
+    spec: &str,
+    n: usize,
+    alpha_test: bool,
+    occupancy: Occupancy,
+) -> Result<Voxelized> {
     let t = Instant::now();
     let model = load_model_with_bar(spec)?;
     let load_s = t.elapsed().as_secs_f64();
-    let mut v = voxelize_model(&model, spec, n, alpha_test)?;
+    let mut v = voxelize_model(&model, spec, n, alpha_test, occupancy)?;
     v.load_s = load_s;
     Ok(v)
 }
@@ -135,7 +168,7 @@ pub fn summary(g: &DensityGrid) -> String {
 
 pub fn run(a: VoxelizeArgs) -> Result<()> {
     let t0 = Instant::now();
-    let v = load_and_voxelize(&a.model, a.grid, !a.no_alpha)?;
+    let v = load_and_voxelize(&a.model, a.grid, !a.no_alpha, a.occupancy.into())?;
     let name = sylva_core::file_stem(&v.name, "model");
     let output = a
         .output

@@ -6,8 +6,8 @@
 //!
 //! | sylva | Mitsuba 3 |
 //! | --- | --- |
-//! | leaf material (alpha-textured quad) | `mask` (opacity = the alpha channel, nearest texel) around a `principledthin` with the leaf texture as `base_color` and `diff_trans` (diffuse transmission) from [`MitsubaOptions::leaf_diff_trans`] |
-//! | wood material | `diffuse` with the bark texture; wrapped in `twosided` when the material is two-sided |
+//! | leaf material (alpha-textured quad) | `mask` (opacity = the alpha channel, nearest texel) around an even `blendbsdf` of a `twosided` `diffuse` of reflectance `2R` and a `principledthin` of `diff_trans` 2 (a pure Lambertian transmitter) of colour `2T`: exactly `R` reflected and `T` transmitted per colour, both Lambertian, as sylva shades them ([`sylva_geom::Optics`]); `2R`, `2T` as linear float EXR textures |
+//! | wood material | `diffuse` with the bark texture (an EXR of `R` where the material scales its colour); wrapped in `twosided` when the material is two-sided |
 //! | sun | `directional`, `direction` = the direction light travels, `irradiance` = [`MitsubaOptions::sun_irradiance`] × the 6500 K black-body colour |
 //! | sky colour | `constant` emitter of that radiance |
 //! | ground | `rectangle` on y = 0 with a `diffuse` of the ground colour |
@@ -20,7 +20,7 @@
 
 use super::{
     file_stems, has_transparency, material_stems, triangles_by_material, validate_models,
-    write_file, write_png, ExportError, Exported, PngChannels, TextureFiles,
+    write_file, write_png, write_scaled_exr, ExportError, Exported, PngChannels, TextureFiles,
 };
 use glam::{Mat4, Vec3};
 use std::fmt::Write as _;
@@ -45,22 +45,18 @@ pub struct MitsubaOptions {
     pub max_depth: i32,
     /// Irradiance of the sun on a surface facing it, as luminance; its colour is a 6500 K
     /// black body. π makes a white Lambertian surface facing the sun as bright as sylva's
-    /// local shading `k_d (N·L)` with a sun of intensity 1.
+    /// local shading `R (N·L)` with a sun of intensity 1.
     pub sun_irradiance: f32,
-    /// `principledthin`'s `diff_trans` for leaves, in [0, 2]: 0 reflects only, 2 transmits
-    /// only, 1 splits the leaf's albedo evenly between reflection and transmission.
-    pub leaf_diff_trans: f32,
 }
 
 impl MitsubaOptions {
     /// The scene's samples per pixel, unbounded paths (an unbiased reference), a sun of
-    /// irradiance π, leaves that reflect and transmit alike.
+    /// irradiance π.
     pub fn for_scene(scene: &Scene) -> MitsubaOptions {
         MitsubaOptions {
             spp: scene.camera.rays_per_pixel,
             max_depth: -1,
             sun_irradiance: std::f32::consts::PI,
-            leaf_diff_trans: 1.0,
         }
     }
 
@@ -79,12 +75,6 @@ impl MitsubaOptions {
             return bad(format!(
                 "sun irradiance {} must be finite and ≥ 0",
                 self.sun_irradiance
-            ));
-        }
-        if !(0.0..=2.0).contains(&self.leaf_diff_trans) {
-            return bad(format!(
-                "leaf diffuse transmission {} must be in [0, 2]",
-                self.leaf_diff_trans
             ));
         }
         Ok(())
@@ -155,16 +145,51 @@ fn open_bsdf(out: &mut String, indent: &mut String, ty: &str, id: Option<&str>) 
     indent.push_str("    ");
 }
 
+/// Where a material's textures went: the colour PNG (shared by materials of one texture)
+/// and, per material, the linear EXRs of its scaled colours.
+struct MaterialFiles {
+    /// `textures/<texture>.png`, the colour as stored (sRGB).
+    colour: Option<String>,
+    /// Leaves: `2R`; wood whose reflectance is not its colour: `R`.
+    reflect: Option<String>,
+    /// Leaves: `2T`.
+    transmit: Option<String>,
+}
+
+/// `<rgb name="NAME" value="..."/>` or a bitmap of `file`.
+fn colour_param(
+    out: &mut String,
+    indent: &str,
+    name: &str,
+    file: Option<&str>,
+    rgb: [f32; 3],
+    wrap: Wrap,
+) {
+    match file {
+        Some(f) => bitmap(out, indent, name, f, wrap, false),
+        None => {
+            let _ = writeln!(out, "{indent}<rgb name=\"{name}\" value=\"{}\"/>", v3(rgb));
+        }
+    }
+}
+
+/// `v ⊙ factor · k`.
+fn scaled(v: [f32; 3], factor: [f32; 3], k: f32) -> [f32; 3] {
+    [0, 1, 2].map(|c| v[c] * factor[c] * k)
+}
+
 /// The BSDF element of `mat` with id `id`.
-fn bsdf(out: &mut String, id: &str, mat: &Material, tex_stem: Option<&str>, opts: &MitsubaOptions) {
+fn bsdf(out: &mut String, id: &str, mat: &Material, files: &MaterialFiles, alpha: Option<&str>) {
     let tex = mat.texture.as_ref();
-    let colour_file = tex_stem.map(|s| format!("{TEXTURE_DIR}/{s}.png"));
     let masked = tex.is_some_and(|t| has_transparency(t));
+    let o = &mat.optics;
     let _ = writeln!(
         out,
-        "    <!-- {} ({}) -->",
+        "    <!-- {} ({}): reflectance {} × colour, transmittance {} × colour -->",
         xml_text(&mat.name),
-        if mat.is_leaf() { "leaf" } else { "wood" }
+        if mat.is_leaf() { "leaf" } else { "wood" },
+        v3(o.reflect),
+        v3(if mat.is_leaf() { o.transmit } else { [0.0; 3] }),
     );
     let mut indent = "    ".to_string();
     let mut closes = 0;
@@ -176,31 +201,45 @@ fn bsdf(out: &mut String, id: &str, mat: &Material, tex_stem: Option<&str>, opts
             out,
             &indent,
             "opacity",
-            &format!("{TEXTURE_DIR}/{}_alpha.png", tex_stem.unwrap_or_default()),
+            alpha.unwrap_or_default(),
             Wrap::Clamp,
             true,
         );
     }
     let wrap = tex.map(|t| t.wrap).unwrap_or(Wrap::Repeat);
     if mat.is_leaf() {
-        // A thin two-sided sheet that reflects and transmits diffusely.
-        open_bsdf(out, &mut indent, "principledthin", id.take());
+        // A thin two-sided sheet: half a two-sided Lambertian reflector of 2R, half a
+        // Lambertian transmitter of 2T (principledthin at diff_trans = 2 transmits its
+        // base colour and reflects nothing; at spec_trans = 0 it has no specular lobe).
+        open_bsdf(out, &mut indent, "blendbsdf", id.take());
         closes += 1;
-        match &colour_file {
-            Some(f) => bitmap(out, &indent, "base_color", f, wrap, false),
-            None => {
-                let _ = writeln!(
-                    out,
-                    "{indent}<rgb name=\"base_color\" value=\"{}\"/>",
-                    v3(mat.base_color)
-                );
-            }
-        }
-        let _ = writeln!(
+        let _ = writeln!(out, "{indent}<float name=\"weight\" value=\"0.5\"/>");
+        open_bsdf(out, &mut indent, "twosided", None);
+        open_bsdf(out, &mut indent, "diffuse", None);
+        colour_param(
             out,
-            "{indent}<float name=\"diff_trans\" value=\"{}\"/>",
-            opts.leaf_diff_trans
+            &indent,
+            "reflectance",
+            files.reflect.as_deref(),
+            scaled(mat.base_color, o.reflect, 2.0),
+            wrap,
         );
+        for _ in 0..2 {
+            indent.truncate(indent.len() - 4);
+            let _ = writeln!(out, "{indent}</bsdf>");
+        }
+        open_bsdf(out, &mut indent, "principledthin", None);
+        colour_param(
+            out,
+            &indent,
+            "base_color",
+            files.transmit.as_deref(),
+            scaled(mat.base_color, o.transmit, 2.0),
+            wrap,
+        );
+        let _ = writeln!(out, "{indent}<float name=\"diff_trans\" value=\"2\"/>");
+        indent.truncate(indent.len() - 4);
+        let _ = writeln!(out, "{indent}</bsdf>");
     } else {
         if mat.two_sided {
             open_bsdf(out, &mut indent, "twosided", id.take());
@@ -208,16 +247,14 @@ fn bsdf(out: &mut String, id: &str, mat: &Material, tex_stem: Option<&str>, opts
         }
         open_bsdf(out, &mut indent, "diffuse", id.take());
         closes += 1;
-        match &colour_file {
-            Some(f) => bitmap(out, &indent, "reflectance", f, wrap, false),
-            None => {
-                let _ = writeln!(
-                    out,
-                    "{indent}<rgb name=\"reflectance\" value=\"{}\"/>",
-                    v3(mat.base_color)
-                );
-            }
-        }
+        colour_param(
+            out,
+            &indent,
+            "reflectance",
+            files.reflect.as_deref().or(files.colour.as_deref()),
+            scaled(mat.base_color, o.reflect, 1.0),
+            wrap,
+        );
     }
     for _ in 0..closes {
         indent.truncate(indent.len() - 4);
@@ -447,19 +484,40 @@ pub fn write(
         v3(scene.sky_color)
     );
 
-    // Materials.
+    // Materials, with the EXR textures of their scaled colours.
     for (k, model) in scene.models.iter().enumerate() {
         if !written[k] {
             continue;
         }
         for (j, mat) in model.materials.iter().enumerate() {
             let stem = mat.texture.as_ref().map(|t| textures.stem(t));
+            let mut files = MaterialFiles {
+                colour: stem.map(|s| format!("{TEXTURE_DIR}/{s}.png")),
+                reflect: None,
+                transmit: None,
+            };
+            if let Some(t) = &mat.texture {
+                let mut exr = |suffix: &str, factor: [f32; 3]| -> Result<String, ExportError> {
+                    let rel = format!("{TEXTURE_DIR}/{}_{suffix}.exr", mat_stems[k][j]);
+                    write_scaled_exr(&dir.join(&rel), t, factor)?;
+                    out.add(dir, PathBuf::from(&rel))?;
+                    Ok(rel)
+                };
+                let o = &mat.optics;
+                if mat.is_leaf() {
+                    files.reflect = Some(exr("reflect", o.reflect.map(|f| 2.0 * f))?);
+                    files.transmit = Some(exr("transmit", o.transmit.map(|f| 2.0 * f))?);
+                } else if o.reflect != [1.0; 3] {
+                    files.reflect = Some(exr("reflect", o.reflect)?);
+                }
+            }
+            let alpha = stem.map(|s| format!("{TEXTURE_DIR}/{s}_alpha.png"));
             bsdf(
                 &mut x,
                 &format!("bsdf-{}", mat_stems[k][j]),
                 mat,
-                stem,
-                opts,
+                &files,
+                alpha.as_deref(),
             );
         }
     }

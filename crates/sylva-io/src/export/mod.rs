@@ -27,7 +27,7 @@ pub enum ExportError {
     Io { path: PathBuf, source: io::Error },
     #[error("{}: exists and is not a directory", .0.display())]
     NotADirectory(PathBuf),
-    #[error("{}: cannot encode PNG: {message}", path.display())]
+    #[error("{}: cannot encode the image: {message}", path.display())]
     Png { path: PathBuf, message: String },
     #[error("model '{model}': {message}")]
     InvalidModel { model: String, message: String },
@@ -245,6 +245,33 @@ pub(crate) enum PngChannels {
     Rgb,
     /// The alpha channel alone, as 8-bit grey (linear coverage).
     Alpha,
+}
+
+/// Writes `t`'s colour decoded to linear RGB (the renderer's decoding,
+/// [`sylva_core::colour::srgb_to_linear`]) times `factor` per colour, as a 32-bit float
+/// OpenEXR (row 0 at the top): a texture whose values can exceed 1.
+pub(crate) fn write_scaled_exr(
+    path: &Path,
+    t: &Texture,
+    factor: [f32; 3],
+) -> Result<(), ExportError> {
+    let lut: Vec<f32> = (0..256)
+        .map(|i| sylva_core::colour::srgb_to_linear(i as f32 / 255.0))
+        .collect();
+    let values: Vec<f32> = t
+        .pixels
+        .iter()
+        .flat_map(|p| [0, 1, 2].map(|c| lut[p[c] as usize] * factor[c]))
+        .collect();
+    let img =
+        image::Rgb32FImage::from_raw(t.width, t.height, values).expect("width × height × 3 values");
+    let mut bytes = io::Cursor::new(Vec::new());
+    img.write_to(&mut bytes, image::ImageFormat::OpenExr)
+        .map_err(|e| ExportError::Png {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+    write_file(path, |w| w.write_all(bytes.get_ref()))
 }
 
 /// Writes `t` as a PNG (row 0 of the texture, v = 0, is the image's top row).

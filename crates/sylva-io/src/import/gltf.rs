@@ -663,7 +663,9 @@ impl<'a> Ctx<'a> {
         let mut raw = RawMaterial::plain(name, [factor[0], factor[1], factor[2]]);
         raw.double_sided = m.double_sided();
         raw.alpha_mask = mode != AlphaMode::Opaque;
-        raw.translucent = diffuse_transmission(m).map_err(|msg| self.err(&el, msg))?;
+        let transmission = diffuse_transmission(m).map_err(|msg| self.err(&el, msg))?;
+        raw.translucent = transmission.is_some();
+        raw.diffuse_transmission = transmission.and_then(|t| t.factor);
 
         let mut slot = MatSlot {
             slot: 0,
@@ -745,10 +747,17 @@ impl<'a> Ctx<'a> {
     }
 }
 
-/// `KHR_materials_diffuse_transmission`: true when the material transmits any light.
-fn diffuse_transmission(m: &gltf::Material) -> Result<bool, String> {
+/// What `KHR_materials_diffuse_transmission` says about a material that transmits light.
+struct DiffuseTransmission {
+    /// `diffuseTransmissionFactor` and `diffuseTransmissionColorFactor`, when the factor is
+    /// above 0.
+    factor: Option<(f32, [f32; 3])>,
+}
+
+/// `KHR_materials_diffuse_transmission`: `Some` when the material transmits any light.
+fn diffuse_transmission(m: &gltf::Material) -> Result<Option<DiffuseTransmission>, String> {
     let Some(ext) = m.extension_value("KHR_materials_diffuse_transmission") else {
-        return Ok(false);
+        return Ok(None);
     };
     let factor = match ext.get("diffuseTransmissionFactor") {
         None => 0.0,
@@ -761,7 +770,26 @@ fn diffuse_transmission(m: &gltf::Material) -> Result<bool, String> {
             }
         },
     };
-    Ok(factor > 0.0 || ext.get("diffuseTransmissionTexture").is_some())
+    let colour = match ext.get("diffuseTransmissionColorFactor") {
+        None => [1.0; 3],
+        Some(v) => match v.as_array().map(|a| a.iter().map(|x| x.as_f64()).collect::<Vec<_>>()) {
+            Some(c) if c.len() == 3 && c.iter().all(|x| x.is_some_and(|x| x.is_finite() && x >= 0.0)) => {
+                [0, 1, 2].map(|k| c[k].expect("checked") as f32)
+            }
+            _ => {
+                return Err(format!(
+                    "KHR_materials_diffuse_transmission.diffuseTransmissionColorFactor {v} must be three numbers ≥ 0"
+                ))
+            }
+        },
+    };
+    if factor > 0.0 || ext.get("diffuseTransmissionTexture").is_some() {
+        Ok(Some(DiffuseTransmission {
+            factor: (factor > 0.0).then_some((factor as f32, colour)),
+        }))
+    } else {
+        Ok(None)
+    }
 }
 
 /// `KHR_texture_transform` as an affine uv map, and its `texCoord` override.

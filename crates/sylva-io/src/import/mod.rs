@@ -16,7 +16,7 @@ use glam::Vec3;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use sylva_core::colour::{linear_to_srgb8, srgb_to_linear};
-use sylva_geom::{Material, MaterialKind, Mesh, Model, Texture, Wrap, OPAQUE_ALPHA};
+use sylva_geom::{Material, MaterialKind, Mesh, Model, Optics, Texture, Wrap, OPAQUE_ALPHA};
 
 /// Sylva models hold at most this many materials (material ids are `u8`).
 pub const MAX_MATERIALS: usize = 256;
@@ -148,6 +148,9 @@ pub(crate) struct RawMaterial {
     pub alpha_mask: bool,
     /// The material lets light through diffusely (glTF diffuse transmission).
     pub translucent: bool,
+    /// glTF `KHR_materials_diffuse_transmission`: its factor (the share of the diffuse light
+    /// transmitted) and colour factor, where the file gives a factor above 0.
+    pub diffuse_transmission: Option<(f32, [f32; 3])>,
     pub double_sided: bool,
 }
 
@@ -160,6 +163,7 @@ impl RawMaterial {
             texture: None,
             alpha_mask: false,
             translucent: false,
+            diffuse_transmission: None,
             double_sided: false,
         }
     }
@@ -317,7 +321,25 @@ impl RawMaterial {
             texture: self.texture.map(Arc::new),
             // Leaves are thin sheets seen from both sides, whatever the file says.
             two_sided: leaf || self.double_sided,
+            optics: optics(leaf, self.diffuse_transmission),
         }
+    }
+}
+
+/// A material's reflectance and transmittance factors (docs/scenes.md, "Importing meshes"):
+/// wood is opaque; a glTF leaf with diffuse transmission factor `f` and colour factor `t`
+/// reflects `(1 - f)` of its colour and transmits `f · t` of it (the extension's mix of a
+/// diffuse BRDF and BTDF, with the transmitted colour taken as the base colour tinted by
+/// `t`); other leaves reflect their colour and transmit Knapp & Carter's forest-leaf ratios
+/// of it ([`Optics::FOREST_LEAF`]).
+fn optics(leaf: bool, diffuse_transmission: Option<(f32, [f32; 3])>) -> Optics {
+    match (leaf, diffuse_transmission) {
+        (false, _) => Optics::OPAQUE,
+        (true, Some((f, t))) => Optics {
+            reflect: [1.0 - f; 3],
+            transmit: t.map(|t| f * t),
+        },
+        (true, None) => Optics::FOREST_LEAF,
     }
 }
 

@@ -362,6 +362,14 @@ impl BasisSet {
                 format!("{},{},{}", p.sigma_a, p.sigma_s, p.g),
             ));
         }
+        if let Some(brown) = &self.medium.brown {
+            for (p, name) in brown.iter().zip(COLOUR_NAMES) {
+                metadata.push((
+                    format!("medium.brown.{name}"),
+                    format!("{},{},{}", p.sigma_a, p.sigma_s, p.g),
+                ));
+            }
+        }
         metadata.extend([
             (
                 "zero_f0_on_green".into(),
@@ -438,6 +446,19 @@ impl BasisSet {
                 "metadata '{key}' = '{v}' is not true or false"
             ))),
         };
+        let params = |key: &str, text: &str| {
+            let parts: Vec<&str> = text.split(',').collect();
+            let [a, s, g] = parts[..] else {
+                return Err(bad(format!(
+                    "metadata '{key}' = '{text}' is not sigma_a,sigma_s,g"
+                )));
+            };
+            Ok(ColourParams {
+                sigma_a: float(key, a)?,
+                sigma_s: float(key, s)?,
+                g: float(key, g)?,
+            })
+        };
         let mut colours = [ColourParams {
             sigma_a: 0.0,
             sigma_s: 0.0,
@@ -445,24 +466,26 @@ impl BasisSet {
         }; 3];
         for (p, name) in colours.iter_mut().zip(COLOUR_NAMES) {
             let key = format!("medium.{name}");
-            let text = value(&key)?;
-            let parts: Vec<&str> = text.split(',').collect();
-            let [a, s, g] = parts[..] else {
-                return Err(bad(format!(
-                    "metadata '{key}' = '{text}' is not sigma_a,sigma_s,g"
-                )));
-            };
-            *p = ColourParams {
-                sigma_a: float(&key, a)?,
-                sigma_s: float(&key, s)?,
-                g: float(&key, g)?,
-            };
+            *p = params(&key, value(&key)?)?;
         }
+        // Brown sites' own coefficients, where the set was solved with them.
+        let brown = match file.metadata_value("medium.brown.red") {
+            None => None,
+            Some(_) => {
+                let mut b = colours;
+                for (p, name) in b.iter_mut().zip(COLOUR_NAMES) {
+                    let key = format!("medium.brown.{name}");
+                    *p = params(&key, value(&key)?)?;
+                }
+                Some(b)
+            }
+        };
         let medium = MediumParams {
             colours,
             zero_f0_on_green: flag("zero_f0_on_green")?,
             zero_f0_on_brown: flag("zero_f0_on_brown")?,
             brown_threshold: float("brown_threshold", value("brown_threshold")?)?,
+            brown,
         };
         medium
             .validate()

@@ -465,6 +465,8 @@ fn lb_lighting(
             &sylva_voxel::VoxelizeOptions {
                 grid: plan.grid,
                 alpha_test: true,
+                // The papers' sub-cell occupancy, which the tables' LB column used.
+                occupancy: sylva_voxel::Occupancy::SubCells,
             },
         )?;
         let opts = SolveOptions::papers(dims);

@@ -15,6 +15,7 @@ pub fn leaf_material() -> Material {
         base_color: [0.2, 0.5, 0.1],
         texture: None,
         two_sided: true,
+        optics: sylva_geom::Optics::FOREST_LEAF,
     }
 }
 

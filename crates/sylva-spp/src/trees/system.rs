@@ -652,8 +652,8 @@ impl sylva_render::IndirectLight for SppLight<'_> {
         Some(Vec3::from_array(out))
     }
 
-    fn ground_sky(&self, p: Vec3) -> f32 {
-        self.system.ground_sky(p)
+    fn ground_sky(&self, p: Vec3) -> Vec3 {
+        Vec3::splat(self.system.ground_sky(p))
     }
 
     fn memory_bytes(&self) -> u64 {

@@ -36,6 +36,7 @@ pub fn wood() -> Material {
         base_color: [0.4, 0.3, 0.2],
         texture: None,
         two_sided: false,
+        optics: sylva_geom::Optics::OPAQUE,
     }
 }
 
@@ -91,6 +92,7 @@ pub fn leaf_material(tex: Texture) -> Material {
         base_color: [0.1, 0.6, 0.1],
         texture: Some(Arc::new(tex)),
         two_sided: true,
+        optics: sylva_geom::Optics::FOREST_LEAF,
     }
 }
 
