@@ -25,11 +25,9 @@ pub const LB_PRESETS: &[&str] = &["leaf", "dogrose", "cloud", "pmma"];
 
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
-    #[error("{path}: cannot read scene file: {source}")]
-    Io {
-        path: String,
-        source: std::io::Error,
-    },
+    /// A scene file that cannot be read (missing, not a regular file, too large, not text).
+    #[error(transparent)]
+    Input(#[from] sylva_core::InputError),
     #[error("no scene file '{0}' and no built-in scene of that name (built-in scenes: {builtins})", builtins = builtin_scenes::NAMES.join(", "))]
     NotFound(String),
     /// Syntax, unknown keys, wrong types and bad values.
@@ -281,10 +279,8 @@ impl SceneDesc {
     }
 
     pub fn load_file(path: &Path) -> Result<SceneDesc, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
-            path: path.display().to_string(),
-            source,
-        })?;
+        let text =
+            sylva_core::read_text_file(path, sylva_core::limits::TEXT_FILE_BYTES, "scene files")?;
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
         SceneDesc::parse(&text, &path.display().to_string(), Some(&dir))
     }
