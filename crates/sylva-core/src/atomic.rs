@@ -24,6 +24,7 @@ pub fn atomic_write_with<F>(path: &Path, fill: F) -> io::Result<()>
 where
     F: FnOnce(&mut dyn Write) -> io::Result<()>,
 {
+    crate::input::check_not_input(path).map_err(io::Error::other)?;
     let _staging = StagingGuard::new();
     let tmp = write_temporary(path, fill)?;
     let result = interrupt::check().and_then(|()| fs::rename(&tmp, path));
@@ -91,7 +92,7 @@ impl Write for Interruptible {
 pub enum OutputError {
     #[error("{}: named twice among this command's outputs", .0.display())]
     Duplicate(PathBuf),
-    #[error("{}: is an input of this command ({}); writing it would destroy it, choose another output", path.display(), input.display())]
+    #[error("{}: is an input of this command ({}); writing it would destroy it: choose another output", path.display(), input.display())]
     IsInput { path: PathBuf, input: PathBuf },
     #[error("cannot write {}: {source}", path.display())]
     Io { path: PathBuf, source: io::Error },
@@ -109,25 +110,15 @@ pub struct OutputSet {
     _staging: Option<StagingGuard>,
 }
 
-/// The path as the file system resolves it: canonical where the file exists, else the
-/// canonical parent joined with the name (and the path itself when neither exists).
-fn identity(p: &Path) -> PathBuf {
-    if let Ok(c) = p.canonicalize() {
-        return c;
-    }
-    let parent = match p.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    match (parent.canonicalize(), p.file_name()) {
-        (Ok(d), Some(n)) => d.join(n),
-        _ => p.to_path_buf(),
-    }
-}
+use crate::input::identity;
 
 impl OutputSet {
-    /// An empty set protecting `inputs` (files the command reads; missing ones are ignored).
+    /// An empty set protecting `inputs` (files the command reads besides those read through
+    /// [`crate::read_file`], which are protected already; missing ones are ignored).
     pub fn new<P: AsRef<Path>>(inputs: &[P]) -> OutputSet {
+        for p in inputs {
+            crate::protect_input(p.as_ref());
+        }
         OutputSet {
             inputs: inputs
                 .iter()
@@ -149,6 +140,12 @@ impl OutputSet {
                 return Err(OutputError::IsInput {
                     path: p.to_path_buf(),
                     input: input.clone(),
+                });
+            }
+            if crate::input::check_not_input(p).is_err() {
+                return Err(OutputError::IsInput {
+                    path: p.to_path_buf(),
+                    input: p.to_path_buf(),
                 });
             }
             if self.planned.iter().any(|(i, _)| *i == id) {

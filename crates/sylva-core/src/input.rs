@@ -2,11 +2,14 @@
 //! opens through [`open_file`]), which refuses what is not a regular file (a directory, a
 //! FIFO that would block, `/dev/zero` that never ends) and files over a size limit, and
 //! checks memory before the bytes are read. [`resolve_inside`] keeps the files a model refers
-//! to inside the model's folder.
+//! to inside the model's folder. Every file read through [`read_file`] is an input of the
+//! process: [`crate::atomic_write`] and [`crate::OutputSet`] refuse to replace it, so no
+//! output name can destroy a command's own input.
 
 use std::fs::File;
 use std::io::{self, Read};
 use std::path::{Component, Path, PathBuf};
+use std::sync::Mutex;
 
 use thiserror::Error;
 
@@ -63,6 +66,48 @@ impl InputError {
     }
 }
 
+/// Inputs of this process, as [`identity`] resolves them.
+static INPUTS: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// The path as the file system resolves it: canonical where the file exists, else the
+/// canonical parent joined with the name (and the path itself when neither exists).
+pub(crate) fn identity(p: &Path) -> PathBuf {
+    if let Ok(c) = p.canonicalize() {
+        return c;
+    }
+    let parent = match p.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    match (parent.canonicalize(), p.file_name()) {
+        (Ok(d), Some(n)) => d.join(n),
+        _ => p.to_path_buf(),
+    }
+}
+
+/// Marks `path` as an input of this process: no output may replace it. [`read_file`] does
+/// this for every file it reads; commands call it for inputs they open otherwise.
+pub fn protect_input(path: &Path) {
+    let id = identity(path);
+    let mut inputs = INPUTS.lock().unwrap_or_else(|e| e.into_inner());
+    if !inputs.contains(&id) {
+        inputs.push(id);
+    }
+}
+
+/// `Err` naming the input when writing `path` would replace an input of this process.
+pub(crate) fn check_not_input(path: &Path) -> Result<(), String> {
+    let id = identity(path);
+    let inputs = INPUTS.lock().unwrap_or_else(|e| e.into_inner());
+    if inputs.contains(&id) {
+        return Err(format!(
+            "{} is an input of this command; writing it would destroy it: choose another output",
+            path.display()
+        ));
+    }
+    Ok(())
+}
+
 /// Opens `path` for reading after checking that it is a regular file of at most `limit`
 /// bytes (`what` names the kind of file in the error, e.g. "scene files"); returns the file
 /// and its size. Checked before opening: opening a FIFO would block until a writer comes.
@@ -96,6 +141,7 @@ pub fn open_file(path: &Path, limit: u64, what: &'static str) -> Result<(File, u
 /// and refused.
 pub fn read_file(path: &Path, limit: u64, what: &'static str) -> Result<Vec<u8>, InputError> {
     let (file, size) = open_file(path, limit, what)?;
+    protect_input(path);
     check_memory(&format!("reading {}", path.display()), size).map_err(|source| {
         InputError::Memory {
             path: path.to_path_buf(),

@@ -24,6 +24,9 @@ pub const RAYS_PER_PIXEL: RangeInclusive<u32> = 1..=1024;
 /// took a minute to start).
 pub const THREADS: RangeInclusive<usize> = 1..=256;
 
+/// Monte Carlo photons (`spp slab --photons`): 10¹² take most of a day on two cores.
+pub const PHOTONS: RangeInclusive<u64> = 1..=1_000_000_000_000;
+
 /// Text inputs: scene files (TOML), Arbaro species files (XML), MTL files.
 pub const TEXT_FILE_BYTES: u64 = 64 << 20;
 

@@ -39,3 +39,17 @@ fn sigint_while_writing_replaces_nothing_and_leaves_no_temporary() {
         .collect();
     assert_eq!(names.len(), 2, "temporaries left behind: {names:?}");
 }
+
+/// Issue 19, item 4: a file this process read is never replaced by one of its outputs.
+#[test]
+fn inputs_read_are_never_overwritten() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = dir.path().join("ok.obj");
+    fs::write(&model, b"v 0 0 0\n").unwrap();
+    sylva_core::read_file(&model, 1 << 20, "model files").unwrap();
+    let e = sylva_core::atomic_write(&dir.path().join("./ok.obj"), b"grid").unwrap_err();
+    assert!(e.to_string().contains("is an input of this command"), "{e}");
+    let mut set = OutputSet::new::<&std::path::Path>(&[]);
+    assert!(set.plan(&[&model]).is_err());
+    assert_eq!(fs::read(&model).unwrap(), b"v 0 0 0\n");
+}

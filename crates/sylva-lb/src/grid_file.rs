@@ -292,6 +292,19 @@ impl GridFile {
         })
     }
 
+    /// Writes into `outputs` (renamed into place with the command's other outputs).
+    pub fn write_into(
+        &self,
+        outputs: &mut sylva_core::OutputSet,
+        path: &Path,
+    ) -> Result<(), sylva_core::OutputError> {
+        let (head, payload) = self.encode();
+        outputs.write(path, |w: &mut dyn Write| {
+            w.write_all(&head)?;
+            w.write_all(&payload)
+        })
+    }
+
     /// Reads and fully validates a grid file.
     pub fn read(path: &Path) -> Result<GridFile, GridFileError> {
         let io = |source| GridFileError::Io {
