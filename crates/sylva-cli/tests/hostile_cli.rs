@@ -192,6 +192,14 @@ fn scene_list_agrees_with_scene_info() {
     for sub in ["lb", "scene", "voxelize", "trace"] {
         assert!(out.contains(sub), "bench --help lacks {sub}: {out}");
     }
+    // Help of the commands that take models names every model format.
+    for args in [&["voxelize", "--help"][..], &["lb", "solve", "--help"]] {
+        let (ok, out, _) = sylva(args);
+        assert!(ok, "{out}");
+        for ext in [".xml", ".obj", ".gltf", ".glb"] {
+            assert!(out.contains(ext), "{args:?} lacks {ext}: {out}");
+        }
+    }
 }
 
 #[cfg(unix)]
@@ -225,4 +233,22 @@ fn a_closed_pipe_ends_the_output_quietly() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert_ne!(out.status.code(), Some(101), "{stderr}");
+}
+
+#[test]
+fn probing_for_a_gpu_prints_no_driver_warnings() {
+    // Item 15: without XDG_RUNTIME_DIR, Mesa's device-select layer (installed with lavapipe)
+    // warns on every Vulkan instance; `--device auto` must probe quietly.
+    let dir = tempfile::tempdir().unwrap();
+    let grid = dir.path().join("g.sgrid");
+    let out = Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .args(["lb", "solve", "--shape", "cube", "--grid", "8", "--steps", "2"])
+        .args(["--device", "auto", "-o", grid.to_str().unwrap()])
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("NODEVICE_SELECT")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(!stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
 }

@@ -97,6 +97,7 @@ pub fn sgrid(data: &[u8]) -> bool {
     file.is_ok_and(|f| match f.kind {
         sylva_lb::GridKind::Density => f.into_density(&p).is_ok(),
         sylva_lb::GridKind::Lighting => true,
+        sylva_lb::GridKind::Basis => sylva_lb::relight::BasisSet::from_grid_file(f, &p).is_ok(),
     })
 }
 
