@@ -242,7 +242,9 @@ fn probing_for_a_gpu_prints_no_driver_warnings() {
     let dir = tempfile::tempdir().unwrap();
     let grid = dir.path().join("g.sgrid");
     let out = Command::new(env!("CARGO_BIN_EXE_sylva"))
-        .args(["lb", "solve", "--shape", "cube", "--grid", "8", "--steps", "2"])
+        .args([
+            "lb", "solve", "--shape", "cube", "--grid", "8", "--steps", "2",
+        ])
         .args(["--device", "auto", "-o", grid.to_str().unwrap()])
         .env_remove("XDG_RUNTIME_DIR")
         .env_remove("NODEVICE_SELECT")

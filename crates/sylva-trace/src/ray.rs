@@ -274,7 +274,10 @@ mod tests {
                     misses += 1;
                 }
             }
-            assert_eq!(misses, 0, "{n}×{n} cells: {misses} of 8000 rays slipped through");
+            assert_eq!(
+                misses, 0,
+                "{n}×{n} cells: {misses} of 8000 rays slipped through"
+            );
         }
     }
 
