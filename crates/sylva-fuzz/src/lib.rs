@@ -10,8 +10,11 @@
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
+/// A target: arbitrary bytes in; whether they parsed.
+pub type Target = fn(&[u8]) -> bool;
+
 /// The targets, by the names of their binaries and corpus folders.
-pub const TARGETS: &[(&str, fn(&[u8]) -> bool)] = &[
+pub const TARGETS: &[(&str, Target)] = &[
     ("scene_toml", scene_toml),
     ("obj_mtl", obj_mtl),
     ("gltf", gltf),

@@ -43,7 +43,7 @@ pub enum SceneError {
         origin: String,
         line: usize,
         model: String,
-        source: ArbaroError,
+        source: Box<ArbaroError>,
     },
     #[error("{origin}: model '{model}': {source}")]
     Generate {
@@ -362,7 +362,7 @@ impl SceneDesc {
                     origin: origin.to_string(),
                     line: l,
                     model: m.name.clone(),
-                    source,
+                    source: Box::new(source),
                 })?;
                 let seed = m.seed.or(a.seed).unwrap_or(0);
                 ModelSource::Species(Box::new(Species::from_params(
