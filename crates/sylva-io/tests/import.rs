@@ -1129,7 +1129,8 @@ fn scene_mesh_errors_name_the_scene_line_and_the_mesh_file() {
     let scene = write(
         d,
         "s.toml",
-        "name = \"x\"\n\n[[models]]\nname = \"b\"\nmesh = \"bad.obj\"\n",
+        "name = \"x\"\n\n[[models]]\nname = \"b\"\nmesh = \"bad.obj\"\n\
+         [[instances]]\nmodel = \"b\"\nposition = [0.0, 0.0, 0.0]\n",
     );
     let desc = SceneDesc::load_file(&scene).unwrap();
     let e = desc.build().unwrap_err().to_string();
