@@ -24,6 +24,10 @@ fn absurd_sizes_are_refused_before_allocating() {
         &["spp", "slab", "--photons", "10000000000000"],
         "photons must be 1 to 10^12",
     );
+    fails_with(
+        &["spp", "trees", "dogrose", "--photons", "10000000000000"],
+        "photons must be 1 to 10^12",
+    );
     // Item 3: LB grids beyond memory are refused before the grid is allocated.
     for grid in ["2000", "1600"] {
         fails_with(&["bench", "lb", "--grid", grid, "--device", "cpu"], "needs");
