@@ -17,7 +17,7 @@ solver (leaf transparency, light scattered between leaves and trees) and renders
 ray tracer. Run `sylva <command> --help` for each command's options."
 )]
 struct Cli {
-    /// Worker threads (default: all cores). Results do not depend on it.
+    /// Worker threads, 1 to 256 (default: all cores). Results do not depend on it.
     #[arg(long, global = true)]
     threads: Option<usize>,
     #[command(subcommand)]
@@ -30,8 +30,8 @@ enum Command {
     Scene(commands::scene::SceneArgs),
     /// The species library: `sylva species list`, `sylva species show NAME`.
     Species(commands::species::SpeciesArgs),
-    /// Turn a model (species name or Arbaro file) into an LB density grid (.sgrid) and a
-    /// preview: `sylva voxelize red_maple --grid 128 -o maple.sgrid`.
+    /// Turn a model (species name, Arbaro file, OBJ, glTF or GLB) into an LB density grid
+    /// (.sgrid) and a preview: `sylva voxelize red_maple --grid 128 -o maple.sgrid`.
     Voxelize(commands::voxelize::VoxelizeArgs),
     /// Lattice-Boltzmann lighting: solve a grid, describe grid files.
     Lb(commands::lb::LbArgs),
@@ -43,7 +43,9 @@ enum Command {
     /// Render a scene (default: the built-in demo) to sylva-out/<scene>.png: sunlight, shadows,
     /// light through leaves and LB indirect light, e.g. `sylva render beech --rpp 4 --hdr`.
     Render(commands::render::RenderArgs),
-    /// Measure speed on this machine (LB solver against copy bandwidth, scene building).
+    /// Measure speed on this machine: `bench lb` (LB solver against copy bandwidth),
+    /// `bench scene` (generation and scene building), `bench voxelize`, `bench trace`
+    /// (acceleration build and frame time).
     Bench(commands::bench::BenchArgs),
 }
 
@@ -78,7 +80,25 @@ fn run(command: Command, comm: Option<&dyn sylva_mpi::Comm>) -> anyhow::Result<(
 fn main() -> std::process::ExitCode {
     // Before any thread exists: it may set an environment variable.
     sylva_wgpu::quiet_headless_probing();
+    // `sylva lb info x.sgrid | head -1`: a closed pipe ends the process quietly, as it does
+    // other Unix tools, instead of a panic in println.
+    #[cfg(unix)]
+    // SAFETY: restoring the default action of a signal before any thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+    // Ctrl-C while outputs are written removes the temporaries and replaces nothing.
+    sylva_core::interrupt::install();
     let cli = Cli::parse();
+    if let Some(n) = cli.threads {
+        let range = sylva_core::limits::THREADS;
+        if !range.contains(&n) {
+            return commands::finish(Err(anyhow::anyhow!(
+                "--threads {n}: must be {}",
+                sylva_core::limits::describe(&range)
+            )));
+        }
+    }
     // One of several processes started by mpirun: the command must split its work.
     let ranks = sylva_mpi::launch::launched_size().filter(|&n| n > 1);
     if let Some(n) = ranks {
@@ -100,12 +120,9 @@ fn main() -> std::process::ExitCode {
     let threads = cli.threads.or_else(|| {
         let local = sylva_mpi::launch::local_size().filter(|_| ranks.is_some())?;
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        Some((cores / local.max(1)).max(1))
+        Some((cores / local.max(1)).clamp(1, *sylva_core::limits::THREADS.end()))
     });
     if let Some(n) = threads {
-        if n == 0 {
-            return commands::finish(Err(anyhow::anyhow!("--threads must be at least 1")));
-        }
         if let Err(e) = rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global()

@@ -92,7 +92,7 @@ fn bad_inputs_are_refused_with_reasons() {
         "{err}"
     );
 
-    let (ok, _, err) = sylva(&["lb", "solve", "--grid", "3000"]);
+    let (ok, _, err) = sylva(&["lb", "solve", "--grid", "2000"]);
     assert!(!ok);
     assert!(err.contains("needs") && err.contains("TiB"), "{err}");
 

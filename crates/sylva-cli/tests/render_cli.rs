@@ -130,8 +130,8 @@ fn render_refuses_bad_options_with_reasons() {
         (&["--key=-1"], "key"),
         (&["--stack", "0"], "--stack 0"),
         (
-            &["--width", "32768", "--height", "32768"],
-            "32768x32768 frame",
+            &["--width", "16384", "--height", "16384"],
+            "16384x16384 frame",
         ),
     ];
     for (extra, want) in cases {

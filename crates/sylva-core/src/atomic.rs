@@ -1,6 +1,17 @@
+//! Atomic file writes and output sets. A file is written to a temporary file beside its target
+//! and renamed into place, so a crash never leaves half a file; an [`OutputSet`] writes all of
+//! a command's files first and renames them together at the end, so a failure or Ctrl-C
+//! replaces none of them. While any temporary file exists, Ctrl-C (SIGINT, SIGTERM) only
+//! marks the process interrupted ([`crate::interrupt`]): the writers stop at their next write,
+//! and the temporaries are removed.
+
 use std::fs::{self, File};
 use std::io::{self, BufWriter, Write};
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+use thiserror::Error;
+
+use crate::interrupt::{self, StagingGuard};
 
 /// Writes `bytes` to `path` atomically (temporary file in the same directory, fsync, rename).
 pub fn atomic_write(path: &Path, bytes: &[u8]) -> io::Result<()> {
@@ -10,6 +21,22 @@ pub fn atomic_write(path: &Path, bytes: &[u8]) -> io::Result<()> {
 /// Streams a file into place atomically: `fill` writes into a buffered temporary file that
 /// replaces `path` only once `fill` succeeded and the data reached the disk.
 pub fn atomic_write_with<F>(path: &Path, fill: F) -> io::Result<()>
+where
+    F: FnOnce(&mut dyn Write) -> io::Result<()>,
+{
+    crate::input::check_not_input(path).map_err(io::Error::other)?;
+    let _staging = StagingGuard::new();
+    let tmp = write_temporary(path, fill)?;
+    let result = interrupt::check().and_then(|()| fs::rename(&tmp, path));
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// Writes `fill`'s bytes to a new temporary file beside `path` and syncs it; removes it on
+/// any error, Ctrl-C included.
+fn write_temporary<F>(path: &Path, fill: F) -> io::Result<PathBuf>
 where
     F: FnOnce(&mut dyn Write) -> io::Result<()>,
 {
@@ -32,16 +59,169 @@ where
     ));
     let result = (|| {
         let file = File::create(&tmp)?;
-        let mut w = BufWriter::with_capacity(1 << 20, file);
+        let mut w = BufWriter::with_capacity(1 << 20, Interruptible(file));
         fill(&mut w)?;
-        let file = w.into_inner().map_err(|e| e.into_error())?;
-        file.sync_all()?;
-        fs::rename(&tmp, path)
+        let file = w.into_inner().map_err(|e| e.into_error())?.0;
+        interrupt::check()?;
+        file.sync_all()
     })();
-    if result.is_err() {
-        let _ = fs::remove_file(&tmp);
+    match result {
+        Ok(()) => Ok(tmp),
+        Err(e) => {
+            let _ = fs::remove_file(&tmp);
+            Err(e)
+        }
     }
-    result
+}
+
+/// A writer that fails once the process is interrupted, so long writes stop promptly.
+struct Interruptible(File);
+
+impl Write for Interruptible {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        interrupt::check()?;
+        self.0.write(buf)
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        self.0.flush()
+    }
+}
+
+/// A file of an [`OutputSet`] that cannot be written.
+#[derive(Debug, Error)]
+pub enum OutputError {
+    #[error("{}: named twice among this command's outputs", .0.display())]
+    Duplicate(PathBuf),
+    #[error("{}: is an input of this command ({}); writing it would destroy it: choose another output", path.display(), input.display())]
+    IsInput { path: PathBuf, input: PathBuf },
+    #[error("cannot write {}: {source}", path.display())]
+    Io { path: PathBuf, source: io::Error },
+}
+
+/// The output files of one command: checked up front against each other and against the
+/// command's inputs, written one by one to temporary files, and renamed into place together
+/// by [`OutputSet::commit`]. Dropped without a commit (an error, Ctrl-C), it removes its
+/// temporaries and leaves every existing file as it was.
+#[derive(Debug)]
+pub struct OutputSet {
+    inputs: Vec<(PathBuf, PathBuf)>,
+    planned: Vec<(PathBuf, PathBuf)>,
+    staged: Vec<(PathBuf, PathBuf)>,
+    _staging: Option<StagingGuard>,
+}
+
+use crate::input::identity;
+
+impl OutputSet {
+    /// An empty set protecting `inputs` (files the command reads besides those read through
+    /// [`crate::read_file`], which are protected already; missing ones are ignored).
+    pub fn new<P: AsRef<Path>>(inputs: &[P]) -> OutputSet {
+        for p in inputs {
+            crate::protect_input(p.as_ref());
+        }
+        OutputSet {
+            inputs: inputs
+                .iter()
+                .map(|p| (identity(p.as_ref()), p.as_ref().to_path_buf()))
+                .collect(),
+            planned: Vec::new(),
+            staged: Vec::new(),
+            _staging: None,
+        }
+    }
+
+    /// Adds the files a command will write, refusing a file named twice or one that is an
+    /// input. Call it before the long work, so a bad output name fails at once.
+    pub fn plan<P: AsRef<Path>>(&mut self, outputs: &[P]) -> Result<(), OutputError> {
+        for p in outputs {
+            let p = p.as_ref();
+            let id = identity(p);
+            if let Some((_, input)) = self.inputs.iter().find(|(i, _)| *i == id) {
+                return Err(OutputError::IsInput {
+                    path: p.to_path_buf(),
+                    input: input.clone(),
+                });
+            }
+            if crate::input::check_not_input(p).is_err() {
+                return Err(OutputError::IsInput {
+                    path: p.to_path_buf(),
+                    input: p.to_path_buf(),
+                });
+            }
+            if self.planned.iter().any(|(i, _)| *i == id) {
+                return Err(OutputError::Duplicate(p.to_path_buf()));
+            }
+            self.planned.push((id, p.to_path_buf()));
+        }
+        Ok(())
+    }
+
+    /// Writes `path` (planned here if it was not) to a temporary file beside it.
+    pub fn write<F>(&mut self, path: &Path, fill: F) -> Result<(), OutputError>
+    where
+        F: FnOnce(&mut dyn Write) -> io::Result<()>,
+    {
+        let id = identity(path);
+        if !self.planned.iter().any(|(i, _)| *i == id) {
+            self.plan(&[path])?;
+        }
+        if self.staged.iter().any(|(_, p)| identity(p) == id) {
+            return Err(OutputError::Duplicate(path.to_path_buf()));
+        }
+        self._staging.get_or_insert_with(StagingGuard::new);
+        let tmp = write_temporary(path, fill).map_err(|source| OutputError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        self.staged.push((tmp, path.to_path_buf()));
+        Ok(())
+    }
+
+    /// [`OutputSet::write`] of bytes in memory.
+    pub fn write_bytes(&mut self, path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
+        self.write(path, |w| w.write_all(bytes))
+    }
+
+    /// Renames every written file into place (unless the process was interrupted: then none)
+    /// and returns their paths in the order written.
+    pub fn commit(mut self) -> Result<Vec<PathBuf>, OutputError> {
+        if let Err(source) = interrupt::check() {
+            let path = self
+                .staged
+                .first()
+                .map(|(_, p)| p.clone())
+                .unwrap_or_default();
+            return Err(OutputError::Io { path, source });
+        }
+        let staged = std::mem::take(&mut self.staged);
+        let mut done = Vec::with_capacity(staged.len());
+        let mut failed = None;
+        for (tmp, path) in staged {
+            if failed.is_some() {
+                let _ = fs::remove_file(&tmp);
+                continue;
+            }
+            match fs::rename(&tmp, &path) {
+                Ok(()) => done.push(path),
+                Err(source) => {
+                    let _ = fs::remove_file(&tmp);
+                    failed = Some(OutputError::Io { path, source });
+                }
+            }
+        }
+        match failed {
+            Some(e) => Err(e),
+            None => Ok(done),
+        }
+    }
+}
+
+impl Drop for OutputSet {
+    fn drop(&mut self) {
+        for (tmp, _) in &self.staged {
+            let _ = fs::remove_file(tmp);
+        }
+    }
 }
 
 #[cfg(test)]
@@ -72,5 +252,56 @@ mod tests {
         assert!(err.is_err());
         assert_eq!(fs::read(&p).unwrap(), b"good");
         assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn a_set_replaces_all_its_files_or_none() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join("a.png"), dir.path().join("a.exr"));
+        fs::write(&a, b"old a").unwrap();
+        fs::write(&b, b"old b").unwrap();
+        // The second file fails: the first, already written, must not replace the old one.
+        let mut set = OutputSet::new::<&Path>(&[]);
+        set.write_bytes(&a, b"new a").unwrap();
+        assert!(set
+            .write(&b, |w| {
+                w.write_all(b"half")?;
+                Err(io::Error::other("disk full"))
+            })
+            .is_err());
+        drop(set);
+        assert_eq!(fs::read(&a).unwrap(), b"old a");
+        assert_eq!(fs::read(&b).unwrap(), b"old b");
+        assert_eq!(
+            fs::read_dir(dir.path()).unwrap().count(),
+            2,
+            "temporaries left"
+        );
+        // Both succeed: both replaced.
+        let mut set = OutputSet::new::<&Path>(&[]);
+        set.write_bytes(&a, b"new a").unwrap();
+        set.write_bytes(&b, b"new b").unwrap();
+        assert_eq!(set.commit().unwrap(), vec![a.clone(), b.clone()]);
+        assert_eq!(fs::read(&b).unwrap(), b"new b");
+        assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 2);
+    }
+
+    #[test]
+    fn inputs_and_repeated_outputs_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let input = dir.path().join("in.sgrid");
+        fs::write(&input, b"grid").unwrap();
+        // The same file by another spelling.
+        let other = dir.path().join("sub/../in.sgrid");
+        fs::create_dir(dir.path().join("sub")).unwrap();
+        let mut set = OutputSet::new(&[&input]);
+        let e = set.plan(&[&other]).unwrap_err();
+        assert!(matches!(e, OutputError::IsInput { .. }), "{e}");
+        assert!(e.to_string().contains("is an input of this command"), "{e}");
+        let out = dir.path().join("l.png");
+        set.plan(&[&out]).unwrap();
+        let e = set.plan(&[dir.path().join("./l.png")]).unwrap_err();
+        assert!(matches!(e, OutputError::Duplicate(_)), "{e}");
+        assert_eq!(fs::read(&input).unwrap(), b"grid");
     }
 }

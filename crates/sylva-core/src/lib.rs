@@ -7,6 +7,10 @@
 //!   +z (so azimuth 90° puts the sun over +z).
 //! * Files are written atomically with [`atomic_write`]: a temporary file beside the target,
 //!   then a rename, so a crash never leaves a half-written cache or image.
+//! * A command's output files are written together with an [`OutputSet`]: all or none
+//!   replaced, never an input, temporaries removed on Ctrl-C ([`interrupt`]).
+//! * Input files are read with [`read_file`]: regular files only, sizes bounded; the limits
+//!   on inputs live in [`limits`].
 //! * Large allocations are checked first with [`check_memory`].
 //! * Light colours are linear sRGB; [`blackbody_rgb`] gives a black body's (the sun is 6500 K).
 //! * Randomness comes from [`SplitMix64`], seeded per task so results do not depend on the
@@ -17,14 +21,18 @@
 mod atomic;
 pub mod colour;
 mod hash;
+mod input;
+pub mod interrupt;
+pub mod limits;
 mod memory;
 mod names;
 mod rng;
 mod sun;
 
-pub use atomic::{atomic_write, atomic_write_with};
+pub use atomic::{atomic_write, atomic_write_with, OutputError, OutputSet};
 pub use colour::{blackbody_rgb, try_blackbody_rgb, SUN_TEMPERATURE_K};
 pub use hash::Fnv64;
+pub use input::{open_file, protect_input, read_file, read_text_file, resolve_inside, InputError};
 pub use memory::{available_memory_bytes, check_memory, format_bytes, MemoryError};
 pub use names::file_stem;
 pub use rng::SplitMix64;

@@ -18,11 +18,9 @@ pub struct ArbaroSpecies {
 
 #[derive(Debug, thiserror::Error)]
 pub enum ArbaroError {
-    #[error("{origin}: cannot read: {source}")]
-    Io {
-        origin: String,
-        source: std::io::Error,
-    },
+    /// A species file that cannot be read (missing, not a regular file, too large, not text).
+    #[error(transparent)]
+    Input(#[from] sylva_core::InputError),
     #[error("{origin}: malformed XML: {message}")]
     Xml { origin: String, message: String },
     #[error("{origin}: {message}")]
@@ -38,10 +36,11 @@ pub enum ArbaroError {
 /// Reads an Arbaro species file.
 pub fn load_file(path: &Path) -> Result<ArbaroSpecies, ArbaroError> {
     let origin = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|source| ArbaroError::Io {
-        origin: origin.clone(),
-        source,
-    })?;
+    let text = sylva_core::read_text_file(
+        path,
+        sylva_core::limits::TEXT_FILE_BYTES,
+        "Arbaro species files",
+    )?;
     parse(&text, &origin)
 }
 

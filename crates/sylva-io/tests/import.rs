@@ -985,6 +985,81 @@ fn gltf_errors_name_file_element_and_problem() {
     check(&p, "", "the mesh is empty: it has no triangles");
 }
 
+/// Issue 19's hostile inputs: each refused with the file, the element and the problem.
+#[test]
+fn hostile_gltf_and_unbounded_references_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let check = |p: &Path, element: &str, want: &str| {
+        let e = load_err(p, &ImportOptions::default());
+        assert!(
+            e.starts_with(&format!("{}: {element}", p.display())),
+            "{element}: {e}"
+        );
+        assert!(e.contains(want), "{want}: {e}");
+    };
+    // Item 1: an attribute naming an accessor that does not exist (the gltf crate's own
+    // validation indexed it unchecked and panicked).
+    let mut doc = hierarchy_doc();
+    doc.json["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = json!(42);
+    let p = doc.write_data_uri(d, "pos42.gltf");
+    check(
+        &p,
+        "meshes[0].primitives[0].attributes.POSITION",
+        "accessor 42 does not exist (the file has 3)",
+    );
+    // Item 13: integer positions and a glTF 3 asset are not read silently.
+    let mut doc = hierarchy_doc();
+    let q = doc.view(&[0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0, 0]);
+    doc.json["accessors"][0] = json!({"bufferView": q, "componentType": 5121, "count": 3, "type": "VEC3", "min": [0, 0, 0], "max": [1, 1, 0]});
+    let p = doc.write_data_uri(d, "u8.gltf");
+    check(&p, "accessors[0] (POSITION", "positions must be FLOAT");
+    let mut doc = hierarchy_doc();
+    doc.json["asset"]["version"] = json!("3.0");
+    let p = doc.write_data_uri(d, "v3.gltf");
+    check(&p, "asset.version", "only glTF 2.x is read");
+    // Item 7: buffers outside the model's folder, relative or absolute.
+    for uri in ["../../etc/passwd", "/etc/passwd", "sub/../../x.bin"] {
+        let mut doc = hierarchy_doc();
+        doc.json["buffers"] = json!([{"byteLength": 80, "uri": uri}]);
+        let p = write(d, "escape.gltf", doc.json.to_string());
+        check(&p, "buffers[0]", "outside the model's folder");
+    }
+    // Item 5: references to /dev/zero and to a FIFO are refused before a byte is read.
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink("/dev/zero", d.join("zero.bin")).unwrap();
+        let mut doc = hierarchy_doc();
+        doc.json["buffers"] = json!([{"byteLength": 80, "uri": "zero.bin"}]);
+        let p = write(d, "zero.gltf", doc.json.to_string());
+        // A link that leads out of the folder is outside it.
+        check(&p, "buffers[0]", "outside the model's folder");
+        std::os::unix::fs::symlink("/dev/zero", d.join("zero.obj")).unwrap();
+        let e = load_err(&d.join("zero.obj"), &ImportOptions::default());
+        assert!(e.contains("zero.obj: is not a regular file"), "{e}");
+        let fifo = d.join("fifo.mtl");
+        assert!(std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .unwrap()
+            .success());
+        let p = write(
+            d,
+            "fifo.obj",
+            "mtllib fifo.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+        );
+        let e = load_err(&p, &ImportOptions::default());
+        assert!(
+            e.contains("line 1: mtllib 'fifo.mtl'") && e.contains("is not a regular file"),
+            "{e}"
+        );
+        let mut doc = hierarchy_doc();
+        doc.json["buffers"] = json!([{"byteLength": 80, "uri": "fifo.mtl"}]);
+        let p = write(d, "fifo.gltf", doc.json.to_string());
+        check(&p, "buffers[0]", "is not a regular file");
+    }
+}
+
 // ---------- scenes ----------
 
 #[test]
@@ -1054,7 +1129,8 @@ fn scene_mesh_errors_name_the_scene_line_and_the_mesh_file() {
     let scene = write(
         d,
         "s.toml",
-        "name = \"x\"\n\n[[models]]\nname = \"b\"\nmesh = \"bad.obj\"\n",
+        "name = \"x\"\n\n[[models]]\nname = \"b\"\nmesh = \"bad.obj\"\n\
+         [[instances]]\nmodel = \"b\"\nposition = [0.0, 0.0, 0.0]\n",
     );
     let desc = SceneDesc::load_file(&scene).unwrap();
     let e = desc.build().unwrap_err().to_string();

@@ -5,13 +5,37 @@
 
 use thiserror::Error;
 
-/// Largest edge the tools accept: far beyond any sensible lighting grid, small enough that
-/// index arithmetic can never overflow.
-pub const MAX_EDGE: usize = 4096;
+/// Largest edge the tools accept ([`sylva_core::limits::GRID_EDGE`]): far beyond any grid
+/// that fits in memory, small enough that index arithmetic can never overflow.
+pub const MAX_EDGE: usize = *sylva_core::limits::GRID_EDGE.end();
+/// Smallest edge: the outer shell is the boundary, so 3 is the smallest grid with an interior.
+pub const MIN_EDGE: usize = *sylva_core::limits::GRID_EDGE.start();
+
+/// Element type of a raw grid file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RawElement {
+    U8,
+    F32,
+}
+
+impl RawElement {
+    pub fn size(self) -> usize {
+        match self {
+            RawElement::U8 => 1,
+            RawElement::F32 => 4,
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            RawElement::U8 => "u8",
+            RawElement::F32 => "f32",
+        }
+    }
+}
 
 #[derive(Debug, Error, PartialEq)]
 pub enum GridError {
-    #[error("grid size {0}×{1}×{2} is invalid: every edge must be between 3 and {MAX_EDGE} (the outer shell is the boundary, so 3 is the smallest grid with an interior)")]
+    #[error("grid size {0}×{1}×{2} is invalid: every edge must be between {MIN_EDGE} and {MAX_EDGE} (the outer shell is the boundary, so 3 is the smallest grid with an interior)")]
     BadDims(usize, usize, usize),
     #[error("{what} has {got} values, but a {dims} grid needs {want}")]
     Length {
@@ -46,7 +70,7 @@ impl std::fmt::Display for Dims {
 
 impl Dims {
     pub fn new(nx: usize, ny: usize, nz: usize) -> Result<Dims, GridError> {
-        let ok = |n: usize| (3..=MAX_EDGE).contains(&n);
+        let ok = |n: usize| sylva_core::limits::GRID_EDGE.contains(&n);
         if !(ok(nx) && ok(ny) && ok(nz)) {
             return Err(GridError::BadDims(nx, ny, nz));
         }
@@ -162,6 +186,34 @@ impl DensityGrid {
             density: vec![0.0; dims.sites()],
             wood: vec![0.0; dims.sites()],
         }
+    }
+
+    /// A headerless raw grid (`lb solve --raw`): densities in site order (x slowest, z
+    /// fastest), `u8` (0..255 maps to 0..1) or little-endian `f32`; no wood, unit bounds.
+    /// The byte count must match `dims` exactly.
+    pub fn from_raw(
+        dims: Dims,
+        bytes: &[u8],
+        element: RawElement,
+    ) -> Result<DensityGrid, GridError> {
+        let size = element.size();
+        let want = dims.sites() * size;
+        if bytes.len() != want {
+            return Err(GridError::Length {
+                what: format!("a raw {} file ({} bytes)", element.name(), bytes.len()),
+                got: bytes.len() / size,
+                want: dims.sites(),
+                dims,
+            });
+        }
+        let density: Vec<f32> = match element {
+            RawElement::F32 => bytes
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect(),
+            RawElement::U8 => bytes.iter().map(|&b| b as f32 / 255.0).collect(),
+        };
+        DensityGrid::new(dims, Bounds::UNIT, density, vec![0.0; dims.sites()])
     }
 
     /// Validates lengths and ranges: density and wood fraction must be finite and in [0, 1].

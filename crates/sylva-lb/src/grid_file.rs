@@ -38,6 +38,9 @@ pub enum GridFileError {
         path: PathBuf,
         source: std::io::Error,
     },
+    /// Not a regular file (a directory, FIFO or device).
+    #[error(transparent)]
+    Input(sylva_core::InputError),
     #[error("{path} is not a sylva grid file (bad magic; expected it to start with 'SYLVAGRD')")]
     Magic { path: PathBuf },
     #[error("{path} has format version {found}; this sylva reads version {VERSION}")]
@@ -289,6 +292,19 @@ impl GridFile {
         })
     }
 
+    /// Writes into `outputs` (renamed into place with the command's other outputs).
+    pub fn write_into(
+        &self,
+        outputs: &mut sylva_core::OutputSet,
+        path: &Path,
+    ) -> Result<(), sylva_core::OutputError> {
+        let (head, payload) = self.encode();
+        outputs.write(path, |w: &mut dyn Write| {
+            w.write_all(&head)?;
+            w.write_all(&payload)
+        })
+    }
+
     /// Reads and fully validates a grid file.
     pub fn read(path: &Path) -> Result<GridFile, GridFileError> {
         let io = |source| GridFileError::Io {
@@ -370,10 +386,12 @@ fn metadata_text(meta: &[(String, String)]) -> String {
 /// Opens a grid file and checks its header and metadata; the file is left at the payload and
 /// the CRC has consumed everything before it.
 fn open_grid(path: &Path) -> Result<(std::fs::File, GridHeader, crc32fast::Hasher), GridFileError> {
-    let mut file = std::fs::File::open(path).map_err(|source| GridFileError::Io {
-        path: path.into(),
-        source,
-    })?;
+    // The header says how long the file must be; the size is checked against it.
+    let (mut file, _) =
+        sylva_core::open_file(path, u64::MAX, "grid files").map_err(|e| match e {
+            sylva_core::InputError::Io { path, source } => GridFileError::Io { path, source },
+            e => GridFileError::Input(e),
+        })?;
     let (header, crc) = read_header(path, &mut file)?;
     Ok((file, header, crc))
 }

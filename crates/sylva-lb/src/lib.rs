@@ -26,7 +26,7 @@ pub mod shapes;
 pub mod solver;
 
 pub use backend::{CpuSolver, LbBenchmark, LbSolver, LbSolverError};
-pub use grid::{Bounds, DensityGrid, Dims, GridError, LightingGrid};
+pub use grid::{Bounds, DensityGrid, Dims, GridError, LightingGrid, RawElement};
 pub use grid_file::{Element, GridFile, GridFileError, GridKind};
 pub use params::{ColourParams, MediumParams, ParamError, Preset};
 pub use solver::{

@@ -17,12 +17,8 @@ fn layout(d: Dims) -> (usize, usize, usize) {
     (w, h, scale)
 }
 
-/// Writes an RGB preview image; `site(x, y, z)` gives linear RGB in [0, 1].
-fn render(
-    d: Dims,
-    path: &Path,
-    site: impl Fn(usize, usize, usize) -> [f32; 3],
-) -> std::io::Result<()> {
+/// An RGB preview image as PNG bytes; `site(x, y, z)` gives linear RGB in [0, 1].
+fn render(d: Dims, site: impl Fn(usize, usize, usize) -> [f32; 3]) -> std::io::Result<Vec<u8>> {
     let (w, h, scale) = layout(d);
     let mut img = vec![[24u8, 24, 24]; w * h];
     let mut put = |px: usize, py: usize, c: [f32; 3]| {
@@ -64,11 +60,16 @@ fn render(
         image::ExtendedColorType::Rgb8,
     )
     .map_err(std::io::Error::other)?;
-    sylva_core::atomic_write(path, &png)
+    Ok(png)
 }
 
-/// Lighting preview, scaled so the brightest interior site is white.
+/// Lighting preview, scaled so the brightest interior site is white, written atomically.
 pub fn write_lighting_preview(g: &LightingGrid, path: &Path) -> std::io::Result<()> {
+    sylva_core::atomic_write(path, &lighting_preview_png(g)?)
+}
+
+/// The lighting preview's PNG bytes.
+pub fn lighting_preview_png(g: &LightingGrid) -> std::io::Result<Vec<u8>> {
     let d = g.dims;
     let mut max = 0.0f32;
     for x in 1..d.nx - 1 {
@@ -81,12 +82,17 @@ pub fn write_lighting_preview(g: &LightingGrid, path: &Path) -> std::io::Result<
         }
     }
     let scale = if max > 0.0 { 1.0 / max } else { 1.0 };
-    render(d, path, |x, y, z| g.at(x, y, z).map(|v| v * scale))
+    render(d, |x, y, z| g.at(x, y, z).map(|v| v * scale))
 }
 
 /// Density preview: leaf density green, wood brown.
 pub fn write_density_preview(g: &DensityGrid, path: &Path) -> std::io::Result<()> {
-    render(g.dims, path, |x, y, z| {
+    sylva_core::atomic_write(path, &density_preview_png(g)?)
+}
+
+/// The density preview's PNG bytes.
+pub fn density_preview_png(g: &DensityGrid) -> std::io::Result<Vec<u8>> {
+    render(g.dims, |x, y, z| {
         let i = g.dims.index(x, y, z);
         let (rho, wood) = (g.density[i], g.wood[i]);
         let leaf = [0.25, 0.8, 0.2];

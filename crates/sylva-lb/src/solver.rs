@@ -395,6 +395,16 @@ pub fn memory_needed(dims: Dims) -> u64 {
     2 * state + ring + n * 4 + 3 * n * 4
 }
 
+/// Refuses an LB solve on `dims` that would not fit in memory: the solver's state
+/// ([`memory_needed`]) plus the density grid it reads (density and wood, 8 B/site), checked
+/// before either is allocated.
+pub fn check_solve_memory(dims: Dims) -> Result<(), sylva_core::MemoryError> {
+    sylva_core::check_memory(
+        &format!("an LB solve on a {dims} grid"),
+        memory_needed(dims) + dims.sites() as u64 * 8,
+    )
+}
+
 /// A raw pointer the planes of a step share; each (row, direction) run of the next state has
 /// exactly one source row, so concurrent writes never overlap.
 #[derive(Clone, Copy)]

@@ -34,7 +34,7 @@ pub mod tonemap;
 pub use indirect::{IndirectLight, ModelGridLight, NoIndirectLight};
 pub use lighting::{Illumination, Light};
 pub use pipeline::{
-    illumination, light_models, lighting_options, load_scene, mode_path, resolution,
+    illumination, image_paths, light_models, lighting_options, load_scene, mode_path, resolution,
     scene_illumination, scene_to_sun, tone_map_modes, write_images, LbPlan, ModeImage,
     PipelineError, PrepareOptions, PreparedScene, Progress, Silent, Tracer, WrittenImage,
 };

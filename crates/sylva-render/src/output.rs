@@ -26,6 +26,9 @@ pub enum OutputError {
         path: PathBuf,
         source: std::io::Error,
     },
+    /// A file of the command's output set (named twice, an input, or not written).
+    #[error(transparent)]
+    Set(#[from] sylva_core::OutputError),
 }
 
 fn check_size(path: &Path, width: u32, height: u32, got: usize) -> Result<(), OutputError> {
@@ -40,6 +43,44 @@ fn check_size(path: &Path, width: u32, height: u32, got: usize) -> Result<(), Ou
         });
     }
     Ok(())
+}
+
+/// Row-major 8-bit sRGB pixels as PNG bytes.
+pub fn encode_png(
+    path: &Path,
+    width: u32,
+    height: u32,
+    pixels: &[[u8; 3]],
+) -> Result<Vec<u8>, OutputError> {
+    check_size(path, width, height, pixels.len())?;
+    let img = RgbImage::from_raw(width, height, pixels.as_flattened().to_vec())
+        .expect("size checked above");
+    let mut bytes = Cursor::new(Vec::new());
+    img.write_to(&mut bytes, ImageFormat::Png)
+        .map_err(|source| OutputError::Encode {
+            path: path.into(),
+            source,
+        })?;
+    Ok(bytes.into_inner())
+}
+
+/// Row-major linear RGB pixels as 32-bit float OpenEXR bytes.
+pub fn encode_exr(
+    path: &Path,
+    width: u32,
+    height: u32,
+    pixels: &[[f32; 3]],
+) -> Result<Vec<u8>, OutputError> {
+    check_size(path, width, height, pixels.len())?;
+    let img = Rgb32FImage::from_raw(width, height, pixels.as_flattened().to_vec())
+        .expect("size checked above");
+    let mut bytes = Cursor::new(Vec::new());
+    img.write_to(&mut bytes, ImageFormat::OpenExr)
+        .map_err(|source| OutputError::Encode {
+            path: path.into(),
+            source,
+        })?;
+    Ok(bytes.into_inner())
 }
 
 fn write_encoded(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {

@@ -21,16 +21,17 @@ use crate::lighting::{
     model_lighting, Illumination, Light, LightingError, LightingOptions, LightingReport,
     LightingSource, ModelLighting,
 };
-use crate::output::{write_exr, write_png, OutputError};
+use crate::output::{encode_exr, encode_png, OutputError};
 use crate::render::{
-    memory_needed, tile_count, Frame, Mode, RenderError, RenderSettings, Renderer,
+    memory_needed, output_memory_needed, tile_count, Frame, Mode, RenderError, RenderSettings,
+    Renderer,
 };
 use crate::shade::{shade_materials, transmission_from_g, ShadeMaterial, ShadingParams};
 use crate::stages::stage;
 use crate::tonemap::{srgb8, ToneMap};
 
-/// Largest image edge in pixels.
-pub const MAX_EDGE: u32 = 32768;
+/// Largest image edge in pixels ([`sylva_core::limits::IMAGE_EDGE`], as in scene files).
+pub const MAX_EDGE: u32 = *sylva_core::limits::IMAGE_EDGE.end();
 
 /// What the pipeline reports while it works. Every method has a default that ignores it;
 /// calls may come from worker threads.
@@ -58,6 +59,8 @@ impl Progress for Silent {}
 pub enum PipelineError {
     #[error(transparent)]
     Scene(#[from] SceneError),
+    #[error("the sun is {elevation:.1}° below the horizon: sylva lights scenes by the sun, so it must be at or above the horizon (elevation ≥ 0)")]
+    SunBelowHorizon { elevation: f64 },
     #[error("resolution {width}x{height}: width and height must be 1 to {MAX_EDGE}")]
     Resolution { width: u32, height: u32 },
     #[error("scene {scene}: [lb] preset")]
@@ -94,6 +97,13 @@ pub fn load_scene(name_or_path: &str, sun: Option<Sun>) -> Result<Scene, Pipelin
     let mut scene = sylva_scene::load(name_or_path)?;
     if let Some(sun) = sun {
         scene.sun = sun;
+    }
+    // Below the horizon the ground hides the sun, but the LB boundary would light the
+    // plants from below: refuse rather than render that.
+    if scene.sun.to_sun().y < 0.0 {
+        return Err(PipelineError::SunBelowHorizon {
+            elevation: -scene.sun.elevation_deg(),
+        });
     }
     Ok(scene)
 }
@@ -155,6 +165,9 @@ pub struct PrepareOptions<'a> {
     /// The largest frame that will be rendered, `(width, height, rays per pixel)`: its memory
     /// is checked before any LB or acceleration work.
     pub largest_frame: Option<(u32, u32, u32)>,
+    /// Images made from that frame (one per mode; `--mode all` makes four): their memory
+    /// is checked with the frame's.
+    pub output_images: usize,
 }
 
 impl Default for PrepareOptions<'_> {
@@ -169,6 +182,7 @@ impl Default for PrepareOptions<'_> {
             indirect: s.indirect,
             sky_ambient: s.sky_ambient,
             largest_frame: None,
+            output_images: 1,
         }
     }
 }
@@ -371,8 +385,11 @@ impl PreparedScene {
     pub fn check(scene: &Scene, opts: &PrepareOptions) -> Result<ShadingParams, PipelineError> {
         if let Some((w, h, rpp)) = opts.largest_frame {
             sylva_core::check_memory(
-                &format!("a {w}x{h} frame at {rpp} rays/pixel"),
-                memory_needed(w, h, rpp),
+                &format!(
+                    "a {w}x{h} frame at {rpp} rays/pixel and its {} image(s)",
+                    opts.output_images
+                ),
+                memory_needed(w, h, rpp) + output_memory_needed(w, h, opts.output_images),
             )?;
         }
         let preset = Preset::parse(&scene.lb.preset).map_err(|source| PipelineError::Preset {
@@ -585,8 +602,23 @@ pub struct WrittenImage {
     pub exr: Option<PathBuf>,
 }
 
-/// Writes each image as PNG at [`mode_path`] of `base` and, with `hdr`, its linear values
-/// as EXR beside it (atomically).
+/// The files [`write_images`] writes for `modes` from `base`: each mode's PNG and, with
+/// `hdr`, its EXR.
+pub fn image_paths(base: &Path, modes: &[Mode], hdr: bool) -> Vec<PathBuf> {
+    let several = modes.len() > 1;
+    let mut paths = Vec::new();
+    for &mode in modes {
+        let png = mode_path(base, mode, several);
+        if hdr {
+            paths.push(png.with_extension("exr"));
+        }
+        paths.push(png);
+    }
+    paths
+}
+
+/// Writes each mode's PNG (named by [`mode_path`] from `base`) and, with `hdr`, its EXR
+/// beside it, as one output set: every file is replaced, or (on an error or Ctrl-C) none.
 pub fn write_images(
     base: &Path,
     width: u32,
@@ -595,22 +627,27 @@ pub fn write_images(
     hdr: bool,
 ) -> Result<Vec<WrittenImage>, OutputError> {
     let _span = tracing::info_span!(stage::IMAGE_OUTPUT).entered();
+    let mut set = sylva_core::OutputSet::new::<&Path>(&[]);
+    let modes: Vec<Mode> = images.iter().map(|i| i.mode).collect();
+    set.plan(&image_paths(base, &modes, hdr))?;
     let mut written = Vec::with_capacity(images.len());
     for image in images {
         let png = mode_path(base, image.mode, images.len() > 1);
-        write_png(&png, width, height, &image.ldr)?;
         let exr = if hdr {
             let exr = png.with_extension("exr");
-            write_exr(&exr, width, height, &image.hdr)?;
+            // One encoded image in memory at a time.
+            set.write_bytes(&exr, &encode_exr(&exr, width, height, &image.hdr)?)?;
             Some(exr)
         } else {
             None
         };
+        set.write_bytes(&png, &encode_png(&png, width, height, &image.ldr)?)?;
         written.push(WrittenImage {
             mode: image.mode,
             png,
             exr,
         });
     }
+    set.commit()?;
     Ok(written)
 }

@@ -854,6 +854,15 @@ pub fn memory_needed(w: u32, h: u32, rays_per_pixel: u32) -> u64 {
     pixels * per_pixel + band * per_sample
 }
 
+/// Bytes the images made from a `w × h` frame hold at their peak: per image the composed
+/// linear image and its tone-mapped 8-bit copy (15 B/pixel), and the encoding of one image
+/// at a time (the EXR's pixel copy and file, 24 B/pixel). Measured peaks of `sylva render`
+/// grow by 95 B/pixel with one image and HDR, 145 with `--mode all --hdr`; this and
+/// [`memory_needed`] give 114 and 159.
+pub fn output_memory_needed(w: u32, h: u32, images: usize) -> u64 {
+    w as u64 * h as u64 * (15 * images.max(1) as u64 + 24)
+}
+
 /// Number of tiles a frame of region `r` is rendered in.
 pub fn tile_count(r: Region) -> u64 {
     let ((r0, r1), (c0, c1)) = (tile_rows(r), tile_columns(r));

@@ -196,11 +196,20 @@ fn bad_inputs_are_errors_naming_the_problem() {
         .unwrap();
     assert!(e.to_string().contains("indirect"), "{e}");
     let opts = PrepareOptions {
-        largest_frame: Some((32768, 32768, 1024)),
+        largest_frame: Some((16384, 16384, 1024)),
         ..PrepareOptions::default()
     };
     let e = PreparedScene::new(scene, &opts, &Silent).err().unwrap();
-    assert!(e.to_string().contains("32768x32768 frame"), "{e}");
+    assert!(e.to_string().contains("16384x16384 frame"), "{e}");
+    // Issue 19, item 6: the images made from a frame count too. A frame that fits alone
+    // must not pass when its four mode images would not.
+    let frame = sylva_render::render::memory_needed(8192, 8192, 1);
+    let images = sylva_render::render::output_memory_needed(8192, 8192, 4);
+    assert!(images > frame / 2, "frame {frame} B, images {images} B");
+    // Issue 19, item 12: a sun below the horizon is refused, not rendered lit from below.
+    let below = sylva_core::Sun::from_angles(-30.0, 0.0).unwrap();
+    let e = load_scene("demo", Some(below)).err().unwrap();
+    assert!(e.to_string().contains("30.0° below the horizon"), "{e}");
     let e = load_scene("no-such-scene.toml", None).err().unwrap();
     assert!(e.to_string().contains("no-such-scene"), "{e}");
 }

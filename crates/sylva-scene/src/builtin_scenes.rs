@@ -19,7 +19,7 @@ pub fn source(name: &str) -> Option<&'static str> {
 pub fn describe(name: &str) -> Option<&'static str> {
     match name {
         "demo" => Some("small mixed forest (maples, pines, dogroses); quick to render; the default of `sylva render`"),
-        "beech" => Some("paper 000 Table 2: 962 trees of 5 species, about 273 M instanced triangles, 896×448"),
+        "beech" => Some("paper 000 Table 2: 962 trees of 5 species, about 270 M instanced triangles, 896×448"),
         "catalpa" => Some("paper 004 Fig. 3 top: one southern catalpa, 512×512"),
         "canopy" => Some("paper 004 Fig. 3 bottom: a dense canopy of 5 species, about 100 M instanced triangles, 512×512"),
         _ => None,

@@ -12,6 +12,7 @@ use glam::Vec3;
 use rayon::prelude::*;
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
+use sylva_core::limits;
 use sylva_core::Sun;
 use sylva_geom::{Aabb, Camera, Ground, Instance, LbSettings, Model, ModelOrigin, Scene};
 use sylva_grow::arbaro::{self, ArbaroError};
@@ -25,11 +26,9 @@ pub const LB_PRESETS: &[&str] = &["leaf", "dogrose", "cloud", "pmma"];
 
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
-    #[error("{path}: cannot read scene file: {source}")]
-    Io {
-        path: String,
-        source: std::io::Error,
-    },
+    /// A scene file that cannot be read (missing, not a regular file, too large, not text).
+    #[error(transparent)]
+    Input(#[from] sylva_core::InputError),
     #[error("no scene file '{0}' and no built-in scene of that name (built-in scenes: {builtins})", builtins = builtin_scenes::NAMES.join(", "))]
     NotFound(String),
     /// Syntax, unknown keys, wrong types and bad values.
@@ -44,7 +43,7 @@ pub enum SceneError {
         origin: String,
         line: usize,
         model: String,
-        source: ArbaroError,
+        source: Box<ArbaroError>,
     },
     #[error("{origin}: model '{model}': {source}")]
     Generate {
@@ -281,10 +280,8 @@ impl SceneDesc {
     }
 
     pub fn load_file(path: &Path) -> Result<SceneDesc, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
-            path: path.display().to_string(),
-            source,
-        })?;
+        let text =
+            sylva_core::read_text_file(path, sylva_core::limits::TEXT_FILE_BYTES, "scene files")?;
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
         SceneDesc::parse(&text, &path.display().to_string(), Some(&dir))
     }
@@ -306,7 +303,6 @@ impl SceneDesc {
             invalid(line, e.message().trim().to_string())
         })?;
         let line = |s: std::ops::Range<usize>| line_of(text, s.start);
-
         // Models.
         let mut models: Vec<ModelDesc> = Vec::new();
         for m in &raw.models {
@@ -366,7 +362,7 @@ impl SceneDesc {
                     origin: origin.to_string(),
                     line: l,
                     model: m.name.clone(),
-                    source,
+                    source: Box::new(source),
                 })?;
                 let seed = m.seed.or(a.seed).unwrap_or(0);
                 ModelSource::Species(Box::new(Species::from_params(
@@ -610,17 +606,24 @@ impl SceneDesc {
                     ));
                 }
                 let [w, h] = c.resolution.unwrap_or([640, 360]);
-                if !(1..=16384).contains(&w) || !(1..=16384).contains(&h) {
+                let edge = limits::IMAGE_EDGE;
+                if !edge.contains(&w) || !edge.contains(&h) {
                     return Err(invalid(
                         Some(l),
-                        format!("camera resolution {w}×{h} must be 1 to 16384 per side"),
+                        format!(
+                            "camera resolution {w}×{h} must be {} per side",
+                            limits::describe(&edge)
+                        ),
                     ));
                 }
                 let rpp = c.rays_per_pixel.unwrap_or(1);
-                if !(1..=1024).contains(&rpp) {
+                if !limits::RAYS_PER_PIXEL.contains(&rpp) {
                     return Err(invalid(
                         Some(l),
-                        format!("rays_per_pixel {rpp} must be 1 to 1024"),
+                        format!(
+                            "rays_per_pixel {rpp} must be {}",
+                            limits::describe(&limits::RAYS_PER_PIXEL)
+                        ),
                     ));
                 }
                 if c.position.is_some() != c.look_at.is_some() {
@@ -654,10 +657,13 @@ impl SceneDesc {
                 let l = line(s.span());
                 let s = s.get_ref();
                 let grid = s.grid.unwrap_or(128);
-                if !(4..=2048).contains(&grid) {
+                if !limits::MODEL_GRID.contains(&(grid as usize)) {
                     return Err(invalid(
                         Some(l),
-                        format!("lb grid {grid} must be 4 to 2048"),
+                        format!(
+                            "lb grid {grid} must be {}",
+                            limits::describe(&limits::MODEL_GRID)
+                        ),
                     ));
                 }
                 let preset = s.preset.clone().unwrap_or_else(|| "leaf".into());
@@ -673,6 +679,18 @@ impl SceneDesc {
                 LbSettings { grid, preset }
             }
         };
+
+        // An empty (or truncated-to-empty) file would render an empty scene without a word.
+        if models.is_empty() || instances.is_empty() {
+            return Err(invalid(
+                None,
+                format!(
+                    "the scene has {} [[models]] and {} [[instances]]: a scene needs at least one of each (is the file empty or truncated?)",
+                    models.len(),
+                    instances.len()
+                ),
+            ));
+        }
 
         Ok(SceneDesc {
             name: raw.name.unwrap_or_else(|| {

@@ -7,7 +7,7 @@ use std::borrow::Cow;
 use glam::Vec3;
 use sylva_geom::Wrap;
 use sylva_trace::kdtree::TERMINATION_SLACK;
-use sylva_trace::ray::BARY_EPS;
+use sylva_trace::ray::{BARY_EPS, ROUNDING};
 use sylva_trace::{KdTree, SceneAccel};
 use sylva_wgpu::{wgpu, GpuContext, GpuError};
 
@@ -316,14 +316,14 @@ impl GpuScene {
             "// Generated for one scene (sylva-trace-gpu/src/scene.rs).\n\
              const STACK: u32 = {}u;\n\
              const BARY_EPS: f32 = {};\n\
-             const ONE_PLUS_EPS: f32 = {};\n\
+             const ROUNDING: f32 = {};\n\
              const SLACK: f32 = {};\n\
              @group({g}) @binding(0) var<uniform> scene: SceneParams;\n\
              @group({g}) @binding(1) var<storage, read> models: array<ModelRec>;\n\
              @group({g}) @binding(2) var<storage, read> masks: array<vec4<u32>>;\n",
             self.stack_size,
             f32_literal(BARY_EPS),
-            f32_literal(1.0 + BARY_EPS),
+            f32_literal(ROUNDING),
             f32_literal(TERMINATION_SLACK),
         );
         let mut next = 3;

@@ -3,7 +3,7 @@
 //
 // The generated prelude (src/shader.rs) declares the scene's storage bindings and defines:
 //   const STACK: u32                         short-stack entries (TraversalConfig::stack_size)
-//   const BARY_EPS, ONE_PLUS_EPS, SLACK: f32 the CPU's constants, bit for bit
+//   const BARY_EPS, ROUNDING, SLACK: f32     the CPU's constants, bit for bit
 //   fn node_at(i) -> vec2<u32>               kd-tree nodes of every tree (KdNode::raw)
 //   fn prim_at(i) -> u32                     leaf primitive lists
 //   fn tri_at(i) -> vec4<f32>                3 per triangle: (v0, alpha entry), (e1, 0), (e2, 0)
@@ -108,14 +108,20 @@ fn intersect_triangle(o: vec3<f32>, d: vec3<f32>, v0: vec3<f32>, e1: vec3<f32>, 
         return miss;
     }
     let inv = 1.0 / det;
+    if (!is_finite_(inv)) {
+        return miss;
+    }
     let s = o - v0;
     let u = dot_(s, p) * inv;
-    if (!(u >= -BARY_EPS && u <= ONE_PLUS_EPS)) {
+    // The edge margin grows with the rounding of the dot products (ray.rs module docs).
+    let margin_u = max(BARY_EPS, ROUNDING * dot_(abs(s), abs(p)) * abs(inv));
+    if (!(u >= -margin_u && u <= 1.0 + margin_u)) {
         return miss;
     }
     let q = cross_(s, e1);
     let v = dot_(d, q) * inv;
-    if (v < -BARY_EPS || u + v > ONE_PLUS_EPS) {
+    let margin = max(margin_u, ROUNDING * dot_(abs(d), abs(q)) * abs(inv));
+    if (v < -margin || u + v > 1.0 + margin) {
         return miss;
     }
     let t = dot_(e2, q) * inv;

@@ -42,10 +42,10 @@ pub const SUB: usize = 3;
 pub const SUBCELLS: u32 = 27;
 /// Sites along the longest edge unless asked otherwise (the papers' 128³).
 pub const DEFAULT_GRID: usize = 128;
-/// Largest `N` accepted (sylva-lb's largest grid edge).
-pub const MAX_GRID: usize = sylva_lb::grid::MAX_EDGE;
+/// Largest `N` accepted ([`sylva_core::limits::MODEL_GRID`]).
+pub const MAX_GRID: usize = *sylva_core::limits::MODEL_GRID.end();
 /// Smallest `N`: the two shell sites plus two interior ones.
-pub const MIN_GRID: usize = 4;
+pub const MIN_GRID: usize = *sylva_core::limits::MODEL_GRID.start();
 
 /// What a cell's density measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -104,6 +104,8 @@ fn bench_lb(a: BenchLbArgs) -> Result<()> {
     if a.steps == 0 || a.repeats == 0 {
         bail!("--steps and --repeats must be at least 1");
     }
+    // The grid and the solver's state, checked before either is allocated.
+    sylva_lb::solver::check_solve_memory(dims)?;
     // A dense cloud-like medium: every site runs the full collision.
     let mut grid = DensityGrid::empty(dims);
     if a.medium == "dense" {

@@ -204,7 +204,7 @@ impl Measured {
 pub fn run(a: BenchTraceArgs, comm: Option<&dyn Comm>) -> Result<()> {
     let clock = StageClock::global();
     clock.reset();
-    let prepared = prepare(&a.frame, !a.no_lb, Some(4), false, comm)?;
+    let prepared = prepare(&a.frame, !a.no_lb, Some(4), 1, false, comm)?;
     let (accel_seconds, lb_seconds) = (
         clock.seconds(stage::ACCEL_BUILD),
         clock.seconds(stage::LB_PRECOMPUTE),

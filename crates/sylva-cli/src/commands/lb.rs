@@ -7,10 +7,10 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use sylva_core::Sun;
 use sylva_lb::grid_file::{read_header_verified, GridKind};
-use sylva_lb::preview::write_lighting_preview;
+use sylva_lb::preview::lighting_preview_png;
 use sylva_lb::shapes::Shape;
 use sylva_lb::{
-    Boundary, ColourParams, DensityGrid, Dims, Element, GridFile, MediumParams, Preset,
+    Boundary, ColourParams, DensityGrid, Dims, Element, GridFile, MediumParams, Preset, RawElement,
     SolveOptions,
 };
 use sylva_scene::model_source::load_scene_model;
@@ -52,8 +52,9 @@ struct Source {
     /// --raw-dims and --raw-type.
     #[arg(long, value_name = "FILE", requires_all = ["raw_dims"])]
     raw: Option<PathBuf>,
-    /// A model, voxelized first (`sylva voxelize`) with --grid sites along its longest edge:
-    /// a built-in species name or an Arbaro species file (.xml).
+    /// A model, voxelized first (`sylva voxelize`) with --grid sites along its longest edge
+    /// (4 to 2048): a built-in species name, an Arbaro species file (.xml), or a mesh (.obj,
+    /// .gltf, .glb).
     #[arg(long, value_name = "SPEC")]
     model: Option<String>,
     /// A scene (file or built-in name): one of its models (--scene-model) voxelized with the
@@ -66,8 +67,9 @@ struct Source {
 pub struct SolveArgs {
     #[command(flatten)]
     source: Source,
-    /// Grid size: for --shape N (an N³ grid) or NXxNYxNZ; for --model and --scene N, the
-    /// sites along the model's longest edge (default 128, or the scene's [lb] grid).
+    /// Grid size: for --shape N (an N³ grid) or NXxNYxNZ, each edge 3 to 2048; for --model
+    /// and --scene N, the sites along the model's longest edge, 4 to 2048 (default 128, or the
+    /// scene's [lb] grid).
     #[arg(long)]
     grid: Option<String>,
     /// With --scene: the name of the model to light (needed when the scene has several).
@@ -220,9 +222,17 @@ fn parse_dims(s: &str, what: &str) -> Result<Dims> {
 
 /// `--grid` as the N of a model grid.
 fn model_grid_n(grid: &str) -> Result<usize> {
-    grid.trim().parse().with_context(|| {
+    let n: usize = grid.trim().parse().with_context(|| {
         format!("--grid '{grid}': a model's grid is one number, the sites along its longest edge")
-    })
+    })?;
+    let range = sylva_core::limits::MODEL_GRID;
+    if !range.contains(&n) {
+        bail!(
+            "--grid {n}: a model's grid must be {} sites along its longest edge",
+            sylva_core::limits::describe(&range)
+        );
+    }
+    Ok(n)
 }
 
 /// Loads the medium and names it for default output paths.
@@ -268,41 +278,27 @@ fn load_source(a: &SolveArgs, scene: Option<&SceneDesc>) -> Result<(DensityGrid,
         bail!("unknown shape '{shape_name}': expected sphere, cube or crown");
     };
     let dims = parse_dims(a.grid.as_deref().unwrap_or("128"), "--grid")?;
-    sylva_core::check_memory(
-        &format!("an LB solve on a {dims} grid"),
-        sylva_lb::solver::memory_needed(dims) + dims.sites() as u64 * 8,
-    )?;
+    sylva_lb::solver::check_solve_memory(dims)?;
     Ok((shape.grid(dims), shape.name().into()))
 }
 
 fn read_raw(path: &Path, dims: Dims, ty: &str) -> Result<DensityGrid> {
-    let size = if ty == "f32" { 4 } else { 1 };
-    let want = dims.sites() as u64 * size;
-    let meta =
-        std::fs::metadata(path).with_context(|| format!("cannot read {}", path.display()))?;
-    if meta.len() != want {
+    let element = if ty == "f32" {
+        RawElement::F32
+    } else {
+        RawElement::U8
+    };
+    let want = (dims.sites() * element.size()) as u64;
+    // A regular file of exactly the bytes the grid needs, checked before it is read.
+    let (_, size) = sylva_core::open_file(path, u64::MAX, "raw grid files")?;
+    if size != want {
         bail!(
-            "{}: a {dims} grid of {ty} needs {want} bytes, the file has {}",
-            path.display(),
-            meta.len()
+            "{}: a {dims} grid of {ty} needs {want} bytes, the file has {size}",
+            path.display()
         );
     }
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let density: Vec<f32> = if size == 4 {
-        bytes
-            .chunks_exact(4)
-            .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
-            .collect()
-    } else {
-        bytes.iter().map(|&b| b as f32 / 255.0).collect()
-    };
-    DensityGrid::new(
-        dims,
-        sylva_lb::Bounds::UNIT,
-        density,
-        vec![0.0; dims.sites()],
-    )
-    .with_context(|| format!("{}", path.display()))
+    let bytes = sylva_core::read_file(path, want, "raw grid files")?;
+    DensityGrid::from_raw(dims, &bytes, element).with_context(|| format!("{}", path.display()))
 }
 
 fn solve(a: SolveArgs) -> Result<()> {
@@ -341,6 +337,14 @@ fn solve(a: SolveArgs) -> Result<()> {
         .png
         .clone()
         .unwrap_or_else(|| output.with_extension("png"));
+    // Inputs are protected (--input and --raw here; scene and model files as they are read),
+    // and the grid and its preview are checked against each other, before the solve.
+    let inputs: Vec<&Path> = [a.source.input.as_deref(), a.source.raw.as_deref()]
+        .into_iter()
+        .flatten()
+        .collect();
+    let mut outputs = sylva_core::OutputSet::new(&inputs);
+    outputs.plan(&[&output, &png])?;
     let (mean, occupied) = grid.occupancy();
     let d = sun.travel();
     println!(
@@ -419,9 +423,11 @@ fn solve(a: SolveArgs) -> Result<()> {
         ),
     ];
     let element = if a.f16 { Element::F16 } else { Element::F32 };
-    GridFile::from_lighting(&lighting, element, metadata).write(&output)?;
-    write_lighting_preview(&lighting, &png)
-        .with_context(|| format!("cannot write {}", png.display()))?;
+    GridFile::from_lighting(&lighting, element, metadata).write_into(&mut outputs, &output)?;
+    let preview = lighting_preview_png(&lighting)
+        .with_context(|| format!("cannot encode the preview {}", png.display()))?;
+    outputs.write_bytes(&png, &preview)?;
+    outputs.commit()?;
     println!(
         "total {:.2} s (setup {load_s:.2} s, solve {solve_s:.2} s, {})",
         t0.elapsed().as_secs_f64(),

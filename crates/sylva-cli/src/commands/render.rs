@@ -12,8 +12,8 @@ use sylva_lb::LbSolver;
 use sylva_mpi::Comm;
 use sylva_render::lighting::{Light, LightingReport, LightingSource};
 use sylva_render::{
-    load_scene, resolution, stage, tone_map_modes, write_images, LbPlan, Mode, PrepareOptions,
-    PreparedScene, Progress, ShadingParams, Silent, StageClock, ToneMap,
+    image_paths, load_scene, resolution, stage, tone_map_modes, write_images, LbPlan, Mode,
+    PrepareOptions, PreparedScene, Progress, ShadingParams, Silent, StageClock, ToneMap,
 };
 use sylva_spp::trees::system::{SppLight, SppSystem, SystemConfig};
 use sylva_trace::TraversalConfig;
@@ -36,11 +36,12 @@ pub struct FrameArgs {
     /// Sun direction (vector towards the sun, x,y,z with y up); default: the scene's sun.
     #[arg(long, conflicts_with_all = ["elevation", "azimuth"])]
     pub sun: Option<String>,
-    /// Sun elevation above the horizon in degrees (default 50 when only --azimuth is given).
-    #[arg(long)]
+    /// Sun elevation above the horizon in degrees, 0 to 90 (default 50 when only --azimuth
+    /// is given).
+    #[arg(long, allow_negative_numbers = true)]
     pub elevation: Option<f64>,
     /// Sun azimuth in degrees from +x towards +z (default 30 when only --elevation is given).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub azimuth: Option<f64>,
     /// Short-stack entries of the kd-tree traversal (000 Fig. 1 uses 5).
     #[arg(long, default_value_t = sylva_trace::DEFAULT_STACK_SIZE)]
@@ -59,7 +60,8 @@ pub struct FrameArgs {
     /// Paper light: sky light on the ground as a fraction of the sun's.
     #[arg(long, default_value_t = ShadingParams::default().sky_ambient)]
     pub sky_ambient: f32,
-    /// LB grid sites along each model's longest edge (default: the scene's [lb] grid).
+    /// LB grid sites along each model's longest edge, 4 to 2048 (default: the scene's [lb]
+    /// grid).
     #[arg(long)]
     pub lb_grid: Option<usize>,
     /// Directory of the LB lighting cache.
@@ -128,6 +130,7 @@ pub fn prepare(
     a: &FrameArgs,
     need_lb: bool,
     rays_per_pixel: Option<u32>,
+    output_images: usize,
     to_stdout: bool,
     comm: Option<&dyn Comm>,
 ) -> Result<Prepared> {
@@ -190,6 +193,7 @@ pub fn prepare(
         indirect: a.indirect,
         sky_ambient: a.sky_ambient,
         largest_frame: Some((width, height, rays_per_pixel)),
+        output_images,
     };
     let progress = Bars::new(
         |model: &Model, report: &LightingReport| match &report.source {
@@ -271,9 +275,17 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
         }
     }
     if let Some(r) = a.rpp {
-        if !(1..=1024).contains(&r) {
-            bail!("--rpp {r}: rays per pixel must be 1 to 1024");
+        let range = sylva_core::limits::RAYS_PER_PIXEL;
+        if !range.contains(&r) {
+            bail!(
+                "--rpp {r}: rays per pixel must be {}",
+                sylva_core::limits::describe(&range)
+            );
         }
+    }
+    if let Some(o) = &a.output {
+        // Named twice or an input: refused now, not after the render.
+        sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&image_paths(o, &modes, a.hdr))?;
     }
     let clock = StageClock::global();
     clock.reset();
@@ -286,6 +298,7 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
         &a.frame,
         !spp && modes.iter().any(|m| m.needs_lb()),
         a.rpp,
+        modes.len(),
         true,
         comm,
     )?;

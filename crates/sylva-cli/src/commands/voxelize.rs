@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::Args;
 use sylva_geom::Model;
-use sylva_lb::preview::write_density_preview;
+use sylva_lb::preview::density_preview_png;
 use sylva_lb::{DensityGrid, Element, GridFile};
 use sylva_voxel::{voxelize, Occupancy, VoxelizeOptions, DEFAULT_GRID};
 
@@ -15,14 +15,14 @@ use super::progress::bar;
 
 #[derive(Args)]
 pub struct VoxelizeArgs {
-    /// The model: a built-in species name (see `sylva species list`) or an Arbaro species file
-    /// (.xml).
+    /// The model: a built-in species name (see `sylva species list`), an Arbaro species file
+    /// (.xml), or a mesh (.obj, .gltf, .glb).
     model: String,
     /// Output density grid (default sylva-out/<model>-<N>.sgrid).
     #[arg(short, long)]
     output: Option<PathBuf>,
     /// Sites along the model's longest edge, the boundary shell included: the N of an
-    /// N³-class grid. The other edges get as many sites as the model's shape needs.
+    /// N³-class grid, 4 to 2048. The other edges get as many sites as the model's shape needs.
     #[arg(long, default_value_t = DEFAULT_GRID)]
     grid: usize,
     /// Store the grid as f16 (half the size; densities are multiples of 1/27, so f16 keeps
@@ -168,6 +168,11 @@ pub fn summary(g: &DensityGrid) -> String {
 
 pub fn run(a: VoxelizeArgs) -> Result<()> {
     let t0 = Instant::now();
+    // Before the work: the grid and its preview must differ and replace no input (the
+    // model file is protected once read).
+    if let (Some(o), Some(p)) = (&a.output, &a.png) {
+        sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&[o, p])?;
+    }
     let v = load_and_voxelize(&a.model, a.grid, !a.no_alpha, a.occupancy.into())?;
     let name = sylva_core::file_stem(&v.name, "model");
     let output = a
@@ -182,9 +187,13 @@ pub fn run(a: VoxelizeArgs) -> Result<()> {
     if a.f16 {
         file.element = Element::F16;
     }
-    file.write(&output)?;
-    write_density_preview(&v.grid, &png)
-        .with_context(|| format!("cannot write {}", png.display()))?;
+    let mut outputs = sylva_core::OutputSet::new::<&std::path::Path>(&[]);
+    outputs.plan(&[&output, &png])?;
+    file.write_into(&mut outputs, &output)?;
+    let preview = density_preview_png(&v.grid)
+        .with_context(|| format!("cannot encode the preview {}", png.display()))?;
+    outputs.write_bytes(&png, &preview)?;
+    outputs.commit()?;
     let b = v.grid.bounds;
     println!("voxelized {name}: {} triangles", v.triangles);
     println!("  {}", summary(&v.grid));

@@ -11,7 +11,9 @@
 //! `alphaCutoff`, baked so texture alpha ≥ 0.5 means opaque), `doubleSided`, and
 //! `KHR_materials_diffuse_transmission` (a translucent leaf).
 
-use super::{decode_image, remap_alpha, tint, to_texture, ImportError};
+use super::{
+    decode_image, read_model_file, read_referenced, remap_alpha, tint, to_texture, ImportError,
+};
 use super::{RawMaterial, RawModel};
 use base64::Engine;
 use glam::{Mat3, Mat4, Vec3};
@@ -26,15 +28,19 @@ use sylva_core::colour::linear_to_srgb8;
 use sylva_geom::{Texture, Wrap};
 
 pub(super) fn load(path: &Path) -> Result<RawModel, ImportError> {
-    let bytes =
-        std::fs::read(path).map_err(|e| ImportError::whole(path, format!("cannot read: {e}")))?;
+    let bytes = read_model_file(path)?;
     let glb = bytes.starts_with(b"glTF");
     if glb {
         check_glb_header(&bytes, path)?;
     }
     let gltf::Gltf { document, blob } =
-        gltf::Gltf::from_slice(&bytes).map_err(|e| parse_error(e, path, glb))?;
+        gltf::Gltf::from_slice_without_validation(&bytes).map_err(|e| parse_error(e, path, glb))?;
     drop(bytes);
+    // The gltf crate's validation indexes some arrays before checking the index: check
+    // those first, then let it validate the rest.
+    check_before_validation(document.as_json(), path)?;
+    let document =
+        gltf::Document::from_json(document.into_json()).map_err(|e| parse_error(e, path, glb))?;
     let ctx = Ctx {
         path,
         dir: path.parent().unwrap_or(Path::new("")).to_path_buf(),
@@ -93,6 +99,38 @@ pub(super) fn load(path: &Path) -> Result<RawModel, ImportError> {
         stack.extend(children.into_iter().rev().map(|c| (c, world)));
     }
     Ok(st.raw)
+}
+
+/// What must hold before the gltf crate validates the document: a glTF 2 asset, and
+/// attributes that name existing accessors (its validation indexes them unchecked).
+fn check_before_validation(root: &gltf::json::Root, path: &Path) -> Result<(), ImportError> {
+    let version = &root.asset.version;
+    if version.split('.').next() != Some("2") {
+        return Err(ImportError::at(
+            path,
+            "asset.version",
+            format!("'{version}': only glTF 2.x is read"),
+        ));
+    }
+    let accessors = root.accessors.len();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            for (semantic, index) in &prim.attributes {
+                if index.value() >= accessors {
+                    let name = semantic.to_string();
+                    return Err(ImportError::at(
+                        path,
+                        format!("meshes[{m}].primitives[{p}].attributes.{name}"),
+                        format!(
+                            "accessor {} does not exist (the file has {accessors})",
+                            index.value()
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The GLB header checks the gltf crate leaves to arithmetic that could underflow.
@@ -260,8 +298,10 @@ impl<'a> Ctx<'a> {
             ));
         }
         let rel = String::from_utf8_lossy(&percent_decode(uri)).into_owned();
-        let p = self.dir.join(rel);
-        std::fs::read(&p).map_err(|e| self.err(el, format!("cannot read {}: {e}", p.display())))
+        // Only files inside the model's folder: a model must not read /etc/passwd.
+        let p = sylva_core::resolve_inside(&self.dir, &rel, self.path)
+            .map_err(|e| self.err(el, e.problem()))?;
+        read_referenced(&p, self.path, el, sylva_core::limits::MODEL_FILE_BYTES)
     }
 
     /// The bytes of a buffer view (ranges checked in [`Ctx::with_buffers`]).
@@ -516,6 +556,16 @@ impl<'a> Ctx<'a> {
         let Some(pos_acc) = prim.get(&Semantic::Positions) else {
             return Ok(());
         };
+        // glTF 2 positions are floats; integer ones need KHR_mesh_quantization, not read here.
+        if pos_acc.data_type() != DataType::F32 {
+            return Err(self.err(
+                format!("accessors[{}] (POSITION of {el})", pos_acc.index()),
+                format!(
+                    "positions must be FLOAT (5126), got {:?} (quantized positions, KHR_mesh_quantization, are not read)",
+                    pos_acc.data_type()
+                ),
+            ));
+        }
         let positions = self.floats::<3>(&pos_acc, &format!("POSITION of {el}"))?;
         let n = positions.len();
         let normals = match prim.get(&Semantic::Normals) {

@@ -485,14 +485,29 @@ pub(crate) fn remap_alpha(a: f32, cutoff: f32) -> u8 {
     }
 }
 
-/// Reads a file the model refers to; `what` names the reference in errors.
+/// Reads a file the model refers to (an MTL file, a texture, a glTF buffer) through the
+/// bounded reader, at most `limit` bytes; `what` names the reference in errors.
 pub(crate) fn read_referenced(
     path: &Path,
     file: &Path,
     what: &str,
+    limit: u64,
 ) -> Result<Vec<u8>, ImportError> {
-    std::fs::read(path)
-        .map_err(|e| ImportError::at(file, what, format!("cannot read {}: {e}", path.display())))
+    sylva_core::read_file(path, limit, "referenced files").map_err(|e| {
+        let message = match e {
+            sylva_core::InputError::Io { path, source } => {
+                format!("cannot read {}: {source}", path.display())
+            }
+            e => e.to_string(),
+        };
+        ImportError::at(file, what, message)
+    })
+}
+
+/// Reads a model file itself (OBJ, glTF, GLB) through the bounded reader.
+pub(crate) fn read_model_file(path: &Path) -> Result<Vec<u8>, ImportError> {
+    sylva_core::read_file(path, sylva_core::limits::MODEL_FILE_BYTES, "model files")
+        .map_err(|e| ImportError::whole(path, e.problem()))
 }
 
 #[cfg(test)]

@@ -8,7 +8,8 @@
 //! directory. OBJ's v runs up the image, sylva's down: v is flipped.
 
 use super::{
-    decode_image_with_alpha, read_referenced, tint, to_texture, ImportError, RawMaterial, RawModel,
+    decode_image_with_alpha, read_model_file, read_referenced, tint, to_texture, ImportError,
+    RawMaterial, RawModel,
 };
 use glam::Vec3;
 use std::io::Cursor;
@@ -152,10 +153,13 @@ fn read_text(
     referenced: Option<(usize, &str)>,
 ) -> Result<String, ImportError> {
     let bytes = match referenced {
-        None => {
-            std::fs::read(p).map_err(|e| ImportError::whole(file, format!("cannot read: {e}")))?
-        }
-        Some((line, what)) => read_referenced(p, file, &format!("line {line}: {what}"))?,
+        None => read_model_file(p)?,
+        Some((line, what)) => read_referenced(
+            p,
+            file,
+            &format!("line {line}: {what}"),
+            sylva_core::limits::TEXT_FILE_BYTES,
+        )?,
     };
     String::from_utf8(bytes).map_err(|e| {
         ImportError::whole(
@@ -502,7 +506,7 @@ fn build_material(
             return Err(ImportError::at(&lib.path, what, "no file name"));
         }
         let p = resolve(dir, &r.file);
-        let bytes = read_referenced(&p, &lib.path, &what)?;
+        let bytes = read_referenced(&p, &lib.path, &what, sylva_core::limits::MODEL_FILE_BYTES)?;
         let (img, has_alpha) = decode_image_with_alpha(&bytes, &lib.path, &what)?;
         let wrap = if r.clamp { Wrap::Clamp } else { Wrap::Repeat };
         Ok((to_texture(&img, wrap), has_alpha))

@@ -55,11 +55,11 @@ impl PhotonConfig {
     }
 
     pub fn validate(&self) -> Result<(), TreeError> {
-        if self.photons == 0 {
+        if !sylva_core::limits::PHOTONS.contains(&self.photons) {
             return Err(TreeError::invalid(
                 "photons",
-                "0".into(),
-                "at least one photon is needed",
+                self.photons.to_string(),
+                "photons must be 1 to 10^12 (10^12 take most of a day on two cores)",
             ));
         }
         for (name, v) in [

@@ -1,0 +1,260 @@
+//! Issue 19: what a hostile user tried, each now a clear error (or a quiet exit), never a
+//! panic, an abort, a hang or a destroyed input.
+
+mod common;
+
+use common::sylva;
+use std::fs;
+use std::process::{Command, Stdio};
+
+/// A one-triangle OBJ.
+const TRIANGLE_OBJ: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+
+fn fails_with(args: &[&str], want: &str) {
+    let (ok, stdout, stderr) = sylva(args);
+    assert!(!ok, "{args:?} should fail: {stdout}");
+    assert!(stderr.contains(want), "{args:?}: {stderr}");
+    assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+}
+
+#[test]
+fn absurd_sizes_are_refused_before_allocating() {
+    // Item 2: more photons than anyone can wait for.
+    fails_with(
+        &["spp", "slab", "--photons", "10000000000000"],
+        "photons must be 1 to 10^12",
+    );
+    fails_with(
+        &["spp", "trees", "dogrose", "--photons", "10000000000000"],
+        "photons must be 1 to 10^12",
+    );
+    // Item 3: LB grids beyond memory are refused before the grid is allocated.
+    for grid in ["2000", "1600"] {
+        fails_with(&["bench", "lb", "--grid", grid, "--device", "cpu"], "needs");
+    }
+    // Item 8: thread counts.
+    fails_with(
+        &["--threads", "100000", "scene", "list"],
+        "--threads 100000: must be 1 to 256",
+    );
+    // Item 14: one limit per quantity, wherever it is given.
+    fails_with(
+        &["voxelize", "dogrose", "--grid", "4096"],
+        "between 4 and 2048",
+    );
+    fails_with(
+        &["lb", "solve", "--model", "dogrose", "--grid", "4096"],
+        "must be 4 to 2048",
+    );
+    fails_with(
+        &["lb", "solve", "--shape", "cube", "--grid", "4096"],
+        "between 3 and 2048",
+    );
+    fails_with(
+        &["render", "demo", "--width", "20000", "--height", "10"],
+        "must be 1 to 16384",
+    );
+}
+
+#[test]
+fn outputs_never_destroy_inputs_or_each_other() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    // Item 4: the grid and its preview under one name.
+    fails_with(
+        &[
+            "lb",
+            "solve",
+            "--shape",
+            "cube",
+            "--grid",
+            "8",
+            "-o",
+            &d("l.png"),
+        ],
+        "named twice",
+    );
+    fails_with(
+        &[
+            "lb",
+            "solve",
+            "--shape",
+            "cube",
+            "--grid",
+            "8",
+            "-o",
+            &d("a.sgrid"),
+            "--png",
+            &d("a.sgrid"),
+        ],
+        "named twice",
+    );
+    // The input grid as the output.
+    fs::write(d("ok.obj"), TRIANGLE_OBJ).unwrap();
+    let (ok, _, e) = sylva(&[
+        "voxelize",
+        &d("ok.obj"),
+        "--grid",
+        "8",
+        "-o",
+        &d("in.sgrid"),
+    ]);
+    assert!(ok, "{e}");
+    let before = fs::read(d("in.sgrid")).unwrap();
+    fails_with(
+        &[
+            "lb",
+            "solve",
+            "--input",
+            &d("in.sgrid"),
+            "-o",
+            &d("in.sgrid"),
+        ],
+        "is an input of this command",
+    );
+    assert_eq!(fs::read(d("in.sgrid")).unwrap(), before);
+    // The model as the voxelizer's output.
+    fails_with(
+        &["voxelize", &d("ok.obj"), "--grid", "8", "-o", &d("ok.obj")],
+        "is an input of this command",
+    );
+    assert_eq!(fs::read_to_string(d("ok.obj")).unwrap(), TRIANGLE_OBJ);
+    // The scene's own mesh as the export's OBJ.
+    fs::write(d("scene.obj"), TRIANGLE_OBJ).unwrap();
+    fs::write(
+        d("s.toml"),
+        "[[models]]\nname = \"m\"\nmesh = \"scene.obj\"\n[[instances]]\nmodel = \"m\"\nposition = [0.0, 0.0, 0.0]\n",
+    )
+    .unwrap();
+    fails_with(
+        &[
+            "export",
+            &d("s.toml"),
+            "--format",
+            "obj",
+            "-o",
+            dir.path().to_str().unwrap(),
+        ],
+        "is an input of this command",
+    );
+    assert_eq!(fs::read_to_string(d("scene.obj")).unwrap(), TRIANGLE_OBJ);
+}
+
+#[test]
+fn unreadable_inputs_are_named_and_refused_at_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n);
+    // Item 5: /dev/zero and a FIFO as a scene file: refused before a byte is read.
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink("/dev/zero", p("zero.toml")).unwrap();
+        fails_with(
+            &["scene", "info", p("zero.toml").to_str().unwrap()],
+            "is not a regular file",
+        );
+        assert!(Command::new("mkfifo")
+            .arg(p("fifo.toml"))
+            .status()
+            .unwrap()
+            .success());
+        fails_with(
+            &["scene", "info", p("fifo.toml").to_str().unwrap()],
+            "is not a regular file",
+        );
+    }
+    // Item 13: an empty scene file.
+    fs::write(p("empty.toml"), "").unwrap();
+    fails_with(
+        &["scene", "info", p("empty.toml").to_str().unwrap()],
+        "is the file empty or truncated?",
+    );
+}
+
+#[test]
+fn sun_below_the_horizon_is_refused_and_negative_numbers_parse() {
+    // Item 12: `--elevation -10` (with a space) reaches sylva, which explains the problem.
+    fails_with(
+        &["render", "demo", "--elevation", "-10", "--mode", "local"],
+        "10.0° below the horizon",
+    );
+    fails_with(
+        &["render", "demo", "--sun", "0,-1,0", "--mode", "local"],
+        "90.0° below the horizon",
+    );
+}
+
+#[test]
+fn scene_list_agrees_with_scene_info() {
+    // Item 14: beech has 270,217,524 instanced triangles.
+    let (ok, out, _) = sylva(&["scene", "list"]);
+    assert!(
+        ok && out.contains("about 270 M instanced triangles"),
+        "{out}"
+    );
+    let (ok, out, _) = sylva(&["bench", "--help"]);
+    assert!(ok, "{out}");
+    for sub in ["lb", "scene", "voxelize", "trace"] {
+        assert!(out.contains(sub), "bench --help lacks {sub}: {out}");
+    }
+    // Help of the commands that take models names every model format.
+    for args in [&["voxelize", "--help"][..], &["lb", "solve", "--help"]] {
+        let (ok, out, _) = sylva(args);
+        assert!(ok, "{out}");
+        for ext in [".xml", ".obj", ".gltf", ".glb"] {
+            assert!(out.contains(ext), "{args:?} lacks {ext}: {out}");
+        }
+    }
+}
+
+#[cfg(unix)]
+#[test]
+fn a_closed_pipe_ends_the_output_quietly() {
+    // Item 10: `sylva lb info x.sgrid | head -1`.
+    let dir = tempfile::tempdir().unwrap();
+    let grid = dir.path().join("g.sgrid");
+    let (ok, _, e) = sylva(&[
+        "lb",
+        "solve",
+        "--shape",
+        "cube",
+        "--grid",
+        "8",
+        "--steps",
+        "2",
+        "-o",
+        grid.to_str().unwrap(),
+    ]);
+    assert!(ok, "{e}");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .args(["lb", "info", grid.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The reader goes away before sylva writes a line.
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_ne!(out.status.code(), Some(101), "{stderr}");
+}
+
+#[test]
+fn probing_for_a_gpu_prints_no_driver_warnings() {
+    // Item 15: without XDG_RUNTIME_DIR, Mesa's device-select layer (installed with lavapipe)
+    // warns on every Vulkan instance; `--device auto` must probe quietly.
+    let dir = tempfile::tempdir().unwrap();
+    let grid = dir.path().join("g.sgrid");
+    let out = Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .args([
+            "lb", "solve", "--shape", "cube", "--grid", "8", "--steps", "2",
+        ])
+        .args(["--device", "auto", "-o", grid.to_str().unwrap()])
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("NODEVICE_SELECT")
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(!stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
+}

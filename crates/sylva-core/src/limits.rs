@@ -1,0 +1,51 @@
+//! The limits sylva enforces on its inputs, in one place: scene files, command-line options,
+//! grid files and model files all check against these, so one quantity has one range.
+//! `docs/reliability.md` lists them with the reasons.
+
+use std::ops::RangeInclusive;
+
+/// Sites along each edge of an LB grid (solver, grid files, raw input, built-in shapes). The
+/// outer shell is the boundary, so 3 is the smallest grid with an interior; 2048³ sites would
+/// take 1.2 TB to solve, so memory refuses far sooner on most machines.
+pub const GRID_EDGE: RangeInclusive<usize> = 3..=2048;
+
+/// Sites along a model's longest edge when it is voxelized (`--grid` of `voxelize` and
+/// `lb solve --model/--scene`, `--lb-grid`, a scene file's `[lb] grid`): the shell on both
+/// sides leaves at least two interior sites.
+pub const MODEL_GRID: RangeInclusive<usize> = 4..=2048;
+
+/// Pixels along each edge of an image (scene files and `--width/--height`).
+pub const IMAGE_EDGE: RangeInclusive<u32> = 1..=16384;
+
+/// Rays per pixel (`--rpp`, a scene camera's `rays_per_pixel`).
+pub const RAYS_PER_PIXEL: RangeInclusive<u32> = 1..=1024;
+
+/// Worker threads (`--threads`): far more threads than cores only add start-up time (10 000
+/// took a minute to start).
+pub const THREADS: RangeInclusive<usize> = 1..=256;
+
+/// Monte Carlo photons (`spp slab --photons`): 10¹² take most of a day on two cores.
+pub const PHOTONS: RangeInclusive<u64> = 1..=1_000_000_000_000;
+
+/// Text inputs: scene files (TOML), Arbaro species files (XML), MTL files.
+pub const TEXT_FILE_BYTES: u64 = 64 << 20;
+
+/// Binary and large inputs: OBJ, glTF and GLB files, glTF buffers, textures.
+pub const MODEL_FILE_BYTES: u64 = 4 << 30;
+
+/// `"4 to 2048"`: a range as error messages write it.
+pub fn describe<T: std::fmt::Display>(r: &RangeInclusive<T>) -> String {
+    format!("{} to {}", r.start(), r.end())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn model_grids_are_grids() {
+        // A voxelized model's grid must be a valid LB grid along every edge.
+        assert!(GRID_EDGE.contains(MODEL_GRID.start()) && GRID_EDGE.contains(MODEL_GRID.end()));
+        assert_eq!(describe(&MODEL_GRID), "4 to 2048");
+    }
+}
