@@ -567,6 +567,7 @@ fn key_of(
     for mat in &model.materials {
         match mat.kind {
             MaterialKind::Wood => h.u64(1),
+            MaterialKind::Solid => h.u64(3),
             MaterialKind::Leaf => {
                 h.u64(2);
                 match &mat.texture {

@@ -187,7 +187,7 @@ fn bsdf(out: &mut String, id: &str, mat: &Material, files: &MaterialFiles, alpha
         out,
         "    <!-- {} ({}): reflectance {} × colour, transmittance {} × colour -->",
         xml_text(&mat.name),
-        if mat.is_leaf() { "leaf" } else { "wood" },
+        mat.kind.name(),
         v3(o.reflect),
         v3(if mat.is_leaf() { o.transmit } else { [0.0; 3] }),
     );
