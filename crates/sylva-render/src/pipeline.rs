@@ -63,9 +63,11 @@ pub enum PipelineError {
     SunBelowHorizon { elevation: f64 },
     #[error("resolution {width}x{height}: width and height must be 1 to {MAX_EDGE}")]
     Resolution { width: u32, height: u32 },
-    #[error("scene {scene}: [lb] preset")]
+    #[error("scene {scene}: LB preset of {what}")]
     Preset {
         scene: String,
+        /// `model 'NAME'` or `medium 'NAME'`.
+        what: String,
         #[source]
         source: ParamError,
     },
@@ -296,7 +298,8 @@ pub fn scene_to_sun(scene: &Scene) -> Vec3 {
     Vec3::new(s.x as f32, s.y as f32, s.z as f32)
 }
 
-/// The lighting options of `lb` for `scene`.
+/// The lighting options of `lb` for `scene` (with the scene's preset: a model's own is
+/// [`Scene::model_preset`]).
 pub fn lighting_options(scene: &Scene, lb: &LbPlan) -> LightingOptions {
     LightingOptions {
         grid: lb.grid.unwrap_or(scene.lb.grid as usize),
@@ -318,7 +321,11 @@ pub fn light_models(
     let illum = scene_illumination(scene);
     let mut lighting = Vec::with_capacity(scene.models.len());
     let mut cached = 0;
-    for model in &scene.models {
+    for (k, model) in scene.models.iter().enumerate() {
+        let lopts = LightingOptions {
+            preset: scene.model_preset(k).to_string(),
+            ..lopts.clone()
+        };
         let _m = tracing::info_span!(stage::LB_MODEL, model = %model.name).entered();
         progress.start(&format!("LB {}", model.name), 3);
         let lit = model_lighting(model, &illum, &lopts, lb.solver, &mut |c, step, max| {
@@ -392,10 +399,19 @@ impl PreparedScene {
                 memory_needed(w, h, rpp) + output_memory_needed(w, h, opts.output_images),
             )?;
         }
+        for k in 0..scene.models.len() {
+            Preset::parse(scene.model_preset(k)).map_err(|source| PipelineError::Preset {
+                scene: scene.name.clone(),
+                what: format!("model '{}'", scene.models[k].name),
+                source,
+            })?;
+        }
         let preset = Preset::parse(&scene.lb.preset).map_err(|source| PipelineError::Preset {
             scene: scene.name.clone(),
+            what: "[lb]".into(),
             source,
         })?;
+        // The paper light's leaf T/R; the physical light's come from each material's optics.
         let g = preset.params().colours.map(|c| c.g as f32);
         let shading = ShadingParams {
             light: opts.light,
