@@ -175,16 +175,18 @@ preset = "cloud"
 [ground]
 enabled = false
 
+# The sun from the left, a little behind the cloud; a clear sky's radiance is about a tenth
+# of the sun's irradiance (sylva's units: the sun lights a white surface facing it to 1).
 [sun]
 elevation = 35.0
-azimuth = 225.0
+azimuth = 160.0
 
 [sky]
-color = [0.30, 0.48, 0.85]
+color = [0.12, 0.20, 0.40]
 
 [camera]
-position = [-600.0, 350.0, -4600.0]
-look_at = [0.0, 700.0, 0.0]
+position = [-500.0, 200.0, -2700.0]
+look_at = [0.0, 640.0, 0.0]
 fov = 42.0
 resolution = [640, 360]
 rays_per_pixel = 1
