@@ -11,7 +11,9 @@
 //!   part ([`sylva_lb::light::uncollided`]) is subtracted: the renderer traces direct sunlight
 //!   exactly, so the grid holds what it cannot trace, the scattered sunlight plus the sky's and
 //!   ground's light, as an LB value (fluence in units of the unit sun's irradiance `E0 = π`).
-//!   Everything is linear in the sun, sky and ground.
+//!   Everything is linear in the sun, sky and ground. A model with a solid material (a
+//!   scattering object such as the PMMA teapot) takes its medium from its LB preset instead,
+//!   on the sub-cell occupancy.
 //! * **Paper** (000). The scene's LB preset, sub-cell occupancy, a sun-only boundary, and the
 //!   total divided by the free-space total `Σ_i max(0, n_i·d)`, so unobstructed sunlight is 1.
 //!
@@ -516,9 +518,23 @@ fn solve_plan(
         Light::Physical => {
             let env = illum.environment(sun);
             env.validate().map_err(LightingError::Illumination)?;
+            // A solid (the PMMA teapot, docs/media.md) is a scattering material, not leaves
+            // and bark: its medium is its preset's, on the paper's sub-cell occupancy.
+            let solid = model
+                .materials
+                .iter()
+                .any(|m| m.kind == MaterialKind::Solid);
             SolvePlan {
-                medium: plant_medium(model)?,
-                occupancy: Occupancy::Area,
+                medium: if solid {
+                    preset_medium(&opts.preset)?
+                } else {
+                    plant_medium(model)?
+                },
+                occupancy: if solid {
+                    Occupancy::SubCells
+                } else {
+                    Occupancy::Area
+                },
                 boundaries: env.diffuse_boundaries(),
                 environment: Some(env),
             }
@@ -1425,6 +1441,19 @@ mod tests {
             .unwrap(),
             "the physical light ignores the preset"
         );
+        // ... except for a solid (the PMMA teapot): its medium is its preset under either light.
+        let mut solid = model(1.0);
+        for mat in &mut solid.materials {
+            mat.kind = MaterialKind::Solid;
+        }
+        let solid_key = |preset: &str| {
+            let opts = LightingOptions {
+                preset: preset.into(),
+                ..o.clone()
+            };
+            cache_key(&solid, &illum(sun()), &opts, &CpuSolver).unwrap()
+        };
+        assert_ne!(solid_key("pmma"), solid_key("dogrose"), "a solid's preset");
         assert_ne!(
             k,
             cache_key(&model(1.01), &illum(sun()), &o, &CpuSolver).unwrap(),

@@ -740,10 +740,13 @@ impl SceneDesc {
                 )));
             }
             let grid = m.grid.unwrap_or(CumulusParams::default().dims);
-            if grid.iter().any(|n| !(16..=1024).contains(n)) {
+            if grid.iter().any(|n| !limits::MEDIUM_GRID.contains(n)) {
                 return Err(bad(format!(
-                    "grid {}×{}×{} must have 16 to 1024 sites per edge",
-                    grid[0], grid[1], grid[2]
+                    "grid {}×{}×{} must have {} sites per edge",
+                    grid[0],
+                    grid[1],
+                    grid[2],
+                    limits::describe(&limits::MEDIUM_GRID)
                 )));
             }
             let mut params = CumulusParams::for_grid(grid, m.seed.unwrap_or(1));
@@ -929,12 +932,13 @@ impl SceneDesc {
             }
         };
 
-        // An empty (or truncated-to-empty) file would render an empty scene without a word.
-        if models.is_empty() || instances.is_empty() {
+        // An empty (or truncated-to-empty) file would render an empty scene without a word. A
+        // scene of media alone (the cloud) has something to draw.
+        if (models.is_empty() || instances.is_empty()) && media.is_empty() {
             return Err(invalid(
                 None,
                 format!(
-                    "the scene has {} [[models]] and {} [[instances]]: a scene needs at least one of each (is the file empty or truncated?)",
+                    "the scene has {} [[models]], {} [[instances]] and no [[media]]: a scene needs at least one model and instance, or a medium (is the file empty or truncated?)",
                     models.len(),
                     instances.len()
                 ),
