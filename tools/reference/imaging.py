@@ -18,6 +18,8 @@ CLASS_COLOURS = {
     "plant sunlit": (170, 230, 60),
     "plant shadowed": (20, 90, 30),
     "mixed": (230, 60, 200),
+    "medium opaque": (250, 250, 250),
+    "medium edge": (170, 170, 185),
 }
 
 

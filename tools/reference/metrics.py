@@ -14,7 +14,13 @@ LUMA = np.array([0.2126, 0.7152, 0.0722])
 # A pixel belongs to a pure class when at least this fraction of its samples saw that class.
 PURE = 0.99
 
-# Report order. "mixed" pixels straddle an outline (plant against sky or ground).
+# A sky pixel whose transmittance through media is below this shows a medium (a cloud).
+MEDIUM_CLEAR = 0.98
+# A medium pixel with transmittance below this is opaque: its light is the medium's alone.
+MEDIUM_OPAQUE = 0.05
+
+# Report order. "mixed" pixels straddle an outline (plant against sky or ground). The
+# medium classes only exist for scenes with media: sky pixels seen through a cloud.
 CLASSES = (
     "all",
     "sky",
@@ -25,6 +31,9 @@ CLASSES = (
     "plant sunlit",
     "plant shadowed",
     "mixed",
+    "medium",
+    "medium opaque",
+    "medium edge",
 )
 
 
@@ -33,13 +42,16 @@ def luminance(rgb):
     return np.asarray(rgb, dtype=np.float64)[..., :3] @ LUMA
 
 
-def classify(sky_coverage, ground_coverage, direct_sun, pure=PURE):
+def classify(sky_coverage, ground_coverage, direct_sun, pure=PURE, transmittance=None):
     """Boolean masks of the pixel classes in `CLASSES`.
 
     `sky_coverage`, `ground_coverage`: per pixel, the fraction of its samples whose camera ray
-    escaped to the sky or hit the ground (through transparent leaf texels); the rest hit a
-    plant. `direct_sun`: the luminance of a direct-sunlight-only render; a pixel with none is
-    shadowed (occluded, or wood facing away from the sun), any is sunlit.
+    escaped to the sky or hit the ground (through transparent leaf texels; media left out);
+    the rest hit a plant. `direct_sun`: the luminance of a direct-sunlight-only render; a pixel
+    with none is shadowed (occluded, or wood facing away from the sun), any is sunlit.
+    `transmittance` (scenes with media): per pixel, the mean transmittance of its camera rays
+    through the media up to the sky; sky pixels below `MEDIUM_CLEAR` are medium pixels, split
+    into opaque (below `MEDIUM_OPAQUE`) and edge.
     """
     sky_coverage = np.asarray(sky_coverage, dtype=np.float64)
     ground_coverage = np.asarray(ground_coverage, dtype=np.float64)
@@ -51,12 +63,21 @@ def classify(sky_coverage, ground_coverage, direct_sun, pure=PURE):
         )
     plant_coverage = 1.0 - sky_coverage - ground_coverage
     sky = sky_coverage >= pure
+    if transmittance is None:
+        transmittance = np.ones(sky.shape)
+    transmittance = np.asarray(transmittance, dtype=np.float64)
+    if transmittance.shape != sky.shape:
+        raise ValueError(
+            f"class images differ in size: sky {sky.shape}, transmittance {transmittance.shape}"
+        )
+    medium = sky & (transmittance < MEDIUM_CLEAR)
+    opaque = medium & (transmittance < MEDIUM_OPAQUE)
     ground = ground_coverage >= pure
     plant = plant_coverage >= pure
     lit = direct_sun > 0.0
     return {
         "all": np.ones(sky.shape, dtype=bool),
-        "sky": sky,
+        "sky": sky & ~medium,
         "ground": ground,
         "ground sunlit": ground & lit,
         "ground shadowed": ground & ~lit,
@@ -64,6 +85,9 @@ def classify(sky_coverage, ground_coverage, direct_sun, pure=PURE):
         "plant sunlit": plant & lit,
         "plant shadowed": plant & ~lit,
         "mixed": ~(sky | ground | plant),
+        "medium": medium,
+        "medium opaque": opaque,
+        "medium edge": medium & ~opaque,
     }
 
 

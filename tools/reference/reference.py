@@ -173,10 +173,11 @@ def read_exr(mi, path):
 
 
 def export_hash(export_dir):
-    """SHA-256 over the exported files (scene.xml, meshes/, textures/): names and bytes."""
+    """SHA-256 over the exported files (scene.xml, meshes/, textures/, media/): names and
+    bytes."""
     h = hashlib.sha256()
     files = [export_dir / "scene.xml"]
-    for sub in ("meshes", "textures"):
+    for sub in ("meshes", "textures", "media"):
         files += sorted((export_dir / sub).glob("*"))
     for f in files:
         rel = f.relative_to(export_dir).as_posix()
@@ -252,10 +253,15 @@ def harness_xml(export_dir, kind, width, height):
     meshes are relative paths):
 
     - reference: unchanged but for the film size;
-    - coverage: no sun; the sky emits (1, 0, 0) and the ground (0, 1, 0), paths end at the
-      first surface (max_depth 1; volpath passes transparent leaf texels without counting a
-      bounce), so R = sky coverage, G = ground coverage of each pixel;
-    - sun: the sun alone, direct light only (max_depth 2): zero where a surface sees no sun.
+    - coverage: no sun, no media; the sky emits (1, 0, 0) and the ground (0, 1, 0), paths end
+      at the first surface (max_depth 1; volpath passes transparent leaf texels without
+      counting a bounce), so R = sky coverage, G = ground coverage of each pixel;
+    - sun: the sun alone, direct light only (max_depth 2), no media: zero where a surface sees
+      no sun (a cloud's shadow does not count: Mitsuba's direct-only render of a medium gives
+      NaN pixels);
+    - transmittance (scenes with media): no sun, the sky emits (1, 1, 1), the ground nothing,
+      media absorb only (albedo 0), paths end at their first event (max_depth 1; at 2 a few
+      pixels come out NaN): each pixel is its rays' transmittance up to the sky.
 
     The classification renders use the stratified sampler (8×8 per pixel at 64 spp)."""
     tree = ET.parse(export_dir / "scene.xml")
@@ -271,8 +277,26 @@ def harness_xml(export_dir, kind, width, height):
     if kind != "reference":
         root.find("sensor/sampler").set("type", "stratified")
         for em in root.findall("emitter"):
-            if kind == "coverage" or em.get("type") != "directional":
+            if kind in ("coverage", "transmittance") or em.get("type") != "directional":
                 root.remove(em)
+        for shape in root.findall("shape"):
+            medium = shape.find("medium")
+            if medium is None:
+                continue
+            if kind in ("coverage", "sun"):
+                root.remove(shape)
+            elif kind == "transmittance":
+                for el in medium.findall("rgb"):
+                    if el.get("name") == "albedo":
+                        el.set("value", "0, 0, 0")
+        if kind == "transmittance":
+            sky = ET.SubElement(root, "emitter", type="constant")
+            ET.SubElement(sky, "rgb", name="radiance", value="1, 1, 1")
+            for shape in root.findall("shape"):
+                if shape.get("id") == "ground":
+                    for el in shape.iter("rgb"):
+                        if el.get("name") == "reflectance":
+                            el.set("value", "0, 0, 0")
         if kind == "coverage":
             sky = ET.SubElement(root, "emitter", type="constant")
             ET.SubElement(sky, "rgb", name="radiance", value="1, 0, 0")
@@ -358,6 +382,12 @@ class Mitsuba:
         }
         atomic_write_text(meta_path, json.dumps(meta, indent=2) + "\n")
         return img, meta, False
+
+
+def has_media(export_dir):
+    """Whether the exported scene holds a participating medium (a cloud)."""
+    root = ET.parse(export_dir / "scene.xml").getroot()
+    return any(shape.find("medium") is not None for shape in root.findall("shape"))
 
 
 def exported_max_depth(export_dir):
@@ -512,7 +542,16 @@ def run_scene(a, mitsuba, scene):
     sun, _, _ = mitsuba.cached(
         cache, sun_xml, f"sun-{size}-{CLASS_SPP}spp", CLASS_SPP, 0, 2, width, height
     )
-    classes = metrics.classify(cov[..., 0], cov[..., 1], metrics.luminance(sun))
+    transmittance = None
+    if has_media(export_dir):
+        tr_xml = harness_xml(export_dir, "transmittance", width, height)
+        tr, _, _ = mitsuba.cached(
+            cache, tr_xml, f"transmittance-{size}-{CLASS_SPP}spp", CLASS_SPP, 0, 1, width, height
+        )
+        transmittance = metrics.luminance(tr)
+    classes = metrics.classify(
+        cov[..., 0], cov[..., 1], metrics.luminance(sun), transmittance=transmittance
+    )
 
     # 4. Metrics.
     L = {m: metrics.luminance(img) for m, img in sy.items()}

@@ -62,6 +62,23 @@ class Classify(unittest.TestCase):
     def test_size_mismatch_is_an_error(self):
         with self.assertRaises(ValueError):
             metrics.classify(np.zeros((2, 2)), np.zeros((2, 3)), np.zeros((2, 2)))
+        with self.assertRaises(ValueError):
+            metrics.classify(np.ones((2, 2)), np.zeros((2, 2)), np.zeros((2, 2)), transmittance=np.ones((1, 2)))
+
+    def test_sky_seen_through_a_medium_is_a_medium_pixel(self):
+        # Four sky pixels: clear, a thin veil (above the clear threshold), a cloud's edge,
+        # its opaque core; and one ground pixel behind nothing.
+        sky = np.array([[1.0, 1.0, 1.0, 1.0, 0.0]])
+        ground = np.array([[0.0, 0.0, 0.0, 0.0, 1.0]])
+        t = np.array([[1.0, 0.99, 0.5, 0.01, 1.0]])
+        c = metrics.classify(sky, ground, np.zeros((1, 5)), transmittance=t)
+        self.assertEqual(c["sky"].tolist(), [[True, True, False, False, False]])
+        self.assertEqual(c["medium"].tolist(), [[False, False, True, True, False]])
+        self.assertEqual(c["medium edge"].tolist(), [[False, False, True, False, False]])
+        self.assertEqual(c["medium opaque"].tolist(), [[False, False, False, True, False]])
+        self.assertTrue(c["ground"][0, 4])
+        # Without media there are none.
+        self.assertFalse(self.c["medium"].any())
 
 
 class Compare(unittest.TestCase):

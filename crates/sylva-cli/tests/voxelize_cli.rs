@@ -123,7 +123,8 @@ fn solve_takes_a_model_or_a_scene_model_directly() {
     // Placed in model space, not the unit cube.
     assert!(lit.bounds.max[1] > 5.0, "{:?}", lit.bounds);
 
-    // The demo scene's dogrose, with the scene's preset unless told otherwise.
+    // The demo scene's dogrose, with its model's preset (the demo gives its roses the
+    // dogrose preset) unless told otherwise.
     let out2 = dir.path().join("s.sgrid");
     let (ok, out, err) = sylva(&[
         "lb",
@@ -143,7 +144,7 @@ fn solve_takes_a_model_or_a_scene_model_directly() {
     assert!(out.contains("voxelized demo: rose"), "{out}");
     let lit = GridFile::read(&out2).unwrap();
     assert_eq!(lit.dims.longest_edge(), 20);
-    assert_eq!(lit.metadata_value("preset"), Some("leaf"));
+    assert_eq!(lit.metadata_value("preset"), Some("dogrose"));
 
     // A scene with several models needs --scene-model; the error lists them.
     let (ok, _, err) = sylva(&["lb", "solve", "--scene", "demo", "--steps", "2"]);

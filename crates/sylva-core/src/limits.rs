@@ -14,6 +14,11 @@ pub const GRID_EDGE: RangeInclusive<usize> = 3..=2048;
 /// sides leaves at least two interior sites.
 pub const MODEL_GRID: RangeInclusive<usize> = 4..=2048;
 
+/// Sites along each edge of a generated medium's grid (a scene's `[[media]] grid`): 16 leaves
+/// the cumulus generator room for its shell and a few cells of cloud; 1024³ sites is a 4 GiB
+/// density grid before its two LB solves.
+pub const MEDIUM_GRID: RangeInclusive<usize> = 16..=1024;
+
 /// Pixels along each edge of an image (scene files and `--width/--height`).
 pub const IMAGE_EDGE: RangeInclusive<u32> = 1..=16384;
 

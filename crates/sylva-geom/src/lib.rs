@@ -2,22 +2,25 @@
 //!
 //! * [`mesh`]: [`Aabb`], indexed triangle [`Mesh`]es and [`Model`]s (mesh + materials +
 //!   bounds).
-//! * [`material`]: leaf and wood [`Material`]s and their [`Optics`] (per-colour reflectance
-//!   and transmittance: the one material model of renderer, LB and export).
+//! * [`material`]: leaf, wood and solid [`Material`]s and their [`Optics`] (per-colour
+//!   reflectance and transmittance: the one material model of renderer, LB and export).
+//! * [`medium`]: participating [`Medium`]s (clouds): density grids placed in the world.
 //! * [`texture`]: RGBA8 [`Texture`]s with their wrap and filter modes, and THE texel opacity
 //!   rule ([`is_opaque`]) the voxelizer, the tracer's alpha test and the cache keys share.
-//! * [`scene`]: the built [`Scene`]: models, [`Instance`]s, [`Ground`], sun, sky, [`Camera`]
-//!   and [`LbSettings`].
+//! * [`scene`]: the built [`Scene`]: models (each with its LB preset), [`Instance`]s, media,
+//!   [`Ground`], sun, sky, [`Camera`] and [`LbSettings`].
 //!
 //! No file formats, no generators, no LB here: scene files and growing live in `sylva-scene`
 //! and `sylva-grow`, model files in `sylva-io`, the density grid in `sylva-voxel`.
 
 pub mod material;
+pub mod medium;
 pub mod mesh;
 pub mod scene;
 pub mod texture;
 
 pub use material::{Material, MaterialKind, Optics, FOREST_LEAF_TRANSMISSION};
+pub use medium::Medium;
 pub use mesh::{Aabb, Mesh, Model};
 pub use scene::{Camera, Ground, Instance, LbSettings, ModelOrigin, Scene};
 pub use texture::{is_opaque, nearest_texel_coords, Filter, Texture, Wrap, OPAQUE_ALPHA};

@@ -1,5 +1,6 @@
 //! Surface materials: leaf and wood are kept apart so the LB voxelizer can mark green (leaf)
-//! and brown (wood) sites, and the renderer can alpha-test leaves.
+//! and brown (wood) sites, and the renderer can alpha-test leaves. Solid is the surface of an
+//! object made of a scattering material (the PMMA teapot of paper 002).
 //!
 //! Every material also carries its [`Optics`]: how much light it reflects and transmits per
 //! colour. This is the one physical material model of sylva (docs/light.md): the shader's
@@ -12,8 +13,24 @@ use std::sync::Arc;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MaterialKind {
+    /// Thin, two-sided, alpha-tested, transmits light; green LB sites.
     Leaf,
+    /// Bark: opaque; brown LB sites (g = -1).
     Wood,
+    /// An opaque surface of a material that scatters light inside it (plastic, wax): shaded
+    /// like wood, but its LB sites are plain medium sites with the model's preset (its own g),
+    /// never brown.
+    Solid,
+}
+
+impl MaterialKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            MaterialKind::Leaf => "leaf",
+            MaterialKind::Wood => "wood",
+            MaterialKind::Solid => "solid",
+        }
+    }
 }
 
 /// Knapp & Carter's forest-leaf transmittance / reflectance per colour (000 Table 1:

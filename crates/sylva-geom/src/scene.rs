@@ -1,7 +1,8 @@
-//! The built scene as plain data: unique models, instances that reference them, and the
-//! ground, sun, sky, camera and LB settings. How it is described and built (scene files,
+//! The built scene as plain data: unique models, instances that reference them, media
+//! (clouds), and the ground, sun, sky, camera and LB settings. How it is described and built (scene files,
 //! growing, import) is `sylva-scene`'s business; everything downstream reads this.
 
+use crate::medium::Medium;
 use crate::mesh::{Aabb, Model};
 use glam::{Affine3A, Quat, Vec3};
 use std::path::PathBuf;
@@ -86,6 +87,8 @@ pub enum ModelOrigin {
     Species(String),
     /// Read from this mesh file.
     MeshFile(PathBuf),
+    /// Made in code: the built-in shape of this name (`teapot`).
+    Shape(String),
 }
 
 /// A built scene: unique models, instances referencing them, and the lighting and view.
@@ -97,7 +100,12 @@ pub struct Scene {
     pub models: Vec<Model>,
     /// Where each model came from, index for index.
     pub model_origins: Vec<ModelOrigin>,
+    /// The LB preset of each model, index for index: its own (`[[models]] preset`) or the
+    /// scene's `[lb] preset`.
+    pub model_presets: Vec<String>,
     pub instances: Vec<Instance>,
+    /// Participating media (clouds), drawn by the volume tracer.
+    pub media: Vec<Medium>,
     pub ground: Ground,
     pub sun: Sun,
     /// Linear RGB radiance of the sky.
@@ -132,10 +140,18 @@ impl Scene {
             .sum()
     }
 
-    /// Model geometry and textures plus instance records.
+    /// The LB preset of model `k`: its own, or the scene's `[lb] preset`.
+    pub fn model_preset(&self, k: usize) -> &str {
+        self.model_presets
+            .get(k)
+            .map_or(self.lb.preset.as_str(), String::as_str)
+    }
+
+    /// Model geometry and textures, instance records and media grids.
     pub fn memory_bytes(&self) -> u64 {
         self.models.iter().map(Model::memory_bytes).sum::<u64>()
             + (self.instances.capacity() * std::mem::size_of::<Instance>()) as u64
+            + self.media.iter().map(Medium::memory_bytes).sum::<u64>()
     }
 
     /// Half extents (x, z) of the ground rectangle on y = 0, when there is one.

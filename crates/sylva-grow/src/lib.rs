@@ -1,14 +1,18 @@
-//! Tree growing: plant models made in code, no downloads.
+//! Growing in code, no downloads: plant models, and the other things the papers render.
 //!
 //! * [`weber_penn`]: the Weber & Penn generator with Arbaro's parameters; [`arbaro`] reads
 //!   and writes Arbaro species files.
 //! * [`species`]: the built-in species (the trees of the papers), each with generated leaf and
 //!   bark [`textures`]; [`Species::build_model`] gives a [`sylva_geom::Model`].
+//! * [`cloud`]: a cumulus cloud's density grid from a parcel model of convection (002 §3.2.1).
+//! * [`teapot`]: the Newell teapot's 32 Bézier patches, tessellated (002 §3.2.3).
 //! * [`rng`]: the generators' seeded random stream (also the scene layout's).
 
 pub mod arbaro;
+pub mod cloud;
 pub mod rng;
 pub mod species;
+pub mod teapot;
 pub mod textures;
 pub mod weber_penn;
 

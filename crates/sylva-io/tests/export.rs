@@ -666,3 +666,98 @@ fn leaf_reflectance_and_transmittance_round_trip_through_the_mitsuba_export() {
     }
     assert_eq!(checked, leaves.len());
 }
+
+#[test]
+fn media_export_as_heterogeneous_volumes_in_world_units() {
+    // A 5×4×6 medium of 2 m cells with a distinct density per interior site.
+    let tmp = tempfile::tempdir().unwrap();
+    let mut scene = small_scene(tmp.path());
+    let dims = [5usize, 4, 6];
+    let h = 2.0f32;
+    let lo = Vec3::new(-3.0, 10.0, 1.0);
+    let mut rho = vec![0.0f32; dims.iter().product()];
+    for x in 1..dims[0] - 1 {
+        for y in 1..dims[1] - 1 {
+            for z in 1..dims[2] - 1 {
+                rho[(x * dims[1] + y) * dims[2] + z] =
+                    0.1 * x as f32 + 0.03 * y as f32 + 0.01 * z as f32;
+            }
+        }
+    }
+    let size = Vec3::new(4.0, 3.0, 5.0) * h;
+    let m = sylva_geom::Medium::new(
+        "puff",
+        dims,
+        sylva_geom::Aabb {
+            min: lo,
+            max: lo + size,
+        },
+        rho,
+        "cloud",
+    )
+    .unwrap();
+    scene.media.push(m.clone());
+    let out = tmp.path().join("media");
+    let opts = mitsuba::MitsubaOptions::for_scene(&scene);
+    mitsuba::write(&scene, &out, &opts, &mut |_| true).unwrap();
+
+    // The VOL file: header, then x fastest, then y, then z, the density unchanged.
+    let vol = fs::read(out.join("media/puff.vol")).unwrap();
+    assert_eq!(&vol[..4], b"VOL\x03");
+    let int = |k: usize| i32::from_le_bytes(vol[4 + 4 * k..8 + 4 * k].try_into().unwrap());
+    assert_eq!((int(0), int(1), int(2), int(3), int(4)), (1, 5, 4, 6, 1));
+    assert_eq!(vol.len(), 48 + 4 * m.sites());
+    let value = |x: usize, y: usize, z: usize| {
+        let k = 48 + 4 * ((z * dims[1] + y) * dims[0] + x);
+        f32::from_le_bytes(vol[k..k + 4].try_into().unwrap())
+    };
+    for (x, y, z) in [(1, 1, 1), (3, 2, 4), (2, 1, 3), (0, 2, 2)] {
+        assert_eq!(
+            value(x, y, z),
+            m.density[m.index(x, y, z)],
+            "site ({x}, {y}, {z})"
+        );
+    }
+
+    // The XML: σ_t per metre = σ_t per lattice step / h, albedo σ_s/σ_t, the preset's g;
+    // grid values at cell centres, so the volume's box is the sites' box grown by h/2.
+    let text = fs::read_to_string(out.join(mitsuba::XML_FILE)).unwrap();
+    let doc = roxmltree::Document::parse(&text).unwrap();
+    let medium = doc
+        .descendants()
+        .find(|n| n.has_tag_name("medium"))
+        .unwrap();
+    assert_eq!(medium.attribute("type"), Some("heterogeneous"));
+    let param = |tag: &str, name: &str| {
+        medium
+            .descendants()
+            .find(|n| n.has_tag_name(tag) && n.attribute("name") == Some(name))
+            .and_then(|n| n.attribute("value"))
+            .map(floats)
+            .unwrap()
+    };
+    let cloud = sylva_lb::Preset::Cloud.params().colours[0];
+    let sigma_t = cloud.sigma_t() as f32;
+    assert!(close(&param("float", "scale"), &[sigma_t / h], 1e-6));
+    assert!(close(
+        &param("rgb", "albedo"),
+        &[cloud.sigma_s as f32 / sigma_t; 3],
+        1e-6
+    ));
+    assert!(close(&param("float", "g"), &[cloud.g as f32], 1e-6));
+    let volume = medium
+        .descendants()
+        .find(|n| n.has_tag_name("volume"))
+        .unwrap();
+    let vt = |name: &str| {
+        volume
+            .descendants()
+            .find(|n| n.has_tag_name(name))
+            .and_then(|n| n.attribute("value"))
+            .map(floats)
+            .unwrap()
+    };
+    let half = Vec3::splat(h / 2.0);
+    assert!(close(&vt("scale"), &(size + 2.0 * half).to_array(), 1e-4));
+    assert!(close(&vt("translate"), &(lo - half).to_array(), 1e-4));
+}

@@ -9,6 +9,8 @@
 //! * [`lighting`]: per model, the LB lighting grid (voxelize, solve, cache on disk) and its
 //!   trilinear lookup in model space; the light models ([`Light`]: physical, the default, and
 //!   paper 000's) and the plant medium from the materials' optics (docs/light.md).
+//! * [`media`]: participating media (clouds): the volume tracer, its shadow volume and the
+//!   LB light it samples ([`Media`]).
 //! * [`indirect`]: [`IndirectLight`], the light scattered in the canopy as shading needs it,
 //!   and [`ModelGridLight`], one LB grid per model.
 //! * [`shade`]: local sunlight (two-sided leaves reflecting and transmitting) and the
@@ -24,6 +26,7 @@
 pub mod gpu_frame;
 pub mod indirect;
 pub mod lighting;
+pub mod media;
 pub mod output;
 pub mod pipeline;
 pub mod render;
@@ -33,6 +36,7 @@ pub mod tonemap;
 
 pub use indirect::{IndirectLight, ModelGridLight, NoIndirectLight};
 pub use lighting::{Illumination, Light};
+pub use media::{Media, MediumVolume, Segment};
 pub use pipeline::{
     illumination, image_paths, light_models, lighting_options, load_scene, mode_path, resolution,
     scene_illumination, scene_to_sun, tone_map_modes, write_images, LbPlan, ModeImage,

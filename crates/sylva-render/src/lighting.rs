@@ -11,7 +11,9 @@
 //!   part ([`sylva_lb::light::uncollided`]) is subtracted: the renderer traces direct sunlight
 //!   exactly, so the grid holds what it cannot trace, the scattered sunlight plus the sky's and
 //!   ground's light, as an LB value (fluence in units of the unit sun's irradiance `E0 = π`).
-//!   Everything is linear in the sun, sky and ground.
+//!   Everything is linear in the sun, sky and ground. A model with a solid material (a
+//!   scattering object such as the PMMA teapot) takes its medium from its LB preset instead,
+//!   on the sub-cell occupancy.
 //! * **Paper** (000). The scene's LB preset, sub-cell occupancy, a sun-only boundary, and the
 //!   total divided by the free-space total `Σ_i max(0, n_i·d)`, so unobstructed sunlight is 1.
 //!
@@ -37,8 +39,8 @@ use sylva_geom::{is_opaque, LbSettings, MaterialKind, Model, Wrap, OPAQUE_ALPHA}
 use sylva_lb::light::{self, Environment, PlantOptics};
 use sylva_lb::solver::{memory_needed, Boundary, Floor, SolveOptions, VolumeSource};
 use sylva_lb::{
-    DensityGrid, Dims, Element, GridFile, GridFileError, GridKind, LightingGrid, MediumParams,
-    ParamError, Preset,
+    Bounds, DensityGrid, Dims, Element, GridFile, GridFileError, GridKind, LightingGrid,
+    MediumParams, ParamError, Preset,
 };
 use sylva_lb::{LbSolver, LbSolverError};
 use sylva_voxel::{
@@ -77,6 +79,14 @@ pub enum LightingError {
         model: String,
         source: LbSolverError,
     },
+    #[error("LB lighting of medium '{medium}': {source}")]
+    SolveMedium {
+        medium: String,
+        source: LbSolverError,
+    },
+    /// A participating medium (cloud) whose grid cannot be lit (its dimensions).
+    #[error("{0}")]
+    MediumGrid(String),
     #[error("cannot create the lighting cache directory {}: {source}", .dir.display())]
     CacheDir {
         dir: PathBuf,
@@ -404,7 +414,7 @@ pub struct LightingReport {
 
 /// The sun direction rounded to [`SUN_QUANTUM`]: the integer components (hashed) and the unit
 /// vector solved with.
-fn quantise_sun(sun_to: Vec3) -> Result<([i64; 3], DVec3), LightingError> {
+pub(crate) fn quantise_sun(sun_to: Vec3) -> Result<([i64; 3], DVec3), LightingError> {
     let v = sun_to.as_dvec3();
     let len = v.length();
     if !(len.is_finite() && len > 0.0) {
@@ -419,11 +429,11 @@ fn quantise_sun(sun_to: Vec3) -> Result<([i64; 3], DVec3), LightingError> {
 
 /// `Σ_i max(0, n_i · d)` for light travelling along `d = -sun_to`: the total a free-space
 /// site holds under a unit-intensity sun, summed from the boundary values the solver uses.
-fn free_space_total(sun_to: DVec3) -> Option<f64> {
+pub(crate) fn free_space_total(sun_to: DVec3) -> Option<f64> {
     light::sun_total((-sun_to).to_array())
 }
 
-fn preset_medium(preset: &str) -> Result<MediumParams, LightingError> {
+pub(crate) fn preset_medium(preset: &str) -> Result<MediumParams, LightingError> {
     let m = Preset::parse(preset)?.params();
     m.validate()?;
     Ok(m)
@@ -508,9 +518,23 @@ fn solve_plan(
         Light::Physical => {
             let env = illum.environment(sun);
             env.validate().map_err(LightingError::Illumination)?;
+            // A solid (the PMMA teapot, docs/media.md) is a scattering material, not leaves
+            // and bark: its medium is its preset's, on the paper's sub-cell occupancy.
+            let solid = model
+                .materials
+                .iter()
+                .any(|m| m.kind == MaterialKind::Solid);
             SolvePlan {
-                medium: plant_medium(model)?,
-                occupancy: Occupancy::Area,
+                medium: if solid {
+                    preset_medium(&opts.preset)?
+                } else {
+                    plant_medium(model)?
+                },
+                occupancy: if solid {
+                    Occupancy::SubCells
+                } else {
+                    Occupancy::Area
+                },
                 boundaries: env.diffuse_boundaries(),
                 environment: Some(env),
             }
@@ -519,7 +543,7 @@ fn solve_plan(
 }
 
 /// How long the solver runs over `dims` (the papers' schedule).
-fn solve_options(dims: Dims) -> SolveOptions {
+pub(crate) fn solve_options(dims: Dims) -> SolveOptions {
     SolveOptions::papers(dims)
 }
 
@@ -567,6 +591,7 @@ fn key_of(
     for mat in &model.materials {
         match mat.kind {
             MaterialKind::Wood => h.u64(1),
+            MaterialKind::Solid => h.u64(3),
             MaterialKind::Leaf => {
                 h.u64(2);
                 match &mat.texture {
@@ -636,10 +661,12 @@ fn key_of(
 
 /// The cache entry of `model` under `key` in `dir`.
 pub fn cache_path(dir: &Path, model: &Model, key: u64) -> PathBuf {
-    dir.join(format!(
-        "{}-{key:016x}.{CACHE_EXTENSION}",
-        sylva_core::file_stem(&model.name, "model")
-    ))
+    entry_path(dir, &sylva_core::file_stem(&model.name, "model"), key)
+}
+
+/// `<stem>-<key>.sgrid` in `dir`.
+fn entry_path(dir: &Path, stem: &str, key: u64) -> PathBuf {
+    dir.join(format!("{stem}-{key:016x}.{CACHE_EXTENSION}"))
 }
 
 /// Lights `grid` as `plan` says on `solver`, forwarding progress: the solver's result, less
@@ -670,6 +697,23 @@ fn solve_density(
         &opts,
         &mut |c, s, _| progress(c, s, max),
     )?;
+    Ok(lighting)
+}
+
+/// Lights a medium's `grid` with one `boundary` on `solver` (the papers' schedule), forwarding
+/// progress: the total light, as the media's volume tracer reads it (docs/media.md).
+pub(crate) fn solve_medium(
+    grid: &DensityGrid,
+    medium: &MediumParams,
+    boundary: Boundary,
+    solver: &dyn LbSolver,
+    progress: &mut dyn FnMut(usize, usize, usize),
+) -> Result<LightingGrid, LbSolverError> {
+    let opts = solve_options(grid.dims);
+    let max = opts.max_steps;
+    let (lighting, _) = solver.solve_lighting(grid, medium, boundary, &opts, &mut |c, s, _| {
+        progress(c, s, max)
+    })?;
     Ok(lighting)
 }
 
@@ -727,7 +771,7 @@ fn to_model_lighting(grid: &LightingGrid, plan: &SolvePlan, sun_to: DVec3) -> Mo
 }
 
 /// Reads and checks a cache entry; `Err` is the reason it is unusable, naming the file.
-fn read_entry(path: &Path, key: u64, placement: &GridPlacement) -> Result<LightingGrid, String> {
+fn read_entry(path: &Path, key: u64, dims: Dims, bounds: Bounds) -> Result<LightingGrid, String> {
     let file = GridFile::read(path).map_err(|e| e.to_string())?;
     let shown = path.display();
     if file.kind != GridKind::Lighting {
@@ -750,19 +794,16 @@ fn read_entry(path: &Path, key: u64, placement: &GridPlacement) -> Result<Lighti
             ))
         }
     }
-    if file.dims != placement.dims {
+    if file.dims != dims {
         return Err(format!(
             "{shown} holds a {} grid, the model needs {}",
-            file.dims, placement.dims
+            file.dims, dims
         ));
     }
-    if file.bounds != placement.bounds() {
+    if file.bounds != bounds {
         return Err(format!(
             "{shown} covers {:?}..{:?}, the model's grid covers {:?}..{:?}",
-            file.bounds.min,
-            file.bounds.max,
-            placement.bounds().min,
-            placement.bounds().max
+            file.bounds.min, file.bounds.max, bounds.min, bounds.max
         ));
     }
     let grid = file.into_lighting(path).map_err(|e| e.to_string())?;
@@ -860,10 +901,12 @@ impl<'a> LightingPlan<'a> {
         };
         match path.try_exists() {
             Ok(false) => CacheLookup::Miss,
-            Ok(true) => match read_entry(path, self.key, &self.placement) {
-                Ok(grid) => CacheLookup::Hit(grid),
-                Err(reason) => CacheLookup::Bad(reason),
-            },
+            Ok(true) => {
+                match read_entry(path, self.key, self.placement.dims, self.placement.bounds()) {
+                    Ok(grid) => CacheLookup::Hit(grid),
+                    Err(reason) => CacheLookup::Bad(reason),
+                }
+            }
             Err(e) => CacheLookup::Bad(format!("cannot read {}: {e}", path.display())),
         }
     }
@@ -1019,6 +1062,61 @@ impl<'a> LightingPlan<'a> {
     pub fn lighting(&self, grid: &LightingGrid) -> ModelLighting {
         to_model_lighting(grid, &self.solve, self.sun)
     }
+}
+
+/// One raw LB solve through the cache: `file_name` (a file stem and the key) in `cache_dir`
+/// when a valid entry holds it (key, dimensions and bounds checked), otherwise `solve()`d and,
+/// with a cache, stored atomically with `metadata` and the key. Returns the grid, where it
+/// came from and the entry's path.
+pub(crate) fn cached_solve(
+    cache_dir: Option<&Path>,
+    stem: &str,
+    key: u64,
+    dims: Dims,
+    bounds: Bounds,
+    metadata: Vec<(String, String)>,
+    solve: impl FnOnce() -> Result<LightingGrid, LightingError>,
+) -> Result<(LightingGrid, LightingSource, Option<PathBuf>), LightingError> {
+    let path = match cache_dir {
+        Some(dir) => {
+            std::fs::create_dir_all(dir).map_err(|source| LightingError::CacheDir {
+                dir: dir.to_path_buf(),
+                source,
+            })?;
+            Some(entry_path(dir, stem, key))
+        }
+        None => None,
+    };
+    let mut source = LightingSource::Computed;
+    if let Some(path) = &path {
+        match path.try_exists() {
+            Ok(false) => {}
+            Ok(true) => match read_entry(path, key, dims, bounds) {
+                Ok(grid) => return Ok((grid, LightingSource::Cached, Some(path.clone()))),
+                Err(reason) => source = LightingSource::Recomputed { reason },
+            },
+            Err(e) => {
+                source = LightingSource::Recomputed {
+                    reason: format!("cannot read {}: {e}", path.display()),
+                }
+            }
+        }
+    }
+    let grid = solve()?;
+    if let Some(path) = &path {
+        let mut metadata = metadata;
+        metadata.insert(0, (KEY_METADATA.to_string(), format!("{key:016x}")));
+        GridFile::from_lighting(&grid, Element::F32, metadata)
+            .write(path)
+            .map_err(|e| LightingError::CacheWrite {
+                path: path.clone(),
+                source: match e {
+                    GridFileError::Io { source, .. } => source,
+                    e => std::io::Error::other(e.to_string()),
+                },
+            })?;
+    }
+    Ok((grid, source, path))
 }
 
 /// One model's LB lighting under `illum` (model frame): from the cache when it holds a valid
@@ -1343,6 +1441,19 @@ mod tests {
             .unwrap(),
             "the physical light ignores the preset"
         );
+        // ... except for a solid (the PMMA teapot): its medium is its preset under either light.
+        let mut solid = model(1.0);
+        for mat in &mut solid.materials {
+            mat.kind = MaterialKind::Solid;
+        }
+        let solid_key = |preset: &str| {
+            let opts = LightingOptions {
+                preset: preset.into(),
+                ..o.clone()
+            };
+            cache_key(&solid, &illum(sun()), &opts, &CpuSolver).unwrap()
+        };
+        assert_ne!(solid_key("pmma"), solid_key("dogrose"), "a solid's preset");
         assert_ne!(
             k,
             cache_key(&model(1.01), &illum(sun()), &o, &CpuSolver).unwrap(),

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 use sylva_core::{MemoryError, Sun};
-use sylva_geom::{Camera, Model, Scene};
+use sylva_geom::{Camera, Medium, Model, Scene};
 use sylva_lb::{LbSolver, ParamError, Preset};
 use sylva_scene::SceneError;
 use sylva_trace::{KdTracer, RayQuery, SceneAccel, TraceError, TraversalConfig};
@@ -21,6 +21,7 @@ use crate::lighting::{
     model_lighting, Illumination, Light, LightingError, LightingOptions, LightingReport,
     LightingSource, ModelLighting,
 };
+use crate::media::{prepare_medium, Media, MediumSolve};
 use crate::output::{encode_exr, encode_png, OutputError};
 use crate::render::{
     memory_needed, output_memory_needed, tile_count, Frame, Mode, RenderError, RenderSettings,
@@ -47,6 +48,8 @@ pub trait Progress: Sync {
     /// Model `model`'s LB lighting is ready: read from the cache, solved, or solved again
     /// because the cache entry was bad ([`LightingReport::source`]).
     fn model_lit(&self, _model: &Model, _report: &LightingReport) {}
+    /// Medium `medium`'s LB lighting is ready: the reports of its sun and sky solves.
+    fn medium_lit(&self, _medium: &Medium, _reports: &[LightingReport]) {}
 }
 
 /// Reports nothing.
@@ -63,9 +66,11 @@ pub enum PipelineError {
     SunBelowHorizon { elevation: f64 },
     #[error("resolution {width}x{height}: width and height must be 1 to {MAX_EDGE}")]
     Resolution { width: u32, height: u32 },
-    #[error("scene {scene}: [lb] preset")]
+    #[error("scene {scene}: LB preset of {what}")]
     Preset {
         scene: String,
+        /// `model 'NAME'` or `medium 'NAME'`.
+        what: String,
         #[source]
         source: ParamError,
     },
@@ -76,6 +81,12 @@ pub enum PipelineError {
     #[error("LB lighting of model '{model}'")]
     Lighting {
         model: String,
+        #[source]
+        source: LightingError,
+    },
+    #[error("medium '{medium}'")]
+    Medium {
+        medium: String,
         #[source]
         source: LightingError,
     },
@@ -154,7 +165,7 @@ pub struct PrepareOptions<'a> {
     /// Trace rays on this GPU ([`GpuTracer`]); `None`: on the CPU ([`KdTracer`]).
     pub trace_gpu: Option<&'a GpuContext>,
     /// With `trace_gpu`, shade on the GPU too ([`GpuFrame`]: the whole frame in one kernel);
-    /// otherwise the GPU answers ray queries and the CPU shades.
+    /// otherwise (and for scenes with media) the GPU answers ray queries and the CPU shades.
     pub shade_on_gpu: bool,
     /// The light model (docs/light.md); the LB plan's is set to it.
     pub light: Light,
@@ -281,6 +292,8 @@ pub struct PreparedScene {
     pub light: ModelGridLight,
     /// The frame kernel when frames are shaded on the GPU.
     pub gpu_frame: Option<GpuFrame>,
+    /// The scene's media, ready to draw (LB-lit with an LB plan, else sun only).
+    pub media: Media,
     /// Unit vector towards the sun.
     pub to_sun: Vec3,
     pub shading: ShadingParams,
@@ -296,7 +309,8 @@ pub fn scene_to_sun(scene: &Scene) -> Vec3 {
     Vec3::new(s.x as f32, s.y as f32, s.z as f32)
 }
 
-/// The lighting options of `lb` for `scene`.
+/// The lighting options of `lb` for `scene` (with the scene's preset: a model's own is
+/// [`Scene::model_preset`]).
 pub fn lighting_options(scene: &Scene, lb: &LbPlan) -> LightingOptions {
     LightingOptions {
         grid: lb.grid.unwrap_or(scene.lb.grid as usize),
@@ -318,7 +332,11 @@ pub fn light_models(
     let illum = scene_illumination(scene);
     let mut lighting = Vec::with_capacity(scene.models.len());
     let mut cached = 0;
-    for model in &scene.models {
+    for (k, model) in scene.models.iter().enumerate() {
+        let lopts = LightingOptions {
+            preset: scene.model_preset(k).to_string(),
+            ..lopts.clone()
+        };
         let _m = tracing::info_span!(stage::LB_MODEL, model = %model.name).entered();
         progress.start(&format!("LB {}", model.name), 3);
         let lit = model_lighting(model, &illum, &lopts, lb.solver, &mut |c, step, max| {
@@ -334,6 +352,57 @@ pub fn light_models(
         lighting.push(l);
     }
     Ok((lighting, cached))
+}
+
+/// The scene's media ready to draw: each lit by its two LB solves (sun and sky, cached) when
+/// `opts.lb` is given, else by the sun alone.
+fn prepare_media(
+    scene: &Scene,
+    opts: &PrepareOptions,
+    to_sun: Vec3,
+    shading: &ShadingParams,
+    progress: &dyn Progress,
+) -> Result<Media, PipelineError> {
+    // The same sun and sky as the plants' (the physical light's [`Illumination`]).
+    let illum = illumination(scene, to_sun, shading.sun_irradiance);
+    let (sun_colour, sky) = (illum.sun, illum.sky);
+    let mut media = Media::default();
+    {
+        // The media's LB solves count as LB precompute (a second span after the models').
+        let solves = opts.lb.is_some() && !scene.media.is_empty();
+        let _span = solves.then(|| tracing::info_span!(stage::LB_PRECOMPUTE).entered());
+        for medium in &scene.media {
+            let _m = solves
+                .then(|| tracing::info_span!(stage::LB_MODEL, model = %medium.name).entered());
+            let lb = opts.lb.as_ref().map(|lb| MediumSolve {
+                solver: lb.solver,
+                cache_dir: lb.cache_dir,
+            });
+            if lb.is_some() {
+                progress.start(&format!("LB {}", medium.name), 6);
+            }
+            let prepared = prepare_medium(
+                medium,
+                to_sun,
+                sun_colour,
+                sky,
+                lb,
+                &mut |solve, c, step, max| {
+                    progress.set(((solve * 3 + c) * max + step) as u64, 6 * max as u64)
+                },
+            );
+            progress.finish();
+            let (volume, reports) = prepared.map_err(|source| PipelineError::Medium {
+                medium: medium.name.clone(),
+                source,
+            })?;
+            if !reports.is_empty() {
+                progress.medium_lit(medium, &reports);
+            }
+            media.volumes.push(volume);
+        }
+    }
+    Ok(media)
 }
 
 impl PreparedScene {
@@ -356,12 +425,13 @@ impl PreparedScene {
             }
             None => ((0..scene.models.len()).map(|_| None).collect(), 0),
         };
-        Self::build(scene, opts, shading, lighting, cached)
+        Self::build(scene, opts, shading, lighting, cached, progress)
     }
 
     /// A scene whose models were lit elsewhere (`lighting` in scene order; `cached` of them
-    /// from a cache): [`PreparedScene::new`] without the LB work, which `opts.lb` is not
-    /// used for.
+    /// from a cache): [`PreparedScene::new`] without the models' LB work. `opts.lb` still
+    /// lights the scene's media (under mpirun each rank lights them itself, from the cache
+    /// when it holds them).
     pub fn with_lighting(
         scene: Scene,
         opts: &PrepareOptions,
@@ -376,6 +446,7 @@ impl PreparedScene {
             shading,
             lighting.into_iter().map(Some).collect(),
             cached,
+            &Silent,
         )
     }
 
@@ -392,10 +463,19 @@ impl PreparedScene {
                 memory_needed(w, h, rpp) + output_memory_needed(w, h, opts.output_images),
             )?;
         }
+        for k in 0..scene.models.len() {
+            Preset::parse(scene.model_preset(k)).map_err(|source| PipelineError::Preset {
+                scene: scene.name.clone(),
+                what: format!("model '{}'", scene.models[k].name),
+                source,
+            })?;
+        }
         let preset = Preset::parse(&scene.lb.preset).map_err(|source| PipelineError::Preset {
             scene: scene.name.clone(),
+            what: "[lb]".into(),
             source,
         })?;
+        // The paper light's leaf T/R; the physical light's come from each material's optics.
         let g = preset.params().colours.map(|c| c.g as f32);
         let shading = ShadingParams {
             light: opts.light,
@@ -414,8 +494,10 @@ impl PreparedScene {
         shading: ShadingParams,
         lighting: Vec<Option<ModelLighting>>,
         lb_models_cached: usize,
+        progress: &dyn Progress,
     ) -> Result<PreparedScene, PipelineError> {
         let to_sun = scene_to_sun(&scene);
+        let media = prepare_media(&scene, opts, to_sun, &shading, progress)?;
         let tracer = {
             let _span = tracing::info_span!(stage::ACCEL_BUILD).entered();
             let cpu = KdTracer::new(SceneAccel::build(&scene)?, opts.traversal);
@@ -426,10 +508,12 @@ impl PreparedScene {
         };
         let light = ModelGridLight::new(lighting, &scene.models, tracer.cpu().accel.instances());
         let materials = shade_materials(&scene.models);
+        // shade.wgsl mirrors the paper light's shading; the physical light's frames are traced
+        // on the GPU and shaded on the CPU (docs/light.md). The frame kernel has no volume
+        // tracer either: scenes with media shade on the CPU (the GPU still answers their ray
+        // queries).
         let gpu_frame = match tracer.gpu() {
-            // shade.wgsl mirrors the paper light's shading; the physical light's frames are
-            // traced on the GPU and shaded on the CPU (docs/light.md).
-            Some(t) if opts.shade_on_gpu && shading.light == Light::Paper => {
+            Some(t) if opts.shade_on_gpu && shading.light == Light::Paper && media.is_empty() => {
                 let _span = tracing::info_span!(stage::ACCEL_BUILD).entered();
                 Some(GpuFrame::new(t, &scene, &materials, &light)?)
             }
@@ -440,6 +524,7 @@ impl PreparedScene {
             gpu_frame,
             tracer,
             light,
+            media,
             to_sun,
             shading,
             lb_models_cached,
@@ -461,7 +546,7 @@ impl PreparedScene {
         RenderSettings::full(camera, rays_per_pixel, seed, self.shading)
     }
 
-    /// The renderer over this scene's tracer and LB light, lit by the 6500 K sun.
+    /// The renderer over this scene's tracer, LB light and media, lit by the 6500 K sun.
     pub fn renderer(&self) -> Renderer<'_> {
         self.renderer_over(self.tracer.query(), &self.light)
     }
@@ -488,6 +573,7 @@ impl PreparedScene {
             sun_colour,
             self.shading.sun_irradiance,
         )
+        .with_media(&self.media)
     }
 
     /// Renders one frame (any camera, any region of its image), reporting tiles as they
@@ -542,9 +628,9 @@ impl PreparedScene {
         Ok(frame?)
     }
 
-    /// Bytes of the LB grids.
+    /// Bytes of the LB grids and the media's volumes.
     pub fn lighting_bytes(&self) -> u64 {
-        self.light.memory_bytes()
+        self.light.memory_bytes() + self.media.memory_bytes()
     }
 }
 

@@ -3,8 +3,10 @@
 //!
 //! The renderer asks its questions through two seams: a [`RayQuery`] (the CPU kd-tree tracer
 //! today) answers batches of closest-hit and shadow rays, and an [`IndirectLight`] (today's
-//! per-model LB grids) gives the light scattered in the canopy. What it renders is a
-//! [`RenderSettings`]: any camera, and any rectangle of that camera's image.
+//! per-model LB grids) gives the light scattered in the canopy. Participating media
+//! ([`Media`], clouds) are integrated along each primary ray up to its hit, in front of what
+//! it hits, and shade the sun on surfaces. What it renders is a [`RenderSettings`]: any
+//! camera, and any rectangle of that camera's image.
 //!
 //! Every pixel's samples depend only on the pixel (its place in the whole image), the sample
 //! index and the seed, so a frame is bit-identical for any thread count, and a region's
@@ -21,6 +23,7 @@ use sylva_trace::{Hit, PinholeCamera, Ray, RayQuery, ShadowRay, TraceError, Trac
 
 use crate::indirect::IndirectLight;
 use crate::lighting::Light;
+use crate::media::Media;
 use crate::shade::{
     indirect_light, local_light, needs_shadow_ray, Radiance, ShadeMaterial, ShadingParams,
     SurfacePoint,
@@ -28,6 +31,8 @@ use crate::shade::{
 
 /// Tile edge in pixels.
 pub const TILE: u32 = 8;
+/// Mixed into the seed of the media's step jitter, so it is independent of the pixel jitter.
+const MEDIA_JITTER: u64 = 0x6d65_6469_615f_6a74;
 /// Samples held at once (hits and shading inputs): about 100 MB.
 const BAND_SAMPLES: usize = 1 << 21;
 
@@ -320,6 +325,7 @@ pub struct Renderer<'a> {
     query: &'a dyn RayQuery,
     light: &'a dyn IndirectLight,
     materials: &'a [Vec<ShadeMaterial>],
+    media: Option<&'a Media>,
     to_sun: Vec3,
     /// Sun colour × irradiance.
     sun: Vec3,
@@ -346,6 +352,7 @@ impl<'a> Renderer<'a> {
             query,
             light,
             materials,
+            media: None,
             to_sun: to_sun.normalize(),
             sun: sun_colour * sun_irradiance,
             ground_colour: Vec3::from_array(scene.ground.color),
@@ -357,6 +364,13 @@ impl<'a> Renderer<'a> {
     /// sky's: the lights of [`Renderer::shade`], for the GPU frame.
     pub(crate) fn lights(&self) -> [Vec3; 4] {
         [self.to_sun, self.sun, self.ground_colour, self.sky]
+    }
+
+    /// Draws `media` (clouds) in front of whatever each primary ray hits, and lets them
+    /// shade the sun on surfaces.
+    pub fn with_media(mut self, media: &'a Media) -> Renderer<'a> {
+        self.media = (!media.is_empty()).then_some(media);
+        self
     }
 
     /// Renders `settings.region` of `settings.camera`'s image. `progress(n)` is called from
@@ -458,17 +472,23 @@ impl<'a> Renderer<'a> {
         // Shading.
         let t2 = Instant::now();
         let inv_n = 1.0 / n as f32;
+        let width = camera.width as u64;
         let shaded: Vec<Vec<Radiance>> = tiles
             .par_iter()
             .zip(primary.par_iter().zip(geoms.par_iter()))
             .map(|(tile, (samples, g))| {
                 let mut out = Vec::with_capacity(tile.pixels());
-                for (k, _) in tile.iter().enumerate() {
+                for (k, (x, y)) in tile.iter().enumerate() {
                     let mut acc = Radiance::default();
                     for s in 0..n as usize {
                         let i = k * n as usize + s;
                         let (ray, hit) = &samples[i];
-                        acc += self.shade(ray, hit.as_ref(), &g[i], &settings.shading);
+                        let mut r = self.shade(ray, hit.as_ref(), &g[i], &settings.shading);
+                        if let Some(media) = self.media {
+                            let pixel = y as u64 * width + x as u64;
+                            r = self.through_media(media, ray, hit.as_ref(), r, pixel, s, settings);
+                        }
+                        acc += r;
                     }
                     out.push(acc * inv_n);
                 }
@@ -666,6 +686,37 @@ impl<'a> Renderer<'a> {
         ShadowRay {
             ray: Ray::new(point + ng * (side * eps), self.to_sun),
             from,
+        }
+    }
+
+    /// `r`, the light from what the primary ray hit, seen through the media in front of it,
+    /// plus what they scatter towards the viewer. Surfaces lit by the sun get the media's
+    /// shadow. The step jitter depends on the pixel, the sample and the seed only.
+    #[allow(clippy::too_many_arguments)]
+    fn through_media(
+        &self,
+        media: &Media,
+        ray: &Ray,
+        hit: Option<&Hit>,
+        mut r: Radiance,
+        pixel: u64,
+        sample: usize,
+        settings: &RenderSettings,
+    ) -> Radiance {
+        let t_max = hit.map_or(f32::INFINITY, |h| h.t);
+        if r.local != Vec3::ZERO {
+            r.local *= media.sun_transmittance(ray.at(t_max));
+        }
+        let n = settings.rays_per_pixel.max(1) as u64;
+        let jitter = SplitMix64::for_chunk(settings.seed ^ MEDIA_JITTER, pixel * n + sample as u64)
+            .next_f64() as f32;
+        let seg = media.integrate(ray.origin, ray.dir, t_max, jitter);
+        let t = seg.transmittance;
+        Radiance {
+            local: seg.local + t * r.local,
+            indirect: seg.indirect + t * r.indirect,
+            albedo: seg.albedo + t * r.albedo,
+            sky: t * r.sky,
         }
     }
 

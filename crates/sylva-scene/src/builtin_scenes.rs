@@ -2,7 +2,15 @@
 //! by name wherever a scene file is.
 
 /// Names of the built-in scenes.
-pub const NAMES: &[&str] = &["demo", "beech", "catalpa", "canopy"];
+pub const NAMES: &[&str] = &[
+    "demo",
+    "beech",
+    "catalpa",
+    "canopy",
+    "cloud",
+    "teapot",
+    "demo_cloud",
+];
 
 /// TOML source of built-in scene `name`.
 pub fn source(name: &str) -> Option<&'static str> {
@@ -11,6 +19,9 @@ pub fn source(name: &str) -> Option<&'static str> {
         "beech" => Some(BEECH),
         "catalpa" => Some(CATALPA),
         "canopy" => Some(CANOPY),
+        "cloud" => Some(CLOUD),
+        "teapot" => Some(TEAPOT),
+        "demo_cloud" => Some(DEMO_CLOUD),
         _ => None,
     }
 }
@@ -22,14 +33,17 @@ pub fn describe(name: &str) -> Option<&'static str> {
         "beech" => Some("paper 000 Table 2: 962 trees of 5 species, about 270 M instanced triangles, 896×448"),
         "catalpa" => Some("paper 004 Fig. 3 top: one southern catalpa, 512×512"),
         "canopy" => Some("paper 004 Fig. 3 bottom: a dense canopy of 5 species, about 100 M instanced triangles, 512×512"),
+        "cloud" => Some("paper 002 Fig. 1: a 256×128×128 cumulus lit by LB over a sky, 640×360"),
+        "teapot" => Some("paper 002 Figs. 4-5: the Newell teapot in PMMA, LB glow against conventional lighting, 512×384"),
+        "demo_cloud" => Some("the demo forest under a fair-weather cumulus (clouds in forest scenes, 000 Fig. 3)"),
         _ => None,
     }
 }
 
-const DEMO: &str = r#"# A small mixed forest that renders quickly.
-name = "demo"
-
-[[models]]
+/// The demo's plants and their placement, shared by `demo` and `demo_cloud`.
+macro_rules! demo_forest {
+    () => {
+        r#"[[models]]
 name = "maple"
 species = "red_maple"
 
@@ -40,6 +54,7 @@ species = "pine"
 [[models]]
 name = "rose"
 species = "dogrose"
+preset = "dogrose"
 
 [[instances]]
 model = "maple"
@@ -70,7 +85,17 @@ min_spacing = 3.5
 scale_jitter = 0.2
 seed = 3
 
-[ground]
+"#
+    };
+}
+
+const DEMO: &str = concat!(
+    r#"# A small mixed forest that renders quickly.
+name = "demo"
+
+"#,
+    demo_forest!(),
+    r#"[ground]
 size = [80.0, 80.0]
 color = [0.16, 0.14, 0.08]
 
@@ -91,6 +116,119 @@ rays_per_pixel = 1
 [lb]
 grid = 64
 preset = "leaf"
+"#
+);
+
+const DEMO_CLOUD: &str = concat!(
+    r#"# The demo forest under a fair-weather cumulus (000 Fig. 3's forest has synthetic clouds).
+name = "demo_cloud"
+
+"#,
+    demo_forest!(),
+    r#"# A cumulus 1.5 km behind the trees: 128×64×64 sites of 9.45 m; its base (the
+# condensation level) 300 m up.
+[[media]]
+name = "cumulus"
+generator = "cumulus"
+grid = [128, 64, 64]
+size = 1200.0
+seed = 3
+position = [150.0, 0.0, 1500.0]
+preset = "cloud"
+
+[ground]
+size = [80.0, 80.0]
+color = [0.16, 0.14, 0.08]
+
+[sun]
+elevation = 40.0
+azimuth = 240.0
+
+[sky]
+color = [0.40, 0.58, 0.92]
+
+[camera]
+position = [0.0, 4.0, -34.0]
+look_at = [0.0, 9.0, 0.0]
+fov = 50.0
+resolution = [480, 270]
+rays_per_pixel = 1
+
+[lb]
+grid = 64
+preset = "leaf"
+"#
+);
+
+const CLOUD: &str = r#"# Paper 002 Fig. 1: a cumulus lit by LB (cloud preset: g 0.9, σ_a 0.008, σ_s 0.792) over a
+# sky. 256×128×128 sites of 12 m: the cloud field is 3 km wide, its base 300 m up.
+name = "cloud"
+
+[[media]]
+name = "cumulus"
+generator = "cumulus"
+grid = [256, 128, 128]
+seed = 1
+position = [0.0, 0.0, 0.0]
+preset = "cloud"
+
+[ground]
+enabled = false
+
+# The sun from the left, a little behind the cloud; a clear sky's radiance is about a tenth
+# of the sun's irradiance (sylva's units: the sun lights a white surface facing it to 1).
+[sun]
+elevation = 35.0
+azimuth = 160.0
+
+[sky]
+color = [0.12, 0.20, 0.40]
+
+[camera]
+position = [-500.0, 200.0, -2700.0]
+look_at = [0.0, 640.0, 0.0]
+fov = 42.0
+resolution = [640, 360]
+rays_per_pixel = 1
+
+[lb]
+preset = "cloud"
+"#;
+
+const TEAPOT: &str = r#"# Paper 002 Figs. 4-5: the Newell teapot in PMMA (002 Table 2), lit by LB (render with
+# --mode all: full is LB lighting, ambient the conventional lighting of Fig. 5).
+name = "teapot"
+
+[[models]]
+name = "teapot"
+shape = "teapot"
+preset = "pmma"
+
+[[instances]]
+model = "teapot"
+position = [0.0, 0.0, 0.0]
+
+[ground]
+size = [30.0, 30.0]
+color = [0.30, 0.30, 0.30]
+
+[sun]
+elevation = 35.0
+azimuth = 70.0
+
+[sky]
+color = [0.55, 0.70, 0.95]
+
+[camera]
+position = [1.5, 4.8, -10.5]
+look_at = [0.25, 1.45, 0.0]
+fov = 36.0
+resolution = [512, 384]
+rays_per_pixel = 1
+
+[lb]
+grid = 128
+preset = "pmma"
 "#;
 
 const BEECH: &str = r#"# Paper 000 Table 2 / Fig. 3a: the beech tree scene.

@@ -1,8 +1,9 @@
 //! Scene descriptions: what a forest is made of and where everything stands.
 //!
 //! * [`scene`]: the TOML scene file ([`SceneDesc`]), checked with file and line in every
-//!   error, and [`SceneDesc::build`], which grows (`sylva-grow`) or imports (`sylva-io`) each
-//!   unique model once and places the instances into a plain-data [`sylva_geom::Scene`].
+//!   error, and [`SceneDesc::build`], which grows (`sylva-grow`), imports (`sylva-io`) or
+//!   makes (the teapot) each unique model once, places the instances and generates the media
+//!   (clouds) into a plain-data [`sylva_geom::Scene`].
 //! * [`layout`]: the placement generators (scatter with minimum spacing, rotation, scale
 //!   jitter).
 //! * [`builtin_scenes`]: the papers' scenes by name.
@@ -15,4 +16,4 @@ pub mod model_source;
 pub mod scene;
 
 pub use model_source::{load_model, ModelSourceError};
-pub use scene::{load, SceneDesc, SceneError, SceneStats, LB_PRESETS};
+pub use scene::{load, MediumStats, SceneDesc, SceneError, SceneStats, LB_PRESETS};

@@ -4,7 +4,7 @@
 
 use std::path::Path;
 
-use crate::scene::{ModelSource, SceneDesc};
+use crate::scene::{ModelDesc, ModelSource, SceneDesc};
 use sylva_geom::Model;
 use sylva_grow::arbaro::{self, ArbaroError};
 use sylva_grow::species::{normalize_name, Species, BUILTIN_NAMES};
@@ -92,11 +92,14 @@ pub fn load_model(spec: &str) -> Result<Model, ModelSourceError> {
     }
 }
 
-/// Model `name` of a scene (the only one when `name` is `None` and the scene has one), built
-/// and named as the scene names it.
-pub fn load_scene_model(scene: &SceneDesc, name: Option<&str>) -> Result<Model, ModelSourceError> {
+/// The description of model `name` of a scene (the only one when `name` is `None` and the
+/// scene has one).
+pub fn scene_model_desc<'a>(
+    scene: &'a SceneDesc,
+    name: Option<&str>,
+) -> Result<&'a ModelDesc, ModelSourceError> {
     let names: Vec<String> = scene.models.iter().map(|m| m.name.clone()).collect();
-    let desc = match name {
+    Ok(match name {
         Some(n) => scene.models.iter().find(|m| m.name == n).ok_or_else(|| {
             ModelSourceError::NoSuchSceneModel {
                 scene: scene.origin.clone(),
@@ -114,9 +117,28 @@ pub fn load_scene_model(scene: &SceneDesc, name: Option<&str>) -> Result<Model, 
                 })
             }
         },
-    };
+    })
+}
+
+/// The LB preset of model `name` of a scene: its own or the scene's.
+pub fn scene_model_preset(
+    scene: &SceneDesc,
+    name: Option<&str>,
+) -> Result<String, ModelSourceError> {
+    let desc = scene_model_desc(scene, name)?;
+    Ok(desc
+        .preset
+        .clone()
+        .unwrap_or_else(|| scene.lb.preset.clone()))
+}
+
+/// Model `name` of a scene (the only one when `name` is `None` and the scene has one), built
+/// and named as the scene names it.
+pub fn load_scene_model(scene: &SceneDesc, name: Option<&str>) -> Result<Model, ModelSourceError> {
+    let desc = scene_model_desc(scene, name)?;
     let origin = format!("{}: model '{}'", scene.origin, desc.name);
     let mut model = match &desc.source {
+        ModelSource::Shape { shape, color } => shape.build(*color),
         ModelSource::Species(s) => grow(s, &origin)?,
         ModelSource::Mesh { path, options } => {
             import::load_mesh_file(path, options).map_err(Box::new)?

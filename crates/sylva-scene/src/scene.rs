@@ -14,9 +14,11 @@ use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use sylva_core::limits;
 use sylva_core::Sun;
-use sylva_geom::{Aabb, Camera, Ground, Instance, LbSettings, Model, ModelOrigin, Scene};
+use sylva_geom::{Aabb, Camera, Ground, Instance, LbSettings, Medium, Model, ModelOrigin, Scene};
 use sylva_grow::arbaro::{self, ArbaroError};
+use sylva_grow::cloud::{cumulus, CloudError, CumulusParams};
 use sylva_grow::species::{normalize_name, Species, BUILTIN_NAMES};
+use sylva_grow::teapot::teapot_model;
 use sylva_grow::weber_penn::GenerateError;
 use sylva_io::import::{self, ImportError, ImportOptions, UpAxis};
 use toml::Spanned;
@@ -59,6 +61,13 @@ pub enum SceneError {
         model: String,
         source: Box<ImportError>,
     },
+    #[error("{origin}: line {line}: medium '{medium}': {source}")]
+    Medium {
+        origin: String,
+        line: usize,
+        medium: String,
+        source: CloudError,
+    },
     #[error("{origin}: line {line}: instances of '{model}': {source}")]
     Layout {
         origin: String,
@@ -78,6 +87,8 @@ struct RawScene {
     models: Vec<Spanned<RawModel>>,
     #[serde(default)]
     instances: Vec<Spanned<RawInstance>>,
+    #[serde(default)]
+    media: Vec<Spanned<RawMedium>>,
     ground: Option<Spanned<RawGround>>,
     sun: Option<Spanned<RawSun>>,
     sky: Option<Spanned<RawSky>>,
@@ -92,7 +103,12 @@ struct RawModel {
     species: Option<String>,
     arbaro: Option<String>,
     mesh: Option<String>,
+    shape: Option<String>,
     seed: Option<u64>,
+    /// The model's own LB preset (default: the scene's `[lb] preset`).
+    preset: Option<String>,
+    // Built-in shapes only.
+    color: Option<[f32; 3]>,
     // Imported meshes only.
     leaf_materials: Option<Vec<String>>,
     wood_materials: Option<Vec<String>>,
@@ -123,6 +139,20 @@ struct RawInstance {
     random_rotation: Option<bool>,
     scale_jitter: Option<f32>,
     seed: Option<u64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMedium {
+    name: String,
+    generator: String,
+    grid: Option<[usize; 3]>,
+    seed: Option<u64>,
+    thermals: Option<usize>,
+    shear: Option<f64>,
+    position: Option<[f32; 3]>,
+    size: Option<f32>,
+    preset: Option<String>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -176,6 +206,42 @@ pub enum ModelSource {
         path: PathBuf,
         options: ImportOptions,
     },
+    /// A shape made in code ([`SHAPES`]) in one solid material of linear colour `color`.
+    Shape { shape: Shape, color: [f32; 3] },
+}
+
+/// Shapes a model can be made of (`shape = "teapot"`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Shape {
+    /// The Newell teapot (paper 002 §3.2.3), 16 × 16 quads per patch.
+    Teapot,
+}
+
+/// Names of the [`Shape`]s.
+pub const SHAPES: &[&str] = &["teapot"];
+
+impl Shape {
+    pub fn parse(s: &str) -> Option<Shape> {
+        match s {
+            "teapot" => Some(Shape::Teapot),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Shape::Teapot => "teapot",
+        }
+    }
+
+    /// The shape's default colour: clear PMMA, a little warm.
+    pub const DEFAULT_COLOR: [f32; 3] = [0.80, 0.76, 0.70];
+
+    pub fn build(self, color: [f32; 3]) -> Model {
+        match self {
+            Shape::Teapot => teapot_model(16, color),
+        }
+    }
 }
 
 #[derive(Debug, Clone)]
@@ -183,7 +249,62 @@ pub struct ModelDesc {
     /// The name instances use.
     pub name: String,
     pub source: ModelSource,
+    /// Its own LB preset (`preset = "dogrose"`); `None`: the scene's.
+    pub preset: Option<String>,
     pub line: usize,
+}
+
+/// How a medium's density is made.
+#[derive(Debug, Clone, PartialEq)]
+pub enum MediumGenerator {
+    /// The cumulus parcel model of [`sylva_grow::cloud`].
+    Cumulus(CumulusParams),
+}
+
+/// Generators a medium may name.
+pub const MEDIUM_GENERATORS: &[&str] = &["cumulus"];
+
+/// A `[[media]]` entry: a density grid made in code, placed in the world.
+#[derive(Debug, Clone)]
+pub struct MediumDesc {
+    pub name: String,
+    pub generator: MediumGenerator,
+    /// World position of the centre of the grid's bottom face.
+    pub position: Vec3,
+    pub preset: String,
+    pub line: usize,
+}
+
+impl MediumDesc {
+    /// Generates the density and places it.
+    pub fn build(&self, origin: &str) -> Result<Medium, SceneError> {
+        let MediumGenerator::Cumulus(p) = &self.generator;
+        let cloud = cumulus(p).map_err(|source| SceneError::Medium {
+            origin: origin.to_string(),
+            line: self.line,
+            medium: self.name.clone(),
+            source,
+        })?;
+        let [nx, ny, nz] = cloud.dims;
+        let h = cloud.cell_m as f32;
+        let extent = Vec3::new((nx - 1) as f32, (ny - 1) as f32, (nz - 1) as f32) * h;
+        let min = self.position - Vec3::new(0.5 * extent.x, 0.0, 0.5 * extent.z);
+        Medium::new(
+            self.name.clone(),
+            cloud.dims,
+            Aabb {
+                min,
+                max: min + extent,
+            },
+            cloud.density,
+            self.preset.clone(),
+        )
+        .map_err(|message| SceneError::Invalid {
+            origin: origin.to_string(),
+            line: Some(self.line),
+            message,
+        })
+    }
 }
 
 #[derive(Debug, Clone)]
@@ -212,6 +333,7 @@ pub struct SceneDesc {
     pub origin: String,
     pub models: Vec<ModelDesc>,
     pub instances: Vec<InstanceDesc>,
+    pub media: Vec<MediumDesc>,
     pub ground: Ground,
     pub sun: Sun,
     /// Linear RGB radiance of the sky.
@@ -242,6 +364,24 @@ pub struct ModelStats {
     pub leaf_triangles: usize,
     pub wood_triangles: usize,
     pub memory_bytes: u64,
+    /// Its LB preset.
+    pub preset: String,
+}
+
+/// Per-medium line of [`SceneStats`].
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct MediumStats {
+    pub name: String,
+    pub preset: String,
+    pub grid: [usize; 3],
+    /// World length of a cell (one LB step), m.
+    pub cell: f32,
+    pub bounds_min: [f32; 3],
+    pub bounds_max: [f32; 3],
+    /// Sites with density.
+    pub occupied: usize,
+    pub mean_density: f64,
+    pub memory_bytes: u64,
 }
 
 /// What `sylva scene info` reports.
@@ -253,9 +393,22 @@ pub struct SceneStats {
     pub instanced_triangles: u64,
     pub bounds_min: [f32; 3],
     pub bounds_max: [f32; 3],
-    /// Bytes of model geometry and textures plus instance records.
+    /// Bytes of model geometry and textures, instance records and media grids.
     pub memory_bytes: u64,
     pub models: Vec<ModelStats>,
+    pub media: Vec<MediumStats>,
+}
+
+/// `Err` names the presets when `preset` is not one of them.
+fn check_preset(preset: &str) -> Result<(), String> {
+    if LB_PRESETS.contains(&preset) {
+        Ok(())
+    } else {
+        Err(format!(
+            "unknown lb preset '{preset}' (presets: {})",
+            LB_PRESETS.join(", ")
+        ))
+    }
 }
 
 fn line_of(text: &str, offset: usize) -> usize {
@@ -314,7 +467,26 @@ impl SceneDesc {
                     format!("model '{}' is defined twice", m.name),
                 ));
             }
-            let sources = [m.species.is_some(), m.arbaro.is_some(), m.mesh.is_some()];
+            let sources = [
+                m.species.is_some(),
+                m.arbaro.is_some(),
+                m.mesh.is_some(),
+                m.shape.is_some(),
+            ];
+            if m.shape.is_none() && m.color.is_some() {
+                return Err(invalid(
+                    Some(l),
+                    format!(
+                        "model '{}': 'color' applies to built-in shapes ('shape = \"teapot\"') only",
+                        m.name
+                    ),
+                ));
+            }
+            if let Some(preset) = &m.preset {
+                check_preset(preset).map_err(|message| {
+                    invalid(Some(l), format!("model '{}': {message}", m.name))
+                })?;
+            }
             if m.mesh.is_none() {
                 let import_keys = [
                     ("leaf_materials", m.leaf_materials.is_some()),
@@ -333,12 +505,43 @@ impl SceneDesc {
                 return Err(invalid(
                     Some(l),
                     format!(
-                        "model '{}' needs exactly one of 'species', 'arbaro' or 'mesh'",
+                        "model '{}' needs exactly one of 'species', 'arbaro', 'mesh' or 'shape'",
                         m.name
                     ),
                 ));
             }
-            let source = if let Some(name) = &m.species {
+            let source = if let Some(name) = &m.shape {
+                let shape = Shape::parse(name).ok_or_else(|| {
+                    invalid(
+                        Some(l),
+                        format!(
+                            "model '{}': unknown shape '{name}' (shapes: {})",
+                            m.name,
+                            SHAPES.join(", ")
+                        ),
+                    )
+                })?;
+                if m.seed.is_some() {
+                    return Err(invalid(
+                        Some(l),
+                        format!(
+                            "model '{}': 'seed' applies to grown models; a shape is fixed",
+                            m.name
+                        ),
+                    ));
+                }
+                let color = m.color.unwrap_or(Shape::DEFAULT_COLOR);
+                if !color
+                    .iter()
+                    .all(|c| c.is_finite() && (0.0..=1.0).contains(c))
+                {
+                    return Err(invalid(
+                        Some(l),
+                        format!("model '{}': color {color:?} must lie in [0, 1]", m.name),
+                    ));
+                }
+                ModelSource::Shape { shape, color }
+            } else if let Some(name) = &m.species {
                 let mut s = Species::builtin(name).ok_or_else(|| {
                     invalid(
                         Some(l),
@@ -420,6 +623,7 @@ impl SceneDesc {
             models.push(ModelDesc {
                 name: m.name.clone(),
                 source,
+                preset: m.preset.clone(),
                 line: l,
             });
         }
@@ -515,6 +719,62 @@ impl SceneDesc {
             instances.push(InstanceDesc {
                 model,
                 placement,
+                line: l,
+            });
+        }
+
+        // Media.
+        let mut media: Vec<MediumDesc> = Vec::new();
+        for m in &raw.media {
+            let l = line(m.span());
+            let m = m.get_ref();
+            let bad = |message: String| invalid(Some(l), format!("medium '{}': {message}", m.name));
+            if media.iter().any(|o| o.name == m.name) {
+                return Err(bad("is defined twice".into()));
+            }
+            if !MEDIUM_GENERATORS.contains(&m.generator.as_str()) {
+                return Err(bad(format!(
+                    "unknown generator '{}' (generators: {})",
+                    m.generator,
+                    MEDIUM_GENERATORS.join(", ")
+                )));
+            }
+            let grid = m.grid.unwrap_or(CumulusParams::default().dims);
+            if grid.iter().any(|n| !limits::MEDIUM_GRID.contains(n)) {
+                return Err(bad(format!(
+                    "grid {}×{}×{} must have {} sites per edge",
+                    grid[0],
+                    grid[1],
+                    grid[2],
+                    limits::describe(&limits::MEDIUM_GRID)
+                )));
+            }
+            let mut params = CumulusParams::for_grid(grid, m.seed.unwrap_or(1));
+            if let Some(size) = m.size {
+                if !(size.is_finite() && size > 0.0) {
+                    return Err(bad(format!(
+                        "size {size} must be a positive length (metres along x)"
+                    )));
+                }
+                params.cell_m = size as f64 / (grid[0] - 1) as f64;
+            }
+            if let Some(t) = m.thermals {
+                params.thermals = t;
+            }
+            if let Some(shear) = m.shear {
+                params.shear = shear;
+            }
+            let position = m.position.unwrap_or([0.0; 3]);
+            if !finite3(position) {
+                return Err(bad(format!("position {position:?} must be finite")));
+            }
+            let preset = m.preset.clone().unwrap_or_else(|| "cloud".into());
+            check_preset(&preset).map_err(bad)?;
+            media.push(MediumDesc {
+                name: m.name.clone(),
+                generator: MediumGenerator::Cumulus(params),
+                position: Vec3::from_array(position),
+                preset,
                 line: l,
             });
         }
@@ -667,25 +927,18 @@ impl SceneDesc {
                     ));
                 }
                 let preset = s.preset.clone().unwrap_or_else(|| "leaf".into());
-                if !LB_PRESETS.contains(&preset.as_str()) {
-                    return Err(invalid(
-                        Some(l),
-                        format!(
-                            "unknown lb preset '{preset}' (presets: {})",
-                            LB_PRESETS.join(", ")
-                        ),
-                    ));
-                }
+                check_preset(&preset).map_err(|m| invalid(Some(l), format!("lb: {m}")))?;
                 LbSettings { grid, preset }
             }
         };
 
-        // An empty (or truncated-to-empty) file would render an empty scene without a word.
-        if models.is_empty() || instances.is_empty() {
+        // An empty (or truncated-to-empty) file would render an empty scene without a word. A
+        // scene of media alone (the cloud) has something to draw.
+        if (models.is_empty() || instances.is_empty()) && media.is_empty() {
             return Err(invalid(
                 None,
                 format!(
-                    "the scene has {} [[models]] and {} [[instances]]: a scene needs at least one of each (is the file empty or truncated?)",
+                    "the scene has {} [[models]], {} [[instances]] and no [[media]]: a scene needs at least one model and instance, or a medium (is the file empty or truncated?)",
                     models.len(),
                     instances.len()
                 ),
@@ -702,6 +955,7 @@ impl SceneDesc {
             origin: origin.to_string(),
             models,
             instances,
+            media,
             ground,
             sun,
             sky_color,
@@ -718,6 +972,7 @@ impl SceneDesc {
             .par_iter()
             .map(|d| {
                 let mut model = match &d.source {
+                    ModelSource::Shape { shape, color } => shape.build(*color),
                     ModelSource::Species(s) => {
                         s.build_model().map_err(|source| SceneError::Generate {
                             origin: self.origin.clone(),
@@ -737,6 +992,11 @@ impl SceneDesc {
                 Ok(model)
             })
             .collect::<Result<_, SceneError>>()?;
+        let media: Vec<Medium> = self
+            .media
+            .iter()
+            .map(|m| m.build(&self.origin))
+            .collect::<Result<_, SceneError>>()?;
         let instances = self.place_instances()?;
         let mut scene = Scene {
             name: self.name.clone(),
@@ -748,9 +1008,16 @@ impl SceneDesc {
                 .map(|m| match &m.source {
                     ModelSource::Species(s) => ModelOrigin::Species(s.name.clone()),
                     ModelSource::Mesh { path, .. } => ModelOrigin::MeshFile(path.clone()),
+                    ModelSource::Shape { shape, .. } => ModelOrigin::Shape(shape.name().into()),
                 })
                 .collect(),
+            model_presets: self
+                .models
+                .iter()
+                .map(|m| m.preset.clone().unwrap_or_else(|| self.lb.preset.clone()))
+                .collect(),
             instances,
+            media,
             ground: self.ground,
             sun: self.sun,
             sky_color: self.sky_color,
@@ -888,6 +1155,7 @@ impl SceneStats {
                             .file_name()
                             .map(|f| f.to_string_lossy().into_owned())
                             .unwrap_or_default(),
+                        Some(ModelOrigin::Shape(name)) => name.clone(),
                         None => String::new(),
                     };
                     ModelStats {
@@ -901,6 +1169,25 @@ impl SceneStats {
                         triangles: m.triangle_count(),
                         leaf_triangles: leaf,
                         wood_triangles: m.triangle_count() - leaf,
+                        memory_bytes: m.memory_bytes(),
+                        preset: scene.model_preset(k).to_string(),
+                    }
+                })
+                .collect(),
+            media: scene
+                .media
+                .iter()
+                .map(|m| {
+                    let (mean_density, occupied) = m.occupancy();
+                    MediumStats {
+                        name: m.name.clone(),
+                        preset: m.preset.clone(),
+                        grid: m.dims,
+                        cell: m.cell(),
+                        bounds_min: m.bounds.min.to_array(),
+                        bounds_max: m.bounds.max.to_array(),
+                        occupied,
+                        mean_density,
                         memory_bytes: m.memory_bytes(),
                     }
                 })

@@ -266,6 +266,9 @@ fn table_3_run_is_deterministic_and_consistent() {
             rays_per_pixel: 1,
         },
         lb: sylva_geom::LbSettings::default(),
+        // Every model with the scene's preset, no media.
+        model_presets: Vec::new(),
+        media: Vec::new(),
     };
     let scene = experiment::repeated(&scene, 2, Some(3.2)).unwrap();
     assert_eq!(scene.instances.len(), 4);
@@ -333,6 +336,9 @@ fn bad_input_is_an_error() {
             rays_per_pixel: 1,
         },
         lb: sylva_geom::LbSettings::default(),
+        // Every model with the scene's preset, no media.
+        model_presets: Vec::new(),
+        media: Vec::new(),
     };
     let ok = small_config(None);
     assert!(experiment::run(&scene, &ok, &Silent).is_ok());

@@ -139,7 +139,8 @@ pub fn plant_area(
                     Kind::Leaf(Some(o))
                 }
             }
-            (MaterialKind::Leaf, _) => Kind::Leaf(None),
+            // A solid's opaque surface scatters like a leaf site, never a brown one.
+            (MaterialKind::Leaf | MaterialKind::Solid, _) => Kind::Leaf(None),
         })
         .collect();
     if let Some(triangle) = mesh.indices.iter().enumerate().position(|(i, t)| {

@@ -331,7 +331,7 @@ pub fn voxelize_masks(
                     Rule::Alpha(c)
                 }
             }
-            (MaterialKind::Leaf, _) => Rule::Solid { wood: false },
+            (MaterialKind::Leaf | MaterialKind::Solid, _) => Rule::Solid { wood: false },
         })
         .collect();
     if let Some(triangle) = mesh.indices.iter().enumerate().position(|(i, t)| {

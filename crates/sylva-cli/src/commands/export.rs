@@ -15,11 +15,13 @@ use super::scene::thousands;
 
 #[derive(Args)]
 pub struct ExportArgs {
-    /// A scene file (TOML) or a built-in scene: demo, beech, catalpa, canopy.
+    /// A scene file (TOML) or a built-in scene: demo, beech, catalpa, canopy, cloud, teapot,
+    /// demo_cloud.
     pub scene: String,
     /// `obj`: the flattened scene (every instance in world space) as one OBJ + MTL + PNG
     /// textures, ground included. `mitsuba`: a Mitsuba 3 scene.xml that keeps the instancing
-    /// (one binary PLY per model and material), with sun, sky, ground, camera and integrator.
+    /// (one binary PLY per model and material), with sun, sky, ground, camera and integrator,
+    /// and media (clouds) as heterogeneous volumes.
     #[arg(long, short = 'f', value_name = "FORMAT")]
     pub format: Format,
     /// Output directory; created if missing, files of the same name in it are replaced.
@@ -30,7 +32,8 @@ pub struct ExportArgs {
     #[arg(long, value_name = "N")]
     pub spp: Option<u32>,
     /// Mitsuba: the volpath integrator's max_depth in scattering events (-1: unbounded; passes
-    /// through a leaf's transparent texels do not count).
+    /// through a leaf's transparent texels do not count). A cloud needs -1: its light
+    /// scatters hundreds of times.
     #[arg(
         long,
         default_value_t = 64,
@@ -84,6 +87,12 @@ pub fn run(args: ExportArgs) -> Result<()> {
         t0.elapsed().as_secs_f64()
     );
     let t1 = Instant::now();
+    if args.format == Format::Obj && !scene.media.is_empty() {
+        eprintln!(
+            "warning: OBJ holds no participating media: {} left out (the mitsuba format writes them)",
+            scene.media.iter().map(|m| format!("'{}'", m.name)).collect::<Vec<_>>().join(", ")
+        );
+    }
     let written = match args.format {
         Format::Obj => {
             if obj::is_large(triangles) {

@@ -13,7 +13,7 @@ use sylva_lb::{
     Boundary, ColourParams, DensityGrid, Dims, Element, GridFile, MediumParams, Preset, RawElement,
     SolveOptions,
 };
-use sylva_scene::model_source::load_scene_model;
+use sylva_scene::model_source::{load_scene_model, scene_model_preset};
 use sylva_scene::SceneDesc;
 
 use super::progress::bar;
@@ -58,7 +58,8 @@ struct Source {
     #[arg(long, value_name = "SPEC")]
     model: Option<String>,
     /// A scene (file or built-in name): one of its models (--scene-model) voxelized with the
-    /// scene's [lb] grid and lit with its preset, unless --grid or --preset say otherwise.
+    /// scene's [lb] grid and lit with the model's preset (its own or the scene's [lb] one),
+    /// unless --grid or --preset say otherwise.
     #[arg(long, value_name = "SCENE")]
     scene: Option<String>,
 }
@@ -91,7 +92,7 @@ pub struct SolveArgs {
     #[arg(long, allow_negative_numbers = true)]
     azimuth: Option<f64>,
     /// Parameter preset: leaf (000 Table 1), dogrose (002 Table 1), cloud, pmma (default
-    /// leaf, or the scene's [lb] preset with --scene).
+    /// leaf, or with --scene the model's own preset or the scene's [lb] one).
     #[arg(long)]
     preset: Option<String>,
     /// Absorption σ_a: one value for all colours or R,G,B (overrides the preset).
@@ -306,7 +307,7 @@ fn solve(a: SolveArgs) -> Result<()> {
     let scene = a.source.scene.as_deref().map(SceneDesc::load).transpose()?;
     let preset = match (&a.preset, &scene) {
         (Some(p), _) => p.clone(),
-        (None, Some(s)) => s.lb.preset.clone(),
+        (None, Some(s)) => scene_model_preset(s, a.scene_model.as_deref())?,
         (None, None) => "leaf".to_string(),
     };
     let m = medium(&a, &preset)?;

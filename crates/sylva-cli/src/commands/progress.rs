@@ -4,7 +4,7 @@
 use std::sync::Mutex;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use sylva_geom::Model;
+use sylva_geom::{Medium, Model};
 use sylva_render::lighting::LightingReport;
 use sylva_render::Progress;
 
@@ -22,13 +22,14 @@ pub fn bar(len: u64, what: &str) -> ProgressBar {
     pb
 }
 
-/// One bar per piece of pipeline work; `on_lit` hears each model's LB lighting report.
+/// One bar per piece of pipeline work; `on_lit(name, report)` hears each model's LB lighting
+/// report and each medium's (two: its sun and sky solves).
 pub struct Bars<F> {
     current: Mutex<Option<ProgressBar>>,
     on_lit: F,
 }
 
-impl<F: Fn(&Model, &LightingReport) + Sync> Bars<F> {
+impl<F: Fn(&str, &LightingReport) + Sync> Bars<F> {
     pub fn new(on_lit: F) -> Bars<F> {
         Bars {
             current: Mutex::new(None),
@@ -43,7 +44,7 @@ impl<F: Fn(&Model, &LightingReport) + Sync> Bars<F> {
     }
 }
 
-impl<F: Fn(&Model, &LightingReport) + Sync> Progress for Bars<F> {
+impl<F: Fn(&str, &LightingReport) + Sync> Progress for Bars<F> {
     fn start(&self, what: &str, total: u64) {
         *self.current.lock().expect("progress bar") = Some(bar(total, what));
     }
@@ -66,6 +67,12 @@ impl<F: Fn(&Model, &LightingReport) + Sync> Progress for Bars<F> {
     }
 
     fn model_lit(&self, model: &Model, report: &LightingReport) {
-        (self.on_lit)(model, report);
+        (self.on_lit)(&model.name, report);
+    }
+
+    fn medium_lit(&self, medium: &Medium, reports: &[LightingReport]) {
+        for (report, which) in reports.iter().zip(["sun", "sky"]) {
+            (self.on_lit)(&format!("{} ({which})", medium.name), report);
+        }
     }
 }

@@ -7,7 +7,6 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use sylva_geom::Model;
 use sylva_lb::LbSolver;
 use sylva_mpi::Comm;
 use sylva_render::lighting::{Light, LightingReport, LightingSource};
@@ -23,7 +22,8 @@ use super::progress::Bars;
 /// Options shared by `sylva render` and `sylva bench trace`: what the frame looks like.
 #[derive(Args, Debug, Clone)]
 pub struct FrameArgs {
-    /// Scene file (.toml) or built-in scene name (demo, beech, catalpa, canopy).
+    /// Scene file (.toml) or built-in scene name (demo, beech, catalpa, canopy, cloud,
+    /// teapot, demo_cloud).
     #[arg(default_value = "demo")]
     pub scene: String,
     /// Image width in pixels (default: the scene camera's; with only --width or --height the
@@ -158,11 +158,12 @@ pub fn prepare(
     let (width, height) = resolution(a.width, a.height, &scene.camera)?;
     let rays_per_pixel = rays_per_pixel.unwrap_or(scene.camera.rays_per_pixel);
     say(format!(
-        "scene {}: {} models, {} instances, {} instanced triangles; {width}x{height}; sun elevation {:.1}° azimuth {:.1}°",
+        "scene {}: {} models, {} instances, {} instanced triangles, {} media; {width}x{height}; sun elevation {:.1}° azimuth {:.1}°",
         scene.name,
         scene.models.len(),
         scene.instances.len(),
         scene.instanced_triangles(),
+        scene.media.len(),
         scene.sun.elevation_deg(),
         scene.sun.azimuth_deg()
     ));
@@ -195,32 +196,30 @@ pub fn prepare(
         largest_frame: Some((width, height, rays_per_pixel)),
         output_images,
     };
-    let progress = Bars::new(
-        |model: &Model, report: &LightingReport| match &report.source {
-            LightingSource::Cached => say(format!(
-                "  LB {}: {} grid from cache ({:.2} s)",
-                model.name, report.dims, report.seconds
-            )),
-            LightingSource::Computed => say(format!(
-                "  LB {}: {} grid solved in {:.1} s{}",
-                model.name,
-                report.dims,
-                report.seconds,
-                report
-                    .path
-                    .as_ref()
-                    .map(|p| format!(", cached as {}", p.display()))
-                    .unwrap_or_default()
-            )),
-            LightingSource::Recomputed { reason } => {
-                eprintln!("warning: {reason}; recomputed");
-                say(format!(
-                    "  LB {}: {} grid solved again in {:.1} s",
-                    model.name, report.dims, report.seconds
-                ))
-            }
-        },
-    );
+    let progress = Bars::new(|name: &str, report: &LightingReport| match &report.source {
+        LightingSource::Cached => say(format!(
+            "  LB {}: {} grid from cache ({:.2} s)",
+            name, report.dims, report.seconds
+        )),
+        LightingSource::Computed => say(format!(
+            "  LB {}: {} grid solved in {:.1} s{}",
+            name,
+            report.dims,
+            report.seconds,
+            report
+                .path
+                .as_ref()
+                .map(|p| format!(", cached as {}", p.display()))
+                .unwrap_or_default()
+        )),
+        LightingSource::Recomputed { reason } => {
+            eprintln!("warning: {reason}; recomputed");
+            say(format!(
+                "  LB {}: {} grid solved again in {:.1} s",
+                name, report.dims, report.seconds
+            ))
+        }
+    });
     let scene = match comm {
         None => PreparedScene::new(scene, &opts, &progress)?,
         Some(comm) => {
@@ -306,7 +305,7 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
     let rpp = a.rpp.unwrap_or(prepared.scene.camera.rays_per_pixel);
     let camera = prepared.camera(p.width, p.height);
     let settings = prepared.settings(camera, rpp, a.frame.seed);
-    let bars = Bars::new(|_: &Model, _: &LightingReport| {});
+    let bars = Bars::new(|_: &str, _: &LightingReport| {});
     let mut spp_seconds = None;
     let (frame, split) = match comm {
         None if spp => {

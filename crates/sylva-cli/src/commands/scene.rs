@@ -170,7 +170,7 @@ fn info(name: &str, json: bool) -> anyhow::Result<()> {
     );
     outln!(
         o,
-        "  memory               {} (models and textures, instance records)",
+        "  memory               {} (models and textures, instance records, media)",
         sylva_core::format_bytes(stats.memory_bytes)
     );
     outln!(
@@ -196,27 +196,58 @@ fn info(name: &str, json: bool) -> anyhow::Result<()> {
         scene.lb.grid,
         scene.lb.preset
     );
-    outln!(o);
-    outln!(
-        o,
-        "  {:<18} {:<18} {:>9} {:>11} {:>11} {:>11}",
-        "model",
-        "species",
-        "instances",
-        "triangles",
-        "leaf",
-        "wood"
-    );
+    if !stats.models.is_empty() {
+        outln!(o);
+        outln!(
+            o,
+            "  {:<18} {:<18} {:>9} {:>11} {:>11} {:>11}  {}",
+            "model",
+            "species",
+            "instances",
+            "triangles",
+            "leaf",
+            "wood",
+            "preset"
+        );
+    }
     for m in &stats.models {
         outln!(
             o,
-            "  {:<18} {:<18} {:>9} {:>11} {:>11} {:>11}",
+            "  {:<18} {:<18} {:>9} {:>11} {:>11} {:>11}  {}",
             m.name,
             m.species,
             m.instances,
             thousands(m.triangles as u64),
             thousands(m.leaf_triangles as u64),
-            thousands(m.wood_triangles as u64)
+            thousands(m.wood_triangles as u64),
+            m.preset
+        );
+    }
+    if !stats.media.is_empty() {
+        outln!(o);
+        outln!(
+            o,
+            "  {:<18} {:<8} {:<13} {:>8} {:>11} {:>6}  box (m)",
+            "medium",
+            "preset",
+            "grid",
+            "cell (m)",
+            "occupied",
+            "mean ρ"
+        );
+    }
+    for m in &stats.media {
+        let [a, b, c] = m.bounds_min;
+        let [d, e, f] = m.bounds_max;
+        outln!(
+            o,
+            "  {:<18} {:<8} {:<13} {:>8.2} {:>11} {:>6.3}  ({a:.0}, {b:.0}, {c:.0}) .. ({d:.0}, {e:.0}, {f:.0})",
+            m.name,
+            m.preset,
+            format!("{}×{}×{}", m.grid[0], m.grid[1], m.grid[2]),
+            m.cell,
+            thousands(m.occupied as u64),
+            m.mean_density
         );
     }
     emit(&o)

@@ -14,6 +14,7 @@
 //! | camera | `perspective`, `lookat` with up = +y, `fov_axis` = `y` (sylva's fov is vertical), the same width, height |
 //! | rays per pixel | `independent` sampler's `sample_count` (the `spp` default, `-Dspp=N` overrides) |
 //! | — | `volpath` integrator: unlike `path`, its shadow rays pass through a mask's transparent texels (null transmission), so leaves cast leaf-shaped shadows rather than quad-shaped ones |
+//! | medium (cloud) | a `cube` with a `null` BSDF around a `heterogeneous` interior medium: `sigma_t` a `gridvolume` of the density (`media/<name>.vol`, trilinear), `scale` = the preset's σ_t per lattice step / the cell length (per world unit), `albedo` = σ_s / σ_t per colour, `hg` phase with the preset's g (its luminance-weighted mean where the colours differ) |
 //!
 //! PLY texture coordinates are sylva's as they are: Mitsuba's PLY loader and bitmap texture
 //! both put v = 0 at the image's first (top) row, as sylva does.
@@ -25,7 +26,7 @@ use super::{
 use glam::{Mat4, Vec3};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use sylva_geom::{Material, Model, Scene, Wrap};
+use sylva_geom::{Material, Medium, Model, Scene, Wrap};
 
 /// The scene file in the output directory.
 pub const XML_FILE: &str = "scene.xml";
@@ -33,6 +34,8 @@ pub const XML_FILE: &str = "scene.xml";
 pub const MESH_DIR: &str = "meshes";
 /// Textures, relative to the output directory.
 pub const TEXTURE_DIR: &str = "textures";
+/// Media density grids (`.vol`), relative to the output directory.
+pub const MEDIA_DIR: &str = "media";
 
 /// Choices the scene file does not fix.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -187,7 +190,7 @@ fn bsdf(out: &mut String, id: &str, mat: &Material, files: &MaterialFiles, alpha
         out,
         "    <!-- {} ({}): reflectance {} × colour, transmittance {} × colour -->",
         xml_text(&mat.name),
-        if mat.is_leaf() { "leaf" } else { "wood" },
+        mat.kind.name(),
         v3(o.reflect),
         v3(if mat.is_leaf() { o.transmit } else { [0.0; 3] }),
     );
@@ -349,6 +352,65 @@ fn ply_bytes(scene: &Scene, written: &[bool]) -> u64 {
         .sum()
 }
 
+/// Writes `m`'s density as Mitsuba's binary grid volume (`VOL` version 3: float32, one
+/// channel, x fastest, then the bounding box, which Mitsuba 3 ignores in favour of the
+/// volume's `to_world`).
+fn write_vol(path: &Path, m: &Medium) -> Result<(), ExportError> {
+    let [nx, ny, nz] = m.dims;
+    write_file(path, |w| {
+        let mut head = Vec::with_capacity(48);
+        head.extend_from_slice(b"VOL");
+        head.push(3);
+        for v in [1i32, nx as i32, ny as i32, nz as i32, 1] {
+            head.extend_from_slice(&v.to_le_bytes());
+        }
+        let (lo, hi) = cell_box(m);
+        for v in lo.to_array().into_iter().chain(hi.to_array()) {
+            head.extend_from_slice(&v.to_le_bytes());
+        }
+        w.write_all(&head)?;
+        let mut row = Vec::with_capacity(nx * 4);
+        for z in 0..nz {
+            for y in 0..ny {
+                row.clear();
+                for x in 0..nx {
+                    row.extend_from_slice(&m.density[m.index(x, y, z)].to_le_bytes());
+                }
+                w.write_all(&row)?;
+            }
+        }
+        Ok(())
+    })
+}
+
+/// The box Mitsuba's grid covers: its values sit at cell centres, so sylva's site-centre box
+/// grows by half a cell on every side.
+fn cell_box(m: &Medium) -> (Vec3, Vec3) {
+    let half = Vec3::splat(0.5 * m.cell());
+    (m.bounds.min - half, m.bounds.max + half)
+}
+
+/// The optical parameters of `m` in world units: σ_t per unit length at density 1 (the
+/// same for every colour in sylva's presets), albedo per colour, and one g.
+fn medium_optics(m: &Medium) -> Result<(f32, [f32; 3], f32, bool), ExportError> {
+    let params = sylva_lb::Preset::parse(&m.preset)
+        .map_err(|e| ExportError::Option(format!("medium '{}': {e}", m.name)))?
+        .params();
+    let c = params.colours;
+    let sigma_t = c[0].sigma_t();
+    if c.iter().any(|p| (p.sigma_t() - sigma_t).abs() > 1e-9) {
+        return Err(ExportError::Option(format!(
+            "medium '{}': preset '{}' has a different σ_t per colour, which one Mitsuba density grid cannot hold",
+            m.name, m.preset
+        )));
+    }
+    let albedo = c.map(|p| (p.sigma_s / p.sigma_t()) as f32);
+    let w = [0.2126, 0.7152, 0.0722];
+    let g: f64 = c.iter().zip(w).map(|(p, w)| p.g * w).sum();
+    let grey_g = c.iter().all(|p| p.g == c[0].g);
+    Ok(((sigma_t / m.cell() as f64) as f32, albedo, g as f32, grey_g))
+}
+
 /// Writes `scene.xml`, the PLY meshes and the textures into `dir` (created if needed), after
 /// checking that the disk has room. `progress(n)` is called with the number of models written
 /// so far; returning `false` cancels the export ([`ExportError::Cancelled`]) before
@@ -373,11 +435,17 @@ pub fn write(
                 && scene.instances.iter().any(|i| i.model as usize == k)
         })
         .collect();
+    let media_bytes: u64 = scene.media.iter().map(|m| m.memory_bytes() + 48).sum();
     super::check_disk_space(
         dir,
-        ply_bytes(scene, &written) + 200 * scene.instances.len() as u64,
+        ply_bytes(scene, &written) + 200 * scene.instances.len() as u64 + media_bytes,
         super::available_disk_bytes(dir),
     )?;
+    let optics = scene
+        .media
+        .iter()
+        .map(medium_optics)
+        .collect::<Result<Vec<_>, _>>()?;
 
     // Textures of the written models only.
     let needed: std::collections::HashSet<&str> = scene
@@ -407,14 +475,15 @@ pub fn write(
     let _ = writeln!(x, "<?xml version=\"1.0\" encoding=\"utf-8\"?>");
     let _ = writeln!(
         x,
-        "<!-- sylva scene '{}' ({}): {} instances of {} models, {} triangles plus the ground.\n     \
+        "<!-- sylva scene '{}' ({}): {} instances of {} models, {} triangles plus the ground, {} media.\n     \
          World frame: right-handed, +y up, metres. Render with Mitsuba 3 (RGB variant), e.g.\n     \
          mitsuba -m scalar_rgb -Dspp=256 -o render.exr {XML_FILE}  (see docs/export.md) -->",
         xml_text(&scene.name),
         xml_text(&scene.origin),
         scene.instances.len(),
         scene.models.len(),
-        scene.instanced_triangles()
+        scene.instanced_triangles(),
+        scene.media.len()
     );
     let _ = writeln!(x, "<scene version=\"3.0.0\">");
     let _ = writeln!(x, "    <default name=\"spp\" value=\"{}\"/>", opts.spp);
@@ -538,6 +607,44 @@ pub fn write(
             "    <shape type=\"rectangle\" id=\"ground\">\n        <transform name=\"to_world\">\n            <matrix value=\"{}\"/>\n        </transform>\n        <bsdf type=\"diffuse\">\n            <rgb name=\"reflectance\" value=\"{}\"/>\n        </bsdf>\n    </shape>\n",
             matrix_value(m),
             v3(scene.ground.color)
+        );
+    }
+
+    // Media: a null-surfaced cube around a heterogeneous interior.
+    let media_stems = file_stems(&scene.media.iter().map(|m| &m.name).collect::<Vec<_>>());
+    for ((m, stem), (sigma_t, albedo, g, grey_g)) in
+        scene.media.iter().zip(&media_stems).zip(optics)
+    {
+        let rel = PathBuf::from(MEDIA_DIR).join(format!("{stem}.vol"));
+        write_vol(&dir.join(&rel), m)?;
+        out.add(dir, rel)?;
+        let (lo, hi) = cell_box(m);
+        let (centre, half) = ((lo + hi) * 0.5, (hi - lo) * 0.5);
+        let _ = writeln!(
+            x,
+            "    <!-- Medium '{}': {}×{}×{} sites of {} m, preset {} (σ per lattice step / cell length = per metre){} -->",
+            xml_text(&m.name),
+            m.dims[0],
+            m.dims[1],
+            m.dims[2],
+            m.cell(),
+            xml_text(&m.preset),
+            if grey_g {
+                ""
+            } else {
+                "; g differs per colour: Mitsuba's hg takes one, the luminance-weighted mean"
+            }
+        );
+        let _ = writeln!(
+            x,
+            "    <shape type=\"cube\">\n        <transform name=\"to_world\">\n            <scale value=\"{}\"/>\n            <translate value=\"{}\"/>\n        </transform>\n        <bsdf type=\"null\"/>\n        <medium type=\"heterogeneous\" name=\"interior\">\n            <rgb name=\"albedo\" value=\"{}\"/>\n            <float name=\"scale\" value=\"{}\"/>\n            <volume type=\"gridvolume\" name=\"sigma_t\">\n                <string name=\"filename\" value=\"{MEDIA_DIR}/{stem}.vol\"/>\n                <transform name=\"to_world\">\n                    <scale value=\"{}\"/>\n                    <translate value=\"{}\"/>\n                </transform>\n            </volume>\n            <phase type=\"hg\">\n                <float name=\"g\" value=\"{}\"/>\n            </phase>\n        </medium>\n    </shape>\n",
+            v3(half),
+            v3(centre),
+            v3(albedo),
+            sigma_t,
+            v3(hi - lo),
+            v3(lo),
+            g
         );
     }
 

@@ -219,7 +219,7 @@ pub fn material_stems(models: &[Model]) -> Vec<Vec<String>> {
         .zip(&model_stems)
         .flat_map(|(m, stem)| {
             m.materials.iter().map(move |mat| {
-                let kind = if mat.is_leaf() { "leaf" } else { "wood" };
+                let kind = mat.kind.name();
                 format!("{stem}_{kind}")
             })
         })

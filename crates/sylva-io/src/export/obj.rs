@@ -229,7 +229,7 @@ pub fn write(
                     w,
                     "# {} ({}, {}-sided), mean colour {r} {g} {b}",
                     mat.name,
-                    if mat.is_leaf() { "leaf" } else { "wood" },
+                    mat.kind.name(),
                     if mat.two_sided { "two" } else { "one" }
                 )?;
                 writeln!(w, "Ka 0 0 0\nKs 0 0 0\nillum 1")?;
