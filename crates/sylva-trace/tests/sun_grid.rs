@@ -40,7 +40,7 @@ fn shadow_rays_through_the_grid_equal_the_kd_tree_and_brute_force() {
                 Vec3::Y
             } else {
                 let e = uniform(&mut r, 0.1, 1.4);
-                let a = uniform(&mut r, 0.0, 6.28);
+                let a = uniform(&mut r, 0.0, std::f32::consts::TAU);
                 Vec3::new(e.cos() * a.cos(), e.sin(), e.cos() * a.sin())
             };
             let grid = SunGrid::build(&accel, to_sun);

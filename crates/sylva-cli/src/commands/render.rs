@@ -195,6 +195,7 @@ pub fn prepare(
         sky_ambient: a.sky_ambient,
         largest_frame: Some((width, height, rays_per_pixel)),
         output_images,
+        ..PrepareOptions::default()
     };
     let progress = Bars::new(|name: &str, report: &LightingReport| match &report.source {
         LightingSource::Cached => say(format!(

@@ -382,9 +382,7 @@ where
                 let p = (0..=c)
                     .find(|&p| medium.colours[p] == medium.colours[c])
                     .unwrap_or(c);
-                by_colour[p]
-                    .clone()
-                    .expect("the first of equal colours is a job")
+                by_colour[p].expect("the first of equal colours is a job")
             })
             .collect();
         reports.push(BasisReport {

@@ -37,6 +37,16 @@ impl Placement {
         std::array::from_fn(|a| (p[a] - self.origin[a]) * self.inv_cell[a])
     }
 
+    /// The model-space point of site `(0, 0, 0)`.
+    pub fn origin(&self) -> [f32; 3] {
+        self.origin
+    }
+
+    /// Sites per model-space unit along each axis (0 along a degenerate axis).
+    pub fn inv_cell(&self) -> [f32; 3] {
+        self.inv_cell
+    }
+
     /// The model-space point at grid coordinates `g` (the inverse of
     /// [`Placement::grid_coords`]; a degenerate axis stays at the origin).
     pub fn model_point(&self, g: [f32; 3]) -> [f32; 3] {
