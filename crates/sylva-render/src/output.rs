@@ -150,6 +150,17 @@ pub fn write_apng(
     frames: &[Vec<[u8; 3]>],
     delay_ms: u32,
 ) -> Result<(), OutputError> {
+    write_encoded(path, &encode_apng(path, width, height, frames, delay_ms)?)
+}
+
+/// The bytes of [`write_apng`]'s animated PNG (`path` names it in errors), for an output set.
+pub fn encode_apng(
+    path: &Path,
+    width: u32,
+    height: u32,
+    frames: &[Vec<[u8; 3]>],
+    delay_ms: u32,
+) -> Result<Vec<u8>, OutputError> {
     if frames.is_empty() || !(1..=65535).contains(&delay_ms) {
         return Err(OutputError::Frames { path: path.into() });
     }
@@ -173,7 +184,7 @@ pub fn write_apng(
         }
         w.finish().map_err(enc)?;
     }
-    write_encoded(path, &bytes)
+    Ok(bytes)
 }
 
 #[cfg(test)]

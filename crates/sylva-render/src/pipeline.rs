@@ -563,7 +563,15 @@ impl PreparedScene {
             }
             (None, None) => (none(), 0),
         };
-        Self::build(scene, opts, shading, lighting, cached, relit_parts, progress)
+        Self::build(
+            scene,
+            opts,
+            shading,
+            lighting,
+            cached,
+            relit_parts,
+            progress,
+        )
     }
 
     /// A scene whose models were lit elsewhere (`lighting` in scene order; `cached` of them
@@ -585,6 +593,27 @@ impl PreparedScene {
             lighting.into_iter().map(Some).collect(),
             cached,
             None,
+            &Silent,
+        )
+    }
+
+    /// A scene relit from base solutions made elsewhere ([`precompute_relighting`] with
+    /// `opts.relight`'s plan): [`PreparedScene::new`] without the LB work.
+    pub fn with_relighting(
+        scene: Scene,
+        opts: &PrepareOptions,
+        relighting: Relighting,
+    ) -> Result<PreparedScene, PipelineError> {
+        let shading = Self::check(&scene, opts)?;
+        let none = (0..scene.models.len()).map(|_| None).collect();
+        let cached = relighting.cached;
+        Self::build(
+            scene,
+            opts,
+            shading,
+            none,
+            cached,
+            Some(relighting),
             &Silent,
         )
     }
