@@ -147,8 +147,8 @@ pub struct FrameArgs {
     /// Sites of the coarse global grid along the forest's longest edge.
     #[arg(long, default_value_t = GlobalGridOptions::default().sites)]
     pub global_grid: usize,
-    /// Shadow rays through the top-level kd-tree or the sun-aligned grid (004 §4.1).
-    #[arg(long, value_enum, default_value = "kd")]
+    /// Shadow rays through the sun-aligned grid (004 §4.1) or the top-level kd-tree.
+    #[arg(long, value_enum, default_value = "grid")]
     pub shadows: ShadowsArg,
     /// Compression of cached base solutions: colour:T (per-basis colour decorrelation +
     /// Haar), haar:T, pca:K or pcahaar:K:T.
