@@ -43,9 +43,18 @@ enum Command {
     /// Render a scene (default: the built-in demo) to sylva-out/<scene>.png: sunlight, shadows,
     /// light through leaves and LB indirect light, e.g. `sylva render beech --rpp 4 --hdr`.
     Render(commands::render::RenderArgs),
+    /// Precompute every model's 19 base solutions (paper 004), compressed and cached, and the
+    /// scene's coarse global grid: afterwards the sun moves with no LB solve, e.g.
+    /// `sylva basis canopy` (`--device gpu` solves on the GPU). Base solutions are the paper
+    /// light's (`--light paper`, the default here; docs/relight.md).
+    Basis(commands::basis::BasisArgs),
+    /// Relight a scene over a moving sun (004 Table 1): numbered PNGs, an animated PNG and
+    /// per-frame times, e.g. `sylva relight catalpa --suns 24`. Under the paper light, whose
+    /// base solutions these are (`--light paper`, the default here).
+    Relight(commands::relight::RelightArgs),
     /// Measure speed on this machine: `bench lb` (LB solver against copy bandwidth),
     /// `bench scene` (generation and scene building), `bench voxelize`, `bench trace`
-    /// (acceleration build and frame time).
+    /// (acceleration build and frame time), `bench spp`, `bench relight` (moving the sun).
     Bench(commands::bench::BenchArgs),
 }
 
@@ -61,6 +70,8 @@ fn distributed(command: &Command) -> Result<(), &'static str> {
         Command::Lb(_) => Err("lb"),
         Command::Spp(_) => Err("spp"),
         Command::Export(_) => Err("export"),
+        Command::Basis(_) => Err("basis"),
+        Command::Relight(_) => Err("relight"),
     }
 }
 
@@ -74,6 +85,8 @@ fn run(command: Command, comm: Option<&dyn sylva_mpi::Comm>) -> anyhow::Result<(
         Command::Bench(a) => commands::bench::run(a, comm),
         Command::Export(a) => commands::export::run(a),
         Command::Render(a) => commands::render::run(a, comm),
+        Command::Basis(a) => commands::basis::run(a),
+        Command::Relight(a) => commands::relight::run(a),
     }
 }
 

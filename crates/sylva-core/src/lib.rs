@@ -10,7 +10,8 @@
 //! * A command's output files are written together with an [`OutputSet`]: all or none
 //!   replaced, never an input, temporaries removed on Ctrl-C ([`interrupt`]).
 //! * Input files are read with [`read_file`]: regular files only, sizes bounded; the limits
-//!   on inputs live in [`limits`].
+//!   on inputs live in [`limits`]. Cache files of sylva's own binary formats use the checked
+//!   [`container`] (header, metadata, CRC-32).
 //! * Large allocations are checked first with [`check_memory`].
 //! * Light colours are linear sRGB; [`blackbody_rgb`] gives a black body's (the sun is 6500 K).
 //! * Randomness comes from [`SplitMix64`], seeded per task so results do not depend on the
@@ -20,6 +21,7 @@
 
 mod atomic;
 pub mod colour;
+pub mod container;
 mod hash;
 mod input;
 pub mod interrupt;

@@ -38,24 +38,6 @@ struct Args {
     tolerance: Option<f64>,
 }
 
-/// `haar:T`, `pca:K`, `pcahaar:K:T` or `colour:T`.
-fn parse_codec(s: &str) -> Result<Codec, String> {
-    let parts: Vec<&str> = s.split(':').collect();
-    let bad = || format!("codec {s}: expected haar:T, pca:K, pcahaar:K:T or colour:T");
-    let t = |v: &str| v.parse::<f64>().map_err(|_| bad());
-    let k = |v: &str| v.parse::<usize>().map_err(|_| bad());
-    Ok(match parts[..] {
-        ["haar", a] => Codec::Haar { threshold: t(a)? },
-        ["pca", a] => Codec::Pca { rank: k(a)? },
-        ["pcahaar", a, b] => Codec::PcaHaar {
-            rank: k(a)?,
-            threshold: t(b)?,
-        },
-        ["colour", a] => Codec::ColourHaar { threshold: t(a)? },
-        _ => return Err(bad()),
-    })
-}
-
 fn parse() -> Result<Args, String> {
     let mut it = std::env::args().skip(1);
     let mut paths = Vec::new();
@@ -110,7 +92,7 @@ fn parse() -> Result<Args, String> {
                 args.codecs = Some(
                     value("--codecs")?
                         .split(',')
-                        .map(parse_codec)
+                        .map(Codec::parse)
                         .collect::<Result<_, _>>()?,
                 )
             }

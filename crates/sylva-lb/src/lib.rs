@@ -3,7 +3,8 @@
 //! Owns the D3Q19 lattice, the collision matrix with Henyey-Greenstein anisotropy, the
 //! parameter presets, the solver (boundary shell, green/brown sites, convergence), the
 //! density and lighting grids with their file format and previews, the built-in test
-//! shapes and relighting (paper 004: base solutions, the 32-face polyhedron, compression);
+//! shapes and relighting of one grid (paper 004: base solutions solved as independent jobs,
+//! the 32-face polyhedron, compression and the compressed file);
 //! [`LbSolver`] is the solver as a backend ([`CpuSolver`] here, the GPU one in
 //! `sylva-lb-gpu`).
 

@@ -5,8 +5,9 @@ use std::sync::OnceLock;
 
 use sylva_lb::lattice::{unit, Q};
 use sylva_lb::relight::{
-    compress, relit_error, sky_directions, solve_basis, Ambient, BasisOptions, BasisSet,
-    BasisWeights, Codec, CompressTarget, Precision, Region, RelightError,
+    compress, relit_error, sky_directions, solve_basis, solve_basis_jobs, Ambient, BasisAssembly,
+    BasisJob, BasisOptions, BasisSet, BasisWeights, Codec, CompressTarget, CompressedBasis,
+    Precision, Region, RelightError, COMPRESSED_EXTENSION,
 };
 use sylva_lb::shapes::Shape;
 use sylva_lb::{
@@ -312,15 +313,219 @@ fn progress_counts_every_solve() {
         },
         ambient: Ambient::Solve,
     };
+    // One job per basis and colour (the leaf preset's three colours differ).
     BasisSet::solve(&g, &medium(), &opts, &mut |p| {
-        assert_eq!((p.solves, p.max_steps), (19, 4));
-        if p.step == 4 && p.colour == 2 {
-            seen.push((p.done, p.basis));
+        assert_eq!((p.solves, p.max_steps), (57, 4));
+        if p.step == 4 {
+            seen.push((p.done, p.basis, p.colour));
         }
     })
     .unwrap();
-    let want: Vec<(usize, usize)> = (1..Q).chain([0]).enumerate().collect();
+    let want: Vec<(usize, usize, usize)> = (1..Q)
+        .chain([0])
+        .flat_map(|j| (0..3).map(move |c| (j, c)))
+        .enumerate()
+        .map(|(k, (j, c))| (k, j, c))
+        .collect();
     assert_eq!(seen, want);
+}
+
+#[test]
+fn jobs_run_anywhere_and_assemble_into_the_same_set() {
+    let g = grid();
+    let m = medium();
+    let opts = options(Ambient::Sum);
+    let jobs = BasisJob::all(&m, &opts);
+    assert_eq!(jobs.len(), 54);
+    assert_eq!(
+        jobs[0],
+        BasisJob {
+            basis: 1,
+            colour: 0
+        }
+    );
+    assert_eq!(
+        jobs[53],
+        BasisJob {
+            basis: 18,
+            colour: 2
+        }
+    );
+    // One job per call, in reverse order, each call lighting one colour.
+    let mut assembly = BasisAssembly::new(g.dims, g.bounds, &m, &opts).unwrap();
+    let mut distinct_colours = Vec::new();
+    for job in jobs.iter().rev() {
+        let out = solve_basis_jobs(
+            &g,
+            &m,
+            &opts,
+            &[*job],
+            |grid: &DensityGrid,
+             medium: &MediumParams,
+             b: Boundary,
+             o: &SolveOptions,
+             p: &mut dyn FnMut(usize, usize, f64)| {
+                let mut c = medium.colours.to_vec();
+                c.dedup();
+                distinct_colours.push(c.len());
+                solve_lighting(grid, medium, b, o, p)
+            },
+            &mut |_, _| {},
+        )
+        .unwrap();
+        assert_eq!(out.len(), 1);
+        assert_eq!(out[0].0, *job);
+        assert_eq!(out[0].2.steps, STEPS);
+        assembly.insert(out[0].0, out[0].1.clone()).unwrap();
+    }
+    assert!(
+        distinct_colours.iter().all(|&n| n == 1),
+        "one colour per call"
+    );
+    assert!(assembly.missing().is_empty());
+    let (whole, _) = BasisSet::solve(&g, &m, &opts, &mut |_| {}).unwrap();
+    assert!(
+        assembly.finish().unwrap() == whole,
+        "bit-identical to one solve"
+    );
+
+    // A medium with two equal colours needs two jobs per basis; the third is copied.
+    let mut twin = m.clone();
+    twin.colours[2] = twin.colours[0];
+    let jobs = BasisJob::all(&twin, &opts);
+    assert_eq!(jobs.len(), 36);
+    assert!(jobs.iter().all(|j| j.colour < 2));
+    let (set, _) = BasisSet::solve(&g, &twin, &opts, &mut |_| {}).unwrap();
+    assert!(set.channel(7, 2) == set.channel(7, 0));
+    assert!(set.channel(7, 1) != set.channel(7, 0));
+
+    // Mistakes are named.
+    let run = |jobs: &[BasisJob]| {
+        solve_basis_jobs(&g, &m, &opts, jobs, solve_lighting, &mut |_, _| {}).unwrap_err()
+    };
+    let e = run(&[]);
+    assert!(e.to_string().contains("no basis jobs"), "{e}");
+    let e = run(&[
+        BasisJob {
+            basis: 1,
+            colour: 0,
+        },
+        BasisJob {
+            basis: 2,
+            colour: 0,
+        },
+    ]);
+    assert!(e.to_string().contains("B_1 and B_2"), "{e}");
+    let e = run(&[
+        BasisJob {
+            basis: 3,
+            colour: 1,
+        },
+        BasisJob {
+            basis: 3,
+            colour: 1,
+        },
+    ]);
+    assert!(e.to_string().contains("twice"), "{e}");
+    let e = run(&[BasisJob {
+        basis: 19,
+        colour: 0,
+    }]);
+    assert!(e.to_string().contains("out of range"), "{e}");
+    let mut a = BasisAssembly::new(g.dims, g.bounds, &m, &opts).unwrap();
+    let job = BasisJob {
+        basis: 4,
+        colour: 1,
+    };
+    let e = a.insert(job, vec![1.0; 5]).unwrap_err();
+    assert!(
+        matches!(e, RelightError::SolverResult { basis: 4, .. }),
+        "{e}"
+    );
+    let mut v = vec![0.5; g.dims.sites()];
+    v[17] = f32::NAN;
+    let e = a.insert(job, v).unwrap_err();
+    assert!(e.to_string().contains("NaN"), "{e}");
+    let e = a
+        .insert(
+            BasisJob {
+                basis: 0,
+                colour: 0,
+            },
+            vec![0.0; g.dims.sites()],
+        )
+        .unwrap_err();
+    assert!(e.to_string().contains("not a job"), "{e}");
+    a.insert(job, vec![0.5; g.dims.sites()]).unwrap();
+    assert_eq!(a.missing().len(), 53);
+    let e = a.finish().unwrap_err();
+    assert!(e.to_string().contains("53 basis jobs"), "{e}");
+}
+
+#[test]
+fn compressed_files_round_trip_and_bad_ones_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let set = solved();
+    let region = Region::near_medium(&grid(), 1).with_floor(2);
+    let extra = vec![("cache_key".to_string(), "00ff".to_string())];
+    for (codec, precision) in [
+        (Codec::Haar { threshold: 3e-3 }, Precision::F16),
+        (Codec::Haar { threshold: 3e-3 }, Precision::F32),
+        (Codec::Pca { rank: 5 }, Precision::F16),
+        (
+            Codec::PcaHaar {
+                rank: 7,
+                threshold: 2e-3,
+            },
+            Precision::Packed,
+        ),
+        (Codec::ColourHaar { threshold: 4e-3 }, Precision::Packed),
+    ] {
+        let target = CompressTarget {
+            precision,
+            ..CompressTarget::new(codec)
+        };
+        let c = compress(set, &region, &target).unwrap();
+        let p = dir.path().join(format!("crown.{COMPRESSED_EXTENSION}"));
+        c.write(&p, &extra).unwrap();
+        let (back, meta) = CompressedBasis::read(&p).unwrap();
+        assert!(back == c, "{codec:?} {precision:?} round trip");
+        assert!(meta.contains(&extra[0]));
+        let w = BasisWeights::three_basis([0.3, -0.8, 0.1])
+            .unwrap()
+            .with_ambient(0.3)
+            .unwrap();
+        let (pa, pb) = (c.project(&w), back.project(&w));
+        for g in points(&region, 50) {
+            assert_eq!(c.sample_grid(g, &pa), back.sample_grid(g, &pb));
+        }
+    }
+    let c = compress(set, &region, &CompressTarget::recommended()).unwrap();
+    let p = dir.path().join("good.scbasis");
+    c.write(&p, &[]).unwrap();
+    let bytes = std::fs::read(&p).unwrap();
+    let bad = dir.path().join("bad.scbasis");
+    let refused = |content: &[u8], want: &str| {
+        std::fs::write(&bad, content).unwrap();
+        let e = CompressedBasis::read(&bad).unwrap_err().to_string();
+        assert!(e.contains("bad.scbasis") && e.contains(want), "{e}");
+    };
+    refused(&bytes[..bytes.len() - 10], "truncated");
+    let mut flipped = bytes.clone();
+    let at = flipped.len() - 7;
+    flipped[at] ^= 2;
+    refused(&flipped, "checksum");
+    refused(b"", "truncated");
+    // A basis grid file is not a compressed set.
+    set.write(&bad, Element::F16).unwrap();
+    let e = CompressedBasis::read(&bad).unwrap_err().to_string();
+    assert!(e.contains("bad.scbasis") && e.contains("magic"), "{e}");
+    // A well-formed file whose codec does not match its fields.
+    let mut wrong = c.clone();
+    wrong.target.codec = Codec::Haar { threshold: 0.004 };
+    wrong.write(&bad, &[]).unwrap();
+    let e = CompressedBasis::read(&bad).unwrap_err().to_string();
+    assert!(e.contains("bad.scbasis") && e.contains("codec"), "{e}");
 }
 
 #[test]

@@ -2,8 +2,9 @@
 //! the physical light's scattered, sky and ground light in LB units, or the paper's light
 //! normalised so unobstructed sunlight is 1; see [`crate::lighting`]) and on the ground (how
 //! much of the sky's light gets through the trees, per colour). [`IndirectLight`] is the interface; [`ModelGridLight`], one
-//! LB grid per unique model placed by each instance's transform (000 §4.3), is today's
-//! implementation, and [`NoIndirectLight`] the absence of any.
+//! LB grid per unique model placed by each instance's transform (000 §4.3), is the static
+//! implementation, [`crate::relight::RelitLight`] (base solutions combined per instance and
+//! sun, 004; the paper light only) the relit one, and [`NoIndirectLight`] the absence of any.
 
 use glam::{Affine3A, Vec2, Vec3};
 use sylva_geom::{Aabb, Model};
@@ -104,38 +105,13 @@ impl IndirectLight for ModelGridLight {
     /// sky's light their grid lets through there ([`ModelLighting::ground_sky`]: 1 in free
     /// space, less in a crown's shade).
     fn ground_sky(&self, point: Vec3) -> Vec3 {
-        let mut f = Vec3::ONE;
-        for &i in self.ground_index.at(point) {
-            let (model, to_model) = &self.instances[i as usize];
-            let Some(l) = &self.lighting[*model as usize] else {
-                continue;
-            };
-            let b = &self.model_bounds[*model as usize];
-            let pm = to_model.transform_point3(point);
-            // Trees stand on the ground; a model floating above it has no LB light down here.
-            let margin = 0.05 * (b.max.y - b.min.y) + 1e-3;
-            if pm.x >= b.min.x
-                && pm.x <= b.max.x
-                && pm.z >= b.min.z
-                && pm.z <= b.max.z
-                && pm.y >= b.min.y - margin
-            {
-                // The grid ends at the model's box while its shade on the ground would go on:
-                // fade to open sky over the box's outer 20 % so no edge shows.
-                let edge = (pm.x - b.min.x)
-                    .min(b.max.x - pm.x)
-                    .min(pm.z - b.min.z)
-                    .min(b.max.z - pm.z);
-                let width = 0.2 * (b.max.x - b.min.x).min(b.max.z - b.min.z);
-                let w = if width > 0.0 {
-                    (edge / width).clamp(0.0, 1.0)
-                } else {
-                    1.0
-                };
-                f *= Vec3::ONE - w * (Vec3::ONE - l.ground_sky(pm));
-            }
-        }
-        f
+        ground_shade(
+            &self.ground_index,
+            &self.instances,
+            &self.model_bounds,
+            point,
+            |_, model, pm| Some(self.lighting[model as usize].as_ref()?.ground_sky(pm)),
+        )
     }
 
     fn memory_bytes(&self) -> u64 {
@@ -145,6 +121,51 @@ impl IndirectLight for ModelGridLight {
             .map(ModelLighting::memory_bytes)
             .sum()
     }
+}
+
+/// The fraction of the sky's light reaching ground point `point` under the trees, per
+/// colour: the product, over the instances whose box covers it (`index`; `instances` as
+/// `(model, world → model)`), of `light(instance, model, model-space point)` (the share their
+/// LB light lets through there, free space 1; `None`: no LB light), clamped to [0, 1]. Trees
+/// stand on the ground, so a model floating above it shades nothing here; a grid ends at its
+/// model's box while its shade on the ground would go on, so the shade fades to open sky
+/// over the box's outer 20 %.
+pub(crate) fn ground_shade(
+    index: &GroundIndex,
+    instances: &[(u32, Affine3A)],
+    model_bounds: &[Aabb],
+    point: Vec3,
+    light: impl Fn(usize, u32, Vec3) -> Option<Vec3>,
+) -> Vec3 {
+    let mut f = Vec3::ONE;
+    for &i in index.at(point) {
+        let (model, to_model) = &instances[i as usize];
+        let b = &model_bounds[*model as usize];
+        let pm = to_model.transform_point3(point);
+        let margin = 0.05 * (b.max.y - b.min.y) + 1e-3;
+        if pm.x >= b.min.x
+            && pm.x <= b.max.x
+            && pm.z >= b.min.z
+            && pm.z <= b.max.z
+            && pm.y >= b.min.y - margin
+        {
+            let Some(lb) = light(i as usize, *model, pm) else {
+                continue;
+            };
+            let edge = (pm.x - b.min.x)
+                .min(b.max.x - pm.x)
+                .min(pm.z - b.min.z)
+                .min(b.max.z - pm.z);
+            let width = 0.2 * (b.max.x - b.min.x).min(b.max.z - b.min.z);
+            let w = if width > 0.0 {
+                (edge / width).clamp(0.0, 1.0)
+            } else {
+                1.0
+            };
+            f *= Vec3::ONE - w * (Vec3::ONE - lb.clamp(Vec3::ZERO, Vec3::ONE));
+        }
+    }
+    f
 }
 
 /// A uniform grid over the ground (x, z) listing the instances whose world box covers each
@@ -164,7 +185,7 @@ impl GroundIndex {
     /// At most this many cells a side.
     const MAX_CELLS: usize = 256;
 
-    fn new(instances: &[TraceInstance]) -> GroundIndex {
+    pub(crate) fn new(instances: &[TraceInstance]) -> GroundIndex {
         let boxes: Vec<_> = instances.iter().map(|i| i.world_bounds).collect();
         if boxes.is_empty() {
             return GroundIndex::default();

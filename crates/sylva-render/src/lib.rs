@@ -11,6 +11,9 @@
 //!   paper 000's) and the plant medium from the materials' optics (docs/light.md).
 //! * [`media`]: participating media (clouds): the volume tracer, its shadow volume and the
 //!   LB light it samples ([`Media`]).
+//! * [`relight`]: paper 004 in the renderer: per model the 19 base solutions (jobs on any
+//!   solver, compressed, cached), the weights of an instance for the sun in its model space,
+//!   the coarse global grid, and [`RelitLight`], which moves the sun without an LB solve.
 //! * [`indirect`]: [`IndirectLight`], the light scattered in the canopy as shading needs it,
 //!   and [`ModelGridLight`], one LB grid per model.
 //! * [`shade`]: local sunlight (two-sided leaves reflecting and transmitting) and the
@@ -20,7 +23,7 @@
 //! * [`gpu_frame`]: the same frame on a GPU, one kernel per band (`shade.wgsl` mirrors the
 //!   CPU's shading function by function).
 //! * [`tonemap`]: Reinhard's global operator and sRGB encoding.
-//! * [`output`]: PNG (8-bit sRGB) and EXR (linear) files, written atomically.
+//! * [`output`]: PNG (8-bit sRGB), animated PNG and EXR (linear) files, written atomically.
 //! * [`stages`]: the stages as `tracing` spans and [`StageClock`], which times them.
 
 pub mod gpu_frame;
@@ -29,6 +32,7 @@ pub mod lighting;
 pub mod media;
 pub mod output;
 pub mod pipeline;
+pub mod relight;
 pub mod render;
 pub mod shade;
 pub mod stages;
@@ -38,10 +42,12 @@ pub use indirect::{IndirectLight, ModelGridLight, NoIndirectLight};
 pub use lighting::{Illumination, Light};
 pub use media::{Media, MediumVolume, Segment};
 pub use pipeline::{
-    illumination, image_paths, light_models, lighting_options, load_scene, mode_path, resolution,
-    scene_illumination, scene_to_sun, tone_map_modes, write_images, LbPlan, ModeImage,
-    PipelineError, PrepareOptions, PreparedScene, Progress, Silent, Tracer, WrittenImage,
+    global_key, illumination, image_paths, light_models, lighting_options, load_scene, mode_path,
+    precompute_relighting, resolution, scene_illumination, scene_to_sun, tone_map_modes,
+    write_images, BasisUse, LbPlan, ModeImage, PipelineError, PrepareOptions, PreparedScene,
+    Progress, RelightPlan, Relighting, ShadowMethod, Silent, Tracer, WrittenImage,
 };
+pub use relight::{RelitIllumination, RelitLight, SunWeights};
 pub use render::{
     mean_luminance, Frame, FrameTimings, Mode, Region, RenderError, RenderSettings, Renderer,
 };

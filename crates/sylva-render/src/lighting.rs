@@ -37,6 +37,7 @@ use sylva_core::colour::luminance;
 use sylva_core::Fnv64;
 use sylva_geom::{is_opaque, LbSettings, MaterialKind, Model, Wrap, OPAQUE_ALPHA};
 use sylva_lb::light::{self, Environment, PlantOptics};
+use sylva_lb::relight::{Footprint, Placement};
 use sylva_lb::solver::{memory_needed, Boundary, Floor, SolveOptions, VolumeSource};
 use sylva_lb::{
     Bounds, DensityGrid, Dims, Element, GridFile, GridFileError, GridKind, LightingGrid,
@@ -97,6 +98,10 @@ pub enum LightingError {
         path: PathBuf,
         source: std::io::Error,
     },
+    #[error(transparent)]
+    Relight(#[from] sylva_lb::relight::RelightError),
+    #[error("global grid: {0}")]
+    Global(String),
 }
 
 /// Which light model plants are lit with (docs/light.md).
@@ -212,16 +217,13 @@ struct OpenField {
 
 /// One model's LB light with its placement in model space: the physical light's scattered,
 /// sky and ground light in LB units (fluence / `E0`), or the paper's light normalised so that
-/// unobstructed sunlight (free space) is 1.0 per colour.
+/// unobstructed sunlight (free space) is 1.0 per colour. The placement is the relighting
+/// bases' [`Placement`] and [`Footprint`]: one definition of where a grid sits and which
+/// sites a lookup reads.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ModelLighting {
     dims: Dims,
-    /// Model-space centre of site (0, 0, 0).
-    origin: Vec3,
-    /// Sites per model-space unit along each axis (0 along a degenerate axis).
-    inv_cell: Vec3,
-    /// Largest site coordinate per axis, `dims - 1`.
-    last: Vec3,
+    placement: Placement,
     /// RGB per site, site order `(x * ny + y) * nz + z`.
     values: Vec<[f32; 3]>,
     /// The physical light's free field; `None` for the paper's.
@@ -239,19 +241,12 @@ impl ModelLighting {
         Self::scaled(grid, scale)
     }
 
+    /// A paper-light grid whose values are already normalised (a relit combination).
+    pub fn from_normalised(grid: &LightingGrid) -> ModelLighting {
+        Self::scaled(grid, 1.0)
+    }
+
     fn scaled(grid: &LightingGrid, scale: f64) -> ModelLighting {
-        let d = grid.dims;
-        let n = [d.nx, d.ny, d.nz];
-        let min = Vec3::from_array(grid.bounds.min);
-        let max = Vec3::from_array(grid.bounds.max);
-        let inv_cell = Vec3::from_array(std::array::from_fn(|a| {
-            let extent = max[a] - min[a];
-            if extent > 0.0 && extent.is_finite() {
-                (n[a] - 1) as f32 / extent
-            } else {
-                0.0
-            }
-        }));
         let [r, g, b] = &grid.colours;
         let values = r
             .iter()
@@ -260,10 +255,8 @@ impl ModelLighting {
             .map(|((&r, &g), &b)| [r, g, b].map(|v| (v as f64 * scale) as f32))
             .collect();
         ModelLighting {
-            dims: d,
-            origin: min,
-            inv_cell,
-            last: Vec3::new((d.nx - 1) as f32, (d.ny - 1) as f32, (d.nz - 1) as f32),
+            dims: grid.dims,
+            placement: Placement::new(grid.dims, grid.bounds),
             values,
             open: None,
         }
@@ -309,8 +302,9 @@ impl ModelLighting {
         match &self.open {
             None => Vec3::splat(luminance(self.sample(p).to_array()).clamp(0.0, 1.0)),
             Some(open) => {
-                let floor = self.sample(Vec3::new(p.x, self.origin.y, p.z));
-                let lowest = self.sample(Vec3::new(p.x, self.origin.y + self.cell().y, p.z));
+                let origin = Vec3::from_array(self.placement.origin());
+                let floor = self.sample(Vec3::new(p.x, origin.y, p.z));
+                let lowest = self.sample(Vec3::new(p.x, origin.y + self.cell().y, p.z));
                 let ground = (floor - open.bottom).max(Vec3::ZERO);
                 let sky = open.sky * 0.5;
                 Vec3::select(
@@ -325,35 +319,21 @@ impl ModelLighting {
 
     /// Cell edge per axis (0 along a degenerate axis).
     fn cell(&self) -> Vec3 {
-        Vec3::select(
-            self.inv_cell.cmpgt(Vec3::ZERO),
-            self.inv_cell.recip(),
-            Vec3::ZERO,
-        )
+        let inv_cell = Vec3::from_array(self.placement.inv_cell());
+        Vec3::select(inv_cell.cmpgt(Vec3::ZERO), inv_cell.recip(), Vec3::ZERO)
     }
 
     /// Trilinear interpolation of the RGB light at model-space point `p`; points
     /// outside the grid clamp to the nearest site.
     #[inline]
     pub fn sample(&self, p: Vec3) -> Vec3 {
-        // `max` before `min` turns NaN into 0.
-        let f = ((p - self.origin) * self.inv_cell)
-            .max(Vec3::ZERO)
-            .min(self.last);
-        // dims ≥ 3, so last - 1 ≥ 1: the upper corner always exists.
-        let i = f.floor().min(self.last - Vec3::ONE);
-        let t = f - i;
-        let (ix, iy, iz) = (i.x as usize, i.y as usize, i.z as usize);
-        let (sy, sx) = (self.dims.nz, self.dims.ny * self.dims.nz);
-        let base = ix * sx + iy * sy + iz;
-        let v = |o: usize| Vec3::from_array(self.values[base + o]);
-        let x00 = v(0).lerp(v(sx), t.x);
-        let x01 = v(1).lerp(v(sx + 1), t.x);
-        let x10 = v(sy).lerp(v(sx + sy), t.x);
-        let x11 = v(sy + 1).lerp(v(sx + sy + 1), t.x);
-        let y0 = x00.lerp(x10, t.y);
-        let y1 = x01.lerp(x11, t.y);
-        y0.lerp(y1, t.z)
+        let fp = Footprint::at(self.dims, self.placement.grid_coords(p.to_array()));
+        let (sites, w) = (fp.sites(self.dims), fp.weights());
+        let mut out = Vec3::ZERO;
+        for k in 0..8 {
+            out += Vec3::from_array(self.values[sites[k]]) * w[k];
+        }
+        out
     }
 
     pub fn dims(&self) -> Dims {
@@ -369,11 +349,12 @@ impl ModelLighting {
     /// What the GPU frame uploads: dims, origin, sites per unit, last site per axis, and the
     /// values (RGB per site, site order `(x * ny + y) * nz + z`).
     pub(crate) fn raw(&self) -> (Dims, Vec3, Vec3, Vec3, &[[f32; 3]]) {
+        let d = self.dims;
         (
-            self.dims,
-            self.origin,
-            self.inv_cell,
-            self.last,
+            d,
+            Vec3::from_array(self.placement.origin()),
+            Vec3::from_array(self.placement.inv_cell()),
+            Vec3::new((d.nx - 1) as f32, (d.ny - 1) as f32, (d.nz - 1) as f32),
             &self.values,
         )
     }
@@ -385,8 +366,7 @@ impl ModelLighting {
 
     /// Model-space centre of site `(x, y, z)`.
     pub fn site_position(&self, x: usize, y: usize, z: usize) -> Vec3 {
-        let c = Vec3::new(x as f32, y as f32, z as f32);
-        self.origin + c * self.cell()
+        Vec3::from_array(self.placement.model_point([x as f32, y as f32, z as f32]))
     }
 }
 
@@ -493,6 +473,9 @@ pub fn plant_medium(model: &Model) -> Result<MediumParams, LightingError> {
     })
 }
 
+/// How the paper light (and its relighting bases) voxelizes: sub-cell occupancy.
+pub(crate) const PAPER_OCCUPANCY: Occupancy = Occupancy::SubCells;
+
 /// The medium, occupancy and boundaries (per colour) of a solve, and (physical light) the
 /// environment whose sun enters as a first-collision source and whose ground is the floor.
 struct SolvePlan {
@@ -511,7 +494,7 @@ fn solve_plan(
     Ok(match opts.light {
         Light::Paper => SolvePlan {
             medium: preset_medium(&opts.preset)?,
-            occupancy: Occupancy::SubCells,
+            occupancy: PAPER_OCCUPANCY,
             boundaries: [Boundary::sun((-sun).to_array(), 1.0); 3],
             environment: None,
         },
@@ -580,10 +563,51 @@ fn key_of(
     h.u64(CACHE_VERSION as u64);
     h.str(opts.light.name());
     h.str(solver);
+    hash_model_medium(&mut h, model, grid, m, plan.occupancy);
+    // Sun and the boundaries (paper: the unit sun; physical: sun, sky and ground colours).
+    for c in sun {
+        h.u64(c as u64);
+    }
+    for b in &plan.boundaries {
+        for v in b.values {
+            h.u64(v.to_bits() as u64);
+        }
+    }
+    if let Some(env) = &plan.environment {
+        // The sun's first-collision source and the floor (the ground's light shadowed by
+        // the plant: the sun straight along its direction, the sky's uncollided light).
+        h.str("physical: first-collision sun source, floor");
+        for v in [env.sun_travel, env.sun_irradiance, env.sky_radiance] {
+            for c in v {
+                h.f64(c);
+            }
+        }
+        for c in env.ground_albedo.unwrap_or([-1.0; 3]) {
+            h.f64(c);
+        }
+        h.f64(light::step_optical_depth_factor());
+    }
+    // Solve schedule: the papers' 2 × longest edge, no tolerance.
+    h.str("papers:2N");
+    h.finish()
+}
+
+/// Hashes what an LB result of `model` depends on besides the boundary: the grid file
+/// version, the mesh's geometry, the voxelizer's occupancy rule, sub-cells and opacity rule,
+/// per material its kind and (for leaves) the texture's size, wrap and opaque texels, the
+/// grid size and the medium's parameters (bit patterns, brown sites' included). Shared by
+/// the per-sun lighting cache and the basis cache.
+pub(crate) fn hash_model_medium(
+    h: &mut Fnv64,
+    model: &Model,
+    grid: usize,
+    m: &MediumParams,
+    occupancy: Occupancy,
+) {
     h.u64(sylva_lb::grid_file::VERSION as u64);
     h.u64(model.mesh.geometry_hash());
     // Voxelization.
-    h.str(plan.occupancy.name());
+    h.str(occupancy.name());
     h.u64(SUB as u64);
     h.u64(OPAQUE_ALPHA as u64);
     h.u64(1); // alpha test on
@@ -631,32 +655,6 @@ fn key_of(
     h.u64(m.zero_f0_on_green as u64);
     h.u64(m.zero_f0_on_brown as u64);
     h.f64(m.brown_threshold);
-    // Sun and the boundaries (paper: the unit sun; physical: sun, sky and ground colours).
-    for c in sun {
-        h.u64(c as u64);
-    }
-    for b in &plan.boundaries {
-        for v in b.values {
-            h.u64(v.to_bits() as u64);
-        }
-    }
-    if let Some(env) = &plan.environment {
-        // The sun's first-collision source and the floor (the ground's light shadowed by
-        // the plant: the sun straight along its direction, the sky's uncollided light).
-        h.str("physical: first-collision sun source, floor");
-        for v in [env.sun_travel, env.sun_irradiance, env.sky_radiance] {
-            for c in v {
-                h.f64(c);
-            }
-        }
-        for c in env.ground_albedo.unwrap_or([-1.0; 3]) {
-            h.f64(c);
-        }
-        h.f64(light::step_optical_depth_factor());
-    }
-    // Solve schedule: the papers' 2 × longest edge, no tolerance.
-    h.str("papers:2N");
-    h.finish()
 }
 
 /// The cache entry of `model` under `key` in `dir`.

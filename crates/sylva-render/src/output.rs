@@ -8,6 +8,13 @@ use image::{ImageFormat, Rgb32FImage, RgbImage};
 
 #[derive(Debug, thiserror::Error)]
 pub enum OutputError {
+    #[error("{path}: cannot encode the animation: {source}")]
+    Animation {
+        path: PathBuf,
+        source: png::EncodingError,
+    },
+    #[error("{path}: an animation needs at least one frame and a delay of 1 to 65535 ms")]
+    Frames { path: PathBuf },
     #[error("{path}: {width}×{height} image needs {want} pixels, got {got}")]
     Size {
         path: PathBuf,
@@ -134,6 +141,52 @@ pub fn write_exr(
     write_encoded(path, bytes.get_ref())
 }
 
+/// Row-major 8-bit sRGB frames of one size → an animated PNG (APNG) at `path`, each frame
+/// shown `delay_ms`, looping forever. Viewers without APNG show the first frame.
+pub fn write_apng(
+    path: &Path,
+    width: u32,
+    height: u32,
+    frames: &[Vec<[u8; 3]>],
+    delay_ms: u32,
+) -> Result<(), OutputError> {
+    write_encoded(path, &encode_apng(path, width, height, frames, delay_ms)?)
+}
+
+/// The bytes of [`write_apng`]'s animated PNG (`path` names it in errors), for an output set.
+pub fn encode_apng(
+    path: &Path,
+    width: u32,
+    height: u32,
+    frames: &[Vec<[u8; 3]>],
+    delay_ms: u32,
+) -> Result<Vec<u8>, OutputError> {
+    if frames.is_empty() || !(1..=65535).contains(&delay_ms) {
+        return Err(OutputError::Frames { path: path.into() });
+    }
+    for f in frames {
+        check_size(path, width, height, f.len())?;
+    }
+    let enc = |source| OutputError::Animation {
+        path: path.into(),
+        source,
+    };
+    let mut bytes = Vec::new();
+    {
+        let mut e = png::Encoder::new(&mut bytes, width, height);
+        e.set_color(png::ColorType::Rgb);
+        e.set_depth(png::BitDepth::Eight);
+        e.set_animated(frames.len() as u32, 0).map_err(enc)?;
+        e.set_frame_delay(delay_ms as u16, 1000).map_err(enc)?;
+        let mut w = e.write_header().map_err(enc)?;
+        for f in frames {
+            w.write_image_data(f.as_flattened()).map_err(enc)?;
+        }
+        w.finish().map_err(enc)?;
+    }
+    Ok(bytes)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -152,6 +205,36 @@ mod tests {
             std::fs::read_dir(path.parent().unwrap()).unwrap().count(),
             1
         );
+    }
+
+    #[test]
+    fn apng_holds_every_frame() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("anim.png");
+        let frames: Vec<Vec<[u8; 3]>> = (0..5u8)
+            .map(|f| (0..6u8).map(|i| [f, 40 * i, 255 - f * i]).collect())
+            .collect();
+        write_apng(&path, 3, 2, &frames, 120).unwrap();
+        let decoder =
+            png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&path).unwrap()));
+        let mut reader = decoder.read_info().unwrap();
+        let actl = reader.info().animation_control.expect("an animated PNG");
+        assert_eq!((actl.num_frames, actl.num_plays), (5, 0));
+        let mut buf = vec![0u8; reader.output_buffer_size().unwrap()];
+        for f in &frames {
+            let info = reader.next_frame(&mut buf).unwrap();
+            assert_eq!((info.width, info.height), (3, 2));
+            assert_eq!(&buf[..18], f.as_flattened());
+        }
+        // The first frame is also the still image other viewers show.
+        let still = image::open(&path).unwrap().to_rgb8();
+        assert_eq!(still.as_raw(), frames[0].as_flattened());
+        let e = write_apng(&path, 3, 2, &[], 100).unwrap_err();
+        assert!(e.to_string().contains("anim.png"), "{e}");
+        let e = write_apng(&path, 3, 2, &frames[..1], 0).unwrap_err();
+        assert!(e.to_string().contains("delay"), "{e}");
+        let e = write_apng(&path, 4, 2, &frames, 100).unwrap_err();
+        assert!(e.to_string().contains("8 pixels"), "{e}");
     }
 
     #[test]

@@ -3,6 +3,12 @@
 //! ([`PreparedScene::new`]), then render frames of any camera and image region
 //! ([`PreparedScene::render`]). Stages are `tracing` spans ([`crate::stages`]); progress goes
 //! to a [`Progress`] the caller implements (the CLI draws bars); nothing here prints.
+//!
+//! LB light comes one of two ways: solved per model for the scene's sun ([`ModelGridLight`],
+//! cached per sun), or, with a [`RelightPlan`], combined per instance from each model's 19
+//! base solutions and scaled by the coarse global grid ([`RelitLight`], paper 004); then
+//! [`PreparedScene::set_sun`] moves the sun with no LB solve. Shadow rays go through the
+//! top-level kd-tree or the sun-aligned grid ([`ShadowMethod`]).
 
 use std::path::{Path, PathBuf};
 
@@ -18,11 +24,16 @@ use sylva_wgpu::GpuContext;
 use crate::gpu_frame::{FrameError, GpuFrame};
 use crate::indirect::{IndirectLight, ModelGridLight};
 use crate::lighting::{
-    model_lighting, Illumination, Light, LightingError, LightingOptions, LightingReport,
-    LightingSource, ModelLighting,
+    hash_model_medium, model_lighting, preset_medium, Illumination, Light, LightingError,
+    LightingOptions, LightingReport, LightingSource, ModelLighting, CACHE_VERSION, PAPER_OCCUPANCY,
 };
 use crate::media::{prepare_medium, Media, MediumSolve};
 use crate::output::{encode_exr, encode_png, OutputError};
+use crate::relight::{
+    model_basis, BasisCacheOptions, BasisPlan, BasisReport, GlobalGridOptions, GlobalInstance,
+    GlobalLight, GlobalReport, ModelBasis, RelitIllumination, RelitLight, StoredBasis, SunWeights,
+    GLOBAL_EXTENSION,
+};
 use crate::render::{
     memory_needed, output_memory_needed, tile_count, Frame, Mode, RenderError, RenderSettings,
     Renderer,
@@ -30,6 +41,8 @@ use crate::render::{
 use crate::shade::{shade_materials, transmission_from_g, ShadeMaterial, ShadingParams};
 use crate::stages::stage;
 use crate::tonemap::{srgb8, ToneMap};
+use sylva_lb::relight::{CompressTarget, RelightError};
+use sylva_trace::{SunGrid, SunGridQuery};
 
 /// Largest image edge in pixels ([`sylva_core::limits::IMAGE_EDGE`], as in scene files).
 pub const MAX_EDGE: u32 = *sylva_core::limits::IMAGE_EDGE.end();
@@ -50,6 +63,10 @@ pub trait Progress: Sync {
     fn model_lit(&self, _model: &Model, _report: &LightingReport) {}
     /// Medium `medium`'s LB lighting is ready: the reports of its sun and sky solves.
     fn medium_lit(&self, _medium: &Medium, _reports: &[LightingReport]) {}
+    /// Model `model`'s base solutions are ready ([`BasisReport::source`] says from where).
+    fn model_basis(&self, _model: &Model, _report: &BasisReport) {}
+    /// The coarse global grid is ready.
+    fn global_grid(&self, _report: &GlobalReport) {}
 }
 
 /// Reports nothing.
@@ -90,6 +107,25 @@ pub enum PipelineError {
         #[source]
         source: LightingError,
     },
+    #[error("the global grid of scene {scene}")]
+    Global {
+        scene: String,
+        #[source]
+        source: LightingError,
+    },
+    #[error(
+        "the scene's LB light was solved for one sun; moving the sun needs base solutions \
+         (prepare with a relight plan, or run `sylva basis` first)"
+    )]
+    NeedsBasis,
+    #[error(
+        "relighting from base solutions is the paper light's (their boundary solves are 004's, \
+         sun only); --light {0} has no base solutions yet (docs/relight.md): use --light paper, \
+         or solve for the sun without bases"
+    )]
+    BasisLight(&'static str),
+    #[error(transparent)]
+    Relight(#[from] RelightError),
     #[error(transparent)]
     Trace(#[from] TraceError),
     #[error(transparent)]
@@ -155,6 +191,76 @@ pub struct LbPlan<'a> {
     pub light: Light,
 }
 
+/// When to use base solutions.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BasisUse {
+    /// When every model's compressed basis is in the cache (and then no LB solve at all);
+    /// otherwise the LB light is solved for the scene's sun as without a plan.
+    IfCached,
+    /// Always: missing bases are solved (and cached).
+    Always,
+}
+
+/// Relighting from base solutions (paper 004).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RelightPlan {
+    pub basis: BasisUse,
+    /// How the sun's direction becomes weights.
+    pub sun: SunWeights,
+    /// Ambient `B_0` scale (free-space value added to the sun's 1).
+    pub ambient: f64,
+    /// The coarse global grid; `None`: instances keep their fine light unscaled.
+    pub global: Option<GlobalGridOptions>,
+    /// What the cached bases are compressed to.
+    pub target: CompressTarget,
+    /// Also keep the uncompressed bases (for [`PreparedScene::use_uncompressed`]).
+    pub keep_raw: bool,
+}
+
+impl Default for RelightPlan {
+    /// Bases when cached, three-basis weights, no ambient, the global grid, the recommended
+    /// compression.
+    fn default() -> Self {
+        RelightPlan {
+            basis: BasisUse::IfCached,
+            sun: SunWeights::ThreeBasis,
+            ambient: 0.0,
+            global: Some(GlobalGridOptions::default()),
+            target: CompressTarget::recommended(),
+            keep_raw: false,
+        }
+    }
+}
+
+/// What finds the occluders of shadow rays.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ShadowMethod {
+    /// The top-level kd-tree over the instances' boxes, as closest hits use.
+    KdTree,
+    /// The sun-aligned tile grid of 004 §4.1, rebuilt when the sun moves: the default, a few
+    /// per cent faster on the canopy and equal on one tree (docs/PERFORMANCE.md). On a GPU
+    /// tracer the GPU's kd-trees answer shadow rays whatever this says.
+    #[default]
+    SunGrid,
+}
+
+impl ShadowMethod {
+    pub fn parse(s: &str) -> Option<ShadowMethod> {
+        Some(match s {
+            "kd" | "kdtree" | "kd-tree" => ShadowMethod::KdTree,
+            "grid" | "sun-grid" => ShadowMethod::SunGrid,
+            _ => return None,
+        })
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            ShadowMethod::KdTree => "kd-tree",
+            ShadowMethod::SunGrid => "sun-grid",
+        }
+    }
+}
+
 /// How [`PreparedScene::new`] prepares a scene.
 #[derive(Clone, Copy)]
 pub struct PrepareOptions<'a> {
@@ -179,6 +285,9 @@ pub struct PrepareOptions<'a> {
     /// Images made from that frame (one per mode; `--mode all` makes four): their memory
     /// is checked with the frame's.
     pub output_images: usize,
+    /// Relighting from base solutions (with `lb`); `None`: LB solved for the scene's sun.
+    pub relight: Option<RelightPlan>,
+    pub shadows: ShadowMethod,
 }
 
 impl Default for PrepareOptions<'_> {
@@ -194,6 +303,8 @@ impl Default for PrepareOptions<'_> {
             sky_ambient: s.sky_ambient,
             largest_frame: None,
             output_images: 1,
+            relight: None,
+            shadows: ShadowMethod::default(),
         }
     }
 }
@@ -283,17 +394,40 @@ pub fn illumination(scene: &Scene, to_sun: Vec3, sun_irradiance: f32) -> Illumin
     }
 }
 
+/// Every model's base solutions (compressed, and uncompressed when kept) and the global
+/// grid: what [`precompute_relighting`] makes and [`PreparedScene::new`] relights with.
+pub struct Relighting {
+    pub compressed: Vec<Option<StoredBasis>>,
+    pub raw: Vec<Option<StoredBasis>>,
+    pub global: Option<GlobalLight>,
+    /// Models whose basis came from the cache.
+    pub cached: usize,
+}
+
 /// A scene ready to render: its LB lighting and acceleration structure built.
 pub struct PreparedScene {
     pub scene: Scene,
     /// What traces the rays (the kd-trees, on the CPU or also on a GPU).
     pub tracer: Tracer,
-    /// Per-model LB grids (none without LB).
+    /// Per-model LB grids solved for the sun (none without LB, or when relit).
     pub light: ModelGridLight,
-    /// The frame kernel when frames are shaded on the GPU.
+    /// The frame kernel when frames are shaded on the GPU (never with relit light: the
+    /// kernel samples per-sun grids; [`PreparedScene::gpu_shading_note`] says why not).
     pub gpu_frame: Option<GpuFrame>,
     /// The scene's media, ready to draw (LB-lit with an LB plan, else sun only).
     pub media: Media,
+    /// Why frames traced on a GPU are shaded on the CPU, when they are.
+    gpu_shading_note: Option<&'static str>,
+    /// Per-instance light from base solutions, when the scene was prepared with them.
+    pub relit: Option<RelitLight>,
+    /// The stored fields not in use: the uncompressed bases while the compressed ones are,
+    /// and the other way round ([`PreparedScene::use_uncompressed`]).
+    spare_bases: Vec<Option<StoredBasis>>,
+    uncompressed: bool,
+    shadows: ShadowMethod,
+    /// The sun-aligned shadow grid (CPU tracer only: a GPU tracer answers shadow rays with
+    /// its kd-trees).
+    sun_grid: Option<SunGrid>,
     /// Unit vector towards the sun.
     pub to_sun: Vec3,
     pub shading: ShadingParams,
@@ -414,18 +548,32 @@ impl PreparedScene {
         progress: &dyn Progress,
     ) -> Result<PreparedScene, PipelineError> {
         let shading = Self::check(&scene, opts)?;
-        let (lighting, cached) = match &opts.lb {
-            Some(lb) => {
-                let lb = LbPlan {
-                    light: opts.light,
-                    ..*lb
-                };
-                let (lit, cached) = light_models(&scene, &lb, progress)?;
+        let none = || (0..scene.models.len()).map(|_| None).collect();
+        let lb = opts.lb.as_ref().map(|lb| LbPlan {
+            light: opts.light,
+            ..*lb
+        });
+        let mut relit_parts = None;
+        if let (Some(lb), Some(plan)) = (&lb, &opts.relight) {
+            relit_parts = precompute_relighting(&scene, lb, plan, progress)?;
+        }
+        let (lighting, cached) = match (&lb, &relit_parts) {
+            (_, Some(parts)) => (none(), parts.cached),
+            (Some(lb), None) => {
+                let (lit, cached) = light_models(&scene, lb, progress)?;
                 (lit.into_iter().map(Some).collect(), cached)
             }
-            None => ((0..scene.models.len()).map(|_| None).collect(), 0),
+            (None, None) => (none(), 0),
         };
-        Self::build(scene, opts, shading, lighting, cached, progress)
+        Self::build(
+            scene,
+            opts,
+            shading,
+            lighting,
+            cached,
+            relit_parts,
+            progress,
+        )
     }
 
     /// A scene whose models were lit elsewhere (`lighting` in scene order; `cached` of them
@@ -446,6 +594,28 @@ impl PreparedScene {
             shading,
             lighting.into_iter().map(Some).collect(),
             cached,
+            None,
+            &Silent,
+        )
+    }
+
+    /// A scene relit from base solutions made elsewhere ([`precompute_relighting`] with
+    /// `opts.relight`'s plan): [`PreparedScene::new`] without the LB work.
+    pub fn with_relighting(
+        scene: Scene,
+        opts: &PrepareOptions,
+        relighting: Relighting,
+    ) -> Result<PreparedScene, PipelineError> {
+        let shading = Self::check(&scene, opts)?;
+        let none = (0..scene.models.len()).map(|_| None).collect();
+        let cached = relighting.cached;
+        Self::build(
+            scene,
+            opts,
+            shading,
+            none,
+            cached,
+            Some(relighting),
             &Silent,
         )
     }
@@ -494,6 +664,7 @@ impl PreparedScene {
         shading: ShadingParams,
         lighting: Vec<Option<ModelLighting>>,
         lb_models_cached: usize,
+        relit_parts: Option<Relighting>,
         progress: &dyn Progress,
     ) -> Result<PreparedScene, PipelineError> {
         let to_sun = scene_to_sun(&scene);
@@ -508,28 +679,156 @@ impl PreparedScene {
         };
         let light = ModelGridLight::new(lighting, &scene.models, tracer.cpu().accel.instances());
         let materials = shade_materials(&scene.models);
-        // shade.wgsl mirrors the paper light's shading; the physical light's frames are traced
-        // on the GPU and shaded on the CPU (docs/light.md). The frame kernel has no volume
-        // tracer either: scenes with media shade on the CPU (the GPU still answers their ray
-        // queries).
+        // The frame kernel samples per-sun grids; relit light (per-instance weights of
+        // stored bases, the global scales) is combined on the CPU, so a relit scene traced
+        // on a GPU is shaded on the CPU.
+        let relit_on_gpu = tracer.gpu().is_some() && opts.shade_on_gpu && relit_parts.is_some();
+        let gpu_shading_note = relit_on_gpu.then_some(
+            "relit light is combined on the CPU (the GPU frame kernel samples per-sun LB grids \
+             only); the GPU traces the rays",
+        );
+        // shade.wgsl mirrors the paper light's shading with per-sun grids; the physical
+        // light's frames and relit frames are traced on the GPU and shaded on the CPU
+        // (docs/light.md). The frame kernel has no volume tracer either: scenes with media
+        // shade on the CPU (the GPU still answers their ray queries).
         let gpu_frame = match tracer.gpu() {
-            Some(t) if opts.shade_on_gpu && shading.light == Light::Paper && media.is_empty() => {
+            Some(t)
+                if opts.shade_on_gpu
+                    && shading.light == Light::Paper
+                    && media.is_empty()
+                    && relit_parts.is_none() =>
+            {
                 let _span = tracing::info_span!(stage::ACCEL_BUILD).entered();
                 Some(GpuFrame::new(t, &scene, &materials, &light)?)
             }
             _ => None,
         };
+        let (relit, spare_bases) = match relit_parts {
+            Some(parts) => {
+                let plan = opts.relight.expect("relit parts come from a plan");
+                let illumination = RelitIllumination::new(to_sun, plan.sun, plan.ambient);
+                let relit = RelitLight::new(
+                    parts.compressed,
+                    &scene.models,
+                    tracer.cpu().accel.instances(),
+                    parts.global,
+                    illumination,
+                )?;
+                (Some(relit), parts.raw)
+            }
+            None => (None, Vec::new()),
+        };
+        let sun_grid = match (&tracer, opts.shadows) {
+            (Tracer::Cpu(t), ShadowMethod::SunGrid) => Some(SunGrid::build(&t.accel, to_sun)),
+            _ => None,
+        };
         Ok(PreparedScene {
             materials,
             gpu_frame,
+            gpu_shading_note,
             tracer,
             light,
             media,
+            relit,
+            spare_bases,
+            uncompressed: false,
+            shadows: opts.shadows,
+            sun_grid,
             to_sun,
             shading,
             lb_models_cached,
             scene,
         })
+    }
+
+    /// The indirect light frames use: the relit light when there is one, else the per-sun
+    /// grids.
+    pub fn indirect(&self) -> &dyn IndirectLight {
+        match &self.relit {
+            Some(r) => r,
+            None => &self.light,
+        }
+    }
+
+    /// Moves the sun (`to_sun`, towards it, any length): the relit light's weights are made
+    /// again and the sun grid rebuilt. No LB solve; without base solutions an error (the
+    /// per-sun LB light would need one), unless the scene has no LB light at all.
+    pub fn set_sun(&mut self, to_sun: Vec3) -> Result<(), PipelineError> {
+        let to_sun = to_sun.normalize_or_zero();
+        if !(to_sun.is_finite() && to_sun != Vec3::ZERO) {
+            return Err(PipelineError::Shading(format!(
+                "sun direction {to_sun} must be a finite, non-zero vector"
+            )));
+        }
+        match &mut self.relit {
+            Some(r) => {
+                let ill = RelitIllumination {
+                    to_sun,
+                    ..r.illumination()
+                };
+                r.relight(ill)?;
+            }
+            None if (0..self.scene.models.len()).any(|m| self.light.model(m).is_some()) => {
+                return Err(PipelineError::NeedsBasis);
+            }
+            None => {}
+        }
+        self.to_sun = to_sun;
+        self.sun_grid = self.build_sun_grid();
+        Ok(())
+    }
+
+    /// How the relit light forms its weights: the sun rule and the ambient scale.
+    pub fn set_illumination(&mut self, sun: SunWeights, ambient: f64) -> Result<(), PipelineError> {
+        let r = self.relit.as_mut().ok_or(PipelineError::NeedsBasis)?;
+        r.relight(RelitIllumination::new(self.to_sun, sun, ambient))?;
+        Ok(())
+    }
+
+    /// Shadow rays through the kd-tree or the sun grid (built now for the current sun).
+    pub fn set_shadows(&mut self, method: ShadowMethod) {
+        self.shadows = method;
+        self.sun_grid = self.build_sun_grid();
+    }
+
+    /// The sun grid for the current sun when shadow rays use it (CPU tracer only).
+    fn build_sun_grid(&self) -> Option<SunGrid> {
+        match (&self.tracer, self.shadows) {
+            (Tracer::Cpu(t), ShadowMethod::SunGrid) => Some(SunGrid::build(&t.accel, self.to_sun)),
+            _ => None,
+        }
+    }
+
+    /// Why frames traced on a GPU are shaded on the CPU, when they are (relit light).
+    pub fn gpu_shading_note(&self) -> Option<&'static str> {
+        self.gpu_shading_note
+    }
+
+    pub fn shadows(&self) -> ShadowMethod {
+        self.shadows
+    }
+
+    /// Whether uncompressed bases were kept ([`RelightPlan::keep_raw`]).
+    pub fn has_uncompressed(&self) -> bool {
+        self.relit.is_some() && self.spare_bases.iter().any(Option::is_some)
+    }
+
+    /// Relights from the uncompressed bases (`true`) or the compressed ones (`false`), for
+    /// measuring what compression costs in the image. The fields are swapped, not copied.
+    pub fn use_uncompressed(&mut self, yes: bool) -> Result<(), PipelineError> {
+        if yes == self.uncompressed {
+            return Ok(());
+        }
+        if !self.has_uncompressed() {
+            return Err(PipelineError::Shading(
+                "the scene was prepared without its uncompressed bases (keep_raw)".into(),
+            ));
+        }
+        let r = self.relit.as_mut().expect("checked above");
+        let spare = std::mem::take(&mut self.spare_bases);
+        self.spare_bases = r.swap_bases(spare)?;
+        self.uncompressed = yes;
+        Ok(())
     }
 
     /// The scene's camera at `width × height`.
@@ -546,13 +845,15 @@ impl PreparedScene {
         RenderSettings::full(camera, rays_per_pixel, seed, self.shading)
     }
 
-    /// The renderer over this scene's tracer, LB light and media, lit by the 6500 K sun.
+    /// The renderer over this scene's tracer, its indirect light (relit or per-sun grids) and
+    /// media, lit by the 6500 K sun.
     pub fn renderer(&self) -> Renderer<'_> {
-        self.renderer_over(self.tracer.query(), &self.light)
+        self.renderer_over(self.tracer.query(), self.indirect())
     }
 
     /// The renderer over this scene's tracer with another indirect light (the plane-parallel
-    /// light of `sylva-spp`, say), lit by the 6500 K sun.
+    /// light of `sylva-spp`, or paper 000's per-sun grids beside the relit light), lit by the
+    /// 6500 K sun.
     pub fn renderer_with<'a>(&'a self, light: &'a dyn IndirectLight) -> Renderer<'a> {
         self.renderer_over(self.tracer.query(), light)
     }
@@ -577,7 +878,7 @@ impl PreparedScene {
     }
 
     /// Renders one frame (any camera, any region of its image), reporting tiles as they
-    /// finish each pass (3 × [`tile_count`] units).
+    /// finish each pass (3 × [`tile_count`] units). Shadow rays go as [`ShadowMethod`] says.
     pub fn render(
         &self,
         settings: &RenderSettings,
@@ -617,9 +918,18 @@ impl PreparedScene {
                     Err(FrameError::Gpu(e)) => return Err(e.into()),
                 }
             }
-            (light, _, _) => self
-                .renderer_with(light.unwrap_or(&self.light))
-                .render(settings, &advance),
+            (light, _, _) => {
+                let light = light.unwrap_or(self.indirect());
+                match (&self.tracer, &self.sun_grid) {
+                    (Tracer::Cpu(cpu), Some(grid)) => {
+                        let query = SunGridQuery::new(cpu, grid);
+                        self.renderer_over(&query, light).render(settings, &advance)
+                    }
+                    _ => self
+                        .renderer_over(self.tracer.query(), light)
+                        .render(settings, &advance),
+                }
+            }
         };
         progress.finish();
         if let Some(e) = self.tracer.gpu().and_then(GpuTracer::take_error) {
@@ -628,10 +938,197 @@ impl PreparedScene {
         Ok(frame?)
     }
 
-    /// Bytes of the LB grids and the media's volumes.
+    /// Bytes of the LB light (per-sun grids or stored bases in use) and the media's volumes.
     pub fn lighting_bytes(&self) -> u64 {
-        self.light.memory_bytes() + self.media.memory_bytes()
+        self.indirect().memory_bytes() + self.media.memory_bytes()
     }
+}
+
+/// Every model's base solutions and the scene's global grid as `plan` asks (from the cache,
+/// or solved on `lb.solver` and cached), without building anything else: what `sylva basis`
+/// runs. `None` when the plan takes cached bases only and one is missing.
+pub fn precompute_relighting(
+    scene: &Scene,
+    lb: &LbPlan,
+    plan: &RelightPlan,
+    progress: &dyn Progress,
+) -> Result<Option<Relighting>, PipelineError> {
+    if lb.light != Light::Paper {
+        return Err(PipelineError::BasisLight(lb.light.name()));
+    }
+    let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
+    prepare_bases(scene, &lighting_options(scene, lb), lb, plan, progress)
+}
+
+/// [`precompute_relighting`] with the lighting options made.
+fn prepare_bases(
+    scene: &Scene,
+    lopts: &LightingOptions,
+    lb: &LbPlan,
+    plan: &RelightPlan,
+    progress: &dyn Progress,
+) -> Result<Option<Relighting>, PipelineError> {
+    let solver = match plan.basis {
+        BasisUse::IfCached => None,
+        BasisUse::Always => Some(lb.solver),
+    };
+    let mut bases: Vec<ModelBasis> = Vec::with_capacity(scene.models.len());
+    let mut reports = Vec::with_capacity(scene.models.len());
+    let mut cached = 0;
+    for (k, model) in scene.models.iter().enumerate() {
+        // Each model's medium is its own preset's ([`Scene::model_preset`]).
+        let bopts = BasisCacheOptions {
+            target: plan.target,
+            keep_raw: plan.keep_raw,
+            ..BasisCacheOptions::new(&LightingOptions {
+                preset: scene.model_preset(k).to_string(),
+                ..lopts.clone()
+            })
+        };
+        let _m = tracing::info_span!(stage::LB_MODEL, model = %model.name).entered();
+        progress.start(&format!("basis {}", model.name), 1);
+        let got = model_basis(model, &bopts, solver, &mut |p| {
+            progress.set(
+                (p.done * p.max_steps + p.step) as u64,
+                (p.solves * p.max_steps) as u64,
+            )
+        });
+        progress.finish();
+        let got = got.map_err(|source| PipelineError::Lighting {
+            model: model.name.clone(),
+            source,
+        })?;
+        let Some((basis, report)) = got else {
+            return Ok(None);
+        };
+        cached += (report.source == LightingSource::Cached) as usize;
+        if solver.is_some() {
+            progress.model_basis(model, &report);
+        } else {
+            reports.push(report);
+        }
+        bases.push(basis);
+    }
+    // Reported once every model's basis was found, so a fall-back reports nothing.
+    for (model, report) in scene.models.iter().zip(&reports) {
+        progress.model_basis(model, report);
+    }
+    let global = match plan.global {
+        Some(gopts) => Some(global_grid(scene, lopts, &gopts, &mut bases, progress)?),
+        None => None,
+    };
+    let mut compressed = Vec::with_capacity(bases.len());
+    let mut raw = Vec::with_capacity(bases.len());
+    for b in bases {
+        compressed.push(Some(StoredBasis::Compressed(b.compressed)));
+        raw.push(b.raw.map(StoredBasis::Full));
+    }
+    Ok(Some(Relighting {
+        compressed,
+        raw,
+        global,
+        cached,
+    }))
+}
+
+/// The cache key of a scene's global grid: its models (as their fine grids depend on them),
+/// grid size and medium, every instance's model and transform, and the coarse layout.
+pub fn global_key(scene: &Scene, lopts: &LightingOptions, gopts: &GlobalGridOptions) -> u64 {
+    let mut h = sylva_core::Fnv64::new();
+    h.str("sylva-render global grid");
+    h.u64(CACHE_VERSION as u64);
+    for (k, model) in scene.models.iter().enumerate() {
+        let preset = scene.model_preset(k);
+        match Preset::parse(preset).map(|p| p.params()) {
+            Ok(m) => hash_model_medium(&mut h, model, lopts.grid, &m, PAPER_OCCUPANCY),
+            Err(_) => h.str(preset),
+        }
+    }
+    // The coarse grid's own medium.
+    h.str(&lopts.preset);
+    h.u64(gopts.sites as u64);
+    h.u64(scene.instances.len() as u64);
+    for i in &scene.instances {
+        h.u64(i.model as u64);
+        for v in i.position.to_array() {
+            h.u64(v.to_bits() as u64);
+        }
+        h.u64(i.rotation_deg.to_bits() as u64);
+        h.u64(i.scale.to_bits() as u64);
+    }
+    h.finish()
+}
+
+/// The global grid from the cache, or solved (voxelizing the models whose density grids this
+/// run did not make) and cached.
+fn global_grid(
+    scene: &Scene,
+    lopts: &LightingOptions,
+    gopts: &GlobalGridOptions,
+    bases: &mut [ModelBasis],
+    progress: &dyn Progress,
+) -> Result<GlobalLight, PipelineError> {
+    let err = |source| PipelineError::Global {
+        scene: scene.name.clone(),
+        source,
+    };
+    let t0 = std::time::Instant::now();
+    let key = global_key(scene, lopts, gopts);
+    let path = lopts.cache_dir.as_ref().map(|d| {
+        d.join(format!(
+            "{}-global-{key:016x}.{GLOBAL_EXTENSION}",
+            sylva_core::file_stem(&scene.name, "scene")
+        ))
+    });
+    let mut source = LightingSource::Computed;
+    if let Some(p) = path.as_deref().filter(|p| p.exists()) {
+        match GlobalLight::read(p, key, scene.instances.len()) {
+            Ok(g) => {
+                progress.global_grid(&GlobalReport {
+                    source: LightingSource::Cached,
+                    seconds: t0.elapsed().as_secs_f64(),
+                    dims: g.dims,
+                    path: path.clone(),
+                });
+                return Ok(g);
+            }
+            Err(reason) => source = LightingSource::Recomputed { reason },
+        }
+    }
+    for (k, (b, model)) in bases.iter_mut().zip(&scene.models).enumerate() {
+        if b.density.is_none() {
+            b.density = Some(
+                BasisPlan::new(model, lopts.grid, scene.model_preset(k))
+                    .map_err(err)?
+                    .density,
+            );
+        }
+    }
+    let medium = preset_medium(&lopts.preset).map_err(err)?;
+    let instances: Vec<GlobalInstance> = scene
+        .instances
+        .iter()
+        .map(|i| GlobalInstance {
+            density: bases[i.model as usize].density.as_ref(),
+            to_world: i.transform(),
+        })
+        .collect();
+    progress.start("global grid", 18);
+    let g = GlobalLight::solve(&instances, &medium, gopts, &mut |done, total| {
+        progress.set(done as u64, total as u64)
+    });
+    progress.finish();
+    let g = g.map_err(err)?;
+    if let Some(p) = &path {
+        g.write(p, key).map_err(err)?;
+    }
+    progress.global_grid(&GlobalReport {
+        source,
+        seconds: t0.elapsed().as_secs_f64(),
+        dims: g.dims,
+        path,
+    });
+    Ok(g)
 }
 
 /// One mode's image: linear HDR and tone-mapped 8-bit sRGB, pixel for pixel.

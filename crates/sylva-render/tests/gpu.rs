@@ -7,10 +7,11 @@
 
 use std::path::Path;
 
+use sylva_lb::relight::CompressTarget;
 use sylva_lb::CpuSolver;
 use sylva_render::{
-    load_scene, tone_map_modes, Frame, LbPlan, Mode, PrepareOptions, PreparedScene, Radiance,
-    Region, Silent, ToneMap,
+    load_scene, tone_map_modes, BasisUse, Frame, LbPlan, Mode, PrepareOptions, PreparedScene,
+    Radiance, Region, RelightPlan, Silent, SunWeights, ToneMap,
 };
 use sylva_wgpu::{AdapterChoice, ContextOptions, GpuContext, GpuError};
 
@@ -67,6 +68,16 @@ fn context() -> Option<GpuContext> {
 /// The scene prepared with the CPU's LB lighting, rays on `gpu` (or the CPU), shaded on the
 /// GPU when `shade_on_gpu`.
 fn prepare(dir: &Path, gpu: Option<&GpuContext>, shade_on_gpu: bool) -> PreparedScene {
+    prepare_lit(dir, gpu, shade_on_gpu, None)
+}
+
+/// [`prepare`], relit from base solutions when `relight` says so.
+fn prepare_lit(
+    dir: &Path,
+    gpu: Option<&GpuContext>,
+    shade_on_gpu: bool,
+    relight: Option<RelightPlan>,
+) -> PreparedScene {
     let path = dir.join("roses.toml");
     std::fs::write(&path, SCENE).unwrap();
     let scene = load_scene(path.to_str().unwrap(), None).unwrap();
@@ -81,6 +92,7 @@ fn prepare(dir: &Path, gpu: Option<&GpuContext>, shade_on_gpu: bool) -> Prepared
         shade_on_gpu,
         // shade.wgsl implements the paper light; the physical light shades on the CPU.
         light: sylva_render::Light::Paper,
+        relight,
         ..PrepareOptions::default()
     };
     PreparedScene::new(scene, &opts, &Silent).unwrap()
@@ -229,5 +241,42 @@ fn gpu_shading_matches_the_cpu_per_pixel() {
         for x in 0..50 {
             assert_eq!(part.pixels[y * 50 + x], full.pixels[(y + 9) * 64 + x + 5]);
         }
+    }
+}
+
+#[test]
+fn relit_light_on_a_gpu_traces_there_and_shades_on_the_cpu() {
+    let Some(ctx) = context() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let plan = RelightPlan {
+        basis: BasisUse::Always,
+        sun: SunWeights::ThreeBasis,
+        ambient: 0.1,
+        global: None,
+        target: CompressTarget::recommended(),
+        keep_raw: false,
+    };
+    let mut cpu = prepare_lit(dir.path(), None, false, Some(plan));
+    // GPU shading asked for: the frame kernel cannot combine base solutions, so the GPU
+    // traces the rays, the CPU shades, and the scene says so.
+    let mut gpu = prepare_lit(dir.path(), Some(&ctx), true, Some(plan));
+    assert_eq!(gpu.tracer.device(), "gpu");
+    assert!(gpu.relit.is_some() && gpu.gpu_frame.is_none());
+    assert!(gpu.gpu_shading_note().is_some_and(|n| n.contains("CPU")));
+    assert!(cpu.gpu_shading_note().is_none());
+    for sun in [
+        glam::Vec3::new(0.3, 0.8, -0.2),
+        glam::Vec3::new(-0.5, 0.6, 0.4),
+    ] {
+        cpu.set_sun(sun).unwrap();
+        gpu.set_sun(sun).unwrap();
+        let cam = cpu.camera(64, 48);
+        let a = cpu.render(&cpu.settings(cam, 1, 1), &Silent).unwrap();
+        let b = gpu.render(&gpu.settings(cam, 1, 1), &Silent).unwrap();
+        assert!(a.pixels.iter().any(|p| p.indirect.max_element() > 0.0));
+        if ctx.is_software() {
+            assert!(a.pixels == b.pixels, "sun {sun}: frames differ");
+        }
+        assert!(within_one_level(&a, &b) >= 0.999);
     }
 }

@@ -7,6 +7,7 @@ pub const NAMES: &[&str] = &[
     "beech",
     "catalpa",
     "canopy",
+    "shade",
     "cloud",
     "teapot",
     "demo_cloud",
@@ -19,6 +20,7 @@ pub fn source(name: &str) -> Option<&'static str> {
         "beech" => Some(BEECH),
         "catalpa" => Some(CATALPA),
         "canopy" => Some(CANOPY),
+        "shade" => Some(SHADE),
         "cloud" => Some(CLOUD),
         "teapot" => Some(TEAPOT),
         "demo_cloud" => Some(DEMO_CLOUD),
@@ -33,6 +35,7 @@ pub fn describe(name: &str) -> Option<&'static str> {
         "beech" => Some("paper 000 Table 2: 962 trees of 5 species, about 270 M instanced triangles, 896×448"),
         "catalpa" => Some("paper 004 Fig. 3 top: one southern catalpa, 512×512"),
         "canopy" => Some("paper 004 Fig. 3 bottom: a dense canopy of 5 species, about 100 M instanced triangles, 512×512"),
+        "shade" => Some("paper 004 Fig. 2: a big beech shading one of two small catalpas (the coarse global grid's test scene)"),
         "cloud" => Some("paper 002 Fig. 1: a 256×128×128 cumulus lit by LB over a sky, 640×360"),
         "teapot" => Some("paper 002 Figs. 4-5: the Newell teapot in PMMA, LB glow against conventional lighting, 512×384"),
         "demo_cloud" => Some("the demo forest under a fair-weather cumulus (clouds in forest scenes, 000 Fig. 3)"),
@@ -473,3 +476,58 @@ preset = "leaf"
         name = s.name,
     ))
 }
+
+const SHADE: &str = r#"# Paper 004 Fig. 2: one big tree shading one of two smaller instances of another model.
+# The sun stands to the right (towards +x, a little towards +z), low; the small catalpa on
+# the left lies in the beech's shade, the one in front does not.
+name = "shade"
+
+[[models]]
+name = "beech"
+species = "american_beech"
+
+[[models]]
+name = "catalpa"
+species = "southern_catalpa"
+
+[[instances]]
+model = "beech"
+position = [6.0, 0.0, 0.0]
+rotation = 0.0
+
+# In the beech's shade: on the line from the beech's crown away from the sun.
+[[instances]]
+model = "catalpa"
+position = [-4.0, 0.0, -3.6]
+rotation = 30.0
+scale = 0.55
+
+# In the open, nearer the camera: nothing stands between it and the sun.
+[[instances]]
+model = "catalpa"
+position = [-8.0, 0.0, 20.0]
+rotation = 150.0
+scale = 0.55
+
+[ground]
+size = [80.0, 80.0]
+color = [0.16, 0.14, 0.08]
+
+[sun]
+elevation = 30.0
+azimuth = 20.0
+
+[sky]
+color = [0.55, 0.70, 0.95]
+
+[camera]
+position = [0.0, 8.0, 38.0]
+look_at = [0.0, 6.0, 0.0]
+fov = 45.0
+resolution = [512, 384]
+rays_per_pixel = 1
+
+[lb]
+grid = 128
+preset = "leaf"
+"#;

@@ -9,6 +9,8 @@
 //! * [`camera`]: [`PinholeCamera`], primary rays from a scene's camera.
 //! * [`query`]: [`RayQuery`], the batched closest-hit and shadow queries a renderer makes,
 //!   and [`KdTracer`], the CPU tracer answering them.
+//! * [`sun_grid`]: the sun-aligned tile grid of 004 §4.1 for shadow rays ([`SunGrid`]) and
+//!   [`SunGridQuery`], the CPU tracer with shadow rays found through it.
 //!
 //! Shading, images and the `sylva render` command live elsewhere; see `docs/trace.md`.
 
@@ -18,6 +20,7 @@ pub mod model;
 pub mod query;
 pub mod ray;
 pub mod scene;
+pub mod sun_grid;
 
 pub use camera::PinholeCamera;
 pub use kdtree::{
@@ -27,3 +30,4 @@ pub use model::{AlphaMask, ModelAccel};
 pub use query::{KdTracer, RayQuery, ShadowRay};
 pub use ray::{intersect_triangle, ray_box, Hit, Ray, TriangleData};
 pub use scene::{AccelMemory, OccluderCache, SceneAccel, TraceError, TraceInstance};
+pub use sun_grid::{SunGrid, SunGridQuery};

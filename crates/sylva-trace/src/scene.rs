@@ -17,6 +17,7 @@ use crate::kdtree::{
 };
 use crate::model::{Best, ModelAccel};
 use crate::ray::{inverse_dir, ray_box, Hit, Ray};
+use crate::sun_grid::SunGrid;
 use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 use sylva_geom::{Aabb, Instance, Model, Scene};
@@ -638,6 +639,69 @@ impl SceneAccel {
                         f32::INFINITY
                     }
                 });
+        }
+        *stats += inner;
+        stats.instance_visits += visits;
+        if let Some(e) = found {
+            cache.remember(e);
+        }
+        found.is_some()
+    }
+
+    /// [`SceneAccel::any_hit_from`] for a ray towards the sun that `grid` was built for
+    /// ([`SunGrid::serves`]): the instances come from the ray's tile instead of the
+    /// top-level tree, and are entered in the same order with the same tests, so the answer
+    /// is the same. A ray the grid does not serve takes the kd path.
+    pub fn any_hit_sun_grid(
+        &self,
+        grid: &SunGrid,
+        ray: &Ray,
+        from: Option<u32>,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+        cache: &mut OccluderCache,
+    ) -> bool {
+        if !grid.serves(ray.dir) {
+            return self.any_hit_from(ray, from, cfg, stats, cache);
+        }
+        stats.rays += 1;
+        if !ray.is_valid() {
+            return false;
+        }
+        if self.ground_t(ray, ray.t_max).is_some() || self.cached_occluder(ray, stats, cache) {
+            return true;
+        }
+        let (o, d) = (ray.origin, ray.dir);
+        let inv_d = inverse_dir(d);
+        let mut found = None;
+        let mut visits = 0u64;
+        let mut inner = TraceStats::default();
+        let first = from.filter(|&i| (i as usize) < self.instances.len());
+        if let Some(i) = first {
+            visits += 1;
+            found = self.instance_any_hit(i, ray, cfg, &mut inner);
+        }
+        if found.is_none() {
+            let mut enter = |i: u32| {
+                if found.is_some() || Some(i) == first {
+                    return;
+                }
+                visits += 1;
+                found = self.instance_any_hit(i, ray, cfg, &mut inner);
+            };
+            let mut cand = [(0f32, 0u32); SORTED_INSTANCES];
+            let n = self.entries(
+                grid.candidates(o),
+                o,
+                inv_d,
+                ray.t_min,
+                ray.t_max,
+                &mut cand,
+                &mut enter,
+            );
+            for &(_, i) in &cand[..n] {
+                enter(i);
+            }
         }
         *stats += inner;
         stats.instance_visits += visits;

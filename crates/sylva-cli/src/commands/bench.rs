@@ -38,6 +38,11 @@ enum BenchCommand {
     /// a frame with the plane-parallel light) beside the paper's Table 4 (default: red_maple
     /// on a 4 × 4 lattice, 22 directions).
     Spp(super::bench_spp::BenchSppArgs),
+    /// Relighting (004 Table 1): frame time over 24 suns (kd-tree and sun-grid shadows)
+    /// against the static frame, basis solve time, compressed bytes, image RMSE of the
+    /// compression (default scene: demo; 004 measured catalpa and canopy). Under the paper
+    /// light, whose base solutions these are.
+    Relight(super::bench_relight::BenchRelightArgs),
 }
 
 #[derive(Args)]
@@ -103,6 +108,7 @@ pub fn run(args: BenchArgs, comm: Option<&dyn sylva_mpi::Comm>) -> Result<()> {
         BenchCommand::Voxelize(a) => super::bench_voxel::run(a),
         BenchCommand::Trace(a) => super::bench_trace::run(a, comm),
         BenchCommand::Spp(a) => super::bench_spp::run(a),
+        BenchCommand::Relight(a) => super::bench_relight::run(a),
     }
 }
 

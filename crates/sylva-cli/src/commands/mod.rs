@@ -17,7 +17,9 @@ pub fn finish(result: anyhow::Result<()>) -> ExitCode {
     }
 }
 
+pub mod basis;
 pub mod bench;
+pub mod bench_relight;
 pub mod bench_scene;
 pub mod bench_spp;
 pub mod bench_trace;
@@ -26,6 +28,7 @@ pub mod device;
 pub mod export;
 pub mod lb;
 pub mod progress;
+pub mod relight;
 pub mod render;
 pub mod scene;
 pub mod species;

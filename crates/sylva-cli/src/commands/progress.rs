@@ -6,6 +6,7 @@ use std::sync::Mutex;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use sylva_geom::{Medium, Model};
 use sylva_render::lighting::LightingReport;
+use sylva_render::relight::{BasisReport, GlobalReport};
 use sylva_render::Progress;
 
 /// A bar over `len` units of work, labelled `what`.
@@ -22,18 +23,27 @@ pub fn bar(len: u64, what: &str) -> ProgressBar {
     pb
 }
 
-/// One bar per piece of pipeline work; `on_lit(name, report)` hears each model's LB lighting
-/// report and each medium's (two: its sun and sky solves).
-pub struct Bars<F> {
-    current: Mutex<Option<ProgressBar>>,
-    on_lit: F,
+/// What the pipeline reports about the LB light, one event at a time.
+pub enum Report<'a> {
+    /// A model's LB light for the sun, or a medium's (its sun and its sky solves), by name.
+    Lit(&'a str, &'a LightingReport),
+    /// A model's base solutions.
+    Basis(&'a Model, &'a BasisReport),
+    /// The coarse global grid.
+    Global(&'a GlobalReport),
 }
 
-impl<F: Fn(&str, &LightingReport) + Sync> Bars<F> {
-    pub fn new(on_lit: F) -> Bars<F> {
+/// One bar per piece of pipeline work; `on_report` hears each LB report.
+pub struct Bars<F> {
+    current: Mutex<Option<ProgressBar>>,
+    on_report: F,
+}
+
+impl<F: Fn(Report) + Sync> Bars<F> {
+    pub fn new(on_report: F) -> Bars<F> {
         Bars {
             current: Mutex::new(None),
-            on_lit,
+            on_report,
         }
     }
 
@@ -44,7 +54,7 @@ impl<F: Fn(&str, &LightingReport) + Sync> Bars<F> {
     }
 }
 
-impl<F: Fn(&str, &LightingReport) + Sync> Progress for Bars<F> {
+impl<F: Fn(Report) + Sync> Progress for Bars<F> {
     fn start(&self, what: &str, total: u64) {
         *self.current.lock().expect("progress bar") = Some(bar(total, what));
     }
@@ -67,12 +77,24 @@ impl<F: Fn(&str, &LightingReport) + Sync> Progress for Bars<F> {
     }
 
     fn model_lit(&self, model: &Model, report: &LightingReport) {
-        (self.on_lit)(&model.name, report);
+        self.finish();
+        (self.on_report)(Report::Lit(&model.name, report));
     }
 
     fn medium_lit(&self, medium: &Medium, reports: &[LightingReport]) {
+        self.finish();
         for (report, which) in reports.iter().zip(["sun", "sky"]) {
-            (self.on_lit)(&format!("{} ({which})", medium.name), report);
+            (self.on_report)(Report::Lit(&format!("{} ({which})", medium.name), report));
         }
+    }
+
+    fn model_basis(&self, model: &Model, report: &BasisReport) {
+        self.finish();
+        (self.on_report)(Report::Basis(model, report));
+    }
+
+    fn global_grid(&self, report: &GlobalReport) {
+        self.finish();
+        (self.on_report)(Report::Global(report));
     }
 }

@@ -3,21 +3,66 @@
 //! summary.
 
 use std::path::PathBuf;
+use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use clap::Args;
+use clap::{Args, ValueEnum};
+use sylva_lb::relight::{Codec, CompressTarget, Precision};
 use sylva_lb::LbSolver;
 use sylva_mpi::Comm;
-use sylva_render::lighting::{Light, LightingReport, LightingSource};
+use sylva_render::lighting::{Light, LightingSource};
+use sylva_render::relight::{BasisReport, GlobalGridOptions, SunWeights};
 use sylva_render::{
-    image_paths, load_scene, resolution, stage, tone_map_modes, write_images, LbPlan, Mode,
-    PrepareOptions, PreparedScene, Progress, ShadingParams, Silent, StageClock, ToneMap,
+    image_paths, load_scene, precompute_relighting, resolution, stage, tone_map_modes,
+    write_images, BasisUse, LbPlan, Mode, PrepareOptions, PreparedScene, Progress, RelightPlan,
+    ShadingParams, ShadowMethod, Silent, StageClock, ToneMap,
 };
 use sylva_spp::trees::system::{SppLight, SppSystem, SystemConfig};
 use sylva_trace::TraversalConfig;
 
-use super::progress::Bars;
+use super::progress::{Bars, Report};
+
+/// Whether the LB light of plants comes from base solutions (paper 004). Base solutions are
+/// the paper light's (004's sun-only boundary solves; docs/relight.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum BasisArg {
+    /// Under --light paper, base solutions when every model's are cached (`sylva basis`),
+    /// else solved for the sun; other lights solve for the sun.
+    Auto,
+    /// Base solutions, solved and cached where missing (paper 004: any sun, rotated
+    /// instances lit correctly, the coarse global grid); --light paper only.
+    Always,
+    /// Solved for the scene's sun per model (paper 000), cached per sun.
+    Never,
+}
+
+/// How the sun becomes base-solution weights.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SunWeightsArg {
+    /// The polyhedron face's three bases, barycentric weights (004 §3.1).
+    Three,
+    /// max(0, n_i · d) over all bases: a direct solve's light, up to rounding.
+    Exact,
+}
+
+/// What finds the occluders of shadow rays.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ShadowsArg {
+    /// The top-level kd-tree over the instances.
+    Kd,
+    /// The sun-aligned tile grid of 004 §4.1.
+    Grid,
+}
+
+/// How cached base solutions are compressed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum BasisPrecisionArg {
+    F16,
+    F32,
+    /// 16 bits per kept coefficient, index included (Haar codecs).
+    Packed,
+}
 
 /// Options shared by `sylva render` and `sylva bench trace`: what the frame looks like.
 #[derive(Args, Debug, Clone)]
@@ -52,8 +97,9 @@ pub struct FrameArgs {
     /// (the paper's shading with the plane-parallel light and G-factor of 003 §5 instead of
     /// LB grids: deep opacity maps in 16 directions, 16³ instance grids, leaf albedo from the
     /// scene's [lb] preset; the `lb` mode shows the SPP light alone).
-    #[arg(long, value_parser = ["physical", "paper", "spp"], default_value = "physical")]
-    pub light: String,
+    /// [default: physical; paper for the commands that relight: basis, relight, bench relight]
+    #[arg(long, value_parser = ["physical", "paper", "spp"])]
+    pub light: Option<String>,
     /// Scale of the LB indirect light (1: as computed).
     #[arg(long, default_value_t = ShadingParams::default().indirect)]
     pub indirect: f32,
@@ -85,6 +131,189 @@ pub struct FrameArgs {
     /// GPU kernel).
     #[arg(long)]
     pub cpu_shading: bool,
+    /// LB light from base solutions (always), solved for the sun (never), or base solutions
+    /// when all are cached (auto). Base solutions are the paper light's: --light paper.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub basis: BasisArg,
+    /// How base solutions combine for the sun: three (004's polyhedron face) or exact.
+    #[arg(long, value_enum, default_value = "three")]
+    pub sun_weights: SunWeightsArg,
+    /// Ambient light from the ambient base solution, as a fraction of unobstructed sunlight.
+    #[arg(long, default_value_t = 0.0)]
+    pub ambient: f64,
+    /// Without the coarse global grid (instances do not shade each other's indirect light).
+    #[arg(long)]
+    pub no_global: bool,
+    /// Sites of the coarse global grid along the forest's longest edge.
+    #[arg(long, default_value_t = GlobalGridOptions::default().sites)]
+    pub global_grid: usize,
+    /// Shadow rays through the sun-aligned grid (004 §4.1) or the top-level kd-tree.
+    #[arg(long, value_enum, default_value = "grid")]
+    pub shadows: ShadowsArg,
+    /// Compression of cached base solutions: colour:T (per-basis colour decorrelation +
+    /// Haar), haar:T, pca:K or pcahaar:K:T.
+    #[arg(long, default_value = "colour:0.004")]
+    pub codec: String,
+    /// Stored values of compressed base solutions.
+    #[arg(long, value_enum, default_value = "packed")]
+    pub basis_precision: BasisPrecisionArg,
+}
+
+impl FrameArgs {
+    /// The light model's name: `--light`, by default physical, or paper for a command that
+    /// relights (`relights`), whose base solutions are the paper light's; another light
+    /// there is an error, not the paper's bases shaded as that light.
+    pub fn light_for(&self, relights: bool) -> Result<&str> {
+        match (self.light.as_deref(), relights) {
+            (None, true) | (Some("paper"), true) => Ok("paper"),
+            (Some(l), true) => bail!(
+                "--light {l}: this command relights from base solutions, which are the paper \
+                 light's (004's boundary solves); the {l} light has none yet (docs/relight.md): \
+                 use --light paper, the default here"
+            ),
+            (l, false) => Ok(l.unwrap_or("physical")),
+        }
+    }
+
+    /// The relighting plan these options ask for under light `light` (`None`: per-sun LB
+    /// light). `force`: base solutions whatever `--basis` says (`auto` then solves missing
+    /// ones); `keep_raw`: keep the uncompressed bases too. Base solutions are the paper
+    /// light's: `--basis always` with another light is an error, `auto` solves for the sun.
+    pub fn relight_plan(
+        &self,
+        force: bool,
+        keep_raw: bool,
+        light: &str,
+    ) -> Result<Option<RelightPlan>> {
+        let paper = light == "paper";
+        let basis = match (self.basis, force) {
+            (BasisArg::Never, true) => {
+                bail!("--basis never: this command relights from base solutions")
+            }
+            (BasisArg::Never, false) => return Ok(None),
+            (BasisArg::Always, false) if !paper => bail!(
+                "--basis always needs --light paper: base solutions are the paper light's \
+                 (004's boundary solves); the {light} light has none yet (docs/relight.md)"
+            ),
+            (BasisArg::Auto, false) if !paper => return Ok(None),
+            (BasisArg::Auto, false) => BasisUse::IfCached,
+            _ => BasisUse::Always,
+        };
+        if !(self.ambient.is_finite() && self.ambient >= 0.0) {
+            bail!("--ambient {}: must be a finite number ≥ 0", self.ambient);
+        }
+        let global = (!self.no_global).then_some(GlobalGridOptions {
+            sites: self.global_grid,
+        });
+        if let Some(g) = &global {
+            g.validate()
+                .map_err(|e| anyhow::anyhow!("--global-grid: {e}"))?;
+        }
+        let codec = Codec::parse(&self.codec).map_err(|e| anyhow::anyhow!("--codec: {e}"))?;
+        let target = CompressTarget {
+            precision: match self.basis_precision {
+                BasisPrecisionArg::F16 => Precision::F16,
+                BasisPrecisionArg::F32 => Precision::F32,
+                BasisPrecisionArg::Packed => Precision::Packed,
+            },
+            ..CompressTarget::new(codec)
+        };
+        target
+            .validate()
+            .map_err(|e| anyhow::anyhow!("--codec/--basis-precision: {e}"))?;
+        Ok(Some(RelightPlan {
+            basis,
+            sun: match self.sun_weights {
+                SunWeightsArg::Three => SunWeights::ThreeBasis,
+                SunWeightsArg::Exact => SunWeights::Exact,
+            },
+            ambient: self.ambient,
+            global,
+            target,
+            keep_raw,
+        }))
+    }
+
+    pub fn shadow_method(&self) -> ShadowMethod {
+        match self.shadows {
+            ShadowsArg::Kd => ShadowMethod::KdTree,
+            ShadowsArg::Grid => ShadowMethod::SunGrid,
+        }
+    }
+}
+
+/// One line about an LB report, and whether it is a warning (to stderr).
+pub fn report_line(r: Report) -> (String, Option<String>) {
+    let warn = |s: &LightingSource| match s {
+        LightingSource::Recomputed { reason } => Some(format!("warning: {reason}; recomputed")),
+        _ => None,
+    };
+    match r {
+        Report::Lit(name, report) => {
+            let line = match &report.source {
+                LightingSource::Cached => format!(
+                    "  LB {}: {} grid from cache ({:.2} s)",
+                    name, report.dims, report.seconds
+                ),
+                LightingSource::Computed => format!(
+                    "  LB {}: {} grid solved in {:.1} s{}",
+                    name,
+                    report.dims,
+                    report.seconds,
+                    report
+                        .path
+                        .as_ref()
+                        .map(|p| format!(", cached as {}", p.display()))
+                        .unwrap_or_default()
+                ),
+                LightingSource::Recomputed { .. } => format!(
+                    "  LB {}: {} grid solved again in {:.1} s",
+                    name, report.dims, report.seconds
+                ),
+            };
+            (line, warn(&report.source))
+        }
+        Report::Basis(model, report) => {
+            let how = match &report.source {
+                LightingSource::Cached => format!("from cache ({:.2} s)", report.seconds),
+                LightingSource::Computed => format!("solved in {:.1} s", report.seconds),
+                LightingSource::Recomputed { .. } => {
+                    format!("solved again in {:.1} s", report.seconds)
+                }
+            };
+            let line = format!(
+                "  basis {}: {} grid {how}{}; {} → {} ({:.1}×){}",
+                model.name,
+                report.dims,
+                report
+                    .solve_seconds
+                    .map(|s| format!(", 54 solves {s:.1} s"))
+                    .unwrap_or_default(),
+                sylva_core::format_bytes(report.raw_bytes),
+                sylva_core::format_bytes(report.compressed_bytes),
+                report.raw_bytes as f64 / report.compressed_bytes.max(1) as f64,
+                match (&report.source, &report.path) {
+                    (LightingSource::Cached, _) | (_, None) => String::new(),
+                    (_, Some(p)) => format!(", cached as {}", p.display()),
+                }
+            );
+            (line, warn(&report.source))
+        }
+        Report::Global(report) => {
+            let how = match &report.source {
+                LightingSource::Cached => "from cache",
+                LightingSource::Computed => "solved",
+                LightingSource::Recomputed { .. } => "solved again",
+            };
+            (
+                format!(
+                    "  global grid: {} {how} in {:.2} s",
+                    report.dims, report.seconds
+                ),
+                warn(&report.source),
+            )
+        }
+    }
 }
 
 #[derive(Args, Debug)]
@@ -119,6 +348,8 @@ pub struct Prepared {
     pub scene: PreparedScene,
     pub width: u32,
     pub height: u32,
+    /// Per model, what its base solutions' preparation reported (empty without them).
+    pub basis: Vec<BasisReport>,
 }
 
 /// Loads the scene, lights every model (from the cache when it can) and builds its
@@ -133,6 +364,31 @@ pub fn prepare(
     output_images: usize,
     to_stdout: bool,
     comm: Option<&dyn Comm>,
+) -> Result<Prepared> {
+    prepare_with(
+        a,
+        need_lb,
+        rays_per_pixel,
+        output_images,
+        to_stdout,
+        comm,
+        false,
+        false,
+    )
+}
+
+/// [`prepare`], with base solutions whatever `--basis` says (`force_basis`: the commands that
+/// relight, under the paper light) and the uncompressed bases kept (`keep_raw`).
+#[allow(clippy::too_many_arguments)]
+pub fn prepare_with(
+    a: &FrameArgs,
+    need_lb: bool,
+    rays_per_pixel: Option<u32>,
+    output_images: usize,
+    to_stdout: bool,
+    comm: Option<&dyn Comm>,
+    force_basis: bool,
+    keep_raw: bool,
 ) -> Result<Prepared> {
     let root = comm.is_none_or(|c| c.rank() == 0);
     // Machine-readable runs keep stdout for their JSON.
@@ -175,10 +431,16 @@ pub fn prepare(
     } else {
         None
     };
+    let light_name = a.light_for(force_basis)?;
     // The SPP light replaces the paper's LB grids under the paper's shading.
-    let light = match a.light.as_str() {
+    let light = match light_name {
         "spp" => Light::Paper,
         l => Light::parse(l).context("--light")?,
+    };
+    let relight = if need_lb {
+        a.relight_plan(force_basis, keep_raw, light_name)?
+    } else {
+        None
     };
     let opts = PrepareOptions {
         lb: solver.as_deref().map(|solver| LbPlan {
@@ -195,30 +457,19 @@ pub fn prepare(
         sky_ambient: a.sky_ambient,
         largest_frame: Some((width, height, rays_per_pixel)),
         output_images,
+        relight,
+        shadows: a.shadow_method(),
     };
-    let progress = Bars::new(|name: &str, report: &LightingReport| match &report.source {
-        LightingSource::Cached => say(format!(
-            "  LB {}: {} grid from cache ({:.2} s)",
-            name, report.dims, report.seconds
-        )),
-        LightingSource::Computed => say(format!(
-            "  LB {}: {} grid solved in {:.1} s{}",
-            name,
-            report.dims,
-            report.seconds,
-            report
-                .path
-                .as_ref()
-                .map(|p| format!(", cached as {}", p.display()))
-                .unwrap_or_default()
-        )),
-        LightingSource::Recomputed { reason } => {
-            eprintln!("warning: {reason}; recomputed");
-            say(format!(
-                "  LB {}: {} grid solved again in {:.1} s",
-                name, report.dims, report.seconds
-            ))
+    let basis = Mutex::new(Vec::new());
+    let progress = Bars::new(|r: Report| {
+        if let Report::Basis(_, b) = &r {
+            basis.lock().expect("basis reports").push((*b).clone());
         }
+        let (line, warning) = report_line(r);
+        if let (Some(w), true) = (warning, root) {
+            eprintln!("{w}");
+        }
+        say(line);
     });
     let scene = match comm {
         None => PreparedScene::new(scene, &opts, &progress)?,
@@ -227,8 +478,26 @@ pub fn prepare(
             match &opts.lb {
                 Some(lb) => {
                     PreparedScene::check(&scene, &opts)?;
-                    let (lighting, cached) = sylva_mpi::light_models(comm, &scene, lb, progress)?;
-                    PreparedScene::with_lighting(scene, &opts, lighting, cached)?
+                    // Cached bases serve every rank (no solve); missing ones are not solved
+                    // on every rank: `sylva basis` makes them, in one process.
+                    if opts.relight.is_some_and(|r| r.basis == BasisUse::Always) {
+                        bail!(
+                            "--basis always under mpirun: solve the bases first with `sylva basis` \
+                             (one process); render then relights from the cache"
+                        );
+                    }
+                    let relit = match &opts.relight {
+                        Some(plan) => precompute_relighting(&scene, lb, plan, progress)?,
+                        None => None,
+                    };
+                    match relit {
+                        Some(parts) => PreparedScene::with_relighting(scene, &opts, parts)?,
+                        None => {
+                            let (lighting, cached) =
+                                sylva_mpi::light_models(comm, &scene, lb, progress)?;
+                            PreparedScene::with_lighting(scene, &opts, lighting, cached)?
+                        }
+                    }
                 }
                 None => PreparedScene::new(scene, &opts, progress)?,
             }
@@ -242,14 +511,31 @@ pub fn prepare(
                 "; shading on the GPU ({} of shading data)",
                 sylva_core::format_bytes(f.device_bytes())
             ),
-            (None, Some(_)) => "; shading on the CPU".into(),
+            (None, Some(_)) => match scene.gpu_shading_note() {
+                Some(why) => format!("; shading on the CPU: {why}"),
+                None => "; shading on the CPU".into(),
+            },
             _ => String::new(),
         }
     ));
+    if let Some(r) = &scene.relit {
+        let ill = r.illumination();
+        say(format!(
+            "LB light: relit from base solutions ({} weights, ambient {}, global grid {}), shadows {}",
+            ill.sun.name(),
+            ill.ambient,
+            r.global()
+                .map(|g| g.dims.to_string())
+                .unwrap_or_else(|| "off".into()),
+            scene.shadows().name()
+        ));
+    }
+    drop(progress);
     Ok(Prepared {
         scene,
         width,
         height,
+        basis: basis.into_inner().expect("basis reports"),
     })
 }
 
@@ -289,7 +575,7 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
     let clock = StageClock::global();
     clock.reset();
     let t_all = Instant::now();
-    let spp = a.frame.light == "spp";
+    let spp = a.frame.light.as_deref() == Some("spp");
     if spp && comm.is_some() {
         bail!("--light spp renders in one process: run it without mpirun");
     }
@@ -305,7 +591,7 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
     let rpp = a.rpp.unwrap_or(prepared.scene.camera.rays_per_pixel);
     let camera = prepared.camera(p.width, p.height);
     let settings = prepared.settings(camera, rpp, a.frame.seed);
-    let bars = Bars::new(|_: &str, _: &LightingReport| {});
+    let bars = Bars::new(|_: Report| {});
     let mut spp_seconds = None;
     let (frame, split) = match comm {
         None if spp => {

@@ -120,7 +120,7 @@ pub fn run(a: TreesArgs) -> Result<()> {
             grid: a.lb_grid.unwrap_or(scene.lb.grid as usize),
         }),
     };
-    let bars = Bars::new(|_, _| {});
+    let bars = Bars::new(|_| {});
     let report = experiment::run(&scene, &cfg, &bars)
         .with_context(|| format!("tree experiment on scene '{}'", scene.name))?;
     let text = if a.json {

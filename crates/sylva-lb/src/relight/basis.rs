@@ -93,9 +93,241 @@ pub struct BasisSet {
     channels: Vec<Vec<f32>>,
 }
 
-/// Solves the basis set of `grid` with `solve`, one boundary at a time: `B_1..B_18`, then `B_0`
-/// as `options.ambient` says. `solve` has the signature of [`solve_lighting`] (pass it, or a
-/// closure around another backend); its progress `(colour, step, residual)` is forwarded.
+/// One independent piece of a basis solve: base solution `basis` in colour `colour`. A basis
+/// set is [`BasisJob::all`] of them; each can run anywhere ([`solve_basis_jobs`], one at a
+/// time or several of one basis in one call) and [`BasisAssembly`] collects the results, so
+/// the precompute can be spread over processes or machines as a work queue.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct BasisJob {
+    pub basis: usize,
+    pub colour: usize,
+}
+
+impl BasisJob {
+    /// The solves a basis set of `medium` needs under `options`, basis-major: `B_1..B_18`
+    /// (then `B_0` with [`Ambient::Solve`]), each in every colour whose parameters differ from
+    /// all earlier colours' (a repeated colour is copied by [`BasisAssembly::finish`]).
+    pub fn all(medium: &MediumParams, options: &BasisOptions) -> Vec<BasisJob> {
+        let colours: Vec<usize> = (0..3)
+            .filter(|&c| (0..c).all(|p| medium.colours[p] != medium.colours[c]))
+            .collect();
+        solved_bases(options)
+            .into_iter()
+            .flat_map(|basis| {
+                colours
+                    .iter()
+                    .map(move |&colour| BasisJob { basis, colour })
+            })
+            .collect()
+    }
+}
+
+/// The bases that are solved (not summed), in solve order.
+fn solved_bases(options: &BasisOptions) -> Vec<usize> {
+    match options.ambient {
+        Ambient::Sum => (1..BASES).collect(),
+        Ambient::Solve => (1..BASES).chain([0]).collect(),
+    }
+}
+
+/// Runs `jobs`, all of one base solution, in one call of `solve` (the signature of
+/// [`solve_lighting`]): the medium handed to it holds the jobs' colours in their places and
+/// repeats the first job's colour elsewhere, so a backend that solves equal colours once (the
+/// CPU and GPU solvers do) solves exactly the jobs asked for. Returns per job its site values
+/// and the backend's report. `progress(colour, step)` follows the solve.
+pub fn solve_basis_jobs<S, E>(
+    grid: &DensityGrid,
+    medium: &MediumParams,
+    options: &BasisOptions,
+    jobs: &[BasisJob],
+    mut solve: S,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Vec<(BasisJob, Vec<f32>, SolveReport)>, RelightError>
+where
+    S: FnMut(
+        &DensityGrid,
+        &MediumParams,
+        Boundary,
+        &SolveOptions,
+        &mut dyn FnMut(usize, usize, f64),
+    ) -> Result<(LightingGrid, Vec<SolveReport>), E>,
+    E: Into<Box<dyn std::error::Error + Send + Sync>>,
+{
+    medium.validate()?;
+    let Some(first) = jobs.first() else {
+        return Err(RelightError::Mismatch("no basis jobs to run".into()));
+    };
+    let j = first.basis;
+    for (k, job) in jobs.iter().enumerate() {
+        if job.basis >= BASES || job.colour >= 3 {
+            return Err(RelightError::Mismatch(format!(
+                "basis job (B_{}, colour {}) is out of range",
+                job.basis, job.colour
+            )));
+        }
+        if job.basis != j {
+            return Err(RelightError::Mismatch(format!(
+                "one call solves one base solution: B_{j} and B_{} asked for",
+                job.basis
+            )));
+        }
+        if jobs[..k].iter().any(|o| o.colour == job.colour) {
+            return Err(RelightError::Mismatch(format!(
+                "basis job (B_{j}, colour {}) asked for twice",
+                job.colour
+            )));
+        }
+    }
+    let mut call_medium = medium.clone();
+    for c in 0..3 {
+        if !jobs.iter().any(|job| job.colour == c) {
+            call_medium.colours[c] = medium.colours[first.colour];
+        }
+    }
+    let (light, reports) = solve(
+        grid,
+        &call_medium,
+        Boundary::basis(j),
+        &options.solve,
+        &mut |colour, step, _residual| progress(colour, step),
+    )
+    .map_err(|e| RelightError::Solve {
+        basis: j,
+        source: e.into(),
+    })?;
+    check_result(j, grid.dims, &light)?;
+    let mut colours = light.colours.map(Some);
+    jobs.iter()
+        .map(|job| {
+            let values = colours[job.colour].take().expect("each colour once");
+            let report =
+                reports
+                    .get(job.colour)
+                    .cloned()
+                    .ok_or_else(|| RelightError::SolverResult {
+                        basis: j,
+                        what: format!("{} reports for 3 colours", reports.len()),
+                    })?;
+            Ok((*job, values, report))
+        })
+        .collect()
+}
+
+/// Collects the results of basis jobs (in any order, from anywhere) into a [`BasisSet`].
+#[derive(Debug, Clone)]
+pub struct BasisAssembly {
+    dims: Dims,
+    bounds: Bounds,
+    medium: MediumParams,
+    options: BasisOptions,
+    /// Channel `3 j + colour`; empty until its job arrives.
+    channels: Vec<Vec<f32>>,
+}
+
+impl BasisAssembly {
+    /// An empty set for a grid of `dims` over `bounds` (its memory is checked here).
+    pub fn new(
+        dims: Dims,
+        bounds: Bounds,
+        medium: &MediumParams,
+        options: &BasisOptions,
+    ) -> Result<BasisAssembly, RelightError> {
+        medium.validate()?;
+        sylva_core::check_memory(
+            &format!("a relighting basis set on a {dims} grid (57 channels)"),
+            BasisSet::memory_needed(dims),
+        )?;
+        Ok(BasisAssembly {
+            dims,
+            bounds,
+            medium: medium.clone(),
+            options: *options,
+            channels: vec![Vec::new(); CHANNELS],
+        })
+    }
+
+    /// The jobs whose results are still missing.
+    pub fn missing(&self) -> Vec<BasisJob> {
+        BasisJob::all(&self.medium, &self.options)
+            .into_iter()
+            .filter(|j| self.channels[3 * j.basis + j.colour].is_empty())
+            .collect()
+    }
+
+    /// Stores one job's result: one value per site, all finite.
+    pub fn insert(&mut self, job: BasisJob, values: Vec<f32>) -> Result<(), RelightError> {
+        if !BasisJob::all(&self.medium, &self.options).contains(&job) {
+            return Err(RelightError::Mismatch(format!(
+                "(B_{}, colour {}) is not a job of this basis set",
+                job.basis, job.colour
+            )));
+        }
+        let bad = |what: String| {
+            Err(RelightError::SolverResult {
+                basis: job.basis,
+                what,
+            })
+        };
+        if values.len() != self.dims.sites() {
+            return bad(format!(
+                "{} {} values for {} sites",
+                values.len(),
+                COLOUR_NAMES[job.colour],
+                self.dims.sites()
+            ));
+        }
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            let (x, y, z) = self.dims.coords(i);
+            return bad(format!(
+                "{} {} at site ({x}, {y}, {z})",
+                values[i], COLOUR_NAMES[job.colour]
+            ));
+        }
+        self.channels[3 * job.basis + job.colour] = values;
+        Ok(())
+    }
+
+    /// The basis set: repeated colours copied, `B_0` summed when [`Ambient::Sum`]. Every job
+    /// must have arrived.
+    pub fn finish(self) -> Result<BasisSet, RelightError> {
+        let missing = self.missing();
+        if let Some(j) = missing.first() {
+            return Err(RelightError::Mismatch(format!(
+                "{} basis jobs have no result yet, the first (B_{}, colour {})",
+                missing.len(),
+                j.basis,
+                j.colour
+            )));
+        }
+        let mut channels = self.channels;
+        for j in solved_bases(&self.options) {
+            for c in 0..3 {
+                if let Some(p) = (0..c).find(|&p| self.medium.colours[p] == self.medium.colours[c])
+                {
+                    channels[3 * j + c] = channels[3 * j + p].clone();
+                }
+            }
+        }
+        if self.options.ambient == Ambient::Sum {
+            let all: Vec<(usize, f64)> = (1..BASES).map(|j| (j, 1.0)).collect();
+            for c in 0..3 {
+                channels[c] = combine(&channels, &all, c, self.dims.sites());
+            }
+        }
+        Ok(BasisSet {
+            dims: self.dims,
+            bounds: self.bounds,
+            medium: self.medium,
+            options: self.options,
+            channels,
+        })
+    }
+}
+
+/// Solves the basis set of `grid` with `solve`, one boundary at a time (all colours of a
+/// basis in one call, [`solve_basis_jobs`]): `B_1..B_18`, then `B_0` as `options.ambient`
+/// says. `solve` has the signature of [`solve_lighting`] (pass it, or a closure around
+/// another backend); progress counts jobs ([`BasisJob::all`]).
 pub fn solve_basis<S, E>(
     grid: &DensityGrid,
     medium: &MediumParams,
@@ -113,66 +345,53 @@ where
     ) -> Result<(LightingGrid, Vec<SolveReport>), E>,
     E: Into<Box<dyn std::error::Error + Send + Sync>>,
 {
-    medium.validate()?;
-    let dims = grid.dims;
-    sylva_core::check_memory(
-        &format!("a relighting basis set on a {dims} grid (57 channels)"),
-        BasisSet::memory_needed(dims),
-    )?;
-    let order: Vec<usize> = match options.ambient {
-        Ambient::Sum => (1..BASES).collect(),
-        Ambient::Solve => (1..BASES).chain([0]).collect(),
-    };
-    let mut channels: Vec<Vec<f32>> = vec![Vec::new(); CHANNELS];
-    let mut reports = Vec::with_capacity(order.len());
+    let mut assembly = BasisAssembly::new(grid.dims, grid.bounds, medium, options)?;
+    let jobs = BasisJob::all(medium, options);
     let max_steps = options.solve.max_steps;
-    for (done, &j) in order.iter().enumerate() {
+    let mut reports = Vec::new();
+    let mut done = 0;
+    for j in solved_bases(options) {
+        let group: Vec<BasisJob> = jobs.iter().filter(|b| b.basis == j).copied().collect();
         let start = Instant::now();
-        let mut forward = |colour: usize, step: usize, _residual: f64| {
-            progress(BasisProgress {
-                done,
-                solves: order.len(),
-                basis: j,
-                colour,
-                step,
-                max_steps,
-            })
-        };
-        let (light, colours) = solve(
+        let results = solve_basis_jobs(
             grid,
             medium,
-            Boundary::basis(j),
-            &options.solve,
-            &mut forward,
-        )
-        .map_err(|e| RelightError::Solve {
-            basis: j,
-            source: e.into(),
-        })?;
-        check_result(j, dims, &light)?;
-        for (c, values) in light.colours.into_iter().enumerate() {
-            channels[3 * j + c] = values;
+            options,
+            &group,
+            &mut solve,
+            &mut |colour, step| {
+                let k = group.iter().position(|b| b.colour == colour).unwrap_or(0);
+                progress(BasisProgress {
+                    done: done + k,
+                    solves: jobs.len(),
+                    basis: j,
+                    colour,
+                    step,
+                    max_steps,
+                })
+            },
+        )?;
+        done += group.len();
+        let mut by_colour: Vec<Option<SolveReport>> = vec![None; 3];
+        for (job, values, report) in results {
+            by_colour[job.colour] = Some(report);
+            assembly.insert(job, values)?;
         }
+        let colours = (0..3)
+            .map(|c| {
+                let p = (0..=c)
+                    .find(|&p| medium.colours[p] == medium.colours[c])
+                    .unwrap_or(c);
+                by_colour[p].expect("the first of equal colours is a job")
+            })
+            .collect();
         reports.push(BasisReport {
             basis: j,
             colours,
             seconds: start.elapsed().as_secs_f64(),
         });
     }
-    if options.ambient == Ambient::Sum {
-        let all: Vec<(usize, f64)> = (1..BASES).map(|j| (j, 1.0)).collect();
-        for c in 0..3 {
-            channels[c] = combine(&channels, &all, c, dims.sites());
-        }
-    }
-    let set = BasisSet {
-        dims,
-        bounds: grid.bounds,
-        medium: medium.clone(),
-        options: *options,
-        channels,
-    };
-    Ok((set, reports))
+    Ok((assembly.finish()?, reports))
 }
 
 /// A backend's result must be a finite lighting grid of the right size.
@@ -337,53 +556,8 @@ impl BasisSet {
     /// The grid file of this set (kind [`GridKind::Basis`]), with the medium and the solve
     /// schedule in its metadata.
     pub fn to_grid_file(&self, element: Element) -> GridFile {
-        let mut metadata = vec![
-            ("basis".to_string(), "B0..B18 × red,green,blue".to_string()),
-            (
-                "ambient".into(),
-                match self.options.ambient {
-                    Ambient::Sum => "sum",
-                    Ambient::Solve => "solved",
-                }
-                .into(),
-            ),
-            ("steps".into(), self.options.solve.max_steps.to_string()),
-            (
-                "tolerance".into(),
-                self.options
-                    .solve
-                    .tolerance
-                    .map_or("none".into(), |t| t.to_string()),
-            ),
-        ];
-        for (p, name) in self.medium.colours.iter().zip(COLOUR_NAMES) {
-            metadata.push((
-                format!("medium.{name}"),
-                format!("{},{},{}", p.sigma_a, p.sigma_s, p.g),
-            ));
-        }
-        if let Some(brown) = &self.medium.brown {
-            for (p, name) in brown.iter().zip(COLOUR_NAMES) {
-                metadata.push((
-                    format!("medium.brown.{name}"),
-                    format!("{},{},{}", p.sigma_a, p.sigma_s, p.g),
-                ));
-            }
-        }
-        metadata.extend([
-            (
-                "zero_f0_on_green".into(),
-                self.medium.zero_f0_on_green.to_string(),
-            ),
-            (
-                "zero_f0_on_brown".into(),
-                self.medium.zero_f0_on_brown.to_string(),
-            ),
-            (
-                "brown_threshold".into(),
-                self.medium.brown_threshold.to_string(),
-            ),
-        ]);
+        let mut metadata = vec![("basis".to_string(), "B0..B18 × red,green,blue".to_string())];
+        metadata.extend(basis_metadata(&self.medium, &self.options));
         GridFile {
             kind: GridKind::Basis,
             dims: self.dims,
@@ -427,98 +601,145 @@ impl BasisSet {
             }
             .into());
         }
-        let value = |key: &str| {
-            file.metadata_value(key).ok_or_else(|| {
-                bad(format!(
-                    "metadata has no '{key}': not a basis file written by sylva"
-                ))
-            })
-        };
-        let float = |key: &str, text: &str| {
-            text.trim()
-                .parse::<f64>()
-                .map_err(|_| bad(format!("metadata '{key}' = '{text}' is not a number")))
-        };
-        let flag = |key: &str| match value(key)? {
-            "true" => Ok(true),
-            "false" => Ok(false),
-            v => Err(bad(format!(
-                "metadata '{key}' = '{v}' is not true or false"
-            ))),
-        };
-        let params = |key: &str, text: &str| {
-            let parts: Vec<&str> = text.split(',').collect();
-            let [a, s, g] = parts[..] else {
-                return Err(bad(format!(
-                    "metadata '{key}' = '{text}' is not sigma_a,sigma_s,g"
-                )));
-            };
-            Ok(ColourParams {
-                sigma_a: float(key, a)?,
-                sigma_s: float(key, s)?,
-                g: float(key, g)?,
-            })
-        };
-        let mut colours = [ColourParams {
-            sigma_a: 0.0,
-            sigma_s: 0.0,
-            g: 0.0,
-        }; 3];
-        for (p, name) in colours.iter_mut().zip(COLOUR_NAMES) {
-            let key = format!("medium.{name}");
-            *p = params(&key, value(&key)?)?;
-        }
-        // Brown sites' own coefficients, where the set was solved with them.
-        let brown = match file.metadata_value("medium.brown.red") {
-            None => None,
-            Some(_) => {
-                let mut b = colours;
-                for (p, name) in b.iter_mut().zip(COLOUR_NAMES) {
-                    let key = format!("medium.brown.{name}");
-                    *p = params(&key, value(&key)?)?;
-                }
-                Some(b)
-            }
-        };
-        let medium = MediumParams {
-            colours,
-            zero_f0_on_green: flag("zero_f0_on_green")?,
-            zero_f0_on_brown: flag("zero_f0_on_brown")?,
-            brown_threshold: float("brown_threshold", value("brown_threshold")?)?,
-            brown,
-        };
-        medium
-            .validate()
-            .map_err(|e| bad(format!("medium in metadata: {e}")))?;
-        let ambient = match value("ambient")? {
-            "sum" => Ambient::Sum,
-            "solved" => Ambient::Solve,
-            v => {
-                return Err(bad(format!(
-                    "metadata 'ambient' = '{v}' is not sum or solved"
-                )))
-            }
-        };
-        let steps = value("steps")?;
-        let max_steps = steps
-            .parse::<usize>()
-            .ok()
-            .filter(|&s| s > 0)
-            .ok_or_else(|| bad(format!("metadata 'steps' = '{steps}' is not a step count")))?;
-        let tolerance = match value("tolerance")? {
-            "none" => None,
-            t => Some(float("tolerance", t)?),
-        };
-        let options = BasisOptions {
-            solve: SolveOptions {
-                max_steps,
-                tolerance,
-            },
-            ambient,
-        };
+        let (medium, options) = parse_basis_metadata(&|k| file.metadata_value(k)).map_err(bad)?;
         BasisSet::new(file.dims, file.bounds, medium, options, file.channels)
             .map_err(|e| bad(e.to_string()))
     }
+}
+
+/// The medium and solve schedule of a basis set as `key=value` metadata (basis grid files and
+/// compressed basis files share it).
+pub fn basis_metadata(medium: &MediumParams, options: &BasisOptions) -> Vec<(String, String)> {
+    let mut metadata = vec![
+        (
+            "ambient".to_string(),
+            match options.ambient {
+                Ambient::Sum => "sum",
+                Ambient::Solve => "solved",
+            }
+            .to_string(),
+        ),
+        ("steps".into(), options.solve.max_steps.to_string()),
+        (
+            "tolerance".into(),
+            options
+                .solve
+                .tolerance
+                .map_or("none".into(), |t| t.to_string()),
+        ),
+    ];
+    for (p, name) in medium.colours.iter().zip(COLOUR_NAMES) {
+        metadata.push((
+            format!("medium.{name}"),
+            format!("{},{},{}", p.sigma_a, p.sigma_s, p.g),
+        ));
+    }
+    if let Some(brown) = &medium.brown {
+        for (p, name) in brown.iter().zip(COLOUR_NAMES) {
+            metadata.push((
+                format!("medium.brown.{name}"),
+                format!("{},{},{}", p.sigma_a, p.sigma_s, p.g),
+            ));
+        }
+    }
+    metadata.extend([
+        (
+            "zero_f0_on_green".into(),
+            medium.zero_f0_on_green.to_string(),
+        ),
+        (
+            "zero_f0_on_brown".into(),
+            medium.zero_f0_on_brown.to_string(),
+        ),
+        ("brown_threshold".into(), medium.brown_threshold.to_string()),
+    ]);
+    metadata
+}
+
+/// Reads what [`basis_metadata`] wrote; `value(key)` looks a key up. The error says which key
+/// is missing or invalid.
+pub fn parse_basis_metadata<'a>(
+    value: &dyn Fn(&str) -> Option<&'a str>,
+) -> Result<(MediumParams, BasisOptions), String> {
+    let get = |key: &str| {
+        value(key).ok_or_else(|| format!("metadata has no '{key}': not a basis written by sylva"))
+    };
+    let float = |key: &str, text: &str| {
+        text.trim()
+            .parse::<f64>()
+            .map_err(|_| format!("metadata '{key}' = '{text}' is not a number"))
+    };
+    let flag = |key: &str| match get(key)? {
+        "true" => Ok(true),
+        "false" => Ok(false),
+        v => Err(format!("metadata '{key}' = '{v}' is not true or false")),
+    };
+    let params = |key: &str| -> Result<ColourParams, String> {
+        let text = get(key)?;
+        let parts: Vec<&str> = text.split(',').collect();
+        let [a, s, g] = parts[..] else {
+            return Err(format!(
+                "metadata '{key}' = '{text}' is not sigma_a,sigma_s,g"
+            ));
+        };
+        Ok(ColourParams {
+            sigma_a: float(key, a)?,
+            sigma_s: float(key, s)?,
+            g: float(key, g)?,
+        })
+    };
+    let mut colours = [ColourParams {
+        sigma_a: 0.0,
+        sigma_s: 0.0,
+        g: 0.0,
+    }; 3];
+    for (p, name) in colours.iter_mut().zip(COLOUR_NAMES) {
+        *p = params(&format!("medium.{name}"))?;
+    }
+    // Brown sites' own coefficients, where the set was solved with them.
+    let brown = match value("medium.brown.red") {
+        None => None,
+        Some(_) => {
+            let mut b = colours;
+            for (p, name) in b.iter_mut().zip(COLOUR_NAMES) {
+                *p = params(&format!("medium.brown.{name}"))?;
+            }
+            Some(b)
+        }
+    };
+    let medium = MediumParams {
+        colours,
+        zero_f0_on_green: flag("zero_f0_on_green")?,
+        zero_f0_on_brown: flag("zero_f0_on_brown")?,
+        brown_threshold: float("brown_threshold", get("brown_threshold")?)?,
+        brown,
+    };
+    medium
+        .validate()
+        .map_err(|e| format!("medium in metadata: {e}"))?;
+    let ambient = match get("ambient")? {
+        "sum" => Ambient::Sum,
+        "solved" => Ambient::Solve,
+        v => return Err(format!("metadata 'ambient' = '{v}' is not sum or solved")),
+    };
+    let steps = get("steps")?;
+    let max_steps = steps
+        .parse::<usize>()
+        .ok()
+        .filter(|&s| s > 0)
+        .ok_or_else(|| format!("metadata 'steps' = '{steps}' is not a step count"))?;
+    let tolerance = match get("tolerance")? {
+        "none" => None,
+        t => Some(float("tolerance", t)?),
+    };
+    let options = BasisOptions {
+        solve: SolveOptions {
+            max_steps,
+            tolerance,
+        },
+        ambient,
+    };
+    Ok((medium, options))
 }
 
 /// Weights `w_j` of a combination `Σ_j w_j B_j` of the 19 base solutions.

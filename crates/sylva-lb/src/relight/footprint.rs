@@ -36,6 +36,28 @@ impl Placement {
     pub fn grid_coords(&self, p: [f32; 3]) -> [f32; 3] {
         std::array::from_fn(|a| (p[a] - self.origin[a]) * self.inv_cell[a])
     }
+
+    /// The model-space point of site `(0, 0, 0)`.
+    pub fn origin(&self) -> [f32; 3] {
+        self.origin
+    }
+
+    /// Sites per model-space unit along each axis (0 along a degenerate axis).
+    pub fn inv_cell(&self) -> [f32; 3] {
+        self.inv_cell
+    }
+
+    /// The model-space point at grid coordinates `g` (the inverse of
+    /// [`Placement::grid_coords`]; a degenerate axis stays at the origin).
+    pub fn model_point(&self, g: [f32; 3]) -> [f32; 3] {
+        std::array::from_fn(|a| {
+            if self.inv_cell[a] > 0.0 {
+                self.origin[a] + g[a] / self.inv_cell[a]
+            } else {
+                self.origin[a]
+            }
+        })
+    }
 }
 
 /// The lower corner of a trilinear lookup and the fractions towards the upper corner.
@@ -98,6 +120,8 @@ mod tests {
         let p = Placement::new(dims, bounds);
         assert_eq!(p.grid_coords(bounds.min), [0.0; 3]);
         assert_eq!(p.grid_coords(bounds.max), [4.0, 3.0, 6.0]);
+        assert_eq!(p.model_point([4.0, 3.0, 6.0]), bounds.max);
+        assert_eq!(p.model_point([0.0; 3]), bounds.min);
         let f = Footprint::at(dims, [4.0, 1.25, -3.0]);
         assert_eq!(f.corner, [3, 1, 0]);
         assert_eq!(f.t, [1.0, 0.25, 0.0]);

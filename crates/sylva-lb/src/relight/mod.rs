@@ -5,12 +5,14 @@
 //!   sun direction crosses with its barycentric weights, and the exact weights
 //!   `max(0, n_i · d)`.
 //! * [`basis`]: [`BasisSet`] (B_0 … B_18, three colours each), the driver that solves it through
-//!   any LB backend, [`BasisWeights`] and the uncompressed combination, and its file format.
+//!   any LB backend as independent jobs ([`BasisJob`]: one basis in one colour, for work
+//!   queues), [`BasisWeights`] and the uncompressed combination, and its file format.
 //! * [`footprint`]: model space to grid coordinates, and the 2×2×2 sites of a lookup.
 //! * [`region`]: the sites where light matters (in and near the medium), where compression
 //!   error is measured and where it is spent.
 //! * [`compress`]: Haar wavelets on 4³ blocks, PCA across the 57 channels, and both combined,
-//!   with footprint decoding for trilinear lookups and relighting in the reduced space.
+//!   with footprint decoding for trilinear lookups and relighting in the reduced space; the
+//!   compressed set's file (`.scbasis`, CRC-checked).
 //!
 //! **Normalisation.** [`BasisWeights::exact`] and [`BasisWeights::three_basis`] give weights of
 //! `B_1..B_18` that sum to 1. Each `B_j` holds exactly 1 at an unobstructed site (its boundary
@@ -30,11 +32,12 @@ use std::path::PathBuf;
 use thiserror::Error;
 
 pub use basis::{
-    solve_basis, Ambient, BasisOptions, BasisProgress, BasisReport, BasisSet, BasisWeights,
+    basis_metadata, parse_basis_metadata, solve_basis, solve_basis_jobs, Ambient, BasisAssembly,
+    BasisJob, BasisOptions, BasisProgress, BasisReport, BasisSet, BasisWeights,
 };
 pub use compress::{
     compress, relit_error, sky_directions, Codec, CompressTarget, CompressedBasis, ErrorReport,
-    Precision, ProjectedWeights,
+    Precision, ProjectedWeights, COMPRESSED_EXTENSION,
 };
 pub use footprint::{Footprint, Placement};
 pub use polyhedron::{exact_weights, face_hit, faces, DirectionError, Face, FaceHit};
@@ -133,4 +136,11 @@ pub enum RelightError {
     Format { path: PathBuf, what: String },
     #[error("compression target: {0}")]
     Target(String),
+    #[error(transparent)]
+    Container(#[from] sylva_core::container::ContainerError),
+    #[error("cannot write {}: {source}", .path.display())]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
 }

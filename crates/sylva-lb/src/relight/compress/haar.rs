@@ -34,6 +34,8 @@
 use half::f16;
 use rayon::prelude::*;
 
+use sylva_core::container::{ByteReader, ByteWriter};
+
 use super::{Precision, Values};
 use crate::grid::Dims;
 use crate::relight::footprint::Footprint;
@@ -485,6 +487,124 @@ impl HaarFields {
                 out[c] += w[c] * v;
             }
         }
+    }
+}
+
+impl HaarFields {
+    /// Appends the fields to a compressed basis file's payload.
+    pub(super) fn write_to(&self, w: &mut ByteWriter) {
+        w.u32(self.fields as u32);
+        for b in self.blocks {
+            w.u32(b as u32);
+        }
+        w.u32s(&self.starts);
+        w.u8s(&self.counts);
+        match &self.coefs {
+            Coefs::Split { indices, values } => {
+                w.u8(0);
+                w.u8s(indices);
+                values.write_to(w);
+            }
+            Coefs::Packed { words, steps } => {
+                w.u8(1);
+                w.u16s(words);
+                w.f32s(steps);
+            }
+        }
+    }
+
+    /// Reads what [`HaarFields::write_to`] wrote for a `dims` grid of `fields` fields, checking
+    /// every index a lookup will follow (block starts, counts, coefficient indices), so a
+    /// damaged file is an error here and never a panic later.
+    pub(super) fn read_from(
+        r: &mut ByteReader,
+        dims: Dims,
+        fields: usize,
+    ) -> Result<HaarFields, String> {
+        let stored = r.u32("Haar field count")? as usize;
+        if stored != fields {
+            return Err(format!(
+                "Haar store of {stored} fields, the map needs {fields}"
+            ));
+        }
+        let n = [dims.nx, dims.ny, dims.nz];
+        let blocks = n.map(|v| (v - 1).div_ceil(OWN));
+        for (a, &b) in blocks.iter().enumerate() {
+            let got = r.u32("Haar block counts")? as usize;
+            if got != b {
+                return Err(format!(
+                    "{got} Haar blocks along axis {a}, a {dims} grid has {b}"
+                ));
+            }
+        }
+        let count = blocks[0] * blocks[1] * blocks[2];
+        let starts = r.u32s("Haar block starts")?;
+        let counts = r.u8s("Haar coefficient counts")?;
+        if starts.len() != count + 1 || counts.len() != count * fields {
+            return Err(format!(
+                "{} block starts and {} counts for {count} blocks of {fields} fields",
+                starts.len(),
+                counts.len()
+            ));
+        }
+        if starts[0] != 0 {
+            return Err("the first Haar block does not start at 0".into());
+        }
+        for b in 0..count {
+            let kept: u32 = counts[b * fields..(b + 1) * fields]
+                .iter()
+                .map(|&c| c as u32)
+                .sum();
+            if counts[b * fields..(b + 1) * fields]
+                .iter()
+                .any(|&c| c as usize > BLOCK_VALUES)
+                || starts[b].checked_add(kept) != Some(starts[b + 1])
+            {
+                return Err(format!("Haar block {b}: counts and starts disagree"));
+            }
+        }
+        let total = starts[count] as usize;
+        let coefs = match r.u8("Haar coefficient format")? {
+            0 => {
+                let indices = r.u8s("Haar coefficient indices")?;
+                let values = Values::read_from(r, "Haar coefficient values")?;
+                if indices.len() != total || values.len() != total {
+                    return Err(format!(
+                        "{} indices and {} values for {total} coefficients",
+                        indices.len(),
+                        values.len()
+                    ));
+                }
+                if let Some(i) = indices.iter().position(|&i| i as usize >= BLOCK_VALUES) {
+                    return Err(format!("Haar coefficient {i} has index {}", indices[i]));
+                }
+                Coefs::Split { indices, values }
+            }
+            1 => {
+                let words = r.u16s("packed Haar coefficients")?;
+                let steps = r.f32s("packed Haar steps")?;
+                if words.len() != total || steps.len() != fields {
+                    return Err(format!(
+                        "{} packed coefficients for {total}, {} steps for {fields} fields",
+                        words.len(),
+                        steps.len()
+                    ));
+                }
+                if steps.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+                    return Err("a packed Haar step is not a positive finite number".into());
+                }
+                Coefs::Packed { words, steps }
+            }
+            t => return Err(format!("unknown Haar coefficient format {t}")),
+        };
+        Ok(HaarFields {
+            dims,
+            fields,
+            blocks,
+            starts,
+            counts,
+            coefs,
+        })
     }
 }
 

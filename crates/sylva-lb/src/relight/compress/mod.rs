@@ -20,8 +20,11 @@
 //! directions; combinations normalised to free-space 1, so the RMSE is a fraction of
 //! unobstructed sunlight.
 
+mod file;
 pub mod haar;
 pub mod pca;
+
+pub use file::COMPRESSED_EXTENSION;
 
 use half::f16;
 use rayon::prelude::*;
@@ -45,6 +48,24 @@ pub enum Precision {
 }
 
 impl Precision {
+    /// `f16`, `f32` or `packed`.
+    pub fn parse(s: &str) -> Option<Precision> {
+        Some(match s {
+            "f16" => Precision::F16,
+            "f32" => Precision::F32,
+            "packed" => Precision::Packed,
+            _ => return None,
+        })
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F16 => "f16",
+            Precision::F32 => "f32",
+            Precision::Packed => "packed",
+        }
+    }
+
     /// Bytes per stored value (a packed coefficient's index included).
     pub fn size(self) -> usize {
         match self {
@@ -85,6 +106,43 @@ impl Values {
             Values::F32(v) => v.len() as u64 * 4,
         }
     }
+
+    pub(crate) fn len(&self) -> usize {
+        match self {
+            Values::F16(v) => v.len(),
+            Values::F32(v) => v.len(),
+        }
+    }
+
+    /// A tag (0 f16, 1 f32) and the values.
+    pub(crate) fn write_to(&self, w: &mut sylva_core::container::ByteWriter) {
+        match self {
+            Values::F16(v) => {
+                w.u8(0);
+                w.u16s(&v.iter().map(|x| x.to_bits()).collect::<Vec<u16>>());
+            }
+            Values::F32(v) => {
+                w.u8(1);
+                w.f32s(v);
+            }
+        }
+    }
+
+    /// Reads what [`Values::write_to`] wrote; every value must be finite.
+    pub(crate) fn read_from(
+        r: &mut sylva_core::container::ByteReader,
+        what: &str,
+    ) -> Result<Values, String> {
+        let v = match r.u8(what)? {
+            0 => Values::F16(r.u16s(what)?.into_iter().map(f16::from_bits).collect()),
+            1 => Values::F32(r.f32s(what)?),
+            t => return Err(format!("{what}: unknown value format {t}")),
+        };
+        if let Some(i) = (0..v.len()).find(|&i| !v.get(i).is_finite()) {
+            return Err(format!("{what}: value {i} is {}", v.get(i)));
+        }
+        Ok(v)
+    }
 }
 
 /// Which codec, and how hard it compresses.
@@ -100,6 +158,36 @@ pub enum Codec {
     /// Per base solution, its three colours decorrelated (3 components each), then Haar
     /// wavelets on the 57 fields: the minor colour components are small and mostly dropped.
     ColourHaar { threshold: f64 },
+}
+
+impl Codec {
+    /// `haar:T`, `pca:K`, `pcahaar:K:T` or `colour:T` (see [`Codec::name`]).
+    pub fn parse(s: &str) -> Result<Codec, String> {
+        let parts: Vec<&str> = s.split(':').collect();
+        let bad = || format!("codec '{s}': expected haar:T, pca:K, pcahaar:K:T or colour:T");
+        let t = |v: &str| v.parse::<f64>().map_err(|_| bad());
+        let k = |v: &str| v.parse::<usize>().map_err(|_| bad());
+        Ok(match parts[..] {
+            ["haar", a] => Codec::Haar { threshold: t(a)? },
+            ["pca", a] => Codec::Pca { rank: k(a)? },
+            ["pcahaar", a, b] => Codec::PcaHaar {
+                rank: k(a)?,
+                threshold: t(b)?,
+            },
+            ["colour", a] => Codec::ColourHaar { threshold: t(a)? },
+            _ => return Err(bad()),
+        })
+    }
+
+    /// The form [`Codec::parse`] reads.
+    pub fn name(&self) -> String {
+        match *self {
+            Codec::Haar { threshold } => format!("haar:{threshold}"),
+            Codec::Pca { rank } => format!("pca:{rank}"),
+            Codec::PcaHaar { rank, threshold } => format!("pcahaar:{rank}:{threshold}"),
+            Codec::ColourHaar { threshold } => format!("colour:{threshold}"),
+        }
+    }
 }
 
 /// What to compress to.
@@ -122,7 +210,16 @@ impl CompressTarget {
         }
     }
 
-    fn validate(&self) -> Result<(), RelightError> {
+    /// The recommended target (docs/PERFORMANCE.md, "Relighting"): per-basis colour
+    /// decorrelation, Haar wavelets at threshold 0.004, packed coefficients.
+    pub fn recommended() -> CompressTarget {
+        CompressTarget {
+            precision: Precision::Packed,
+            ..CompressTarget::new(Codec::ColourHaar { threshold: 0.004 })
+        }
+    }
+
+    pub fn validate(&self) -> Result<(), RelightError> {
         let bad = |what: String| Err(RelightError::Target(what));
         let threshold_ok = |t: f64| !t.is_nan() && t >= 0.0;
         match self.codec {

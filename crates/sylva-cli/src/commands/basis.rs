@@ -1,0 +1,85 @@
+//! `sylva basis SCENE`: precomputes every model's 19 base solutions (paper 004 §3.1: 54
+//! solves per model, `B_0` summed), compresses and caches them, and the scene's coarse global
+//! grid; afterwards `sylva render` and `sylva relight` move the sun with no LB solve.
+
+use std::time::Instant;
+
+use anyhow::Result;
+use clap::Args;
+use sylva_render::{load_scene, precompute_relighting, LbPlan};
+
+use super::progress::{Bars, Report};
+use super::render::{report_line, FrameArgs};
+
+#[derive(Args, Debug)]
+pub struct BasisArgs {
+    /// The scene, the LB grid and cache, the solver (`--device gpu` solves on the GPU), the
+    /// compression (`--codec`, `--basis-precision`) and the global grid (`--no-global`,
+    /// `--global-grid`); view options are ignored.
+    #[command(flatten)]
+    pub frame: FrameArgs,
+    /// Also keep each model's uncompressed basis in the cache (57 × 4 bytes per site), which
+    /// `sylva bench relight` measures compression against.
+    #[arg(long)]
+    pub keep_raw: bool,
+    /// Print the independent solve jobs (model, base solution, colour) and stop: the work
+    /// list a distributed precompute hands out.
+    #[arg(long)]
+    pub list_jobs: bool,
+}
+
+pub fn run(a: BasisArgs) -> Result<()> {
+    let t0 = Instant::now();
+    let scene = load_scene(&a.frame.scene, None)?;
+    // Base solutions are the paper light's (004's boundary solves): basis sets it.
+    let light = a.frame.light_for(true)?;
+    let plan = a
+        .frame
+        .relight_plan(true, a.keep_raw, light)?
+        .expect("forced plans exist");
+    let grid = a.frame.lb_grid.unwrap_or(scene.lb.grid as usize);
+    if a.list_jobs {
+        println!("model\tbasis\tcolour");
+        for (m, model) in scene.models.iter().enumerate() {
+            let plan = sylva_render::relight::BasisPlan::new(model, grid, scene.model_preset(m))?;
+            for job in plan.jobs() {
+                println!("{m}\t{}\t{}", job.basis, job.colour);
+            }
+        }
+        return Ok(());
+    }
+    println!(
+        "scene {}: {} models, {} instances; LB grid {grid}, preset {}",
+        scene.name,
+        scene.models.len(),
+        scene.instances.len(),
+        scene.lb.preset
+    );
+    let solver = super::device::open_solver(a.frame.device, a.frame.precision)?;
+    println!("LB solver: {}", solver.describe());
+    let lb = LbPlan {
+        solver: &*solver,
+        grid: a.frame.lb_grid,
+        cache_dir: (!a.frame.no_cache).then_some(a.frame.cache_dir.as_path()),
+        light: sylva_render::Light::Paper,
+    };
+    let progress = Bars::new(|r: Report| {
+        let (line, warning) = report_line(r);
+        if let Some(w) = warning {
+            eprintln!("{w}");
+        }
+        println!("{line}");
+    });
+    let done = precompute_relighting(&scene, &lb, &plan, &progress)?
+        .expect("a forced plan solves what is missing");
+    let bytes: u64 = done.compressed.iter().flatten().map(|b| b.bytes()).sum();
+    println!(
+        "{} of {} models from the cache; compressed bases {} in all ({}); {:.1} s",
+        done.cached,
+        scene.models.len(),
+        sylva_core::format_bytes(bytes),
+        plan.target.codec.name(),
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(())
+}

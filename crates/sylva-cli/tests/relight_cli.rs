@@ -1,0 +1,152 @@
+//! `sylva basis`, `sylva render` with cached bases, `sylva relight` and `sylva bench relight`
+//! end to end on a small scene.
+
+mod common;
+
+use common::sylva;
+use std::fs;
+
+const SCENE: &str = r#"
+name = "roses"
+
+[[models]]
+name = "rose"
+species = "dogrose"
+
+[[instances]]
+model = "rose"
+position = [0.0, 0.0, 0.0]
+
+[[instances]]
+model = "rose"
+position = [1.6, 0.0, 0.8]
+rotation = 70.0
+
+[ground]
+size = [20.0, 20.0]
+
+[camera]
+position = [0.5, 2.5, -6.0]
+look_at = [0.5, 0.7, 0.0]
+fov = 40.0
+resolution = [40, 32]
+
+[lb]
+grid = 12
+"#;
+
+#[test]
+fn basis_then_render_and_relight_without_solves() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("roses.toml");
+    fs::write(&scene, SCENE).unwrap();
+    let scene = scene.to_str().unwrap();
+    let cache = dir.path().join("cache");
+    let cache = cache.to_str().unwrap();
+    let common = ["--cache-dir", cache, "--global-grid", "24"];
+
+    // The job list a distributed precompute hands out: 18 bases × 3 colours per model.
+    let (ok, stdout, stderr) = sylva(&["basis", scene, "--list-jobs"]);
+    assert!(ok, "{stderr}");
+    assert_eq!(stdout.lines().count(), 1 + 54, "{stdout}");
+
+    let mut args = vec!["basis", scene, "--device", "cpu"];
+    args.extend(common);
+    let (ok, stdout, stderr) = sylva(&args);
+    assert!(ok, "{stdout}{stderr}");
+    assert!(
+        stdout.contains("basis rose") && stdout.contains("solved"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("global grid"), "{stdout}");
+    // Again: all from the cache.
+    let (ok, stdout, _) = sylva(&args);
+    assert!(ok);
+    assert!(stdout.contains("1 of 1 models from the cache"), "{stdout}");
+
+    // `render --light paper` finds the bases and relights: nothing solved.
+    let out = dir.path().join("r.png");
+    let mut args = vec![
+        "render",
+        scene,
+        "--light",
+        "paper",
+        "-o",
+        out.to_str().unwrap(),
+    ];
+    args.extend(common);
+    let (ok, stdout, stderr) = sylva(&args);
+    assert!(ok, "{stdout}{stderr}");
+    assert!(stdout.contains("relit from base solutions"), "{stdout}");
+    assert!(
+        stdout.contains("from cache") && !stdout.contains("solved"),
+        "{stdout}"
+    );
+    assert!(out.is_file());
+    // The physical light (the default) has no bases: it solves for the sun, never shading
+    // the paper's bases as physical light; asking it for bases is an error.
+    let mut args = vec!["render", scene, "-o", out.to_str().unwrap()];
+    args.extend(common);
+    let (ok, stdout, stderr) = sylva(&args);
+    assert!(ok, "{stdout}{stderr}");
+    assert!(!stdout.contains("relit from base solutions"), "{stdout}");
+    args.extend(["--basis", "always"]);
+    let (ok, _, stderr) = sylva(&args);
+    assert!(!ok && stderr.contains("--light paper"), "{stderr}");
+
+    // `relight`: numbered frames and an animation, one line per frame.
+    let seq = dir.path().join("seq");
+    let mut args = vec![
+        "relight",
+        scene,
+        "--suns",
+        "4",
+        "--shadows",
+        "grid",
+        "-o",
+        seq.to_str().unwrap(),
+    ];
+    args.extend(common);
+    let (ok, stdout, stderr) = sylva(&args);
+    assert!(ok, "{stdout}{stderr}");
+    assert_eq!(stdout.matches("  frame ").count(), 4, "{stdout}");
+    for k in 0..4 {
+        let f = image::open(seq.join(format!("frame-{k:02}.png"))).unwrap();
+        assert_eq!((f.width(), f.height()), (40, 32));
+    }
+    let anim = fs::read(seq.join("roses.png")).unwrap();
+    assert!(anim.windows(4).any(|w| w == b"acTL"), "an animated PNG");
+    assert!(!stdout.contains("solved"), "{stdout}");
+
+    // The benchmark's JSON has the fields the issue asks for.
+    let mut args = vec![
+        "bench", "relight", scene, "--suns", "3", "--runs", "1", "--json",
+    ];
+    args.extend(common);
+    let (ok, stdout, stderr) = sylva(&args);
+    assert!(ok, "{stdout}{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    for key in [
+        "frame_seconds",
+        "basis_seconds",
+        "compressed_bytes",
+        "rmse",
+        "static_frame_seconds",
+        "frame_seconds_kd",
+        "frame_seconds_grid",
+    ] {
+        assert!(v.get(key).is_some_and(|x| !x.is_null()), "{key}: {stdout}");
+    }
+    let rmse = v["rmse"].as_f64().unwrap();
+    assert!((0.0..0.05).contains(&rmse), "{rmse}");
+
+    // Bad options are named.
+    let (ok, _, stderr) = sylva(&["relight", scene, "--basis", "never"]);
+    assert!(!ok && stderr.contains("--basis never"), "{stderr}");
+    let (ok, _, stderr) = sylva(&["relight", scene, "--light", "physical"]);
+    assert!(!ok && stderr.contains("--light physical"), "{stderr}");
+    let (ok, _, stderr) = sylva(&["basis", scene, "--codec", "zip:3"]);
+    assert!(!ok && stderr.contains("--codec"), "{stderr}");
+    let (ok, _, stderr) = sylva(&["relight", scene, "--ambient", "NaN"]);
+    assert!(!ok && stderr.contains("--ambient"), "{stderr}");
+}

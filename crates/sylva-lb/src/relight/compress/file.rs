@@ -1,0 +1,222 @@
+//! The compressed basis file (`.scbasis`): a [`CompressedBasis`] as it is held in memory, in
+//! sylva's checked container (`sylva_core::container`: header, CRC-32, atomic writes).
+//!
+//! Metadata: the medium and solve schedule (as in basis grid files), the codec, precision and
+//! far threshold, and whatever the caller adds (a cache key, the model's name). Payload,
+//! little-endian: dims (3 × u32), bounds (6 × f32), the map back to channels (tag 0 identity,
+//! or 1 linear: rank, 57 means, 57 × rank components), then the fields (tag 0 dense: field
+//! count and the values; or 1 Haar: field count, blocks per axis, block starts, counts per
+//! block and field, and the coefficients split or packed). Reading checks every length and
+//! index a lookup follows, so a damaged file is refused naming the problem, never a panic.
+
+use std::path::Path;
+
+use sylva_core::container::{read_container, write_container, ByteReader, ByteWriter};
+
+use super::haar::HaarFields;
+use super::{
+    Codec, CompressTarget, CompressedBasis, DenseFields, Precision, Store, Transform, Values,
+};
+use crate::grid::{Bounds, Dims};
+use crate::relight::basis::{basis_metadata, parse_basis_metadata};
+use crate::relight::{RelightError, CHANNELS};
+
+/// Extension of compressed basis files.
+pub const COMPRESSED_EXTENSION: &str = "scbasis";
+const MAGIC: &[u8; 8] = b"SYLVACBS";
+const VERSION: u32 = 1;
+const WHAT: &str = "compressed relighting basis file";
+
+impl CompressedBasis {
+    /// Writes the set atomically; `extra` metadata (`key=value`) is stored beside the
+    /// set's own.
+    pub fn write(&self, path: &Path, extra: &[(String, String)]) -> Result<(), RelightError> {
+        sylva_core::check_memory(&format!("writing {}", path.display()), self.bytes() * 2)?;
+        let mut metadata = vec![
+            ("format".to_string(), WHAT.to_string()),
+            ("codec".to_string(), self.target.codec.name()),
+            (
+                "precision".to_string(),
+                self.target.precision.name().to_string(),
+            ),
+            (
+                "far_threshold".to_string(),
+                self.target.far_threshold.to_string(),
+            ),
+        ];
+        metadata.extend(basis_metadata(&self.medium, &self.options));
+        metadata.extend(extra.iter().cloned());
+        let mut w = ByteWriter::new();
+        for n in [self.dims.nx, self.dims.ny, self.dims.nz] {
+            w.u32(n as u32);
+        }
+        for v in self.bounds.min.iter().chain(&self.bounds.max) {
+            w.f32(*v);
+        }
+        match &self.transform {
+            Transform::Identity => w.u8(0),
+            Transform::Linear {
+                mean,
+                components,
+                rank,
+            } => {
+                w.u8(1);
+                w.u32(*rank as u32);
+                w.f32s(mean);
+                w.f32s(components);
+            }
+        }
+        match &self.store {
+            Store::Dense(d) => {
+                w.u8(0);
+                w.u32(d.fields as u32);
+                d.values.write_to(&mut w);
+            }
+            Store::Haar(h) => {
+                w.u8(1);
+                h.write_to(&mut w);
+            }
+        }
+        write_container(path, MAGIC, VERSION, &metadata, &w.bytes).map_err(|source| {
+            RelightError::Write {
+                path: path.into(),
+                source,
+            }
+        })
+    }
+
+    /// Reads a file written by [`CompressedBasis::write`]: the set and the file's metadata.
+    /// Truncated, corrupted (CRC) or inconsistent files are refused with an error naming the
+    /// file and the problem.
+    pub fn read(path: &Path) -> Result<(CompressedBasis, Vec<(String, String)>), RelightError> {
+        let c = read_container(path, MAGIC, VERSION, WHAT)?;
+        let bad = |what: String| RelightError::Format {
+            path: path.into(),
+            what,
+        };
+        let (medium, options) = parse_basis_metadata(&|k| c.metadata_value(k)).map_err(&bad)?;
+        let get = |key: &str| {
+            c.metadata_value(key)
+                .ok_or_else(|| bad(format!("metadata has no '{key}'")))
+        };
+        let codec = Codec::parse(get("codec")?).map_err(&bad)?;
+        let precision = Precision::parse(get("precision")?)
+            .ok_or_else(|| bad("metadata 'precision' is not f16, f32 or packed".into()))?;
+        let far = get("far_threshold")?;
+        let far_threshold = far.parse::<f64>().map_err(|_| {
+            bad(format!(
+                "metadata 'far_threshold' = '{far}' is not a number"
+            ))
+        })?;
+        let target = CompressTarget {
+            codec,
+            precision,
+            far_threshold,
+        };
+        target.validate().map_err(|e| bad(e.to_string()))?;
+        let mut r = ByteReader::new(&c.payload);
+        let (transform, store, dims, bounds) = read_payload(&mut r, &target).map_err(&bad)?;
+        let set = CompressedBasis {
+            dims,
+            bounds,
+            medium,
+            options,
+            target,
+            transform,
+            store,
+        };
+        Ok((set, c.metadata))
+    }
+}
+
+fn read_payload(
+    r: &mut ByteReader,
+    target: &CompressTarget,
+) -> Result<(Transform, Store, Dims, Bounds), String> {
+    let mut n = [0usize; 3];
+    for v in &mut n {
+        *v = r.u32("grid size")? as usize;
+    }
+    let dims = Dims::new(n[0], n[1], n[2]).map_err(|e| e.to_string())?;
+    let mut b = [0f32; 6];
+    for v in &mut b {
+        *v = r.f32("bounds")?;
+    }
+    if b.iter().any(|v| !v.is_finite()) || (0..3).any(|a| b[a] > b[a + 3]) {
+        return Err(format!("bounds {b:?} are not a finite box"));
+    }
+    let bounds = Bounds {
+        min: [b[0], b[1], b[2]],
+        max: [b[3], b[4], b[5]],
+    };
+    let transform = match r.u8("channel map")? {
+        0 => Transform::Identity,
+        1 => {
+            let rank = r.u32("rank")? as usize;
+            if !(1..=CHANNELS).contains(&rank) {
+                return Err(format!("rank {rank} is not in 1..={CHANNELS}"));
+            }
+            let mean = r.f32s("channel means")?;
+            let components = r.f32s("components")?;
+            if mean.len() != CHANNELS || components.len() != CHANNELS * rank {
+                return Err(format!(
+                    "{} means and {} components for rank {rank}",
+                    mean.len(),
+                    components.len()
+                ));
+            }
+            if mean.iter().chain(&components).any(|v| !v.is_finite()) {
+                return Err("a mean or component is not finite".into());
+            }
+            Transform::Linear {
+                mean,
+                components,
+                rank,
+            }
+        }
+        t => return Err(format!("unknown channel map {t}")),
+    };
+    let fields = match &transform {
+        Transform::Identity => CHANNELS,
+        Transform::Linear { rank, .. } => *rank,
+    };
+    let store = match r.u8("field store")? {
+        0 => {
+            let stored = r.u32("field count")? as usize;
+            let values = Values::read_from(r, "field values")?;
+            if stored != fields || values.len() != fields * dims.sites() {
+                return Err(format!(
+                    "{} values of {stored} fields; a {dims} grid of {fields} fields needs {}",
+                    values.len(),
+                    fields * dims.sites()
+                ));
+            }
+            Store::Dense(DenseFields {
+                dims,
+                fields,
+                values,
+            })
+        }
+        1 => Store::Haar(HaarFields::read_from(r, dims, fields)?),
+        t => return Err(format!("unknown field store {t}")),
+    };
+    r.finish()?;
+    let consistent = match (target.codec, &transform, &store) {
+        (Codec::Haar { .. }, Transform::Identity, Store::Haar(_)) => true,
+        (Codec::Pca { rank }, Transform::Linear { rank: k, .. }, Store::Dense(_)) => rank == *k,
+        (Codec::PcaHaar { rank, .. }, Transform::Linear { rank: k, .. }, Store::Haar(_)) => {
+            rank == *k
+        }
+        (Codec::ColourHaar { .. }, Transform::Linear { rank, .. }, Store::Haar(_)) => {
+            *rank == CHANNELS
+        }
+        _ => false,
+    };
+    if !consistent {
+        return Err(format!(
+            "the stored fields do not match the codec {}",
+            target.codec.name()
+        ));
+    }
+    Ok((transform, store, dims, bounds))
+}

@@ -1,0 +1,538 @@
+//! Per model, its 19 base solutions (004 §3.1): voxelized, solved on any [`LbSolver`] as
+//! independent jobs, compressed, and cached on disk like the per-sun lighting.
+//!
+//! * **Jobs.** [`BasisPlan`] holds what a model's basis depends on (its density grid, the
+//!   medium, the schedule) and lists the solves as [`BasisJob`]s (one base solution in one
+//!   colour); [`BasisPlan::run`] runs any of them on a solver, [`BasisPlan::assembly`]
+//!   collects results from anywhere. A distributed precompute hands out jobs and gathers
+//!   `(job, values)` pairs; [`model_basis`] runs them all in order.
+//! * **Cache.** The compressed set is what is cached (`<model>-<key>.scbasis`,
+//!   `sylva_lb::relight::CompressedBasis::write`: CRC-checked, atomic). The key hashes the
+//!   model and medium ([`crate::lighting`]'s rules), the grid, the solve schedule, the solver
+//!   backend's cache tag and the compression target; it is stored in the file and checked on
+//!   reading, with the dimensions and bounds. With [`BasisCacheOptions::keep_raw`] the
+//!   uncompressed set is kept as well (`<model>-<key>.sbasis`, a kind-3 grid file, f32): what
+//!   compression error is measured against. A damaged or stale entry is reported, solved
+//!   again and replaced. Each entry records how long its solves took.
+//! * **Lookup only.** With no solver, [`model_basis`] only reads the cache, under the tag of
+//!   any backend (a basis solved on the GPU serves a CPU render), and returns `None` when
+//!   there is no valid entry: the render then solves for its sun as before.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use sylva_core::Fnv64;
+use sylva_geom::Model;
+use sylva_lb::relight::{
+    compress, solve_basis_jobs, BasisAssembly, BasisJob, BasisOptions, BasisProgress, BasisSet,
+    CompressTarget, CompressedBasis, Region, COMPRESSED_EXTENSION,
+};
+use sylva_lb::solver::SolveOptions;
+use sylva_lb::{DensityGrid, Dims, Element, GridFile, LbSolver, MediumParams};
+use sylva_voxel::{placement_for, voxelize, VoxelizeOptions};
+
+use crate::lighting::{
+    hash_model_medium, preset_medium, LightingError, LightingOptions, LightingSource,
+    CACHE_VERSION, KEY_METADATA, PAPER_OCCUPANCY,
+};
+
+/// Extension of uncompressed basis cache entries.
+pub const RAW_EXTENSION: &str = "sbasis";
+/// Metadata key of the seconds the solves of an entry took.
+pub const SOLVE_SECONDS_METADATA: &str = "solve_seconds";
+/// Solver cache tags a lookup-only read tries, after the current solver's.
+const KNOWN_TAGS: [&str; 3] = ["cpu", "gpu-f32", "gpu-f16"];
+
+/// How models' base solutions are made and kept.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BasisCacheOptions {
+    /// Sites along each model's longest edge (scene `[lb] grid`).
+    pub grid: usize,
+    /// LB preset name (scene `[lb] preset`).
+    pub preset: String,
+    /// The cache; `None`: always solve, write nothing.
+    pub cache_dir: Option<PathBuf>,
+    /// What the stored set is compressed to.
+    pub target: CompressTarget,
+    /// Also keep the uncompressed set (read and written; 57 × 4 bytes per site).
+    pub keep_raw: bool,
+}
+
+impl BasisCacheOptions {
+    /// The recommended compression, no uncompressed copy.
+    pub fn new(lighting: &LightingOptions) -> BasisCacheOptions {
+        BasisCacheOptions {
+            grid: lighting.grid,
+            preset: lighting.preset.clone(),
+            cache_dir: lighting.cache_dir.clone(),
+            target: CompressTarget::recommended(),
+            keep_raw: false,
+        }
+    }
+}
+
+/// A model's basis: the compressed set the renderer reads, and on request the uncompressed one.
+#[derive(Debug, Clone)]
+pub struct ModelBasis {
+    pub compressed: CompressedBasis,
+    pub raw: Option<BasisSet>,
+    /// The density grid, when this call voxelized the model (the coarse global grid
+    /// resamples it).
+    pub density: Option<DensityGrid>,
+}
+
+/// What [`model_basis`] did.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BasisReport {
+    /// Where the compressed set came from.
+    pub source: LightingSource,
+    /// Wall-clock seconds of the call.
+    pub seconds: f64,
+    /// Seconds the base solutions' solves took: measured now, or as recorded in the cache
+    /// entry when it was solved.
+    pub solve_seconds: Option<f64>,
+    /// The compressed cache entry (read or written).
+    pub path: Option<PathBuf>,
+    pub dims: Dims,
+    /// Bytes of the uncompressed set (57 f32 per site) and of the compressed one.
+    pub raw_bytes: u64,
+    pub compressed_bytes: u64,
+}
+
+/// The cache key of a model's uncompressed basis solved on a backend tagged `solver_tag`.
+pub fn basis_key(
+    model: &Model,
+    grid: usize,
+    medium: &MediumParams,
+    options: &BasisOptions,
+    solver_tag: &str,
+) -> u64 {
+    let mut h = Fnv64::new();
+    h.str("sylva-render relighting basis");
+    h.u64(CACHE_VERSION as u64);
+    h.str(solver_tag);
+    hash_model_medium(&mut h, model, grid, medium, PAPER_OCCUPANCY);
+    h.u64(options.solve.max_steps as u64);
+    h.f64(options.solve.tolerance.unwrap_or(0.0));
+    h.u64(options.ambient as u64);
+    h.finish()
+}
+
+/// The cache key of the compressed set made from the basis of key `raw` with `target`.
+pub fn compressed_key(raw: u64, target: &CompressTarget) -> u64 {
+    let mut h = Fnv64::new();
+    h.str("sylva-render compressed basis");
+    h.u64(raw);
+    h.str(&target.codec.name());
+    h.str(target.precision.name());
+    h.f64(target.far_threshold);
+    // The region compression spends its bits on (see `region_of`).
+    h.str("near_medium(1).with_floor(2)");
+    h.finish()
+}
+
+/// The cache entry of `model` under `key` with extension `ext`.
+pub fn basis_path(dir: &Path, model: &Model, key: u64, ext: &str) -> PathBuf {
+    dir.join(format!(
+        "{}-{key:016x}.{ext}",
+        sylva_core::file_stem(&model.name, "model")
+    ))
+}
+
+/// Where the renderer reads a model's light: in and next to the medium, and the lowest two
+/// layers (the ground under the tree). Compression spends its bits there.
+pub fn region_of(density: &DensityGrid) -> Region {
+    Region::near_medium(density, 1).with_floor(2)
+}
+
+/// What a model's basis depends on, and its solves as independent jobs.
+#[derive(Debug, Clone)]
+pub struct BasisPlan {
+    pub model: String,
+    pub density: DensityGrid,
+    pub medium: MediumParams,
+    pub options: BasisOptions,
+}
+
+impl BasisPlan {
+    /// Voxelizes `model` at `grid` sites along its longest edge; the medium from `preset`,
+    /// the papers' schedule, `B_0` summed.
+    pub fn new(model: &Model, grid: usize, preset: &str) -> Result<BasisPlan, LightingError> {
+        let medium = preset_medium(preset)?;
+        let placement = placement_for(model, grid)?;
+        sylva_core::check_memory(
+            &format!(
+                "voxelizing model '{}' on a {} grid",
+                model.name, placement.dims
+            ),
+            sylva_voxel::memory_needed(placement.dims),
+        )?;
+        let density = voxelize(
+            model,
+            &VoxelizeOptions {
+                grid,
+                alpha_test: true,
+                occupancy: PAPER_OCCUPANCY,
+            },
+        )?;
+        let options = basis_options(density.dims);
+        Ok(BasisPlan {
+            model: model.name.clone(),
+            density,
+            medium,
+            options,
+        })
+    }
+
+    /// Every solve of the basis, basis-major ([`BasisJob::all`]).
+    pub fn jobs(&self) -> Vec<BasisJob> {
+        BasisJob::all(&self.medium, &self.options)
+    }
+
+    /// Runs `jobs` (any subset, any order) on `solver`: the jobs of one base solution in one
+    /// call. Returns each job's site values. `progress(job index, step)` follows the solves.
+    pub fn run(
+        &self,
+        jobs: &[BasisJob],
+        solver: &dyn LbSolver,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<Vec<(BasisJob, Vec<f32>)>, LightingError> {
+        let mut out = Vec::with_capacity(jobs.len());
+        let mut k = 0;
+        while k < jobs.len() {
+            // A run of jobs of one basis, each colour once, goes in one call.
+            let mut end = k + 1;
+            while end < jobs.len()
+                && jobs[end].basis == jobs[k].basis
+                && !jobs[k..end].iter().any(|j| j.colour == jobs[end].colour)
+            {
+                end += 1;
+            }
+            let group = &jobs[k..end];
+            let results = solve_basis_jobs(
+                &self.density,
+                &self.medium,
+                &self.options,
+                group,
+                |g: &DensityGrid,
+                 m: &MediumParams,
+                 b: sylva_lb::Boundary,
+                 o: &SolveOptions,
+                 p: &mut dyn FnMut(usize, usize, f64)| {
+                    solver.solve_lighting(g, m, b, o, p)
+                },
+                &mut |colour, step| {
+                    let i = group.iter().position(|j| j.colour == colour).unwrap_or(0);
+                    progress(k + i, step)
+                },
+            )?;
+            out.extend(results.into_iter().map(|(job, values, _)| (job, values)));
+            k = end;
+        }
+        Ok(out)
+    }
+
+    /// An empty assembly for this basis: insert `(job, values)` from anywhere, then finish.
+    pub fn assembly(&self) -> Result<BasisAssembly, LightingError> {
+        Ok(BasisAssembly::new(
+            self.density.dims,
+            self.density.bounds,
+            &self.medium,
+            &self.options,
+        )?)
+    }
+}
+
+/// The solve schedule of basis sets: the papers' 2 × the longest edge, `B_0` summed.
+fn basis_options(dims: Dims) -> BasisOptions {
+    BasisOptions::papers(dims)
+}
+
+/// Reads the compressed entry at `path`; `Err` is why it is unusable, naming the file.
+fn read_compressed(
+    path: &Path,
+    key: u64,
+    dims: Dims,
+    bounds: sylva_lb::Bounds,
+) -> Result<(CompressedBasis, Option<f64>, u64), String> {
+    let (set, meta) = CompressedBasis::read(path).map_err(|e| e.to_string())?;
+    let shown = path.display();
+    let value = |k: &str| meta.iter().find(|(m, _)| m == k).map(|(_, v)| v.as_str());
+    check_key(&shown.to_string(), value(KEY_METADATA), key)?;
+    if set.dims != dims || set.bounds != bounds {
+        return Err(format!(
+            "{shown} holds a {} grid over {:?}..{:?}, the model needs {dims} over {:?}..{:?}",
+            set.dims, set.bounds.min, set.bounds.max, bounds.min, bounds.max
+        ));
+    }
+    let seconds = value(SOLVE_SECONDS_METADATA).and_then(|v| v.parse().ok());
+    let raw_bytes = value("raw_bytes").and_then(|v| v.parse().ok()).unwrap_or(0);
+    Ok((set, seconds, raw_bytes))
+}
+
+/// Reads the uncompressed entry at `path`; `Err` is why it is unusable, naming the file.
+fn read_raw(
+    path: &Path,
+    key: u64,
+    dims: Dims,
+    bounds: sylva_lb::Bounds,
+) -> Result<(BasisSet, Option<f64>), String> {
+    let file = GridFile::read(path).map_err(|e| e.to_string())?;
+    let shown = path.display().to_string();
+    check_key(&shown, file.metadata_value(KEY_METADATA), key)?;
+    let seconds = file
+        .metadata_value(SOLVE_SECONDS_METADATA)
+        .and_then(|v| v.parse().ok());
+    let set = BasisSet::from_grid_file(file, path).map_err(|e| e.to_string())?;
+    if set.dims != dims || set.bounds != bounds {
+        return Err(format!(
+            "{shown} holds a {} grid, the model needs {dims}",
+            set.dims
+        ));
+    }
+    Ok((set, seconds))
+}
+
+fn check_key(shown: &str, found: Option<&str>, key: u64) -> Result<(), String> {
+    let want = format!("{key:016x}");
+    match found {
+        Some(k) if k == want => Ok(()),
+        Some(k) => Err(format!(
+            "{shown} is stale: its cache key is {k}, expected {want}"
+        )),
+        None => Err(format!("{shown} has no cache key: not a basis cache entry")),
+    }
+}
+
+/// One model's basis: from the cache when it holds a valid entry; otherwise, with a solver,
+/// voxelized, solved (every job of [`BasisPlan::jobs`]), compressed and (with a cache)
+/// stored. Without a solver only the cache is read, and `None` means there is no valid entry.
+/// `progress` counts jobs and steps.
+pub fn model_basis(
+    model: &Model,
+    opts: &BasisCacheOptions,
+    solver: Option<&dyn LbSolver>,
+    progress: &mut dyn FnMut(BasisProgress),
+) -> Result<Option<(ModelBasis, BasisReport)>, LightingError> {
+    let t0 = Instant::now();
+    let medium = preset_medium(&opts.preset)?;
+    opts.target.validate()?;
+    let placement = placement_for(model, opts.grid)?;
+    let (dims, bounds) = (placement.dims, placement.bounds());
+    let options = basis_options(dims);
+    let raw_bytes_of = |d: Dims| BasisSet::memory_needed(d);
+
+    let mut tags: Vec<String> = Vec::new();
+    if let Some(s) = solver {
+        tags.push(s.cache_tag());
+    } else {
+        tags.extend(KNOWN_TAGS.iter().map(|t| t.to_string()));
+    }
+    let mut source = LightingSource::Computed;
+    if let Some(dir) = &opts.cache_dir {
+        std::fs::create_dir_all(dir).map_err(|source| LightingError::CacheDir {
+            dir: dir.clone(),
+            source,
+        })?;
+        for tag in &tags {
+            let rkey = basis_key(model, opts.grid, &medium, &options, tag);
+            let ckey = compressed_key(rkey, &opts.target);
+            let cpath = basis_path(dir, model, ckey, COMPRESSED_EXTENSION);
+            let rpath = basis_path(dir, model, rkey, RAW_EXTENSION);
+            let raw = if opts.keep_raw {
+                match rpath.try_exists() {
+                    Ok(true) => match read_raw(&rpath, rkey, dims, bounds) {
+                        Ok(r) => Some(r),
+                        Err(reason) => {
+                            source = LightingSource::Recomputed { reason };
+                            continue;
+                        }
+                    },
+                    _ => continue,
+                }
+            } else {
+                None
+            };
+            let compressed = match cpath.try_exists() {
+                Ok(true) => match read_compressed(&cpath, ckey, dims, bounds) {
+                    Ok(c) => Some(c),
+                    Err(reason) => {
+                        if raw.is_none() {
+                            source = LightingSource::Recomputed { reason };
+                            continue;
+                        }
+                        None
+                    }
+                },
+                Ok(false) => None,
+                Err(e) => {
+                    if raw.is_none() {
+                        source = LightingSource::Recomputed {
+                            reason: format!("cannot read {}: {e}", cpath.display()),
+                        };
+                        continue;
+                    }
+                    None
+                }
+            };
+            match (compressed, raw) {
+                (Some((c, seconds, _)), raw) => {
+                    let report = BasisReport {
+                        source: LightingSource::Cached,
+                        seconds: t0.elapsed().as_secs_f64(),
+                        solve_seconds: seconds.or(raw.as_ref().and_then(|r| r.1)),
+                        path: Some(cpath),
+                        dims,
+                        raw_bytes: raw_bytes_of(dims),
+                        compressed_bytes: c.bytes(),
+                    };
+                    let basis = ModelBasis {
+                        compressed: c,
+                        raw: raw.map(|r| r.0),
+                        density: None,
+                    };
+                    return Ok(Some((basis, report)));
+                }
+                (None, Some((raw, seconds))) => {
+                    // The uncompressed set is there: compress it again (no solve).
+                    let density = BasisPlan::new(model, opts.grid, &opts.preset)?.density;
+                    let c = compress(&raw, &region_of(&density), &opts.target)?;
+                    write_compressed(&c, &cpath, ckey, model, opts, seconds, solver)?;
+                    let report = BasisReport {
+                        source: LightingSource::Cached,
+                        seconds: t0.elapsed().as_secs_f64(),
+                        solve_seconds: seconds,
+                        path: Some(cpath),
+                        dims,
+                        raw_bytes: raw_bytes_of(dims),
+                        compressed_bytes: c.bytes(),
+                    };
+                    let basis = ModelBasis {
+                        compressed: c,
+                        raw: Some(raw),
+                        density: Some(density),
+                    };
+                    return Ok(Some((basis, report)));
+                }
+                (None, None) => {}
+            }
+        }
+    }
+    let Some(solver) = solver else {
+        return Ok(None);
+    };
+
+    let plan = BasisPlan::new(model, opts.grid, &opts.preset)?;
+    debug_assert_eq!(plan.density.dims, dims);
+    let jobs = plan.jobs();
+    let max_steps = plan.options.solve.max_steps;
+    let solve_start = Instant::now();
+    let mut assembly = plan.assembly()?;
+    let results = plan.run(&jobs, solver, &mut |k, step| {
+        progress(BasisProgress {
+            done: k,
+            solves: jobs.len(),
+            basis: jobs[k].basis,
+            colour: jobs[k].colour,
+            step,
+            max_steps,
+        })
+    })?;
+    for (job, values) in results {
+        assembly.insert(job, values)?;
+    }
+    let raw = assembly.finish()?;
+    let solve_seconds = solve_start.elapsed().as_secs_f64();
+    let compressed = compress(&raw, &region_of(&plan.density), &opts.target)?;
+    let mut path = None;
+    if let Some(dir) = &opts.cache_dir {
+        let rkey = basis_key(
+            model,
+            opts.grid,
+            &plan.medium,
+            &plan.options,
+            &solver.cache_tag(),
+        );
+        let ckey = compressed_key(rkey, &opts.target);
+        let cpath = basis_path(dir, model, ckey, COMPRESSED_EXTENSION);
+        write_compressed(
+            &compressed,
+            &cpath,
+            ckey,
+            model,
+            opts,
+            Some(solve_seconds),
+            Some(solver),
+        )?;
+        if opts.keep_raw {
+            let rpath = basis_path(dir, model, rkey, RAW_EXTENSION);
+            let mut file = raw.to_grid_file(Element::F32);
+            file.metadata.extend([
+                (KEY_METADATA.to_string(), format!("{rkey:016x}")),
+                ("source".to_string(), model.name.clone()),
+                (
+                    SOLVE_SECONDS_METADATA.to_string(),
+                    format!("{solve_seconds:.3}"),
+                ),
+                ("solver".to_string(), solver.describe()),
+            ]);
+            sylva_core::check_memory(
+                &format!("writing {}", rpath.display()),
+                BasisSet::memory_needed(dims) * 2,
+            )?;
+            file.write(&rpath).map_err(|e| LightingError::CacheWrite {
+                path: rpath.clone(),
+                source: std::io::Error::other(e.to_string()),
+            })?;
+        }
+        path = Some(cpath);
+    }
+    let report = BasisReport {
+        source,
+        seconds: t0.elapsed().as_secs_f64(),
+        solve_seconds: Some(solve_seconds),
+        path,
+        dims,
+        raw_bytes: raw_bytes_of(dims),
+        compressed_bytes: compressed.bytes(),
+    };
+    let basis = ModelBasis {
+        compressed,
+        raw: opts.keep_raw.then_some(raw),
+        density: Some(plan.density),
+    };
+    Ok(Some((basis, report)))
+}
+
+fn write_compressed(
+    c: &CompressedBasis,
+    path: &Path,
+    key: u64,
+    model: &Model,
+    opts: &BasisCacheOptions,
+    solve_seconds: Option<f64>,
+    solver: Option<&dyn LbSolver>,
+) -> Result<(), LightingError> {
+    let mut meta = vec![
+        (KEY_METADATA.to_string(), format!("{key:016x}")),
+        ("source".to_string(), model.name.clone()),
+        ("preset".to_string(), opts.preset.clone()),
+        ("grid".to_string(), opts.grid.to_string()),
+        (
+            "raw_bytes".to_string(),
+            BasisSet::memory_needed(c.dims).to_string(),
+        ),
+    ];
+    if let Some(s) = solve_seconds {
+        meta.push((SOLVE_SECONDS_METADATA.to_string(), format!("{s:.3}")));
+    }
+    if let Some(s) = solver {
+        meta.push(("solver".to_string(), s.describe()));
+    }
+    c.write(path, &meta).map_err(|e| match e {
+        sylva_lb::relight::RelightError::Write { path, source } => {
+            LightingError::CacheWrite { path, source }
+        }
+        e => e.into(),
+    })
+}

@@ -1,0 +1,281 @@
+//! [`RelitLight`]: the indirect light of every instance as a combination of its model's base
+//! solutions, weighted for the sun in the instance's own model space (004 §3.1), scaled by the
+//! coarse global grid (004 §3.2). Moving the sun recomputes the per-instance weights (a few
+//! hundred small dot products), never an LB solve.
+
+use glam::{Affine3A, Vec3};
+use sylva_core::colour::luminance;
+use sylva_geom::{Aabb, Model};
+use sylva_lb::relight::{
+    BasisSet, BasisWeights, CompressedBasis, Placement, ProjectedWeights, RelightError,
+};
+use sylva_lb::{Bounds, Dims};
+use sylva_trace::TraceInstance;
+
+use super::global::{GlobalLight, InstanceScale};
+use super::weights::RelitIllumination;
+use crate::indirect::{ground_shade, GroundIndex, IndirectLight};
+
+/// A model's stored fields: its base solutions, uncompressed or compressed.
+// One per model, held in place: the variants' header sizes do not matter.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone)]
+pub enum StoredBasis {
+    Full(BasisSet),
+    Compressed(CompressedBasis),
+}
+
+/// Weights made for one [`StoredBasis`] ([`StoredBasis::project`]).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ProjectedLight {
+    Full(BasisWeights),
+    Compressed(ProjectedWeights),
+}
+
+impl StoredBasis {
+    pub fn dims(&self) -> Dims {
+        match self {
+            StoredBasis::Full(b) => b.dims,
+            StoredBasis::Compressed(c) => c.dims,
+        }
+    }
+
+    pub fn bounds(&self) -> Bounds {
+        match self {
+            StoredBasis::Full(b) => b.bounds,
+            StoredBasis::Compressed(c) => c.bounds,
+        }
+    }
+
+    /// Bytes of stored fields.
+    pub fn bytes(&self) -> u64 {
+        match self {
+            StoredBasis::Full(b) => BasisSet::memory_needed(b.dims),
+            StoredBasis::Compressed(c) => c.bytes(),
+        }
+    }
+
+    /// `w` in the form a lookup reads (for compressed sets: folded into the fields).
+    pub fn project(&self, w: &BasisWeights) -> ProjectedLight {
+        match self {
+            StoredBasis::Full(_) => ProjectedLight::Full(*w),
+            StoredBasis::Compressed(c) => ProjectedLight::Compressed(c.project(w)),
+        }
+    }
+
+    /// The combination at grid coordinates `g` (trilinear, clamped to the grid). `w` must
+    /// come from this set's [`StoredBasis::project`].
+    #[inline]
+    pub fn sample_grid(&self, g: [f32; 3], w: &ProjectedLight) -> [f32; 3] {
+        match (self, w) {
+            (StoredBasis::Full(b), ProjectedLight::Full(w)) => b.sample(g, w),
+            (StoredBasis::Compressed(c), ProjectedLight::Compressed(w)) => c.sample_grid(g, w),
+            _ => panic!("weights projected for another kind of stored basis"),
+        }
+    }
+}
+
+/// Per instance: its projected weights, or none (its model has no basis).
+#[derive(Debug, Clone)]
+struct InstanceLight {
+    model: u32,
+    to_model: Affine3A,
+    weights: Option<ProjectedLight>,
+}
+
+/// Indirect light from base solutions, per instance and sun.
+#[derive(Debug)]
+pub struct RelitLight {
+    /// Per model: its stored basis and placement (or none: no indirect light on it).
+    models: Vec<Option<(StoredBasis, Placement)>>,
+    model_bounds: Vec<Aabb>,
+    instances: Vec<InstanceLight>,
+    /// `(model, world → model)` per instance, for the ground's shade.
+    placed: Vec<(u32, Affine3A)>,
+    ground_index: GroundIndex,
+    global: Option<GlobalLight>,
+    scales: Vec<InstanceScale>,
+    illumination: RelitIllumination,
+}
+
+impl RelitLight {
+    /// `bases[m]` is model `m`'s stored basis (`None`: no indirect light on it); `instances`
+    /// as traced; `global` the coarse grid's answer for these instances, if any. The weights
+    /// are made for `illumination` at once.
+    pub fn new(
+        bases: Vec<Option<StoredBasis>>,
+        models: &[Model],
+        instances: &[TraceInstance],
+        global: Option<GlobalLight>,
+        illumination: RelitIllumination,
+    ) -> Result<RelitLight, RelightError> {
+        if bases.len() != models.len() {
+            return Err(RelightError::Mismatch(format!(
+                "{} bases for {} models",
+                bases.len(),
+                models.len()
+            )));
+        }
+        if let Some(g) = &global {
+            if g.instances() != instances.len() {
+                return Err(RelightError::Mismatch(format!(
+                    "the global grid was solved for {} instances, the scene has {}",
+                    g.instances(),
+                    instances.len()
+                )));
+            }
+        }
+        let models_placed: Vec<Option<(StoredBasis, Placement)>> = bases
+            .into_iter()
+            .map(|b| {
+                b.map(|b| {
+                    let p = Placement::new(b.dims(), b.bounds());
+                    (b, p)
+                })
+            })
+            .collect();
+        let ground_index = if models_placed.iter().any(Option::is_some) {
+            GroundIndex::new(instances)
+        } else {
+            GroundIndex::default()
+        };
+        let mut light = RelitLight {
+            models: models_placed,
+            model_bounds: models.iter().map(|m| m.bounds).collect(),
+            instances: instances
+                .iter()
+                .map(|i| InstanceLight {
+                    model: i.model,
+                    to_model: i.to_model,
+                    weights: None,
+                })
+                .collect(),
+            placed: instances.iter().map(|i| (i.model, i.to_model)).collect(),
+            ground_index,
+            global,
+            scales: Vec::new(),
+            illumination,
+        };
+        light.relight(illumination)?;
+        Ok(light)
+    }
+
+    /// Makes every instance's weights for `illumination`: the sun taken into its model space,
+    /// the global grid's scales applied. No LB solve.
+    pub fn relight(&mut self, illumination: RelitIllumination) -> Result<(), RelightError> {
+        illumination
+            .validate()
+            .map_err(|e| RelightError::Mismatch(format!("illumination: {e}")))?;
+        self.scales = match &self.global {
+            Some(g) => g.scales(&illumination.weights(&Affine3A::IDENTITY)?),
+            None => vec![InstanceScale::ONE; self.instances.len()],
+        };
+        for (inst, scale) in self.instances.iter_mut().zip(&self.scales) {
+            inst.weights = match &self.models[inst.model as usize] {
+                Some((basis, _)) => {
+                    let w = illumination.weights(&inst.to_model)?;
+                    Some(basis.project(&scale.apply(&w)?))
+                }
+                None => None,
+            };
+        }
+        self.illumination = illumination;
+        Ok(())
+    }
+
+    /// Replaces the stored fields with `bases` (the same models on the same grids, e.g. the
+    /// uncompressed sets for the compressed ones) and makes the weights again; returns the
+    /// fields it held.
+    pub fn swap_bases(
+        &mut self,
+        bases: Vec<Option<StoredBasis>>,
+    ) -> Result<Vec<Option<StoredBasis>>, RelightError> {
+        if bases.len() != self.models.len() {
+            return Err(RelightError::Mismatch(format!(
+                "{} bases for {} models",
+                bases.len(),
+                self.models.len()
+            )));
+        }
+        for (m, (new, old)) in bases.iter().zip(&self.models).enumerate() {
+            let same = match (new, old) {
+                (Some(n), Some((o, _))) => n.dims() == o.dims() && n.bounds() == o.bounds(),
+                (None, None) => true,
+                _ => false,
+            };
+            if !same {
+                return Err(RelightError::Mismatch(format!(
+                    "model {m}: the replacement basis is not on the same grid"
+                )));
+            }
+        }
+        let old = std::mem::replace(
+            &mut self.models,
+            bases
+                .into_iter()
+                .map(|b| {
+                    b.map(|b| {
+                        let p = Placement::new(b.dims(), b.bounds());
+                        (b, p)
+                    })
+                })
+                .collect(),
+        );
+        self.relight(self.illumination)?;
+        Ok(old.into_iter().map(|b| b.map(|b| b.0)).collect())
+    }
+
+    pub fn illumination(&self) -> RelitIllumination {
+        self.illumination
+    }
+
+    /// Per instance, the global grid's scales for the current sun (1 without the grid).
+    pub fn scales(&self) -> &[InstanceScale] {
+        &self.scales
+    }
+
+    pub fn global(&self) -> Option<&GlobalLight> {
+        self.global.as_ref()
+    }
+
+    /// Model `m`'s stored basis.
+    pub fn model(&self, m: usize) -> Option<&StoredBasis> {
+        self.models.get(m).and_then(|b| b.as_ref().map(|b| &b.0))
+    }
+
+    /// The light of instance `instance` at model-space point `p` (`None`: no basis).
+    #[inline]
+    pub fn sample_instance(&self, instance: usize, p: Vec3) -> Option<Vec3> {
+        let inst = self.instances.get(instance)?;
+        let w = inst.weights.as_ref()?;
+        let (basis, placement) = self.models[inst.model as usize].as_ref()?;
+        let g = placement.grid_coords(p.to_array());
+        Some(Vec3::from_array(basis.sample_grid(g, w)))
+    }
+}
+
+impl IndirectLight for RelitLight {
+    fn plant(&self, instance: u32, placed: &TraceInstance, world: Vec3) -> Option<Vec3> {
+        self.sample_instance(instance as usize, placed.to_model.transform_point3(world))
+    }
+
+    /// As [`crate::ModelGridLight`]'s, with each tree's relit luminance relative to its free
+    /// space value (`1 + ambient`), so ambient light does not brighten the shade.
+    fn ground_sky(&self, point: Vec3) -> Vec3 {
+        let open = (1.0 + self.illumination.ambient) as f32;
+        ground_shade(
+            &self.ground_index,
+            &self.placed,
+            &self.model_bounds,
+            point,
+            |i, _, pm| {
+                self.sample_instance(i, pm)
+                    .map(|l| Vec3::splat(luminance(l.to_array()) / open))
+            },
+        )
+    }
+
+    fn memory_bytes(&self) -> u64 {
+        self.models.iter().flatten().map(|(b, _)| b.bytes()).sum()
+    }
+}
