@@ -18,7 +18,7 @@ use rayon::prelude::*;
 use sylva_geom::{is_opaque, MaterialKind, Model, Texture, Wrap};
 use sylva_lb::{light::collision_probability, DensityGrid};
 
-use crate::{check_model, GridPlacement, VoxelizeError};
+use crate::{check_model, check_texture_uvs, GridPlacement, VoxelizeError};
 
 /// Fixed-point scale of summed areas (units of cell²).
 const FIXED: f64 = 4_294_967_296.0;
@@ -143,16 +143,9 @@ pub fn plant_area(
             (MaterialKind::Leaf | MaterialKind::Solid, _) => Kind::Leaf(None),
         })
         .collect();
-    if let Some(triangle) = mesh.indices.iter().enumerate().position(|(i, t)| {
-        matches!(kinds[mesh.material_ids[i] as usize], Kind::Leaf(Some(_)))
-            && t.iter()
-                .any(|&v| mesh.uvs[v as usize].iter().any(|x| !x.is_finite()))
-    }) {
-        return Err(VoxelizeError::BadUv {
-            model: model.name.clone(),
-            triangle,
-        });
-    }
+    check_texture_uvs(model, |material| {
+        matches!(kinds[material as usize], Kind::Leaf(Some(_)))
+    })?;
     let leaf: Vec<AtomicU64> = (0..dims.sites()).map(|_| AtomicU64::new(0)).collect();
     let bark: Vec<AtomicU64> = (0..dims.sites()).map(|_| AtomicU64::new(0)).collect();
     let origin = DVec3::from_array(placement.origin);

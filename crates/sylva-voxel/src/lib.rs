@@ -303,6 +303,26 @@ enum Rule {
     Invisible,
 }
 
+/// Refuses a model whose texture-sampled triangles (those whose material `samples_texture`
+/// says so) carry non-finite UVs: both voxelizers look texels up at those UVs.
+pub(crate) fn check_texture_uvs(
+    model: &Model,
+    samples_texture: impl Fn(u8) -> bool,
+) -> Result<(), VoxelizeError> {
+    let mesh = &model.mesh;
+    if let Some(triangle) = mesh.indices.iter().enumerate().position(|(i, t)| {
+        samples_texture(mesh.material_ids[i])
+            && t.iter()
+                .any(|&v| mesh.uvs[v as usize].iter().any(|x| !x.is_finite()))
+    }) {
+        return Err(VoxelizeError::BadUv {
+            model: model.name.clone(),
+            triangle,
+        });
+    }
+    Ok(())
+}
+
 /// Sub-cell masks of `model` on an explicit placement (cells outside the shell only).
 pub fn voxelize_masks(
     model: &Model,
@@ -334,16 +354,9 @@ pub fn voxelize_masks(
             (MaterialKind::Leaf | MaterialKind::Solid, _) => Rule::Solid { wood: false },
         })
         .collect();
-    if let Some(triangle) = mesh.indices.iter().enumerate().position(|(i, t)| {
-        matches!(rules[mesh.material_ids[i] as usize], Rule::Alpha(_))
-            && t.iter()
-                .any(|&v| mesh.uvs[v as usize].iter().any(|x| !x.is_finite()))
-    }) {
-        return Err(VoxelizeError::BadUv {
-            model: model.name.clone(),
-            triangle,
-        });
-    }
+    check_texture_uvs(model, |material| {
+        matches!(rules[material as usize], Rule::Alpha(_))
+    })?;
     let cells: Vec<AtomicU64> = (0..dims.sites()).map(|_| AtomicU64::new(0)).collect();
     let d = [dims.nx, dims.ny, dims.nz];
     // Sub-cells of the interior cells, inclusive.
