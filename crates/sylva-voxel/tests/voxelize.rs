@@ -606,7 +606,11 @@ fn bad_input_is_refused_with_a_reason() {
     let mut mesh = quad();
     mesh.uvs[1][0] = f32::INFINITY;
     let tex = Some(half_texture(Wrap::Clamp));
-    let e = voxelize(&Model::new("uv", mesh, materials(tex)), &opts(32)).unwrap_err();
+    let model = Model::new("uv", mesh, materials(tex));
+    let e = voxelize(&model, &opts(32)).unwrap_err();
+    assert!(matches!(e, VoxelizeError::BadUv { triangle: 0, .. }), "{e}");
+    // The plant-area voxelizer (the physical occupancy) refuses it the same way.
+    let e = plant_area(&model, &unit_placement(), true).unwrap_err();
     assert!(matches!(e, VoxelizeError::BadUv { triangle: 0, .. }), "{e}");
 }
 
