@@ -15,9 +15,10 @@ use std::num::NonZeroU64;
 use sylva_lb::collision::{Omega, ReducedOmega};
 use sylva_lb::kernel::CubicOmega;
 use sylva_lb::lattice::Q;
+use sylva_lb::solver::ColourSource;
 use sylva_lb::{
     Boundary, ColourParams, DensityGrid, Dims, Floor, LightingGrid, MediumParams, RunMonitor,
-    SolveError, SolveOptions, SolveReport,
+    SolveError, SolveOptions, SolveReport, VolumeSource,
 };
 
 use crate::shader::{self, Layout, REDUCE_THREADS};
@@ -63,6 +64,10 @@ impl Precision {
     }
 }
 
+/// Bytes of the step's uniform: sizes and f_0 factors (8 words), green and brown Ω (20
+/// each), the source's green and brown profiles (20 each).
+const PARAMS_BYTES: u64 = 4 * (8 + 4 * 20);
+
 /// Steps per submission when no tolerance asks for a check after every pair.
 const BATCH: usize = 32;
 
@@ -106,6 +111,13 @@ pub struct GpuLattice<'c> {
     boundary: Boundary,
     /// This colour's floor radiance per `(x, z)` (`sylva_lb::Floor`), if any.
     floor: Option<Vec<f32>>,
+    /// The volume source's strength per site on the device, which sites are brown (when the
+    /// step has a source), and this colour's source.
+    strength: wgpu::Buffer,
+    brown_sites: Option<Vec<bool>>,
+    source: Option<ColourSource>,
+    /// The uniform's colour part (sizes, f_0 factors, Ω coefficients).
+    colour_words: Vec<u32>,
     keep_f0: [f32; 2],
 }
 
@@ -177,6 +189,20 @@ impl<'c> GpuLattice<'c> {
         boundary: Boundary,
         precision: Precision,
     ) -> Result<GpuLattice<'c>, LbGpuError> {
+        Self::with_source(ctx, grid, medium, colour, boundary, precision, false)
+    }
+
+    /// [`GpuLattice::new`], with a step that adds a volume source when `source` (set per
+    /// colour with [`GpuLattice::set_source`]; none until then).
+    pub fn with_source(
+        ctx: &'c GpuContext,
+        grid: &DensityGrid,
+        medium: &MediumParams,
+        colour: usize,
+        boundary: Boundary,
+        precision: Precision,
+        source: bool,
+    ) -> Result<GpuLattice<'c>, LbGpuError> {
         medium.validate().map_err(SolveError::from)?;
         validate_boundary(&boundary)?;
         if precision == Precision::F16 && !ctx.supports_f16() {
@@ -211,9 +237,10 @@ impl<'c> GpuLattice<'c> {
             f16: precision == Precision::F16,
             wg_z,
             wg_y,
+            source,
         };
         let parts = layout.parts();
-        let needed_storage = 2 + 2 * parts as u32;
+        let needed_storage = 2 + 2 * parts as u32 + source as u32;
         if needed_storage > limits.max_storage_buffers_per_shader_stage {
             return Err(LbGpuError::TooLarge(format!(
                 "a {dims} grid splits into {parts} state parts per copy, needing \
@@ -255,8 +282,14 @@ impl<'c> GpuLattice<'c> {
         let out = ctx.buffer("site totals", sites * 4, storage_usage)?;
         let params = ctx.buffer(
             "params",
-            192,
+            PARAMS_BYTES,
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        )?;
+        // The source's strength per site (one zero word without a source).
+        let strength = ctx.buffer(
+            "source strength",
+            if source { sites * 4 } else { 4 },
+            storage_usage,
         )?;
         let partials_per_step = groups.iter().map(|&g| g as u64).product::<u64>();
         let align = limits.min_storage_buffer_offset_alignment.max(4) as u64;
@@ -332,6 +365,9 @@ impl<'c> GpuLattice<'c> {
             step_entries.push(entry(3 + p, storage(true), false));
             step_entries.push(entry(3 + parts as u32 + p, storage(false), false));
         }
+        if source {
+            step_entries.push(entry(3 + 2 * parts as u32, storage(true), false));
+        }
         let step_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("step"),
             entries: &step_entries,
@@ -354,6 +390,9 @@ impl<'c> GpuLattice<'c> {
             for (p, (src, dst)) in states[from].iter().zip(&states[1 - from]).enumerate() {
                 e.push(whole(3 + p as u32, src));
                 e.push(whole(3 + (parts + p) as u32, dst));
+            }
+            if source {
+                e.push(whole(3 + 2 * parts as u32, &strength));
             }
             device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("step"),
@@ -423,6 +462,9 @@ impl<'c> GpuLattice<'c> {
             .collect();
         ctx.queue
             .write_buffer(&codes, 0, bytemuck::cast_slice(&code));
+        // Which interior sites are brown (the source's profile there), for the first
+        // post-collision state.
+        let brown_sites = source.then(|| code.iter().map(|&c| c < 0.0).collect());
         drop(code);
 
         let mut lattice = GpuLattice {
@@ -449,6 +491,10 @@ impl<'c> GpuLattice<'c> {
             steps: 0,
             boundary,
             floor: None,
+            strength,
+            brown_sites,
+            source: None,
+            colour_words: Vec::new(),
             keep_f0: [
                 if medium.zero_f0_on_green { 0.0 } else { 1.0 },
                 if medium.zero_f0_on_brown { 0.0 } else { 1.0 },
@@ -482,10 +528,60 @@ impl<'c> GpuLattice<'c> {
         for set in omega_coefficients(green, brown) {
             words.extend(set.iter().map(|v| v.to_bits()));
         }
-        debug_assert_eq!(words.len() * 4, 192);
+        self.colour_words = words;
+        self.write_params();
+        Ok(())
+    }
+
+    /// The uniform: the colour's constants and the source's profiles.
+    fn write_params(&self) {
+        let mut words = self.colour_words.clone();
+        for profile in [
+            self.source.as_ref().map(|s| s.green),
+            self.source.as_ref().map(|s| s.brown),
+        ] {
+            let mut p = [0u32; 20];
+            if let Some(v) = profile {
+                for (w, v) in p.iter_mut().zip(v) {
+                    *w = v.to_bits();
+                }
+            }
+            words.extend(p);
+        }
+        debug_assert_eq!(words.len() as u64 * 4, PARAMS_BYTES);
         self.ctx
             .queue
             .write_buffer(&self.params, 0, bytemuck::cast_slice(&words));
+    }
+
+    /// Sets this colour's volume source (`None`: none); takes effect at the next
+    /// [`GpuLattice::reset`]. A source needs a lattice made with one
+    /// ([`GpuLattice::with_source`]).
+    pub fn set_source(&mut self, source: Option<ColourSource>) -> Result<(), LbGpuError> {
+        if let Some(s) = &source {
+            if self.brown_sites.is_none() {
+                return Err(LbGpuError::Solve(SolveError::Source(
+                    "this GPU lattice was built without a source term".into(),
+                )));
+            }
+            if s.strength.len() != self.dims.sites() {
+                return Err(LbGpuError::Solve(SolveError::Source(format!(
+                    "{} strengths for a {} grid",
+                    s.strength.len(),
+                    self.dims
+                ))));
+            }
+            self.ctx
+                .queue
+                .write_buffer(&self.strength, 0, bytemuck::cast_slice(&s.strength));
+        } else if self.brown_sites.is_some() {
+            let zeros = vec![0f32; self.dims.sites()];
+            self.ctx
+                .queue
+                .write_buffer(&self.strength, 0, bytemuck::cast_slice(&zeros));
+        }
+        self.source = source;
+        self.write_params();
         Ok(())
     }
 
@@ -507,20 +603,29 @@ impl<'c> GpuLattice<'c> {
         }
     }
 
-    /// Interior back to zero, shell to `boundary` and the floor (both states).
+    /// Interior back to zero (plus the source's first emission), shell to `boundary` and the
+    /// floor (both states).
     pub fn reset(&mut self, boundary: Boundary) -> Result<(), LbGpuError> {
         validate_boundary(&boundary)?;
         self.boundary = boundary;
         let d = self.dims;
         let elem = self.precision.bytes();
         for m in 0..Q {
+            // The interior of P_0 (the state after the CPU's first collision of a zero
+            // interior): the source's share, or zero.
+            let interior = |i: usize| match (&self.source, &self.brown_sites) {
+                (Some(s), Some(brown)) => {
+                    s.strength[i] * if brown[i] { s.brown[m] } else { s.green[m] }
+                }
+                _ => 0.0,
+            };
             let values: Vec<f32> = (0..d.sites())
                 .map(|i| {
                     let (x, y, z) = d.coords(i);
                     if d.on_shell(x, y, z) {
                         self.shell_value(x, y, z, m)
                     } else {
-                        0.0
+                        interior(i)
                     }
                 })
                 .collect();
@@ -693,6 +798,7 @@ pub fn solve_lighting_gpu(
     medium: &MediumParams,
     boundaries: &[Boundary; 3],
     floor: Option<&Floor>,
+    source: Option<&VolumeSource>,
     opts: &SolveOptions,
     precision: Precision,
     progress: &mut dyn FnMut(usize, usize, f64),
@@ -702,12 +808,15 @@ pub fn solve_lighting_gpu(
     if let Some(f) = floor {
         f.validate(grid.dims)?;
     }
+    if let Some(s) = source {
+        s.validate(grid.dims)?;
+    }
     sylva_lb::solver::solve_colours(
         grid,
         medium,
         boundaries,
         floor,
-        None,
+        source,
         |c, lattice: Option<GpuLattice>| {
             let boundary = boundaries[c];
             let mut lat = match lattice {
@@ -715,10 +824,21 @@ pub fn solve_lighting_gpu(
                     l.set_colour(&medium.colours[c], &medium.brown_colour(c))?;
                     l
                 }
-                None => GpuLattice::new(ctx, grid, medium, c, boundary, precision)?,
+                None => GpuLattice::with_source(
+                    ctx,
+                    grid,
+                    medium,
+                    c,
+                    boundary,
+                    precision,
+                    source.is_some(),
+                )?,
             };
             if floor.is_some() {
                 lat.set_floor(floor.map(|f| f.radiance[c].clone()));
+            }
+            if let Some(s) = source {
+                lat.set_source(Some(s.colour(c)))?;
             }
             lat.reset(boundary)?;
             let report = lat.run(opts, &mut |s, r| progress(c, s, r))?;

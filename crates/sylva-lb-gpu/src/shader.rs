@@ -35,6 +35,9 @@ pub struct Layout {
     /// Workgroup shape along z and y.
     pub wg_z: u32,
     pub wg_y: u32,
+    /// The step adds a volume source (`sylva_lb::VolumeSource`): a strength per site and a
+    /// profile per direction for green and brown sites.
+    pub source: bool,
 }
 
 impl Layout {
@@ -80,6 +83,9 @@ struct Params {
     pad1: f32,
     green: array<vec4<f32>, 5>,
     brown: array<vec4<f32>, 5>,
+    // The volume source's share per direction on green and brown sites.
+    source_green: array<vec4<f32>, 5>,
+    source_brown: array<vec4<f32>, 5>,
 }
 @group(0) @binding(0) var<uniform> P: Params;
 ";
@@ -139,6 +145,14 @@ pub fn step_shader(layout: &Layout) -> String {
         )
         .unwrap();
     }
+    if layout.source {
+        writeln!(
+            s,
+            "@group(0) @binding({}) var<storage, read> source_strength: array<f32>;",
+            3 + 2 * parts
+        )
+        .unwrap();
+    }
     let (wz, wy) = (layout.wg_z, layout.wg_y);
     writeln!(
         s,
@@ -174,6 +188,22 @@ pub fn step_shader(layout: &Layout) -> String {
     s.push_str("let code = codes[s];\nif (code != 0.0) {\n");
     s.push_str(COLLIDE);
     s.push_str("}\n");
+    if layout.source {
+        // Added to every post-collision value, after f_0's scaling, as the CPU kernel does
+        // (empty sites hold no strength).
+        s.push_str("let strength = source_strength[s];\nlet source_brown = code < 0.0;\n");
+        for m in 0..Q {
+            writeln!(
+                s,
+                "r{m} = r{m} + strength * select(P.source_green[{}][{}], P.source_brown[{}][{}], source_brown);",
+                m / 4,
+                m % 4,
+                m / 4,
+                m % 4
+            )
+            .unwrap();
+        }
+    }
     for m in 0..Q {
         writeln!(s, "{} = {t}(r{m});", element_expr(layout, m, "dst", "s")).unwrap();
     }
@@ -372,18 +402,21 @@ mod tests {
                 f16: false,
                 wg_z: 32,
                 wg_y: 4,
+                source: false,
             },
             Layout {
                 per_part: 1,
                 f16: true,
                 wg_z: 4,
                 wg_y: 32,
+                source: true,
             },
             Layout {
                 per_part: 7,
                 f16: false,
                 wg_z: 16,
                 wg_y: 8,
+                source: true,
             },
         ] {
             for (name, src) in [

@@ -55,18 +55,13 @@ impl LbSolver for GpuSolver {
         opts: &SolveOptions,
         progress: &mut dyn FnMut(usize, usize, f64),
     ) -> Result<(LightingGrid, Vec<SolveReport>), LbSolverError> {
-        if source.is_some() {
-            // The WGSL kernel has no source term yet: volume sources run on the CPU kernel
-            // (docs/gpu.md).
-            return CpuSolver
-                .solve_lighting_rgb(grid, medium, boundaries, floor, source, opts, progress);
-        }
         Ok(solve_lighting_gpu(
             &self.ctx,
             grid,
             medium,
             boundaries,
             floor,
+            source,
             opts,
             self.precision,
             progress,

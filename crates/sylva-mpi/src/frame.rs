@@ -147,6 +147,7 @@ fn encode_unit(f: &Frame) -> Vec<u8> {
         .f64(t.shadow_seconds)
         .f64(t.shading_seconds)
         .f64(t.fused_seconds)
+        .f64(t.gpu_kernel_seconds)
         .u64(t.primary_rays)
         .u64(t.shadow_rays);
     for v in [
@@ -178,6 +179,7 @@ fn decode_unit(data: &[u8], region: Region) -> Result<Frame, DistError> {
         shadow_seconds: r.f64()?,
         shading_seconds: r.f64()?,
         fused_seconds: r.f64()?,
+        gpu_kernel_seconds: r.f64()?,
         primary_rays: r.u64()?,
         shadow_rays: r.u64()?,
     };
@@ -297,6 +299,7 @@ pub fn render_frame(
         timings.shadow_seconds += f.timings.shadow_seconds;
         timings.shading_seconds += f.timings.shading_seconds;
         timings.fused_seconds += f.timings.fused_seconds;
+        timings.gpu_kernel_seconds += f.timings.gpu_kernel_seconds;
         timings.primary_rays += f.timings.primary_rays;
         timings.shadow_rays += f.timings.shadow_rays;
         stats += f.stats;
@@ -306,6 +309,7 @@ pub fn render_frame(
     timings.shadow_seconds /= ranks;
     timings.shading_seconds /= ranks;
     timings.fused_seconds /= ranks;
+    timings.gpu_kernel_seconds /= ranks;
     let per_rank = outcome
         .per_rank(comm.size())
         .into_iter()

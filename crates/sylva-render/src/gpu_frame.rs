@@ -4,27 +4,34 @@
 //! `ModelGridLight::ground_sky` function by function), over the scene the [`GpuTracer`] put
 //! on the device.
 //!
-//! The host makes the camera rays (the CPU renderer's `sample_ray`, so both devices trace the
-//! same rays) and uploads them with the shading data: per model its mesh indices, vertex
+//! The kernel makes the camera rays as the CPU renderer's `sample_ray` does (the same
+//! arithmetic; jittered sub-pixel offsets, drawn from a 64-bit generator, come from the
+//! host), and the host uploads the shading data once: per model its mesh indices, vertex
 //! normals and texture coordinates, material ids, materials with their linear textures, its
 //! LB grid (today's [`ModelGridLight`]); the instances' world transforms; the ground index.
 //! A pixel whose rays the kernel hands back (a ray lying in a kd-tree split plane) is
 //! rendered by the CPU renderer, so every pixel is what the CPU would make of it.
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
+use std::sync::Mutex;
 use std::time::Instant;
 
 use glam::Vec3;
 use rayon::prelude::*;
-use sylva_geom::{Scene, Wrap};
+use sylva_geom::{Aabb, Scene, Wrap};
+use sylva_lb::relight::{BasisSet, HaarCoefs, Placement, StoredFields};
+use sylva_lb::Dims;
 use sylva_trace::{PinholeCamera, TraceStats};
 use sylva_trace_gpu::split::{storage_entry, uniform_entry, SplitArray};
 use sylva_trace_gpu::{GpuTracer, TraceGpuError, SCENE_GROUP};
-use sylva_wgpu::{wgpu, GpuContext, GpuError};
+use sylva_wgpu::{wgpu, GpuContext, GpuError, PassTimer};
 
-use crate::indirect::{IndirectLight, ModelGridLight};
-use crate::render::{sample_ray, Frame, FrameTimings, RenderError, RenderSettings, Renderer};
+use crate::indirect::{GroundIndex, ModelGridLight};
+use crate::lighting::Light;
+use crate::relight::{RelitLight, StoredBasis};
+use crate::render::{sample_offset, Frame, FrameTimings, RenderError, RenderSettings, Renderer};
 use crate::shade::{Radiance, ShadeMaterial};
+use sylva_lb::light::SHEET_RADIANCE_PER_FLUENCE;
 
 /// The kernel and the shading functions it calls (after the scene's WGSL).
 const SHADE_WGSL: &str = include_str!("shade.wgsl");
@@ -32,9 +39,46 @@ const SHADE_WGSL: &str = include_str!("shade.wgsl");
 const NONE: u32 = u32::MAX;
 /// Samples in flight at once, as the CPU renderer's bands.
 const BAND_SAMPLES: usize = 1 << 21;
-/// Bytes per sample's ray and per pixel's result on the device.
-const RAY_BYTES: u64 = 32;
-const PIXEL_BYTES: u64 = 64;
+/// Bytes per uploaded sample offset (jittered sampling only), per pixel's radiance (four
+/// RGB parts) and per pixel on the device in all (radiance and a flag word).
+const OFFSET_BYTES: u64 = 8;
+const RADIANCE_BYTES: u64 = 48;
+const PIXEL_BYTES: u64 = RADIANCE_BYTES + 4;
+/// A pixel's flag word: the CPU must render it (a ray lay in a split plane); below this bit,
+/// the shadow rays it traced.
+const TO_CPU: u32 = 1 << 31;
+
+/// `FrameParams` in shade.wgsl: the band and the camera the kernel makes its rays with
+/// (`PinholeCamera::ray` of `sample_ray`).
+#[repr(C)]
+#[derive(Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
+struct FrameParams {
+    /// Band width and rows, samples per pixel, 1 / samples as f32 bits.
+    size: [u32; 4],
+    /// The band's first pixel (x0, y0) in the image; the image's width and height.
+    origin: [u32; 4],
+    position: [f32; 4],
+    forward: [f32; 4],
+    right: [f32; 4],
+    up: [f32; 4],
+    /// tan(fov / 2), width / height.
+    lens: [f32; 4],
+}
+
+impl FrameParams {
+    fn new(c: &PinholeCamera, x0: u32, y0: u32, w: u32, rows: u32, n: u32, inv_n: f32) -> Self {
+        let v4 = |v: Vec3| [v.x, v.y, v.z, 0.0];
+        FrameParams {
+            size: [w, rows, n, inv_n.to_bits()],
+            origin: [x0, y0, c.width, c.height],
+            position: v4(c.position),
+            forward: v4(c.forward),
+            right: v4(c.right),
+            up: v4(c.up),
+            lens: [c.tan_half(), c.aspect(), 0.0, 0.0],
+        }
+    }
+}
 
 /// `ShadeParams` in shade.wgsl.
 #[repr(C)]
@@ -60,6 +104,57 @@ struct Pool {
     params: ShadeParams,
 }
 
+/// The LB light a GPU frame shades with.
+#[derive(Clone, Copy)]
+pub enum FrameLight<'a> {
+    /// One grid per model, solved for the sun (paper or physical light).
+    Grids(&'a ModelGridLight),
+    /// Base solutions combined per instance for the current sun (paper 004): the decoded
+    /// fields on the device, each instance's combination rewritten when the sun moves
+    /// ([`GpuFrame::relight`]).
+    Relit(&'a RelitLight),
+}
+
+impl FrameLight<'_> {
+    fn ground_index(&self) -> Option<&GroundIndex> {
+        match self {
+            FrameLight::Grids(l) => l.ground_index(),
+            FrameLight::Relit(l) => l.ground_index(),
+        }
+    }
+
+    /// Words of LB light on the device: grids' RGB values, or the decoded fields.
+    fn words(&self, scene: &Scene) -> u64 {
+        (0..scene.models.len())
+            .map(|m| match self {
+                FrameLight::Grids(l) => l
+                    .model(m)
+                    .map_or(0, |g| 3 * g.dims().sites() as u64 + LIGHT_HEADER as u64),
+                FrameLight::Relit(l) => l.model(m).map_or(0, |b| {
+                    let stored = match b {
+                        StoredBasis::Full(set) => BasisSet::memory_needed(set.dims),
+                        // f16 values are widened to f32: at most 4 × what is stored.
+                        StoredBasis::Compressed(c) => 4 * c.bytes(),
+                    };
+                    stored / 4 + LIGHT_HEADER as u64
+                }),
+            })
+            .sum()
+    }
+}
+
+/// Words of an LB light record's header (shade.wgsl: LIGHT_OPEN, RELIT_KIND and what
+/// follows them).
+const LIGHT_HEADER: u32 = 28;
+/// Where a relit record's kind (0 fields, 1 Haar split, 2 Haar packed) sits in its header.
+const RELIT_KIND: usize = 19;
+/// Words of a material record (shade.wgsl: MATERIAL_WORDS).
+const MATERIAL_WORDS: usize = 16;
+/// Words of an instance's entry in the relit words (first term, count, constant, padding)
+/// and of one term (field, weight per colour).
+const RELIT_ENTRY: usize = 8;
+const RELIT_TERM: usize = 4;
+
 impl Pool {
     fn at(&self) -> u32 {
         self.words.len() as u32
@@ -75,10 +170,110 @@ impl Pool {
         self.f(v.z);
     }
 
+    /// An LB light record's header (LIGHT_HEADER words): dims, where its values start,
+    /// placement, model bounds, then `extra` (free field, or the site count).
+    fn light_header(
+        &mut self,
+        dims: Dims,
+        placement: (Vec3, Vec3, Vec3),
+        bounds: Aabb,
+        extra: [u32; 9],
+    ) {
+        let values_at = self.at() + LIGHT_HEADER;
+        self.words
+            .extend([dims.nx as u32, dims.ny as u32, dims.nz as u32, values_at]);
+        self.v3(placement.0);
+        self.v3(placement.1);
+        self.v3(placement.2);
+        self.v3(bounds.min);
+        self.v3(bounds.max);
+        self.words.extend(extra);
+    }
+
+    /// A model's relit record: the header, then its stored fields as the CPU's lookup
+    /// reads them (shade.wgsl: relit_sample): every field at every site (uncompressed and
+    /// dense sets), or the Haar blocks' starts, counts (4 per word) and coefficients (split:
+    /// indices 4 per word and f32 values; packed: the u16 words 2 per word and a step per
+    /// field).
+    fn relit_record(&mut self, b: &StoredBasis, bounds: Aabb) {
+        let dims = b.dims();
+        let placement = Placement::new(dims, b.bounds());
+        let last = Vec3::new(
+            (dims.nx - 1) as f32,
+            (dims.ny - 1) as f32,
+            (dims.nz - 1) as f32,
+        );
+        let start = self.at();
+        let mut extra = [0u32; 9];
+        extra[1] = b.field_count() as u32;
+        extra[2] = dims.sites() as u32;
+        self.light_header(
+            dims,
+            (
+                Vec3::from_array(placement.origin()),
+                Vec3::from_array(placement.inv_cell()),
+                last,
+            ),
+            bounds,
+            extra,
+        );
+        let fields = |p: &mut Pool, fields: &[Vec<f32>]| {
+            for f in fields {
+                p.words.extend(f.iter().map(|v| v.to_bits()));
+            }
+        };
+        let bytes_as_words = |p: &mut Pool, bytes: &[u8]| {
+            p.words.extend(bytes.chunks(4).map(|c| {
+                c.iter()
+                    .enumerate()
+                    .fold(0u32, |w, (k, &b)| w | (b as u32) << (8 * k))
+            }));
+        };
+        let header = |p: &mut Pool, k: usize, v: u32| p.words[start as usize + k] = v;
+        match b {
+            StoredBasis::Full(set) => fields(self, set.channels()),
+            StoredBasis::Compressed(c) => match c.stored_fields() {
+                StoredFields::Dense(f) => fields(self, &f),
+                StoredFields::Haar(h) => {
+                    header(self, RELIT_KIND, 1);
+                    header(self, RELIT_KIND + 3, h.blocks[1] as u32);
+                    header(self, RELIT_KIND + 4, h.blocks[2] as u32);
+                    let at = self.at();
+                    header(self, RELIT_KIND + 5, at);
+                    self.words.extend_from_slice(h.starts);
+                    let at = self.at();
+                    header(self, RELIT_KIND + 6, at);
+                    bytes_as_words(self, h.counts);
+                    match h.coefs {
+                        HaarCoefs::Split { indices, values } => {
+                            let at = self.at();
+                            header(self, RELIT_KIND + 7, at);
+                            bytes_as_words(self, indices);
+                            let at = self.at();
+                            header(self, RELIT_KIND + 8, at);
+                            self.words.extend(values.iter().map(|v| v.to_bits()));
+                        }
+                        HaarCoefs::Packed { words, steps } => {
+                            header(self, RELIT_KIND, 2);
+                            let at = self.at();
+                            header(self, RELIT_KIND + 7, at);
+                            self.words.extend(words.chunks(2).map(|c| {
+                                c[0] as u32 | (c.get(1).copied().unwrap_or(0) as u32) << 16
+                            }));
+                            let at = self.at();
+                            header(self, RELIT_KIND + 8, at);
+                            self.words.extend(steps.iter().map(|v| v.to_bits()));
+                        }
+                    }
+                }
+            },
+        }
+    }
+
     /// Per model its record (8 words: indices, normals, uvs, material ids, materials,
-    /// material count, LB grid, 0) and data; the instances' world transforms; the ground
+    /// material count, LB light, 0) and data; the instances' world transforms; the ground
     /// index.
-    fn build(scene: &Scene, materials: &[Vec<ShadeMaterial>], light: &ModelGridLight) -> Pool {
+    fn build(scene: &Scene, materials: &[Vec<ShadeMaterial>], light: FrameLight) -> Pool {
         let mut p = Pool::default();
         let models = p.at();
         p.words.resize(p.words.len() + 8 * scene.models.len(), 0);
@@ -120,12 +315,15 @@ impl Pool {
             let mats = &materials[m];
             rec[4] = p.at();
             rec[5] = mats.len() as u32;
-            p.words.resize(p.words.len() + 8 * mats.len(), 0);
+            p.words
+                .resize(p.words.len() + MATERIAL_WORDS * mats.len(), 0);
             for (k, mat) in mats.iter().enumerate() {
-                let r = (rec[4] + 8 * k as u32) as usize;
+                let r = rec[4] as usize + MATERIAL_WORDS * k;
                 p.words[r] = mat.leaf as u32;
                 p.words[r + 1..r + 4].copy_from_slice(&mat.base.to_array().map(f32::to_bits));
                 p.words[r + 4] = NONE;
+                p.words[r + 8..r + 11].copy_from_slice(&mat.optics.reflect.map(f32::to_bits));
+                p.words[r + 11..r + 14].copy_from_slice(&mat.optics.transmit.map(f32::to_bits));
                 if let Some(tex) = &mat.texture {
                     let (w, h, wrap, texels) = tex.raw();
                     let at = p.at();
@@ -139,25 +337,34 @@ impl Pool {
                     p.words[r + 4..r + 8].copy_from_slice(&[at, w, h, wrap]);
                 }
             }
-            if let Some(l) = light.model(m) {
-                let (dims, origin, inv_cell, last, values) = l.raw();
-                rec[6] = p.at();
-                let values_at = rec[6] + 19;
-                p.words
-                    .extend([dims.nx as u32, dims.ny as u32, dims.nz as u32, values_at]);
-                p.v3(origin);
-                p.v3(inv_cell);
-                p.v3(last);
-                let b = light.model_bounds(m);
-                p.v3(b.min);
-                p.v3(b.max);
-                p.words.extend(values.iter().flatten().map(|v| v.to_bits()));
+            match light {
+                FrameLight::Grids(light) => {
+                    if let Some(l) = light.model(m) {
+                        let (dims, origin, inv_cell, last, values) = l.raw();
+                        rec[6] = p.at();
+                        let mut open = [0u32; 9];
+                        if let Some((sky, bottom)) = l.open_field() {
+                            open[0] = 1;
+                            open[1..4].copy_from_slice(&sky.to_array().map(f32::to_bits));
+                            open[4..7].copy_from_slice(&bottom.to_array().map(f32::to_bits));
+                        }
+                        p.light_header(dims, (origin, inv_cell, last), light.model_bounds(m), open);
+                        p.words.extend(values.iter().flatten().map(|v| v.to_bits()));
+                    }
+                }
+                FrameLight::Relit(light) => {
+                    if let Some(b) = light.model(m) {
+                        rec[6] = p.at();
+                        p.relit_record(b, light.model_bounds(m));
+                    }
+                }
             }
             rec[7] = 0;
             let at = (models + 8 * m as u32) as usize;
             p.words[at..at + 8].copy_from_slice(&rec);
         }
-        p.params.tables = [models, instances, 0, 0];
+        let relit = matches!(light, FrameLight::Relit(_)) as u32;
+        p.params.tables = [models, instances, 0, relit];
         if let Some(g) = light.ground_index() {
             let cells = &g.cells;
             let starts = p.at();
@@ -179,27 +386,74 @@ impl Pool {
     }
 }
 
+/// The relit words (shade.wgsl: relit_sample): per instance an entry (first term, term
+/// count, constant per colour), then the terms (field, weight per colour), for `light`'s
+/// current sun. Instances without a basis have no terms.
+fn relit_words(light: &RelitLight, instances: usize) -> Vec<u32> {
+    let mut words = vec![0u32; RELIT_ENTRY * instances];
+    for i in 0..instances {
+        let Some((constant, terms)) = light.instance_terms(i) else {
+            continue;
+        };
+        let first = words.len() as u32;
+        for (field, w) in &terms {
+            words.push(*field);
+            words.extend(w.map(f32::to_bits));
+        }
+        let e = RELIT_ENTRY * i;
+        words[e] = first;
+        words[e + 1] = terms.len() as u32;
+        words[e + 2..e + 5].copy_from_slice(&constant.map(f32::to_bits));
+    }
+    words
+}
+
+/// Words the relit words can take for `scene` (every field of every instance's model).
+fn relit_capacity(light: &RelitLight, scene: &Scene) -> usize {
+    scene
+        .instances
+        .iter()
+        .map(|inst| {
+            RELIT_ENTRY
+                + light
+                    .model(inst.model as usize)
+                    .map_or(0, |b| RELIT_TERM * b.field_count())
+        })
+        .sum::<usize>()
+        .max(RELIT_ENTRY)
+}
+
 /// Device bytes of a scene's shading data (for memory checks and reports).
-pub fn shading_bytes(scene: &Scene, light: &ModelGridLight) -> u64 {
+pub fn shading_bytes(scene: &Scene, light: FrameLight) -> u64 {
     let mut words = 8 * scene.models.len() as u64 + 12 * scene.instances.len() as u64;
     for m in &scene.models {
         let mesh = &m.mesh;
         words += 3 * mesh.indices.len() as u64
             + 5 * mesh.positions.len() as u64
             + mesh.material_ids.len() as u64 / 4
-            + 8 * m.materials.len() as u64;
+            + MATERIAL_WORDS as u64 * m.materials.len() as u64;
         for mat in &m.materials {
             if let Some(t) = &mat.texture {
                 words += 3 * t.pixels.len() as u64;
             }
         }
     }
-    words * 4 + light.memory_bytes()
+    words += light.words(scene);
+    if let FrameLight::Relit(l) = light {
+        words += relit_capacity(l, scene) as u64;
+    }
+    words * 4
 }
 
 /// The shading data on the device and the frame kernel.
 pub struct GpuFrame {
     ctx: GpuContext,
+    /// The relit light's per-instance combinations (a placeholder for per-sun grids), its
+    /// capacity in words, and its free-space luminance.
+    relit: wgpu::Buffer,
+    relit_capacity: usize,
+    /// The relit light's free-space luminance as f32 bits (its ambient may change).
+    free_space: AtomicU32,
     pool: SplitArray,
     params: wgpu::Buffer,
     base: ShadeParams,
@@ -208,6 +462,29 @@ pub struct GpuFrame {
     pipeline: wgpu::ComputePipeline,
     max_binding: u64,
     cpu_pixels: AtomicU64,
+    /// The last frame's ray, pixel and read-back buffers, reused while they are large enough
+    /// (creating and zeroing them each frame cost more than the kernel on small frames).
+    buffers: Mutex<Option<FrameBuffers>>,
+    /// The kernel's time on the GPU's clock, where the device has timestamps.
+    timer: Option<PassTimer>,
+}
+
+/// A band's buffers on the device.
+struct FrameBuffers {
+    /// Sub-pixel offsets of jittered samples (one entry when the kernel makes its own).
+    offsets_buf: wgpu::Buffer,
+    /// Radiance per pixel, 12 floats.
+    pixels: wgpu::Buffer,
+    /// A flag word per pixel ([`TO_CPU`], shadow rays).
+    flags: wgpu::Buffer,
+    /// The radiance, then (at `flags_at`) the flags, for the host.
+    staging: wgpu::Buffer,
+    flags_at: u64,
+    params: wgpu::Buffer,
+    group: wgpu::BindGroup,
+    /// Offsets and pixels they hold.
+    offsets: usize,
+    pixel_count: usize,
 }
 
 impl GpuFrame {
@@ -217,7 +494,7 @@ impl GpuFrame {
         tracer: &GpuTracer,
         scene: &Scene,
         materials: &[Vec<ShadeMaterial>],
-        light: &ModelGridLight,
+        light: FrameLight,
     ) -> Result<GpuFrame, TraceGpuError> {
         let ctx = tracer.context().clone();
         sylva_core::check_memory(
@@ -237,8 +514,26 @@ impl GpuFrame {
             bytemuck::cast_slice(&pool.words),
             max_binding,
         )?;
-        // The scene's bindings, the pool's and the frame's own two.
-        let need = tracer.scene().storage_bindings() + words.bindings() + 2;
+        drop(pool.words);
+        // The relit light's per-instance combinations, rewritten when the sun moves.
+        let relit_words = match light {
+            FrameLight::Relit(l) => relit_capacity(l, scene),
+            FrameLight::Grids(_) => RELIT_ENTRY,
+        };
+        let relit = ctx.buffer(
+            "relit words",
+            4 * relit_words as u64,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        )?;
+        if relit_words as u64 * 4 > max_binding {
+            return Err(TraceGpuError::TooLarge(format!(
+                "the relit light's combinations ({}) exceed one storage binding ({})",
+                sylva_core::format_bytes(relit_words as u64 * 4),
+                sylva_core::format_bytes(max_binding)
+            )));
+        }
+        // The scene's bindings, the pool's, the relit words and the frame's own three.
+        let need = tracer.scene().storage_bindings() + words.bindings() + 4;
         let allowed = limits.max_storage_buffers_per_shader_stage;
         if need > allowed {
             return Err(TraceGpuError::TooLarge(format!(
@@ -250,8 +545,10 @@ impl GpuFrame {
             std::mem::size_of::<ShadeParams>() as u64,
             wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
         )?;
+        let relit_binding = 1 + words.bindings();
         let mut entries = vec![uniform_entry(0)];
         entries.extend(words.layout_entries(1));
+        entries.push(storage_entry(relit_binding, true));
         let shade_layout = ctx
             .device
             .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -263,6 +560,10 @@ impl GpuFrame {
             resource: params.as_entire_binding(),
         }];
         group_entries.extend(words.group_entries(1));
+        group_entries.push(wgpu::BindGroupEntry {
+            binding: relit_binding,
+            resource: relit.as_entire_binding(),
+        });
         let shade_group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("shading"),
             layout: &shade_layout,
@@ -276,11 +577,14 @@ impl GpuFrame {
                     uniform_entry(0),
                     storage_entry(1, true),
                     storage_entry(2, false),
+                    storage_entry(3, false),
                 ],
             });
         let src = format!(
             "{}\n// Shading data (sylva-render/src/gpu_frame.rs).\n\
-             @group(1) @binding(0) var<uniform> shading: ShadeParams;\n{}\n{}",
+             @group(1) @binding(0) var<uniform> shading: ShadeParams;\n{}\n\
+             @group(1) @binding({relit_binding}) var<storage, read> relit_words: array<u32>;\n\
+             fn relit_word_at(i: u32) -> u32 {{ return relit_words[i]; }}\n{}",
             tracer.scene().wgsl(),
             words.declare(1, 1),
             SHADE_WGSL
@@ -309,8 +613,12 @@ impl GpuFrame {
                 cache: None,
             });
         ctx.check("building the GPU frame kernel")?;
-        Ok(GpuFrame {
+        let timer = PassTimer::new(&ctx, 1)?;
+        let frame = GpuFrame {
             ctx,
+            relit,
+            relit_capacity: relit_words,
+            free_space: AtomicU32::new(1f32.to_bits()),
             pool: words,
             params,
             base: pool.params,
@@ -319,7 +627,32 @@ impl GpuFrame {
             pipeline,
             max_binding,
             cpu_pixels: AtomicU64::new(0),
-        })
+            buffers: Mutex::new(None),
+            timer,
+        };
+        if let FrameLight::Relit(l) = light {
+            frame.relight(l)?;
+        }
+        Ok(frame)
+    }
+
+    /// Uploads the relit light's per-instance combinations for its current sun (after
+    /// [`RelitLight::relight`]); the fields on the device stay.
+    pub fn relight(&self, light: &RelitLight) -> Result<(), GpuError> {
+        let words = relit_words(light, light.instances());
+        if words.len() > self.relit_capacity {
+            return Err(GpuError::TooLarge(format!(
+                "{} words of relit combinations for a buffer of {}",
+                words.len(),
+                self.relit_capacity
+            )));
+        }
+        self.ctx
+            .queue
+            .write_buffer(&self.relit, 0, bytemuck::cast_slice(&words));
+        self.free_space
+            .store(light.free_space().to_bits(), Ordering::Relaxed);
+        Ok(())
     }
 
     /// Bytes of shading data on the device.
@@ -355,135 +688,160 @@ impl GpuFrame {
         }
         let n = settings.rays_per_pixel.max(1);
         let w = region.width as usize;
+        // Samples whose sub-pixel offsets the kernel cannot make itself (n other than 1 and
+        // 4: jittered from the seed's 64-bit generator) are uploaded, 8 bytes each.
+        let jittered = n != 1 && n != 4;
         let row_samples = w * n as usize;
-        if row_samples as u64 * RAY_BYTES > self.max_binding {
+        let row_offset_bytes = if jittered {
+            row_samples as u64 * OFFSET_BYTES
+        } else {
+            0
+        };
+        if row_offset_bytes > self.max_binding || w as u64 * PIXEL_BYTES > self.max_binding {
             return Err(GpuError::TooLarge(format!(
-                "one image row of {row_samples} samples ({} of rays) exceeds the adapter's {} per storage binding",
-                sylva_core::format_bytes(row_samples as u64 * RAY_BYTES),
+                "one image row of {w} pixels × {n} samples exceeds the adapter's {} per storage binding",
                 sylva_core::format_bytes(self.max_binding)
             ))
             .into());
         }
         let band_rows = (BAND_SAMPLES / row_samples)
-            .min((self.max_binding / (row_samples as u64 * RAY_BYTES)) as usize)
+            .min((self.max_binding / row_offset_bytes.max(1)) as usize)
             .min((self.max_binding / (w as u64 * PIXEL_BYTES)) as usize)
             .clamp(1, region.height as usize);
         self.write_params(cpu, settings);
         let ctx = &self.ctx;
-        let rays_buf = ctx.buffer(
-            "frame rays",
-            (band_rows * row_samples) as u64 * RAY_BYTES,
-            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-        )?;
-        let pixel_bytes = (band_rows * w) as u64 * PIXEL_BYTES;
-        let pixels_buf = ctx.buffer(
-            "frame pixels",
-            pixel_bytes,
-            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        )?;
-        let staging = ctx.buffer(
-            "frame readback",
-            pixel_bytes,
-            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        )?;
-        let frame_params = ctx.buffer(
-            "frame params",
-            16,
-            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        )?;
-        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("frame"),
-            layout: &self.frame_layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: frame_params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: rays_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: pixels_buf.as_entire_binding(),
-                },
-            ],
-        });
-
-        let mut pixels = vec![Radiance::default(); region.pixels() as usize];
+        let mut held = self.buffers.lock().expect("frame buffers");
+        let (need_offsets, need_pixels) = (
+            if jittered { band_rows * row_samples } else { 1 },
+            band_rows * w,
+        );
+        let fits = held
+            .as_ref()
+            .is_some_and(|b| b.offsets >= need_offsets && b.pixel_count >= need_pixels);
+        if !fits {
+            *held = None;
+            *held = Some(self.buffers(need_offsets, need_pixels)?);
+        }
+        let bufs = held.as_ref().expect("frame buffers made");
+        let mut kernel_seconds = 0.0;
+        // Filled band by band from the read-back, in parallel (a frame's 10-20 MB written
+        // once: no zeroing pass whose page faults cost more than the kernel).
+        let mut pixels: Vec<Radiance> = Vec::with_capacity(region.pixels() as usize);
         let mut stats = TraceStats::default();
         let mut shadow_rays = 0u64;
         let tiles = 3 * crate::render::tile_count(region);
         let mut reported = 0u64;
-        let mut rays = vec![[0f32; 8]; band_rows * row_samples];
+        let mut offsets = Vec::new();
         let inv_n = 1.0 / n as f32;
         let mut row = 0usize;
+        // SYLVA_GPU_PROFILE=1: each frame's host phases on stderr (docs/gpu.md).
+        let profile = std::env::var_os("SYLVA_GPU_PROFILE").is_some();
+        let mut phases = [0.0f64; 4];
+        let mut lap = Instant::now();
+        let mut mark = |k: usize, phases: &mut [f64; 4]| {
+            if profile {
+                phases[k] += lap.elapsed().as_secs_f64();
+                lap = Instant::now();
+            }
+        };
         while row < region.height as usize {
             let rows = band_rows.min(region.height as usize - row);
             let y0 = region.y0 + row as u32;
-            rays[..rows * row_samples]
-                .par_chunks_mut(row_samples)
-                .enumerate()
-                .for_each(|(r, out)| {
-                    for (k, ray) in out.iter_mut().enumerate() {
-                        let (x, s) = ((k / n as usize) as u32, (k % n as usize) as u32);
-                        let ray_ =
-                            sample_ray(&camera, region.x0 + x, y0 + r as u32, s, n, settings.seed);
-                        let (o, d) = (ray_.origin, ray_.dir);
-                        *ray = [o.x, o.y, o.z, ray_.t_min, d.x, d.y, d.z, ray_.t_max];
-                    }
-                });
-            ctx.queue.write_buffer(
-                &rays_buf,
-                0,
-                bytemuck::cast_slice(&rays[..rows * row_samples]),
-            );
-            ctx.queue.write_buffer(
-                &frame_params,
-                0,
-                bytemuck::cast_slice(&[w as u32, rows as u32, n, inv_n.to_bits()]),
-            );
+            if jittered {
+                offsets.clear();
+                offsets.resize(rows * row_samples, [0f32; 2]);
+                offsets
+                    .par_chunks_mut(row_samples)
+                    .enumerate()
+                    .for_each(|(r, out)| {
+                        let y = y0 + r as u32;
+                        for (k, o) in out.iter_mut().enumerate() {
+                            let x = region.x0 + (k / n as usize) as u32;
+                            let s = (k % n as usize) as u32;
+                            let pixel = y as u64 * camera.width as u64 + x as u64;
+                            *o = sample_offset(n, s, pixel, settings.seed).to_array();
+                        }
+                    });
+                ctx.queue
+                    .write_buffer(&bufs.offsets_buf, 0, bytemuck::cast_slice(&offsets));
+            }
+            let params = FrameParams::new(&camera, region.x0, y0, w as u32, rows as u32, n, inv_n);
+            ctx.queue
+                .write_buffer(&bufs.params, 0, bytemuck::bytes_of(&params));
+            mark(0, &mut phases);
             let mut enc = ctx
                 .device
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
             {
                 let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("frame"),
-                    timestamp_writes: None,
+                    timestamp_writes: self.timer.as_ref().map(|t| t.writes(0)),
                 });
                 pass.set_pipeline(&self.pipeline);
                 pass.set_bind_group(0, tracer.scene().group(), &[]);
                 pass.set_bind_group(1, &self.shade_group, &[]);
-                pass.set_bind_group(2, &group, &[]);
+                pass.set_bind_group(2, &bufs.group, &[]);
                 pass.dispatch_workgroups(w.div_ceil(8) as u32, rows.div_ceil(8) as u32, 1);
             }
-            let bytes = (rows * w) as u64 * PIXEL_BYTES;
-            enc.copy_buffer_to_buffer(&pixels_buf, 0, &staging, 0, bytes);
-            ctx.queue.submit([enc.finish()]);
-            let data = ctx.map_read(&staging, bytes)?;
-            let out: &[[f32; 16]] = bytemuck::cast_slice(&data);
-            let dst = &mut pixels[row * w..(row + rows) * w];
-            for (k, (p, v)) in dst.iter_mut().zip(out).enumerate() {
-                if v[3] != 0.0 {
-                    let (x, y) = (region.x0 + (k % w) as u32, y0 + (k / w) as u32);
-                    let (r, s) = cpu.pixel(&camera, x, y, settings, &mut stats);
-                    *p = r;
-                    shadow_rays += s;
-                    self.cpu_pixels.fetch_add(1, Ordering::Relaxed);
-                    continue;
-                }
-                *p = Radiance {
-                    local: Vec3::new(v[0], v[1], v[2]),
-                    indirect: Vec3::new(v[4], v[5], v[6]),
-                    albedo: Vec3::new(v[8], v[9], v[10]),
-                    sky: Vec3::new(v[12], v[13], v[14]),
-                };
-                shadow_rays += v[7].to_bits() as u64;
+            let band_pixels = rows * w;
+            let (radiance_bytes, flag_bytes) =
+                (band_pixels as u64 * RADIANCE_BYTES, band_pixels as u64 * 4);
+            enc.copy_buffer_to_buffer(&bufs.pixels, 0, &bufs.staging, 0, radiance_bytes);
+            enc.copy_buffer_to_buffer(&bufs.flags, 0, &bufs.staging, bufs.flags_at, flag_bytes);
+            if let Some(t) = &self.timer {
+                t.resolve(&mut enc, 1);
             }
+            ctx.queue.submit([enc.finish()]);
+            mark(1, &mut phases);
+            let flags_at = bufs.flags_at as usize;
+            let pixels_ref = &mut pixels;
+            let (handed_back, traced) =
+                ctx.map_read_with(&bufs.staging, bufs.flags_at + flag_bytes, |data| {
+                    let values: &[f32] = bytemuck::cast_slice(&data[..radiance_bytes as usize]);
+                    let flags: &[u32] =
+                        bytemuck::cast_slice(&data[flags_at..flags_at + flag_bytes as usize]);
+                    // Radiance per pixel as the kernel packs it: local, indirect, albedo, sky.
+                    pixels_ref.par_extend(values.par_chunks_exact(12).map(|v| Radiance {
+                        local: Vec3::new(v[0], v[1], v[2]),
+                        indirect: Vec3::new(v[3], v[4], v[5]),
+                        albedo: Vec3::new(v[6], v[7], v[8]),
+                        sky: Vec3::new(v[9], v[10], v[11]),
+                    }));
+                    let mut back = Vec::new();
+                    let mut traced = 0u64;
+                    for (k, &f) in flags.iter().enumerate() {
+                        if f & TO_CPU != 0 {
+                            back.push(k);
+                        } else {
+                            traced += f as u64;
+                        }
+                    }
+                    (back, traced)
+                })?;
+            mark(2, &mut phases);
+            shadow_rays += traced;
+            if let Some(t) = &self.timer {
+                kernel_seconds += t.seconds(ctx, 1)?.iter().sum::<f64>();
+            }
+            for k in handed_back {
+                let (x, y) = (region.x0 + (k % w) as u32, y0 + (k / w) as u32);
+                let (r, s) = cpu.pixel(&camera, x, y, settings, &mut stats);
+                pixels[row * w + k] = r;
+                shadow_rays += s;
+                self.cpu_pixels.fetch_add(1, Ordering::Relaxed);
+            }
+            mark(3, &mut phases);
             row += rows;
             let done = tiles * row as u64 / region.height as u64;
             progress(done - reported);
             reported = done;
+        }
+        if profile {
+            let ms = phases.map(|s| s * 1e3);
+            eprintln!(
+                "GPU frame {}x{} at {n} rays/pixel: host set-up {:.2} ms, submit {:.2} ms, kernel + read-back + unpacking {:.2} ms (kernel {:.2} ms), CPU pixels {:.2} ms",
+                region.width, region.height, ms[0], ms[1], ms[2], kernel_seconds * 1e3, ms[3]
+            );
         }
         let primary_rays = region.pixels() * n as u64;
         // The CPU's single-ray counts for handed-back pixels are in `stats` already.
@@ -495,11 +853,72 @@ impl GpuFrame {
             pixels,
             timings: FrameTimings {
                 fused_seconds: t0.elapsed().as_secs_f64(),
+                gpu_kernel_seconds: kernel_seconds,
                 primary_rays,
                 shadow_rays,
                 ..FrameTimings::default()
             },
             stats,
+        })
+    }
+
+    /// Buffers for bands of up to `offsets` uploaded sample offsets and `pixel_count` pixels.
+    fn buffers(&self, offsets: usize, pixel_count: usize) -> Result<FrameBuffers, GpuError> {
+        let ctx = &self.ctx;
+        let offsets_buf = ctx.buffer(
+            "frame sample offsets",
+            offsets.max(1) as u64 * OFFSET_BYTES,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        )?;
+        let radiance_bytes = pixel_count as u64 * RADIANCE_BYTES;
+        let pixels = ctx.buffer(
+            "frame pixels",
+            radiance_bytes,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        )?;
+        let flags = ctx.buffer(
+            "frame pixel flags",
+            pixel_count as u64 * 4,
+            wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        )?;
+        // Copies into the staging buffer start at multiples of 4 bytes (radiance_bytes is).
+        let flags_at = radiance_bytes;
+        let staging = ctx.buffer(
+            "frame readback",
+            flags_at + pixel_count as u64 * 4,
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        )?;
+        let params = ctx.buffer(
+            "frame params",
+            std::mem::size_of::<FrameParams>() as u64,
+            wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        )?;
+        fn entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+            wgpu::BindGroupEntry {
+                binding,
+                resource: buffer.as_entire_binding(),
+            }
+        }
+        let group = ctx.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("frame"),
+            layout: &self.frame_layout,
+            entries: &[
+                entry(0, &params),
+                entry(1, &offsets_buf),
+                entry(2, &pixels),
+                entry(3, &flags),
+            ],
+        });
+        Ok(FrameBuffers {
+            offsets_buf,
+            pixels,
+            flags,
+            staging,
+            flags_at,
+            params,
+            group,
+            offsets: offsets.max(1),
+            pixel_count,
         })
     }
 
@@ -520,7 +939,18 @@ impl GpuFrame {
                 s.leaf_specular.0,
                 s.leaf_specular.1,
             ],
-            k2: [s.wood_specular.0, s.wood_specular.1, 0.0, 0.0],
+            k2: [
+                s.wood_specular.0,
+                s.wood_specular.1,
+                SHEET_RADIANCE_PER_FLUENCE,
+                f32::from_bits(self.free_space.load(Ordering::Relaxed)),
+            ],
+            tables: [
+                self.base.tables[0],
+                self.base.tables[1],
+                (s.light == Light::Physical) as u32,
+                self.base.tables[3],
+            ],
             ..self.base
         };
         self.ctx

@@ -284,6 +284,12 @@ impl ModelLighting {
         }
     }
 
+    /// The physical light's free field, open sky and open bottom per colour (what
+    /// [`ModelLighting::ground_sky`] measures against); `None` for the paper light.
+    pub(crate) fn open_field(&self) -> Option<(Vec3, Vec3)> {
+        self.open.map(|o| (o.sky, o.bottom))
+    }
+
     /// Whether this is the physical light (LB units, direct sun removed).
     pub fn is_physical(&self) -> bool {
         self.open.is_some()

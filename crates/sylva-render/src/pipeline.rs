@@ -21,7 +21,7 @@ use sylva_trace::{KdTracer, RayQuery, SceneAccel, TraceError, TraversalConfig};
 use sylva_trace_gpu::{GpuTracer, TraceGpuError};
 use sylva_wgpu::GpuContext;
 
-use crate::gpu_frame::{FrameError, GpuFrame};
+use crate::gpu_frame::{FrameError, FrameLight, GpuFrame};
 use crate::indirect::{IndirectLight, ModelGridLight};
 use crate::lighting::{
     hash_model_medium, model_lighting, preset_medium, Illumination, Light, LightingError,
@@ -411,8 +411,8 @@ pub struct PreparedScene {
     pub tracer: Tracer,
     /// Per-model LB grids solved for the sun (none without LB, or when relit).
     pub light: ModelGridLight,
-    /// The frame kernel when frames are shaded on the GPU (never with relit light: the
-    /// kernel samples per-sun grids; [`PreparedScene::gpu_shading_note`] says why not).
+    /// The frame kernel when frames are shaded on the GPU (not for scenes with media:
+    /// [`PreparedScene::gpu_shading_note`] says why not).
     pub gpu_frame: Option<GpuFrame>,
     /// The scene's media, ready to draw (LB-lit with an LB plan, else sun only).
     pub media: Media,
@@ -679,30 +679,6 @@ impl PreparedScene {
         };
         let light = ModelGridLight::new(lighting, &scene.models, tracer.cpu().accel.instances());
         let materials = shade_materials(&scene.models);
-        // The frame kernel samples per-sun grids; relit light (per-instance weights of
-        // stored bases, the global scales) is combined on the CPU, so a relit scene traced
-        // on a GPU is shaded on the CPU.
-        let relit_on_gpu = tracer.gpu().is_some() && opts.shade_on_gpu && relit_parts.is_some();
-        let gpu_shading_note = relit_on_gpu.then_some(
-            "relit light is combined on the CPU (the GPU frame kernel samples per-sun LB grids \
-             only); the GPU traces the rays",
-        );
-        // shade.wgsl mirrors the paper light's shading with per-sun grids; the physical
-        // light's frames and relit frames are traced on the GPU and shaded on the CPU
-        // (docs/light.md). The frame kernel has no volume tracer either: scenes with media
-        // shade on the CPU (the GPU still answers their ray queries).
-        let gpu_frame = match tracer.gpu() {
-            Some(t)
-                if opts.shade_on_gpu
-                    && shading.light == Light::Paper
-                    && media.is_empty()
-                    && relit_parts.is_none() =>
-            {
-                let _span = tracing::info_span!(stage::ACCEL_BUILD).entered();
-                Some(GpuFrame::new(t, &scene, &materials, &light)?)
-            }
-            _ => None,
-        };
         let (relit, spare_bases) = match relit_parts {
             Some(parts) => {
                 let plan = opts.relight.expect("relit parts come from a plan");
@@ -717,6 +693,25 @@ impl PreparedScene {
                 (Some(relit), parts.raw)
             }
             None => (None, Vec::new()),
+        };
+        // shade.wgsl mirrors the CPU's shading for both lights, with per-sun grids or relit
+        // base solutions. It has no volume tracer: scenes with media shade on the CPU (the
+        // GPU still answers their ray queries).
+        let gpu_on = tracer.gpu().is_some() && opts.shade_on_gpu;
+        let gpu_shading_note = (gpu_on && !media.is_empty()).then_some(
+            "the scene has media (clouds), which the CPU's volume tracer draws; the GPU traces \
+             the rays",
+        );
+        let gpu_frame = match tracer.gpu() {
+            Some(t) if gpu_on && media.is_empty() => {
+                let _span = tracing::info_span!(stage::ACCEL_BUILD).entered();
+                let frame_light = match &relit {
+                    Some(r) => FrameLight::Relit(r),
+                    None => FrameLight::Grids(&light),
+                };
+                Some(GpuFrame::new(t, &scene, &materials, frame_light)?)
+            }
+            _ => None,
         };
         let sun_grid = match (&tracer, opts.shadows) {
             (Tracer::Cpu(t), ShadowMethod::SunGrid) => Some(SunGrid::build(&t.accel, to_sun)),
@@ -767,6 +762,9 @@ impl PreparedScene {
                     ..r.illumination()
                 };
                 r.relight(ill)?;
+                if let Some(f) = &self.gpu_frame {
+                    f.relight(r)?;
+                }
             }
             None if (0..self.scene.models.len()).any(|m| self.light.model(m).is_some()) => {
                 return Err(PipelineError::NeedsBasis);
@@ -782,6 +780,9 @@ impl PreparedScene {
     pub fn set_illumination(&mut self, sun: SunWeights, ambient: f64) -> Result<(), PipelineError> {
         let r = self.relit.as_mut().ok_or(PipelineError::NeedsBasis)?;
         r.relight(RelitIllumination::new(self.to_sun, sun, ambient))?;
+        if let Some(f) = &self.gpu_frame {
+            f.relight(r)?;
+        }
         Ok(())
     }
 
@@ -828,6 +829,26 @@ impl PreparedScene {
         let spare = std::mem::take(&mut self.spare_bases);
         self.spare_bases = r.swap_bases(spare)?;
         self.uncompressed = yes;
+        if self.gpu_frame.is_some() {
+            // Other fields: the GPU frame decodes and uploads them again.
+            self.rebuild_gpu_frame()?;
+        }
+        Ok(())
+    }
+
+    /// The GPU frame made again for the current relit light (its fields or its ambient
+    /// changed).
+    fn rebuild_gpu_frame(&mut self) -> Result<(), PipelineError> {
+        let (Some(t), Some(r)) = (self.tracer.gpu(), &self.relit) else {
+            return Ok(());
+        };
+        self.gpu_frame = None;
+        self.gpu_frame = Some(GpuFrame::new(
+            t,
+            &self.scene,
+            &self.materials,
+            FrameLight::Relit(r),
+        )?);
         Ok(())
     }
 

@@ -165,6 +165,9 @@ pub struct FrameTimings {
     /// A GPU frame's single pass (primary rays, shadow rays and shading in one kernel, with
     /// the rays' upload and the pixels' read-back); 0 on the CPU.
     pub fused_seconds: f64,
+    /// Of `fused_seconds`, the kernel's own time on the GPU's clock (0 where the device has
+    /// no timestamps, and on the CPU).
+    pub gpu_kernel_seconds: f64,
     pub primary_rays: u64,
     pub shadow_rays: u64,
 }
@@ -246,7 +249,7 @@ impl Frame {
 }
 
 /// Sub-pixel position of sample `s` of `n` in pixel `pixel`.
-fn sample_offset(n: u32, s: u32, pixel: u64, seed: u64) -> Vec2 {
+pub(crate) fn sample_offset(n: u32, s: u32, pixel: u64, seed: u64) -> Vec2 {
     if n == 1 {
         return Vec2::splat(0.5);
     }

@@ -1,17 +1,21 @@
 // A frame on the GPU: per pixel, each sample's primary ray, its shadow ray and its shading,
 // the CPU renderer's functions one for one (same names, same operations in the same order):
 //
-//   render.rs    Renderer::sample_geometry, Renderer::shadow_ray, Renderer::shade
-//   shade.rs     local_light, needs_shadow_ray, LinearTexture::sample
-//   indirect.rs  ModelGridLight::plant, ModelGridLight::ground_sky, GroundIndex::at
-//   lighting.rs  ModelLighting::sample
+//   render.rs       sample_ray, Renderer::sample_geometry, Renderer::shadow_ray, Renderer::shade
+//   shade.rs        local_light (paper and physical), indirect_light, needs_shadow_ray,
+//                   LinearTexture::sample
+//   indirect.rs     ModelGridLight::plant, ground_shade, GroundIndex::at
+//   lighting.rs     ModelLighting::sample, ModelLighting::ground_sky
+//   relight/light.rs RelitLight::sample_instance (base solutions combined per instance, 004)
 //
 // Included after the scene's WGSL (sylva-trace-gpu: closest_hit, any_hit, to_model, ...)
 // and a generated prelude that binds the shading data: `shade_word_at(i) -> u32`, one pool
-// of words holding per model its mesh data, materials, linear textures and LB grid, the
-// instances' world transforms and the ground index (offsets in `shading.tables` and in the
-// records), and `shading: ShadeParams`. A change to the shading formulas changes both
-// sides; the test `gpu_shading_matches_the_cpu_per_pixel` compares them.
+// of words holding per model its mesh data, materials, linear textures and LB light (a grid
+// solved for the sun, or decoded base-solution fields), the instances' world transforms and
+// the ground index (offsets in `shading.tables` and in the records), `relit_word_at(i)`, the
+// relit light's per-instance combinations (rewritten when the sun moves), and
+// `shading: ShadeParams`. A change to the shading formulas changes both sides; the tests in
+// crates/sylva-render/tests/gpu.rs compare them.
 
 struct ShadeParams {
     // Sun colour × irradiance; w: +∞ (the shadow rays' t_max).
@@ -22,10 +26,12 @@ struct ShadeParams {
     leaf_transmission: vec4<f32>,
     // indirect, sky_ambient, leaf k_s, leaf shininess
     k: vec4<f32>,
-    // wood k_s, wood shininess
+    // wood k_s, wood shininess, SHEET_RADIANCE_PER_FLUENCE, the relit light's free-space
+    // luminance (1 + ambient)
     k2: vec4<f32>,
     // Pool offsets: model records (8 words each), instances' world transforms (12 words
-    // each), 0, 0.
+    // each); the light model (0 paper, 1 physical); the indirect light (0 per-model grids,
+    // 1 relit from base solutions).
     tables: vec4<u32>,
     // Ground index: cell starts (nx·nz + 1 words), instance lists, nx, nz (0: no index).
     ground: vec4<u32>,
@@ -35,17 +41,30 @@ struct ShadeParams {
     ground_cell: vec4<f32>,
 }
 
+const PHYSICAL: u32 = 1u;
+const RELIT: u32 = 1u;
+
 struct FrameParams {
     // Pixels of the band: width, rows; samples per pixel; 1 / samples as f32 bits.
     size: vec4<u32>,
+    // The band's first pixel (x0, y0) in the image; the image's width and height.
+    origin: vec4<u32>,
+    // The camera (PinholeCamera): position, forward, right, up; tan(fov / 2), aspect.
+    position: vec4<f32>,
+    forward: vec4<f32>,
+    right: vec4<f32>,
+    up: vec4<f32>,
+    lens: vec4<f32>,
 }
 
 @group(2) @binding(0) var<uniform> frame: FrameParams;
-// Two per sample, pixel by pixel, sample by sample: (origin, t_min), (direction, t_max).
-@group(2) @binding(1) var<storage, read> frame_rays: array<vec4<f32>>;
-// Four per pixel: local (w: 1 when the CPU must render the pixel), indirect (w: shadow rays
-// traced, as bits), albedo, sky.
-@group(2) @binding(2) var<storage, read_write> frame_pixels: array<vec4<f32>>;
+// Sub-pixel offsets per sample, pixel by pixel, where the host draws them (jittered
+// sampling: samples per pixel other than 1 and 4).
+@group(2) @binding(1) var<storage, read> frame_offsets: array<vec2<f32>>;
+// Twelve per pixel: local, indirect, albedo, sky (Radiance's parts).
+@group(2) @binding(2) var<storage, read_write> frame_pixels: array<f32>;
+// One per pixel: bit 31 when the CPU must render the pixel, else the shadow rays traced.
+@group(2) @binding(3) var<storage, read_write> frame_flags: array<u32>;
 
 fn word_f(i: u32) -> f32 {
     return bitcast<f32>(shade_word_at(i));
@@ -147,7 +166,8 @@ struct ShadeModel {
     // Material records (8 words each) and their count.
     materials: u32,
     material_count: u32,
-    // LB grid record (NONE: no LB light on this model).
+    // LB light record (NONE: no LB light on this model): a grid solved for the sun, or
+    // the decoded fields of its base solutions (relit).
     grid: u32,
 }
 
@@ -164,9 +184,16 @@ fn material_id(sm: ShadeModel, triangle: u32) -> u32 {
     return (shade_word_at(sm.material_ids + triangle / 4u) >> (8u * (triangle % 4u))) & 0xffu;
 }
 
-// Material record: leaf, base colour (3), linear texels (NONE: untextured), width, height, wrap.
+// Material record (16 words): leaf, base colour (3), linear texels (NONE: untextured),
+// width, height, wrap, reflect (3), transmit (3): sylva_geom::Optics.
+const MATERIAL_WORDS: u32 = 16u;
+
 fn material_word(sm: ShadeModel, mat: u32, k: u32) -> u32 {
-    return shade_word_at(sm.materials + 8u * mat + k);
+    return shade_word_at(sm.materials + MATERIAL_WORDS * mat + k);
+}
+
+fn material_vec3(sm: ShadeModel, mat: u32, k: u32) -> vec3<f32> {
+    return word_vec3(sm.materials + MATERIAL_WORDS * mat + k);
 }
 
 // Renderer::is_leaf.
@@ -182,6 +209,20 @@ struct SurfacePoint {
     view: vec3<f32>,
     colour: vec3<f32>,
     leaf: bool,
+    reflect: vec3<f32>,
+    transmit: vec3<f32>,
+}
+
+// SurfacePoint::reflectance and SurfacePoint::transmittance.
+fn reflectance(s: SurfacePoint) -> vec3<f32> {
+    return s.colour * s.reflect;
+}
+
+fn transmittance(s: SurfacePoint) -> vec3<f32> {
+    if (s.leaf) {
+        return s.colour * s.transmit;
+    }
+    return vec3<f32>(0.0, 0.0, 0.0);
 }
 
 // shade::local_light.
@@ -190,6 +231,12 @@ fn local_light(s: SurfacePoint, to_sun: vec3<f32>, lit: bool) -> vec3<f32> {
         return vec3<f32>(0.0, 0.0, 0.0);
     }
     let cos = dot_(s.normal, to_sun);
+    if (shading.tables.z == PHYSICAL) {
+        if (cos > 0.0) {
+            return reflectance(s) * cos;
+        }
+        return transmittance(s) * (-cos);
+    }
     if (cos > 0.0) {
         var ks = shading.k2.x;
         var shininess = shading.k2.y;
@@ -204,6 +251,14 @@ fn local_light(s: SurfacePoint, to_sun: vec3<f32>, lit: bool) -> vec3<f32> {
         return s.colour * shading.leaf_transmission.xyz * (-cos);
     }
     return vec3<f32>(0.0, 0.0, 0.0);
+}
+
+// shade::indirect_light: the light a surface sends to the viewer from the LB light `lb`.
+fn indirect_light(s: SurfacePoint, lb: vec3<f32>, sun: vec3<f32>) -> vec3<f32> {
+    if (shading.tables.z == PHYSICAL) {
+        return lb * (reflectance(s) + transmittance(s)) * (shading.k2.z * shading.k.x);
+    }
+    return lb * s.colour * sun * shading.k.x;
 }
 
 // shade::needs_shadow_ray.
@@ -237,36 +292,236 @@ fn linear_texture_sample(sm: ShadeModel, mat: u32, uv_in: vec2<f32>) -> vec3<f32
     return lerp3(top, bottom, t.y);
 }
 
-// ---- lighting.rs and indirect.rs ------------------------------------------------------------
+// ---- lighting.rs, indirect.rs, relight/light.rs --------------------------------------------
 
-// ModelLighting::sample: trilinear RGB at model-space point p of the grid record `g`
-// (nx, ny, nz, values, origin (3), inv_cell (3), last (3), model bounds min (3), max (3)).
-fn lighting_sample(g: u32, p: vec3<f32>) -> vec3<f32> {
-    let ny = shade_word_at(g + 1u);
-    let nz = shade_word_at(g + 2u);
-    let values = shade_word_at(g + 3u);
+// An LB light record: nx, ny, nz, values (first word of the values or stored fields),
+// origin (3), inv_cell (3), last (3), model bounds min (3), max (3), then 9 words: a grid's
+// free field (physical light: 1, open sky (3), open bottom (3)), or a relit record's kind
+// (RELIT_FIELDS, RELIT_HAAR_SPLIT, RELIT_HAAR_PACKED), field count, site count, Haar blocks
+// along y and z, and where the Haar starts, counts, indices or packed words, and values or
+// steps begin.
+const LIGHT_OPEN: u32 = 19u;
+const RELIT_KIND: u32 = 19u;
+const RELIT_FIELDS: u32 = 0u;
+const RELIT_HAAR_SPLIT: u32 = 1u;
+
+// relight::Footprint::at of relight::Placement::grid_coords: the lower corner of the 2×2×2
+// sites a trilinear lookup at model-space point p reads, and the fractions.
+struct Corner {
+    i: vec3<u32>,
+    t: vec3<f32>,
+}
+
+fn corner(g: u32, p: vec3<f32>) -> Corner {
     let origin = word_vec3(g + 4u);
     let inv_cell = word_vec3(g + 7u);
     let last = word_vec3(g + 10u);
+    // `max` before `min` turns NaN into 0.
     let f = fmin3(fmax3((p - origin) * inv_cell, vec3<f32>(0.0, 0.0, 0.0)), last);
     let i = fmin3(floor(f), last - vec3<f32>(1.0, 1.0, 1.0));
-    let t = f - i;
-    let sy = nz;
-    let sx = ny * nz;
-    let base = u32(i.x) * sx + u32(i.y) * sy + u32(i.z);
-    let x00 = lerp3(word_vec3(values + 3u * base), word_vec3(values + 3u * (base + sx)), t.x);
-    let x01 = lerp3(word_vec3(values + 3u * (base + 1u)), word_vec3(values + 3u * (base + sx + 1u)), t.x);
-    let x10 = lerp3(word_vec3(values + 3u * (base + sy)), word_vec3(values + 3u * (base + sx + sy)), t.x);
-    let x11 = lerp3(word_vec3(values + 3u * (base + sy + 1u)), word_vec3(values + 3u * (base + sx + sy + 1u)), t.x);
-    let y0 = lerp3(x00, x10, t.y);
-    let y1 = lerp3(x01, x11, t.y);
-    return lerp3(y0, y1, t.z);
+    return Corner(vec3<u32>(i), f - i);
 }
 
-// ModelGridLight::ground_sky: the product over the trees whose LB grid covers ground point
-// p of their LB luminance there, faded to 1 over each grid footprint's outer 20 %.
-fn ground_sky(p: vec3<f32>) -> f32 {
-    var f = 1.0;
+// Footprint::sites and Footprint::weights (corner (dx, dy, dz) at index 4 dx + 2 dy + dz).
+struct Footprint {
+    sites: array<u32, 8>,
+    weights: array<f32, 8>,
+}
+
+fn footprint(g: u32, p: vec3<f32>) -> Footprint {
+    let ny = shade_word_at(g + 1u);
+    let nz = shade_word_at(g + 2u);
+    let c = corner(g, p);
+    let base = (c.i.x * ny + c.i.y) * nz + c.i.z;
+    var fp: Footprint;
+    for (var k = 0u; k < 8u; k++) {
+        let dx = k >> 2u;
+        let dy = (k >> 1u) & 1u;
+        let dz = k & 1u;
+        fp.sites[k] = base + (dx * ny + dy) * nz + dz;
+        let wx = select(1.0 - c.t.x, c.t.x, dx == 1u);
+        let wy = select(1.0 - c.t.y, c.t.y, dy == 1u);
+        let wz = select(1.0 - c.t.z, c.t.z, dz == 1u);
+        fp.weights[k] = wx * wy * wz;
+    }
+    return fp;
+}
+
+// ModelLighting::sample: trilinear RGB at model-space point p of the grid record `g`.
+fn lighting_sample(g: u32, p: vec3<f32>) -> vec3<f32> {
+    let values = shade_word_at(g + 3u);
+    let fp = footprint(g, p);
+    var out = vec3<f32>(0.0, 0.0, 0.0);
+    for (var k = 0u; k < 8u; k++) {
+        out += word_vec3(values + 3u * fp.sites[k]) * fp.weights[k];
+    }
+    return out;
+}
+
+// Byte k of the bytes packed 4 per word from word `at`.
+fn byte_at(at: u32, k: u32) -> u32 {
+    return (shade_word_at(at + k / 4u) >> (8u * (k % 4u))) & 0xffu;
+}
+
+// haar::kernel: the 64 weights K of a footprint whose lower corner sits at local
+// coordinates o in its block, with fractions t: the interpolated value is Σ coef_k K[k].
+fn haar_kernel(o: vec3<u32>, t: vec3<f32>) -> array<f32, 64> {
+    var e: array<vec2<f32>, 3>;
+    var f: array<array<vec2<f32>, 2>, 3>;
+    for (var a = 0u; a < 3u; a++) {
+        for (var s = 0u; s < 2u; s++) {
+            let v = o[a] + s;
+            let w = select(1.0 - t[a], t[a], s == 1u);
+            let cell = v >> 1u;
+            let pos = v & 1u;
+            e[a][0] += w;
+            e[a][1] += w * select(-1.0, 1.0, cell == 0u);
+            f[a][cell][0] += w;
+            f[a][cell][1] += w * select(-1.0, 1.0, pos == 0u);
+        }
+    }
+    var k: array<f32, 64>;
+    for (var q = 0u; q < 8u; q++) {
+        k[q] = e[0][q >> 2u] * e[1][(q >> 1u) & 1u] * e[2][q & 1u];
+    }
+    for (var c = 0u; c < 8u; c++) {
+        let cx = c >> 2u;
+        let cy = (c >> 1u) & 1u;
+        let cz = c & 1u;
+        for (var q = 1u; q < 8u; q++) {
+            k[8u + 7u * c + q - 1u] = f[0][cx][q >> 2u] * f[1][cy][(q >> 1u) & 1u] * f[2][cz][q & 1u];
+        }
+    }
+    return k;
+}
+
+// RelitLight::sample_instance: instance i's combination of its model's base solutions at
+// model-space point p (its relit record `g`): constant + Σ terms weight · field, where a
+// field is looked up as the CPU's stored set does: BasisSet::sample and DenseFields (every
+// site stored) or HaarFields::sample_into (one block's coefficients against the
+// footprint's kernel). The instance's entry in the relit words: first term, term count,
+// constant (3); each term: field, weight (3); terms sorted by field.
+fn relit_sample(g: u32, i: u32, p: vec3<f32>) -> vec3<f32> {
+    let first = relit_word_at(8u * i);
+    let count = relit_word_at(8u * i + 1u);
+    var out = vec3<f32>(bitcast<f32>(relit_word_at(8u * i + 2u)), bitcast<f32>(relit_word_at(8u * i + 3u)),
+        bitcast<f32>(relit_word_at(8u * i + 4u)));
+    let kind = shade_word_at(g + RELIT_KIND);
+    if (kind == RELIT_FIELDS) {
+        let fields = shade_word_at(g + 3u);
+        let sites = shade_word_at(g + RELIT_KIND + 2u);
+        let fp = footprint(g, p);
+        for (var k = 0u; k < count; k++) {
+            let term = first + 4u * k;
+            let field = fields + relit_word_at(term) * sites;
+            var v = 0.0;
+            for (var c = 0u; c < 8u; c++) {
+                v += fp.weights[c] * word_f(field + fp.sites[c]);
+            }
+            let w = vec3<f32>(bitcast<f32>(relit_word_at(term + 1u)), bitcast<f32>(relit_word_at(term + 2u)),
+                bitcast<f32>(relit_word_at(term + 3u)));
+            out += w * v;
+        }
+        return out;
+    }
+    // HaarFields::block_of: blocks own 3 lower corners per axis.
+    let nf = shade_word_at(g + RELIT_KIND + 1u);
+    let blocks_y = shade_word_at(g + RELIT_KIND + 3u);
+    let blocks_z = shade_word_at(g + RELIT_KIND + 4u);
+    let starts = shade_word_at(g + RELIT_KIND + 5u);
+    let counts = shade_word_at(g + RELIT_KIND + 6u);
+    let coef_a = shade_word_at(g + RELIT_KIND + 7u);
+    let coef_b = shade_word_at(g + RELIT_KIND + 8u);
+    let c = corner(g, p);
+    let b = c.i / 3u;
+    let o = c.i - 3u * b;
+    let block = (b.x * blocks_y + b.y) * blocks_z + b.z;
+    let kernel = haar_kernel(o, c.t);
+    var pos = shade_word_at(starts + block);
+    var next = 0u;
+    for (var k = 0u; k < count; k++) {
+        let term = first + 4u * k;
+        let f = relit_word_at(term);
+        for (; next < f; next++) {
+            pos += byte_at(counts, block * nf + next);
+        }
+        let n = byte_at(counts, block * nf + f);
+        var v = 0.0;
+        if (kind == RELIT_HAAR_SPLIT) {
+            for (var j = pos; j < pos + n; j++) {
+                v += word_f(coef_b + j) * kernel[byte_at(coef_a, j)];
+            }
+        } else {
+            // Packed: the value in the top 10 bits (signed), the index in the low 6, the
+            // sum scaled by the field's step.
+            for (var j = pos; j < pos + n; j++) {
+                let w16 = (shade_word_at(coef_a + j / 2u) >> (16u * (j % 2u))) & 0xffffu;
+                let q = f32(bitcast<i32>(w16 << 16u) >> 22u);
+                v += q * kernel[w16 & 63u];
+            }
+            v = v * word_f(coef_b + f);
+        }
+        pos += n;
+        next = f + 1u;
+        let w = vec3<f32>(bitcast<f32>(relit_word_at(term + 1u)), bitcast<f32>(relit_word_at(term + 2u)),
+            bitcast<f32>(relit_word_at(term + 3u)));
+        out += w * v;
+    }
+    return out;
+}
+
+// IndirectLight::plant: the LB light on instance i at world point p; w = 0 when it gets none.
+fn plant_light(i: u32, p: vec3<f32>) -> vec4<f32> {
+    let g = shade_model(instance_model(i)).grid;
+    if (g == NONE) {
+        return vec4<f32>(0.0, 0.0, 0.0, 0.0);
+    }
+    let pm = model_point(i, p);
+    if (shading.tables.w == RELIT) {
+        return vec4<f32>(relit_sample(g, i, pm), 1.0);
+    }
+    return vec4<f32>(lighting_sample(g, pm), 1.0);
+}
+
+// ModelLighting::ground_sky (physical light): the share of the open sky's light reaching the
+// ground at model-space point p, per colour, from the grid's two lowest layers.
+fn physical_ground_sky(g: u32, p: vec3<f32>) -> vec3<f32> {
+    let origin = word_vec3(g + 4u);
+    let inv_cell_y = word_f(g + 8u);
+    var cell_y = 0.0;
+    if (inv_cell_y > 0.0) {
+        cell_y = 1.0 / inv_cell_y;
+    }
+    let open_sky = word_vec3(g + LIGHT_OPEN + 1u);
+    let open_bottom = word_vec3(g + LIGHT_OPEN + 4u);
+    let floor_ = lighting_sample(g, vec3<f32>(p.x, origin.y, p.z));
+    let lowest = lighting_sample(g, vec3<f32>(p.x, origin.y + cell_y, p.z));
+    let ground = fmax3(floor_ - open_bottom, vec3<f32>(0.0, 0.0, 0.0));
+    let sky = open_sky * 0.5;
+    let share = (lowest - 2.0 * ground) * 0.5 / fmax3(sky, vec3<f32>(1.17549435e-38, 1.17549435e-38, 1.17549435e-38));
+    let clamped = clamp(share, vec3<f32>(0.0, 0.0, 0.0), vec3<f32>(1.0, 1.0, 1.0));
+    return select(vec3<f32>(1.0, 1.0, 1.0), clamped, sky > vec3<f32>(0.0, 0.0, 0.0));
+}
+
+// The share of the open sky's light instance i's LB light lets through at its model-space
+// point pm (1 in free space): ModelLighting::ground_sky, or the relit light's luminance over
+// its free-space value.
+fn instance_ground_sky(g: u32, i: u32, pm: vec3<f32>) -> vec3<f32> {
+    if (shading.tables.w == RELIT) {
+        let l = luminance(relit_sample(g, i, pm)) / shading.k2.w;
+        return vec3<f32>(l, l, l);
+    }
+    if (shading.tables.z == PHYSICAL && shade_word_at(g + LIGHT_OPEN) == 1u) {
+        return physical_ground_sky(g, pm);
+    }
+    let l = clamp(luminance(lighting_sample(g, pm)), 0.0, 1.0);
+    return vec3<f32>(l, l, l);
+}
+
+// indirect::ground_shade: the product over the trees whose LB light covers ground point p of
+// the share of the sky's light they let through, faded to 1 over each footprint's outer 20 %.
+fn ground_sky(p: vec3<f32>) -> vec3<f32> {
+    var f = vec3<f32>(1.0, 1.0, 1.0);
     let nx = shading.ground.z;
     let nz = shading.ground.w;
     if (nx == 0u) {
@@ -283,6 +538,7 @@ fn ground_sky(p: vec3<f32>) -> f32 {
     let cell = cz * nx + cx;
     let first = shade_word_at(shading.ground.x + cell);
     let end = shade_word_at(shading.ground.x + cell + 1u);
+    let one = vec3<f32>(1.0, 1.0, 1.0);
     for (var k = first; k < end; k++) {
         let i = shade_word_at(shading.ground.y + k);
         let g = shade_model(instance_model(i)).grid;
@@ -294,14 +550,14 @@ fn ground_sky(p: vec3<f32>) -> f32 {
         let pm = model_point(i, p);
         let margin = 0.05 * (bmax.y - bmin.y) + 1e-3f;
         if (pm.x >= bmin.x && pm.x <= bmax.x && pm.z >= bmin.z && pm.z <= bmax.z && pm.y >= bmin.y - margin) {
+            let lb = instance_ground_sky(g, i, pm);
             let edge = fmin_(fmin_(fmin_(pm.x - bmin.x, bmax.x - pm.x), pm.z - bmin.z), bmax.z - pm.z);
             let width = 0.2 * fmin_(bmax.x - bmin.x, bmax.z - bmin.z);
             var w = 1.0;
             if (width > 0.0) {
                 w = clamp(edge / width, 0.0, 1.0);
             }
-            let lb = clamp(luminance(lighting_sample(g, pm)), 0.0, 1.0);
-            f *= 1.0 - w * (1.0 - lb);
+            f *= one - w * (one - clamp(lb, vec3<f32>(0.0, 0.0, 0.0), one));
         }
     }
     return f;
@@ -389,7 +645,8 @@ fn sample_geometry(o: vec3<f32>, d: vec3<f32>, h: Best) -> Geom {
     if (dot_(normal, ng_view) < 0.0) {
         normal = -normal;
     }
-    let probe = SurfacePoint(normal, view, vec3<f32>(1.0, 1.0, 1.0), is_leaf(sm, h.triangle));
+    let one = vec3<f32>(1.0, 1.0, 1.0);
+    let probe = SurfacePoint(normal, view, one, is_leaf(sm, h.triangle), one, one);
     g.kind = 2u;
     g.normal = normal;
     g.shadow = needs_shadow_ray(probe, to_sun);
@@ -413,12 +670,16 @@ fn shade(d: vec3<f32>, h: Best, g: Geom, lit: bool) -> Radiance {
         if (lit) {
             local = c * cos;
         }
-        return Radiance(local, c * (shading.k.y * ground_sky(g.point)), c, zero);
+        if (shading.tables.z == PHYSICAL) {
+            // The open ground takes π L_sky from the sky: L_sky in units of E0.
+            let ground = shading.ground_colour.xyz;
+            return Radiance(local, ground * shading.sky.xyz * ground_sky(g.point), ground, zero);
+        }
+        return Radiance(local, c * (shading.k.y * ground_sky(g.point).x), c, zero);
     }
     let sm = shade_model(instance_model(h.instance));
     let mat = material_id(sm, h.triangle);
-    var colour = vec3<f32>(word_f(sm.materials + 8u * mat + 1u), word_f(sm.materials + 8u * mat + 2u),
-        word_f(sm.materials + 8u * mat + 3u));
+    var colour = material_vec3(sm, mat, 1u);
     if (material_word(sm, mat, 4u) != NONE && sm.uvs != NONE) {
         let t0 = shade_word_at(sm.indices + 3u * h.triangle);
         let t1 = shade_word_at(sm.indices + 3u * h.triangle + 1u);
@@ -428,19 +689,44 @@ fn shade(d: vec3<f32>, h: Best, g: Geom, lit: bool) -> Radiance {
         let uv2 = vec2<f32>(word_f(sm.uvs + 2u * t2), word_f(sm.uvs + 2u * t2 + 1u));
         colour = linear_texture_sample(sm, mat, uv0 * (1.0 - h.u - h.v) + uv1 * h.u + uv2 * h.v);
     }
-    let s = SurfacePoint(g.normal, -d, colour, material_word(sm, mat, 0u) == 1u);
-    let albedo = colour * sun;
+    let s = SurfacePoint(g.normal, -d, colour, material_word(sm, mat, 0u) == 1u, material_vec3(sm, mat, 8u),
+        material_vec3(sm, mat, 11u));
+    var albedo = colour * sun;
+    if (shading.tables.z == PHYSICAL) {
+        albedo = reflectance(s) + transmittance(s);
+    }
     var indirect = zero;
-    if (sm.grid != NONE) {
-        // ModelGridLight::plant.
-        let l = lighting_sample(sm.grid, model_point(h.instance, g.point));
-        indirect = l * albedo * shading.k.x;
+    let l = plant_light(h.instance, g.point);
+    if (l.w != 0.0) {
+        indirect = indirect_light(s, l.xyz, sun);
     }
     return Radiance(local_light(s, to_sun, lit) * sun, indirect, albedo, zero);
 }
 
+// render::sample_offset for 1 and 4 samples per pixel (the others come from the host).
+fn sample_offset(pixel: u32, s: u32) -> vec2<f32> {
+    let n = frame.size.z;
+    if (n == 1u) {
+        return vec2<f32>(0.5, 0.5);
+    }
+    if (n == 4u) {
+        return vec2<f32>(0.25 + 0.5 * f32(s % 2u), 0.25 + 0.5 * f32(s / 2u));
+    }
+    return frame_offsets[pixel * n + s];
+}
+
+// PinholeCamera::ray through continuous pixel coordinates (px, py): its unit direction
+// (glam's normalize: the vector times 1 / length).
+fn camera_dir(px: f32, py: f32) -> vec3<f32> {
+    let nx = (px / f32(frame.origin.z)) * 2.0 - 1.0;
+    let ny = 1.0 - (py / f32(frame.origin.w)) * 2.0;
+    let d = frame.forward.xyz + frame.right.xyz * ((nx * frame.lens.x) * frame.lens.y)
+        + frame.up.xyz * (ny * frame.lens.x);
+    return d * (1.0 / sqrt(dot_(d, d)));
+}
+
 // One pixel of the band: its samples traced, shaded and averaged, as the CPU renderer does
-// (Renderer::trace_unit, then the shading pass's sum and 1 / n).
+// (render::sample_ray, Renderer::trace_unit, then the shading pass's sum and 1 / n).
 @compute @workgroup_size(8, 8)
 fn render_frame(@builtin(global_invocation_id) id: vec3<u32>) {
     let width = frame.size.x;
@@ -448,21 +734,24 @@ fn render_frame(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let pixel = id.y * width + id.x;
+    let x = frame.origin.x + id.x;
+    let y = frame.origin.y + id.y;
     let n = frame.size.z;
+    let origin = frame.position.xyz;
+    let t_max = bitcast<f32>(0x7f800000u);
     let zero = vec3<f32>(0.0, 0.0, 0.0);
     var acc = Radiance(zero, zero, zero, zero);
     var to_cpu = false;
     var shadow_rays = 0u;
     for (var s = 0u; s < n; s++) {
-        let k = 2u * (pixel * n + s);
-        let a = frame_rays[k];
-        let b = frame_rays[k + 1u];
-        let c = closest_hit(a.xyz, b.xyz, a.w, b.w);
+        let o = sample_offset(pixel, s);
+        let d = camera_dir(f32(x) + o.x, f32(y) + o.y);
+        let c = closest_hit(origin, d, 0.0, t_max);
         if (c.fallback) {
             to_cpu = true;
             break;
         }
-        let g = sample_geometry(a.xyz, b.xyz, c.best);
+        let g = sample_geometry(origin, d, c.best);
         var lit = false;
         if (g.shadow) {
             let blocked = any_hit(g.shadow_origin, shading.to_sun.xyz, 0.0, shading.sun.w, g.from_instance);
@@ -473,15 +762,18 @@ fn render_frame(@builtin(global_invocation_id) id: vec3<u32>) {
             lit = blocked.x == 0u;
             shadow_rays += 1u;
         }
-        let r = shade(b.xyz, c.best, g, lit);
+        let r = shade(d, c.best, g, lit);
         acc.local += r.local;
         acc.indirect += r.indirect;
         acc.albedo += r.albedo;
         acc.sky += r.sky;
     }
     let inv_n = bitcast<f32>(frame.size.w);
-    frame_pixels[4u * pixel] = vec4<f32>(acc.local * inv_n, select(0.0, 1.0, to_cpu));
-    frame_pixels[4u * pixel + 1u] = vec4<f32>(acc.indirect * inv_n, bitcast<f32>(shadow_rays));
-    frame_pixels[4u * pixel + 2u] = vec4<f32>(acc.albedo * inv_n, 0.0);
-    frame_pixels[4u * pixel + 3u] = vec4<f32>(acc.sky * inv_n, 0.0);
+    let parts = array<vec3<f32>, 4>(acc.local * inv_n, acc.indirect * inv_n, acc.albedo * inv_n, acc.sky * inv_n);
+    for (var k = 0u; k < 4u; k++) {
+        frame_pixels[12u * pixel + 3u * k] = parts[k].x;
+        frame_pixels[12u * pixel + 3u * k + 1u] = parts[k].y;
+        frame_pixels[12u * pixel + 3u * k + 2u] = parts[k].z;
+    }
+    frame_flags[pixel] = select(shadow_rays, 0x80000000u, to_cpu);
 }

@@ -10,8 +10,8 @@ use std::path::Path;
 use sylva_lb::relight::CompressTarget;
 use sylva_lb::CpuSolver;
 use sylva_render::{
-    load_scene, tone_map_modes, BasisUse, Frame, LbPlan, Mode, PrepareOptions, PreparedScene,
-    Radiance, Region, RelightPlan, Silent, SunWeights, ToneMap,
+    load_scene, tone_map_modes, BasisUse, Frame, LbPlan, Light, Mode, PrepareOptions,
+    PreparedScene, Radiance, Region, RelightPlan, Silent, SunWeights, ToneMap,
 };
 use sylva_wgpu::{AdapterChoice, ContextOptions, GpuContext, GpuError};
 
@@ -78,20 +78,30 @@ fn prepare_lit(
     shade_on_gpu: bool,
     relight: Option<RelightPlan>,
 ) -> PreparedScene {
+    prepare_with(dir, gpu, shade_on_gpu, relight, Light::Paper)
+}
+
+/// [`prepare_lit`] under `light`.
+fn prepare_with(
+    dir: &Path,
+    gpu: Option<&GpuContext>,
+    shade_on_gpu: bool,
+    relight: Option<RelightPlan>,
+    light: Light,
+) -> PreparedScene {
     let path = dir.join("roses.toml");
     std::fs::write(&path, SCENE).unwrap();
     let scene = load_scene(path.to_str().unwrap(), None).unwrap();
     let opts = PrepareOptions {
         lb: Some(LbPlan {
             solver: &CpuSolver,
-            light: sylva_render::Light::Paper,
+            light,
             grid: None,
             cache_dir: Some(&dir.join("cache")),
         }),
         trace_gpu: gpu,
         shade_on_gpu,
-        // shade.wgsl implements the paper light; the physical light shades on the CPU.
-        light: sylva_render::Light::Paper,
+        light,
         relight,
         ..PrepareOptions::default()
     };
@@ -115,15 +125,15 @@ fn within_one_level(a: &Frame, b: &Frame) -> f64 {
     close as f64 / ia[0].ldr.len() as f64
 }
 
-/// Largest difference between two pixels' parts, relative to the larger value (floored at
-/// 1e-3, below which nothing shows).
-fn part_difference(a: &Radiance, b: &Radiance) -> f32 {
+/// Largest difference between two pixels' parts, relative to the larger value floored at
+/// `floor`.
+fn part_difference(a: &Radiance, b: &Radiance, floor: f32) -> f32 {
     let parts = |r: &Radiance| [r.local, r.indirect, r.albedo, r.sky];
     parts(a)
         .iter()
         .zip(parts(b))
         .flat_map(|(x, y)| {
-            (0..3).map(move |c| (x[c] - y[c]).abs() / x[c].abs().max(y[c].abs()).max(1e-3))
+            (0..3).map(move |c| (x[c] - y[c]).abs() / x[c].abs().max(y[c].abs()).max(floor))
         })
         .fold(0.0, f32::max)
 }
@@ -185,8 +195,23 @@ fn gpu_rays_give_the_cpu_image() {
 fn gpu_shading_matches_the_cpu_per_pixel() {
     let Some(ctx) = context() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let cpu = prepare(dir.path(), None, false);
-    let gpu = prepare(dir.path(), Some(&ctx), true);
+    for light in [Light::Paper, Light::Physical] {
+        let cpu = prepare_with(dir.path(), None, false, None, light);
+        let gpu = prepare_with(dir.path(), Some(&ctx), true, None, light);
+        frames_agree(&ctx, &cpu, &gpu, (1e-5, 1e-3), &format!("{light:?}"));
+    }
+}
+
+/// The GPU frame kernel of `gpu` against `cpu`'s frames, per pixel and part, at 1, 4 and 3
+/// rays per pixel, and for a region. On lavapipe every part of every pixel agrees within
+/// `tolerance`, relative to the larger value floored at `floor`.
+fn frames_agree(
+    ctx: &GpuContext,
+    cpu: &PreparedScene,
+    gpu: &PreparedScene,
+    (tolerance, floor): (f32, f32),
+    what: &str,
+) {
     let kernel = gpu.gpu_frame.as_ref().expect("frames on the GPU");
     for rpp in [1, 4, 3] {
         let cam = cpu.camera(64, 48);
@@ -194,17 +219,55 @@ fn gpu_shading_matches_the_cpu_per_pixel() {
         let b = gpu.render(&gpu.settings(cam, rpp, 5), &Silent).unwrap();
         assert!(b.timings.fused_seconds > 0.0 && b.timings.primary_seconds == 0.0);
         assert_eq!(a.timings.primary_rays, b.timings.primary_rays);
-        assert_eq!(a.timings.shadow_rays, b.timings.shadow_rays, "rpp {rpp}");
+        // The kernel makes its camera rays with the CPU's arithmetic: on lavapipe the same
+        // rays, so the same shadow rays; a hardware GPU's contracted multiply-adds may move
+        // a ray across an edge, changing whether its sample needs a shadow ray.
+        let (sa, sb) = (a.timings.shadow_rays, b.timings.shadow_rays);
+        if ctx.is_software() {
+            assert_eq!(sa, sb, "{what} rpp {rpp}");
+        } else {
+            assert!(
+                sa.abs_diff(sb) * 200 <= sa,
+                "{what} rpp {rpp}: {sa} vs {sb} shadow rays"
+            );
+        }
         // Every part of every pixel (at one ray per pixel: every sample) agrees; only the
         // specular pow may differ in its last bits.
         let worst = a
             .pixels
             .iter()
             .zip(&b.pixels)
-            .map(|(p, q)| part_difference(p, q))
+            .map(|(p, q)| part_difference(p, q, floor))
             .fold(0.0, f32::max);
-        let bound = if ctx.is_software() { 1e-5 } else { 1e-3 };
-        assert!(worst <= bound, "rpp {rpp}: parts differ by {worst:e}");
+        let at = a
+            .pixels
+            .iter()
+            .zip(&b.pixels)
+            .position(|(p, q)| part_difference(p, q, floor) == worst)
+            .unwrap_or(0);
+        let detail = format!(
+            "{what} rpp {rpp}: parts differ by {worst:e} at pixel {at}: CPU {:?}, GPU {:?}",
+            a.pixels[at], b.pixels[at]
+        );
+        if ctx.is_software() {
+            assert!(worst <= tolerance, "{detail}");
+        } else {
+            // A hardware GPU contracts multiply-adds: a hit's barycentrics move by up to
+            // ~1e-4 on far, small leaves (the tracer's tests), which moves its texture
+            // lookup. 99 % of pixels stay within 1e-3 in every part; the image test below
+            // bounds the rest.
+            let close = a
+                .pixels
+                .iter()
+                .zip(&b.pixels)
+                .filter(|(p, q)| part_difference(p, q, floor) <= tolerance.max(1e-3))
+                .count();
+            assert!(
+                close * 100 >= 99 * a.pixels.len(),
+                "{close} close; {detail}"
+            );
+        }
+        eprintln!("{detail}");
         let same = a
             .pixels
             .iter()
@@ -245,7 +308,7 @@ fn gpu_shading_matches_the_cpu_per_pixel() {
 }
 
 #[test]
-fn relit_light_on_a_gpu_traces_there_and_shades_on_the_cpu() {
+fn relit_light_is_shaded_on_the_gpu_as_on_the_cpu() {
     let Some(ctx) = context() else { return };
     let dir = tempfile::tempdir().unwrap();
     let plan = RelightPlan {
@@ -254,29 +317,48 @@ fn relit_light_on_a_gpu_traces_there_and_shades_on_the_cpu() {
         ambient: 0.1,
         global: None,
         target: CompressTarget::recommended(),
-        keep_raw: false,
+        keep_raw: true,
     };
     let mut cpu = prepare_lit(dir.path(), None, false, Some(plan));
-    // GPU shading asked for: the frame kernel cannot combine base solutions, so the GPU
-    // traces the rays, the CPU shades, and the scene says so.
     let mut gpu = prepare_lit(dir.path(), Some(&ctx), true, Some(plan));
     assert_eq!(gpu.tracer.device(), "gpu");
-    assert!(gpu.relit.is_some() && gpu.gpu_frame.is_none());
-    assert!(gpu.gpu_shading_note().is_some_and(|n| n.contains("CPU")));
-    assert!(cpu.gpu_shading_note().is_none());
+    assert!(gpu.relit.is_some() && gpu.gpu_frame.is_some());
+    assert!(gpu.gpu_shading_note().is_none());
+    let tight = (1e-5, 1e-3);
     for sun in [
         glam::Vec3::new(0.3, 0.8, -0.2),
         glam::Vec3::new(-0.5, 0.6, 0.4),
     ] {
+        // The sun moves: the kernel gets each instance's new combination, no LB solve.
         cpu.set_sun(sun).unwrap();
         gpu.set_sun(sun).unwrap();
+        // Uncompressed bases: the kernel's lookup is BasisSet::sample's arithmetic.
+        cpu.use_uncompressed(true).unwrap();
+        gpu.use_uncompressed(true).unwrap();
         let cam = cpu.camera(64, 48);
         let a = cpu.render(&cpu.settings(cam, 1, 1), &Silent).unwrap();
-        let b = gpu.render(&gpu.settings(cam, 1, 1), &Silent).unwrap();
         assert!(a.pixels.iter().any(|p| p.indirect.max_element() > 0.0));
-        if ctx.is_software() {
-            assert!(a.pixels == b.pixels, "sun {sun}: frames differ");
-        }
-        assert!(within_one_level(&a, &b) >= 0.999);
+        frames_agree(
+            &ctx,
+            &cpu,
+            &gpu,
+            tight,
+            &format!("relit, uncompressed, sun {sun}"),
+        );
+        // Compressed bases: the kernel reads the Haar blocks as HaarFields::sample_into
+        // does (one block's coefficients against the footprint's kernel).
+        cpu.use_uncompressed(false).unwrap();
+        gpu.use_uncompressed(false).unwrap();
+        frames_agree(
+            &ctx,
+            &cpu,
+            &gpu,
+            tight,
+            &format!("relit, compressed, sun {sun}"),
+        );
     }
+    // The ambient changes the kernel's free-space luminance (the ground's shade) too.
+    cpu.set_illumination(SunWeights::Exact, 0.3).unwrap();
+    gpu.set_illumination(SunWeights::Exact, 0.3).unwrap();
+    frames_agree(&ctx, &cpu, &gpu, tight, "relit, exact weights, ambient 0.3");
 }

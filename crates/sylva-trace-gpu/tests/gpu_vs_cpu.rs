@@ -148,9 +148,84 @@ fn identical(a: Option<Hit>, b: Option<Hit>) -> bool {
     }
 }
 
+/// How a hardware GPU's closest hit may differ from the CPU's for one ray. Contracted
+/// multiply-adds move the model-space ray and every t, u and v by a few ulps (more for far,
+/// small triangles, whose barycentrics lose digits to cancellation). So the same hit may come
+/// out rounded differently, and a different hit may be found only where rounding decides:
+/// two surfaces within rounding of each other along the ray (the traversal meets them near
+/// a kd split plane in another order), or the nearer answer (the one the other device
+/// rejected or missed) lying within rounding of its triangle's edge or of an alpha texel
+/// boundary. Anything else is a bug.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Difference {
+    /// The same instance and triangle, t within 1e-5 relative.
+    Rounded,
+    /// Another answer that rounding explains (what explains it).
+    Explained(&'static str),
+    Unexplained,
+}
+
+fn classify(accel: &SceneAccel, ray: &Ray, g: Option<Hit>, w: Option<Hit>) -> Difference {
+    let nearer = match (g, w) {
+        (Some(g), Some(w)) => {
+            // Rounding of t scales with the coordinates it is computed from: the hit's
+            // distance and the origin's magnitude (a segment starting on a surface has a
+            // tiny t but a large origin).
+            let scale = w.t.abs() + ray.origin.abs().max_element();
+            let close = |tol: f32| (g.t - w.t).abs() <= tol * scale;
+            if g.instance == w.instance && g.triangle == w.triangle && close(1e-5) {
+                return Difference::Rounded;
+            }
+            if close(1e-4) {
+                return Difference::Explained("surfaces within rounding along the ray");
+            }
+            if g.t < w.t {
+                g
+            } else {
+                w
+            }
+        }
+        (Some(h), None) | (None, Some(h)) => h,
+        (None, None) => return Difference::Rounded,
+    };
+    if nearer.is_ground() {
+        return Difference::Unexplained;
+    }
+    let model = &accel.models()[accel.instances()[nearer.instance as usize].model as usize];
+    // Barycentric distance within which rounding may decide: the u, v of one hit differ by
+    // up to 1.5e-4 between an H200 and the CPU on these far, small leaves.
+    const D: f32 = 1e-3;
+    let (u, v) = (nearer.u, nearer.v);
+    if u < D || v < D || u + v > 1.0 - D {
+        return Difference::Explained("edge");
+    }
+    let opaque = model.is_opaque_at(nearer.triangle, u, v);
+    let boundary = [(D, 0.0), (-D, 0.0), (0.0, D), (0.0, -D)]
+        .iter()
+        .any(|&(du, dv)| model.is_opaque_at(nearer.triangle, u + du, v + dv) != opaque);
+    if boundary {
+        Difference::Explained("alpha texel boundary")
+    } else {
+        Difference::Unexplained
+    }
+}
+
 /// Closest hits and shadow answers of `gpu` against `cpu` for `rays` and shadow rays from
 /// their hits; returns the CPU's work counters.
 fn compare(gpu: &GpuTracer, cpu: &KdTracer, rays: &[Ray], strict: bool, what: &str) -> TraceStats {
+    compare_with_budget(gpu, cpu, rays, strict, 1e-3, what)
+}
+
+/// [`compare`], with at most `budget` of the rays getting another (explained) hit on a
+/// hardware GPU.
+fn compare_with_budget(
+    gpu: &GpuTracer,
+    cpu: &KdTracer,
+    rays: &[Ray],
+    strict: bool,
+    budget: f64,
+    what: &str,
+) -> TraceStats {
     let mut cs = TraceStats::default();
     let mut want = vec![None; rays.len()];
     cpu.closest_hits(rays, &mut want, &mut cs);
@@ -166,22 +241,34 @@ fn compare(gpu: &GpuTracer, cpu: &KdTracer, rays: &[Ray], strict: bool, what: &s
         hits > rays.len() / 4,
         "{what}: the rays should hit ({hits})"
     );
-    let mut differ = 0;
+    let (mut rounded, mut differ) = (0, 0);
     for (k, (g, w)) in got.iter().zip(&want).enumerate() {
         if identical(*g, *w) {
             continue;
         }
-        differ += 1;
-        // Only a rounding-level tie may differ, and only off lavapipe.
-        let near = matches!((g, w), (Some(g), Some(w)) if (g.t - w.t).abs() <= 1e-5 * w.t.abs());
+        // Only off lavapipe, and only where rounding decides.
+        let why = classify(&cpu.accel, &rays[k], *g, *w);
         assert!(
-            !strict && near,
+            !strict && why != Difference::Unexplained,
             "{what}: ray {k} {:?}: GPU {g:?}, CPU {w:?}",
             rays[k]
         );
+        match why {
+            Difference::Rounded => rounded += 1,
+            _ => {
+                differ += 1;
+                eprintln!("{what}: ray {k}: {why:?}: GPU {g:?}, CPU {w:?}");
+            }
+        }
+    }
+    if rounded + differ > 0 {
+        eprintln!(
+            "{what}: of {} rays, {rounded} the same hit rounded differently, {differ} another hit",
+            rays.len()
+        );
     }
     assert!(
-        differ * 1000 <= rays.len(),
+        differ as f64 <= budget * rays.len() as f64,
         "{what}: {differ} of {} hits differ",
         rays.len()
     );
@@ -254,7 +341,10 @@ fn crowded_leaves_and_tied_instances_agree() {
     let cfg = TraversalConfig::default();
     let cpu = KdTracer::new(accel.clone(), cfg);
     let gpu = GpuTracer::new(ctx.clone(), KdTracer::new(accel, cfg)).unwrap();
-    compare(&gpu, &cpu, &rays, ctx.is_software(), "crowded");
+    // 41 instances piled up, one an exact duplicate of another: rays through them meet
+    // surfaces at equal or nearly equal t, which rounding orders, so on a hardware GPU up
+    // to 0.5 % may get another (explained) hit.
+    compare_with_budget(&gpu, &cpu, &rays, ctx.is_software(), 5e-3, "crowded");
 }
 
 #[test]

@@ -72,6 +72,16 @@ impl PinholeCamera {
         })
     }
 
+    /// tan(fov / 2) of the vertical field of view.
+    pub fn tan_half(&self) -> f32 {
+        self.tan_half
+    }
+
+    /// Width over height.
+    pub fn aspect(&self) -> f32 {
+        self.aspect
+    }
+
     /// The ray through continuous pixel coordinates `(px, py)`.
     #[inline]
     pub fn ray(&self, px: f32, py: f32) -> Ray {

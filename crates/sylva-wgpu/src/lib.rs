@@ -10,9 +10,11 @@
 
 pub mod context;
 pub mod select;
+pub mod timer;
 
 pub use context::{AdapterChoice, ContextOptions, GpuContext};
 pub use select::{open_device, quiet_headless_probing, Device, OpenedDevice};
+pub use timer::PassTimer;
 /// The wgpu version this crate is built on (for [`ContextOptions::backends`]).
 pub use wgpu;
 

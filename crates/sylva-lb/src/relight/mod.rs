@@ -35,9 +35,10 @@ pub use basis::{
     basis_metadata, parse_basis_metadata, solve_basis, solve_basis_jobs, Ambient, BasisAssembly,
     BasisJob, BasisOptions, BasisProgress, BasisReport, BasisSet, BasisWeights,
 };
+pub use compress::haar::{HaarCoefs, HaarView};
 pub use compress::{
     compress, relit_error, sky_directions, Codec, CompressTarget, CompressedBasis, ErrorReport,
-    Precision, ProjectedWeights, COMPRESSED_EXTENSION,
+    Precision, ProjectedWeights, StoredFields, COMPRESSED_EXTENSION,
 };
 pub use footprint::{Footprint, Placement};
 pub use polyhedron::{exact_weights, face_hit, faces, DirectionError, Face, FaceHit};

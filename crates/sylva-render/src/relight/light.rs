@@ -55,6 +55,15 @@ impl StoredBasis {
         }
     }
 
+    /// Fields a lookup combines: the 57 channels `3 j + colour` uncompressed, the codec's
+    /// fields compressed.
+    pub fn field_count(&self) -> usize {
+        match self {
+            StoredBasis::Full(b) => b.channels().len(),
+            StoredBasis::Compressed(c) => c.fields(),
+        }
+    }
+
     /// `w` in the form a lookup reads (for compressed sets: folded into the fields).
     pub fn project(&self, w: &BasisWeights) -> ProjectedLight {
         match self {
@@ -71,6 +80,32 @@ impl StoredBasis {
             (StoredBasis::Full(b), ProjectedLight::Full(w)) => b.sample(g, w),
             (StoredBasis::Compressed(c), ProjectedLight::Compressed(w)) => c.sample_grid(g, w),
             _ => panic!("weights projected for another kind of stored basis"),
+        }
+    }
+}
+
+/// A combination of a stored basis's fields: the constant per colour and
+/// `(field, weight per colour)` terms, sorted by field.
+pub type FieldTerms = ([f32; 3], Vec<(u32, [f32; 3])>);
+
+impl ProjectedLight {
+    /// The combination as `constant + Σ weight · field` over the stored fields (the 57
+    /// channels `3 j + colour` uncompressed, the codec's fields compressed), zero terms left
+    /// out.
+    pub fn field_terms(&self) -> FieldTerms {
+        match self {
+            ProjectedLight::Full(w) => {
+                let mut terms = Vec::new();
+                for (j, w) in w.terms() {
+                    for c in 0..3 {
+                        let mut v = [0.0f32; 3];
+                        v[c] = w as f32;
+                        terms.push(((3 * j + c) as u32, v));
+                    }
+                }
+                ([0.0; 3], terms)
+            }
+            ProjectedLight::Compressed(w) => (w.constant(), w.terms().to_vec()),
         }
     }
 }
@@ -243,6 +278,37 @@ impl RelitLight {
         self.models.get(m).and_then(|b| b.as_ref().map(|b| &b.0))
     }
 
+    /// Instances lit.
+    pub fn instances(&self) -> usize {
+        self.instances.len()
+    }
+
+    /// Instance `i`'s combination of its model's fields for the current sun (`None`: its
+    /// model has no basis).
+    pub fn instance_terms(&self, i: usize) -> Option<FieldTerms> {
+        self.instances
+            .get(i)?
+            .weights
+            .as_ref()
+            .map(ProjectedLight::field_terms)
+    }
+
+    /// Model `m`'s bounds in model space (where its light ends on the ground).
+    pub(crate) fn model_bounds(&self, m: usize) -> Aabb {
+        self.model_bounds[m]
+    }
+
+    /// The ground index (for the GPU frame); `None` when there is none.
+    pub(crate) fn ground_index(&self) -> Option<&GroundIndex> {
+        (!self.ground_index.cells.is_empty()).then_some(&self.ground_index)
+    }
+
+    /// The relit light's luminance in free space (`1 + ambient`), what the ground's shade is
+    /// measured against.
+    pub(crate) fn free_space(&self) -> f32 {
+        (1.0 + self.illumination.ambient) as f32
+    }
+
     /// The light of instance `instance` at model-space point `p` (`None`: no basis).
     #[inline]
     pub fn sample_instance(&self, instance: usize, p: Vec3) -> Option<Vec3> {
@@ -262,7 +328,7 @@ impl IndirectLight for RelitLight {
     /// As [`crate::ModelGridLight`]'s, with each tree's relit luminance relative to its free
     /// space value (`1 + ambient`), so ambient light does not brighten the shade.
     fn ground_sky(&self, point: Vec3) -> Vec3 {
-        let open = (1.0 + self.illumination.ambient) as f32;
+        let open = self.free_space();
         ground_shade(
             &self.ground_index,
             &self.placed,

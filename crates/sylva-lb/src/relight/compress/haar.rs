@@ -247,7 +247,44 @@ pub(crate) fn kernel(o: [usize; 3], t: [f32; 3]) -> [f32; BLOCK_VALUES] {
     k
 }
 
+/// What a [`HaarFields`] lookup reads, for kernels on other devices that mirror
+/// [`HaarFields::sample_into`] (the GPU frame): blocks per axis, per block its first
+/// coefficient, per block and field its count, and the coefficients.
+#[derive(Debug)]
+pub struct HaarView<'a> {
+    pub blocks: [usize; 3],
+    pub starts: &'a [u32],
+    pub counts: &'a [u8],
+    pub coefs: HaarCoefs<'a>,
+}
+
+/// The kept coefficients as stored (f16 values widened to f32, exactly).
+#[derive(Debug)]
+pub enum HaarCoefs<'a> {
+    /// Per coefficient its index in the block and its value.
+    Split { indices: &'a [u8], values: Vec<f32> },
+    /// Per coefficient one u16: the value in the top 10 bits (signed, in steps of its field's
+    /// `steps` entry) and the index in the low 6.
+    Packed { words: &'a [u16], steps: &'a [f32] },
+}
+
 impl HaarFields {
+    /// The stored data a lookup reads.
+    pub fn view(&self) -> HaarView<'_> {
+        HaarView {
+            blocks: self.blocks,
+            starts: &self.starts,
+            counts: &self.counts,
+            coefs: match &self.coefs {
+                Coefs::Split { indices, values } => HaarCoefs::Split {
+                    indices,
+                    values: (0..values.len()).map(|i| values.get(i)).collect(),
+                },
+                Coefs::Packed { words, steps } => HaarCoefs::Packed { words, steps },
+            },
+        }
+    }
+
     /// Compresses `scales.len()` fields of a `dims` grid, `value(field, site)`, each with its
     /// scale (the threshold is relative to it).
     pub fn encode(

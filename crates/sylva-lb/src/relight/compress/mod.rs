@@ -318,6 +318,15 @@ impl ProjectedWeights {
     }
 }
 
+/// [`CompressedBasis::stored_fields`]: what a lookup of the projected combination reads.
+#[derive(Debug)]
+pub enum StoredFields<'a> {
+    /// Field after field, every site's value (f16 widened to f32, exactly).
+    Dense(Vec<Vec<f32>>),
+    /// Haar blocks ([`HaarFields::sample_into`]).
+    Haar(haar::HaarView<'a>),
+}
+
 /// A compressed basis set.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CompressedBasis {
@@ -532,6 +541,36 @@ impl CompressedBasis {
         }
     }
 
+    /// The stored fields as a lookup reads them (for kernels on other devices that mirror
+    /// [`CompressedBasis::sample_grid`]): per-site values, or Haar blocks.
+    pub fn stored_fields(&self) -> StoredFields<'_> {
+        match &self.store {
+            Store::Haar(h) => StoredFields::Haar(h.view()),
+            Store::Dense(d) => StoredFields::Dense(
+                (0..self.fields())
+                    .map(|f| {
+                        (0..self.dims.sites())
+                            .map(|s| d.values.get(s * d.fields + f))
+                            .collect()
+                    })
+                    .collect(),
+            ),
+        }
+    }
+
+    /// Field `f` (< [`CompressedBasis::fields`]) at every site, site order as in
+    /// [`LightingGrid`] (Haar: each site from the block that owns it). A lookup of the
+    /// projected combination is `constant + Σ_terms weights · trilinear(field)`.
+    pub fn decode_field(&self, f: usize) -> Vec<f32> {
+        assert!(f < self.fields(), "field {f} of {}", self.fields());
+        match &self.store {
+            Store::Haar(h) => h.decode_field(f),
+            Store::Dense(d) => (0..self.dims.sites())
+                .map(|s| d.values.get(s * d.fields + f))
+                .collect(),
+        }
+    }
+
     /// Decodes every channel at every site (Haar: each site from the block that owns it).
     pub fn decompress(&self) -> Result<BasisSet, RelightError> {
         let n = self.dims.sites();
@@ -541,10 +580,7 @@ impl CompressedBasis {
         )?;
         let fields: Vec<Vec<f32>> = (0..self.fields())
             .into_par_iter()
-            .map(|f| match &self.store {
-                Store::Haar(h) => h.decode_field(f),
-                Store::Dense(d) => (0..n).map(|s| d.values.get(s * d.fields + f)).collect(),
-            })
+            .map(|f| self.decode_field(f))
             .collect();
         let channels = match &self.transform {
             Transform::Identity => fields,
