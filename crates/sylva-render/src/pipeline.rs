@@ -932,7 +932,7 @@ impl PreparedScene {
         let frame = match (light, &self.gpu_frame, self.tracer.gpu()) {
             (None, Some(gpu_frame), Some(tracer)) => {
                 // Pixels the kernel hands back are rendered by the CPU tracer and shading.
-                let cpu = self.renderer_over(self.tracer.cpu(), &self.light);
+                let cpu = self.renderer_over(self.tracer.cpu(), self.indirect());
                 match gpu_frame.render(tracer, &cpu, settings, &advance) {
                     Ok(f) => Ok(f),
                     Err(FrameError::Render(e)) => Err(e),
