@@ -109,9 +109,9 @@ struct Pool {
 pub enum FrameLight<'a> {
     /// One grid per model, solved for the sun (paper or physical light).
     Grids(&'a ModelGridLight),
-    /// Base solutions combined per instance for the current sun (paper 004): the decoded
-    /// fields on the device, each instance's combination rewritten when the sun moves
-    /// ([`GpuFrame::relight`]).
+    /// Base solutions combined per instance for the current sun (paper 004): the stored
+    /// fields on the device as the CPU holds them (Haar blocks stay compressed), each
+    /// instance's combination rewritten when the sun moves ([`GpuFrame::relight`]).
     Relit(&'a RelitLight),
 }
 
@@ -123,7 +123,7 @@ impl FrameLight<'_> {
         }
     }
 
-    /// Words of LB light on the device: grids' RGB values, or the decoded fields.
+    /// Words of LB light on the device (at most): grids' RGB values, or the stored fields.
     fn words(&self, scene: &Scene) -> u64 {
         (0..scene.models.len())
             .map(|m| match self {

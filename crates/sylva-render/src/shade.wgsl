@@ -11,7 +11,7 @@
 // Included after the scene's WGSL (sylva-trace-gpu: closest_hit, any_hit, to_model, ...)
 // and a generated prelude that binds the shading data: `shade_word_at(i) -> u32`, one pool
 // of words holding per model its mesh data, materials, linear textures and LB light (a grid
-// solved for the sun, or decoded base-solution fields), the instances' world transforms and
+// solved for the sun, or the stored fields of its base solutions), the instances' world transforms and
 // the ground index (offsets in `shading.tables` and in the records), `relit_word_at(i)`, the
 // relit light's per-instance combinations (rewritten when the sun moves), and
 // `shading: ShadeParams`. A change to the shading formulas changes both sides; the tests in
@@ -167,7 +167,7 @@ struct ShadeModel {
     materials: u32,
     material_count: u32,
     // LB light record (NONE: no LB light on this model): a grid solved for the sun, or
-    // the decoded fields of its base solutions (relit).
+    // the stored fields of its base solutions (relit).
     grid: u32,
 }
 

@@ -337,27 +337,11 @@ impl GpuScene {
 
     /// A shader module from WGSL that includes [`GpuScene::wgsl`].
     pub fn module(&self, ctx: &GpuContext, label: &str, src: String) -> wgpu::ShaderModule {
-        let desc = wgpu::ShaderModuleDescriptor {
-            label: Some(label),
-            source: wgpu::ShaderSource::Wgsl(Cow::Owned(src)),
-        };
-        // Experiment knob (SYLVA_GPU_CHECKS=all|unbounded-loops|none): wgpu's runtime checks.
-        match std::env::var("SYLVA_GPU_CHECKS").as_deref() {
-            Ok("unbounded-loops") => unsafe {
-                ctx.device.create_shader_module_trusted(
-                    desc,
-                    wgpu::ShaderRuntimeChecks {
-                        force_loop_bounding: false,
-                        ..wgpu::ShaderRuntimeChecks::checked()
-                    },
-                )
-            },
-            Ok("none") => unsafe {
-                ctx.device
-                    .create_shader_module_trusted(desc, wgpu::ShaderRuntimeChecks::unchecked())
-            },
-            _ => ctx.device.create_shader_module(desc),
-        }
+        ctx.device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(Cow::Owned(src)),
+            })
     }
 }
 
