@@ -96,6 +96,12 @@ pub struct GpuLattice<'c> {
     sums: wgpu::Buffer,
     sums_staging: wgpu::Buffer,
     step_pipeline: wgpu::ComputePipeline,
+    /// The step without the monitor's sum, for steps whose total nobody reads.
+    quiet_pipeline: wgpu::ComputePipeline,
+    /// Steps numbered below this run quiet (their totals are NaN): set by [`GpuLattice::run`].
+    quiet_before: usize,
+    /// Monitor every step even without a tolerance (each step's residual reported).
+    monitor_every_step: bool,
     gather_pipeline: wgpu::ComputePipeline,
     reduce_pipeline: wgpu::ComputePipeline,
     /// `step_groups[i]` reads state i and writes state 1 - i.
@@ -374,6 +380,8 @@ impl<'c> GpuLattice<'c> {
         });
         let step_module = module("step", shader::step_shader(&layout));
         let step_pipeline = pipeline("step", &step_module, &step_bgl);
+        let quiet_module = module("step", shader::step_shader_with(&layout, false));
+        let quiet_pipeline = pipeline("step", &quiet_module, &step_bgl);
         let step_group = |from: usize| {
             let mut e = vec![
                 whole(0, &params),
@@ -479,6 +487,9 @@ impl<'c> GpuLattice<'c> {
             sums,
             sums_staging,
             step_pipeline,
+            quiet_pipeline,
+            quiet_before: 0,
+            monitor_every_step: std::env::var_os("SYLVA_LB_MONITOR_EVERY_STEP").is_some(),
             gather_pipeline,
             reduce_pipeline,
             step_groups,
@@ -663,6 +674,12 @@ impl<'c> GpuLattice<'c> {
         self.precision
     }
 
+    /// Monitor every step's total even without a tolerance, so each step's residual is
+    /// reported (the default monitors only the last two steps of such a run).
+    pub fn set_monitor_every_step(&mut self, yes: bool) {
+        self.monitor_every_step = yes;
+    }
+
     /// Storage bindings each copy of the state is split over.
     pub fn parts(&self) -> usize {
         self.layout.parts()
@@ -674,6 +691,7 @@ impl<'c> GpuLattice<'c> {
         assert!(n <= self.max_batch + 1);
         let mut totals = Vec::with_capacity(n);
         let mut launches = 0usize;
+        let mut quiet = Vec::with_capacity(n);
         let mut enc = self
             .ctx
             .device
@@ -685,7 +703,7 @@ impl<'c> GpuLattice<'c> {
                 label: Some("steps"),
                 timestamp_writes: None,
             });
-            pass.set_pipeline(&self.step_pipeline);
+            let mut bound: Option<bool> = None;
             for _ in 0..n {
                 if self.steps == 0 {
                     // X_0 → X_1 is streaming alone; X_0's interior total is zero.
@@ -696,6 +714,16 @@ impl<'c> GpuLattice<'c> {
                 if launches == self.max_batch {
                     break;
                 }
+                let q = self.steps + 1 < self.quiet_before;
+                if bound != Some(q) {
+                    pass.set_pipeline(if q {
+                        &self.quiet_pipeline
+                    } else {
+                        &self.step_pipeline
+                    });
+                    bound = Some(q);
+                }
+                quiet.push(q);
                 let offset = (launches as u64 * self.partial_stride) as u32;
                 pass.set_bind_group(0, &self.step_groups[self.current], &[offset]);
                 pass.dispatch_workgroups(self.groups[0], self.groups[1], self.groups[2]);
@@ -705,6 +733,12 @@ impl<'c> GpuLattice<'c> {
             }
         }
         if launches == 0 {
+            return Ok(totals);
+        }
+        if quiet.iter().all(|&q| q) {
+            // Nothing to read: submit without waiting (the next read waits for it).
+            self.ctx.queue.submit([enc.finish()]);
+            totals.extend(std::iter::repeat_n(f64::NAN, launches));
             return Ok(totals);
         }
         {
@@ -721,8 +755,12 @@ impl<'c> GpuLattice<'c> {
         self.ctx.queue.submit([enc.finish()]);
         let data = self.ctx.map_read(&self.sums_staging, bytes)?;
         let sums: &[f32] = bytemuck::cast_slice(&data);
-        for step in sums.chunks_exact(REDUCE_THREADS as usize) {
-            totals.push(step.iter().map(|&v| v as f64).sum());
+        for (step, &q) in sums.chunks_exact(REDUCE_THREADS as usize).zip(&quiet) {
+            totals.push(if q {
+                f64::NAN
+            } else {
+                step.iter().map(|&v| v as f64).sum()
+            });
         }
         Ok(totals)
     }
@@ -737,6 +775,14 @@ impl<'c> GpuLattice<'c> {
     ) -> Result<SolveReport, LbGpuError> {
         validate_options(opts)?;
         let mut monitor = RunMonitor::new(opts);
+        // Without a tolerance only the last two totals matter (the report's residual): the
+        // steps before them skip the monitor's sum and the host's wait for it. Their
+        // progress reports carry no new residual.
+        self.quiet_before = if opts.tolerance.is_none() && !self.monitor_every_step {
+            (self.steps + opts.max_steps).saturating_sub(1)
+        } else {
+            0
+        };
         while monitor.steps_left() > 0 {
             // With a tolerance, the CPU checks after each pair (or the last single step);
             // batches without one are checked never, so grouping does not matter.

@@ -124,6 +124,12 @@ fn header(layout: &Layout) -> String {
 
 /// The step kernel: gather, monitor, collide, store; one partial sum per workgroup.
 pub fn step_shader(layout: &Layout) -> String {
+    step_shader_with(layout, true)
+}
+
+/// The step kernel, with the monitor's per-workgroup sum (`monitor`) or without it (no
+/// shared memory, no barriers: for steps whose total nobody reads).
+pub fn step_shader_with(layout: &Layout, monitor: bool) -> String {
     let parts = layout.parts();
     let t = layout.elem();
     let mut s = header(layout);
@@ -154,10 +160,16 @@ pub fn step_shader(layout: &Layout) -> String {
         .unwrap();
     }
     let (wz, wy) = (layout.wg_z, layout.wg_y);
+    if monitor {
+        writeln!(
+            s,
+            "var<workgroup> scratch: array<f32, {WORKGROUP_THREADS}>;"
+        )
+        .unwrap();
+    }
     writeln!(
         s,
-        "var<workgroup> scratch: array<f32, {WORKGROUP_THREADS}>;\n\
-         @compute @workgroup_size({wz}, {wy}, 1)\n\
+        "@compute @workgroup_size({wz}, {wy}, 1)\n\
          fn step(@builtin(global_invocation_id) gid: vec3<u32>,\n\
                  @builtin(local_invocation_index) li: u32,\n\
                  @builtin(workgroup_id) wid: vec3<u32>,\n\
@@ -206,6 +218,19 @@ pub fn step_shader(layout: &Layout) -> String {
     }
     for m in 0..Q {
         writeln!(s, "{} = {t}(r{m});", element_expr(layout, m, "dst", "s")).unwrap();
+    }
+    if !monitor {
+        // `total` stays unread; the partial of this workgroup is not written.
+        s.push_str(
+            "}
+_ = total;
+_ = li;
+_ = wid;
+_ = nwg;
+}
+",
+        );
+        return s;
     }
     s.push_str(
         "}
@@ -421,6 +446,7 @@ mod tests {
         ] {
             for (name, src) in [
                 ("step", step_shader(&layout)),
+                ("step", step_shader_with(&layout, false)),
                 ("gather", gather_shader(&layout)),
                 ("reduce", reduce_shader()),
             ] {
