@@ -369,7 +369,8 @@ fn solve(a: SolveArgs) -> Result<()> {
                 pb.set_position((c * opts.max_steps) as u64);
             }
             pb.set_position((c * opts.max_steps + s) as u64);
-            if s % 8 == 0 {
+            // A GPU run without a tolerance measures only its last residual (NaN before).
+            if s % 8 == 0 && r.is_finite() {
                 pb.set_message(format!(
                     "{} residual {r:.2e}",
                     sylva_lb::params::COLOUR_NAMES[c]
