@@ -502,6 +502,12 @@ impl GpuFrame {
             shading_bytes(scene, light),
         )?;
         let pool = Pool::build(scene, materials, light);
+        if pool.words.len() > u32::MAX as usize {
+            return Err(TraceGpuError::TooLarge(format!(
+                "the scene's shading data ({}) exceed the kernel's 32-bit word offsets",
+                sylva_core::format_bytes(4 * pool.words.len() as u64)
+            )));
+        }
         let limits = ctx.limits();
         let max_binding = limits
             .max_storage_buffer_binding_size

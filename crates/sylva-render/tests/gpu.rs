@@ -7,7 +7,7 @@
 
 use std::path::Path;
 
-use sylva_lb::relight::CompressTarget;
+use sylva_lb::relight::{Codec, CompressTarget, Precision};
 use sylva_lb::CpuSolver;
 use sylva_render::{
     load_scene, tone_map_modes, BasisUse, Frame, LbPlan, Light, Mode, PrepareOptions,
@@ -361,4 +361,36 @@ fn relit_light_is_shaded_on_the_gpu_as_on_the_cpu() {
     cpu.set_illumination(SunWeights::Exact, 0.3).unwrap();
     gpu.set_illumination(SunWeights::Exact, 0.3).unwrap();
     frames_agree(&ctx, &cpu, &gpu, tight, "relit, exact weights, ambient 0.3");
+}
+
+#[test]
+fn every_stored_form_of_the_bases_is_read_on_the_gpu_as_on_the_cpu() {
+    // The recommended codec stores packed Haar coefficients (the test above); the others
+    // store split Haar coefficients (f16 or f32 values) or dense per-site fields (PCA).
+    let Some(ctx) = context() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let targets = [
+        CompressTarget::new(Codec::Haar { threshold: 0.004 }),
+        CompressTarget {
+            precision: Precision::F32,
+            ..CompressTarget::new(Codec::ColourHaar { threshold: 0.002 })
+        },
+        CompressTarget::new(Codec::Pca { rank: 12 }),
+    ];
+    for target in targets {
+        let plan = RelightPlan {
+            basis: BasisUse::Always,
+            sun: SunWeights::ThreeBasis,
+            ambient: 0.2,
+            global: None,
+            target,
+            keep_raw: false,
+        };
+        let mut cpu = prepare_lit(dir.path(), None, false, Some(plan));
+        let mut gpu = prepare_lit(dir.path(), Some(&ctx), true, Some(plan));
+        let sun = glam::Vec3::new(0.4, 0.7, 0.3);
+        cpu.set_sun(sun).unwrap();
+        gpu.set_sun(sun).unwrap();
+        frames_agree(&ctx, &cpu, &gpu, (1e-5, 1e-3), &format!("{target:?}"));
+    }
 }
