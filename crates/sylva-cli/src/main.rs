@@ -45,8 +45,9 @@ enum Command {
     Render(commands::render::RenderArgs),
     /// Precompute every model's 19 base solutions (paper 004), compressed and cached, and the
     /// scene's coarse global grid: afterwards the sun moves with no LB solve, e.g.
-    /// `sylva basis canopy` (`--device gpu` solves on the GPU). Base solutions are the paper
-    /// light's (`--light paper`, the default here; docs/relight.md).
+    /// `sylva basis canopy` (`--device gpu` solves on the GPU; `mpirun -np N sylva basis`
+    /// across processes, with the `mpi` feature). Base solutions are the paper light's
+    /// (`--light paper`, the default here; docs/relight.md).
     Basis(commands::basis::BasisArgs),
     /// Relight a scene over a moving sun (004 Table 1): numbered PNGs, an animated PNG and
     /// per-frame times, e.g. `sylva relight catalpa --suns 24`. Under the paper light, whose
@@ -61,7 +62,7 @@ enum Command {
 /// Whether `command` runs across MPI ranks, and its name for messages.
 fn distributed(command: &Command) -> Result<(), &'static str> {
     match command {
-        Command::Render(_) => Ok(()),
+        Command::Render(_) | Command::Basis(_) => Ok(()),
         Command::Bench(b) if b.is_trace() => Ok(()),
         Command::Bench(_) => Err("bench (other than bench trace)"),
         Command::Scene(_) => Err("scene"),
@@ -70,7 +71,6 @@ fn distributed(command: &Command) -> Result<(), &'static str> {
         Command::Lb(_) => Err("lb"),
         Command::Spp(_) => Err("spp"),
         Command::Export(_) => Err("export"),
-        Command::Basis(_) => Err("basis"),
         Command::Relight(_) => Err("relight"),
     }
 }
@@ -85,7 +85,7 @@ fn run(command: Command, comm: Option<&dyn sylva_mpi::Comm>) -> anyhow::Result<(
         Command::Bench(a) => commands::bench::run(a, comm),
         Command::Export(a) => commands::export::run(a),
         Command::Render(a) => commands::render::run(a, comm),
-        Command::Basis(a) => commands::basis::run(a),
+        Command::Basis(a) => commands::basis::run(a, comm),
         Command::Relight(a) => commands::relight::run(a),
     }
 }
@@ -118,7 +118,7 @@ fn main() -> std::process::ExitCode {
         if let Err(what) = distributed(&cli.command) {
             return commands::finish(Err(anyhow::anyhow!(
                 "started by mpirun as one of {n} processes, but `sylva {what}` does not split \
-                 its work across processes: run it without mpirun (render and bench trace do)"
+                 its work across processes: run it without mpirun (render, basis and bench trace do)"
             )));
         }
         if !cfg!(feature = "mpi") {

@@ -1,6 +1,7 @@
-//! `mpirun -np N sylva render|bench trace` (built with `--features mpi`; CI runs these with
-//! 2 and 3 ranks): the image and the LB cache are those of one process, bit for bit; a rank
-//! that fails ends the whole job with its message instead of leaving the others waiting.
+//! `mpirun -np N sylva render|basis|bench trace` (built with `--features mpi`; CI runs these
+//! with 2 and 3 ranks): the image, the LB cache and the relighting bases are those of one
+//! process, bit for bit; a rank that fails ends the whole job with its message instead of
+//! leaving the others waiting.
 #![cfg(feature = "mpi")]
 
 mod common;
@@ -163,6 +164,180 @@ fn mpi_render_and_lb_are_bit_identical_to_one_process() {
             assert!(entries(Path::new(&cache)) == entries(Path::new(&one_cache)));
         }
     }
+}
+
+fn basis_args<'a>(scene: &'a str, cache: &'a str) -> Vec<&'a str> {
+    vec![
+        "basis",
+        scene,
+        "--lb-grid",
+        "12",
+        "--global-grid",
+        "24",
+        "--keep-raw",
+        "--cache-dir",
+        cache,
+        "--device",
+        "cpu",
+        "--threads",
+        "1",
+    ]
+}
+
+/// A decoded cache entry: file name, metadata, contents.
+type Entry = (String, Vec<(String, String)>, Vec<u8>);
+
+/// Basis cache entries by file name, decoded: the metadata but the solve time (measured, so
+/// it differs from run to run) and the contents bit for bit (compressed sets as they are sent
+/// between ranks, the uncompressed sets' channels, the global grid's file as it is).
+fn basis_entries(dir: &Path) -> Vec<Entry> {
+    use sylva_lb::relight::CompressedBasis;
+    let measured = |meta: Vec<(String, String)>| -> Vec<(String, String)> {
+        meta.into_iter()
+            .filter(|(k, _)| k != "solve_seconds")
+            .collect()
+    };
+    let mut v: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| {
+            let path = e.unwrap().path();
+            let name = path.file_name().unwrap().to_string_lossy().into_owned();
+            let (meta, bytes) = match path.extension().and_then(|e| e.to_str()) {
+                Some("scbasis") => {
+                    let (set, meta) = CompressedBasis::read(&path).unwrap();
+                    (measured(meta), set.to_bytes())
+                }
+                Some("sbasis") => {
+                    let file = sylva_lb::GridFile::read(&path).unwrap();
+                    let bits = file
+                        .channels
+                        .iter()
+                        .flatten()
+                        .flat_map(|v| v.to_bits().to_le_bytes())
+                        .collect();
+                    (measured(file.metadata), bits)
+                }
+                _ => (Vec::new(), std::fs::read(&path).unwrap()),
+            };
+            (name, meta, bytes)
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn mpi_basis_is_bit_identical_to_one_process() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write_scene(dir.path());
+    let d = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let one_cache = d("one-cache");
+    let (ok, out, err) = sylva(&basis_args(&scene, &one_cache));
+    assert!(ok, "{out}\n{err}");
+    let want = basis_entries(Path::new(&one_cache));
+    let names: Vec<&str> = want.iter().map(|e| e.0.as_str()).collect();
+    // Per model a compressed and an uncompressed set, and the scene's global grid.
+    assert_eq!(want.len(), 5, "{names:?}");
+    assert!(names.iter().any(|n| n.ends_with(".sglobal")), "{names:?}");
+
+    for np in [2, 3] {
+        let cache = d(&format!("np{np}-cache"));
+        for pass in 0..2 {
+            let (ok, out, err) = mpirun(np, &basis_args(&scene, &cache), &[]);
+            assert!(ok, "np {np} pass {pass}:\n{out}\n{err}");
+            // Rank 0 alone prints: one summary.
+            assert_eq!(out.matches("models from the cache").count(), 1, "{out}");
+            assert!(
+                out.contains(&format!("base solutions solved across {np} ranks")),
+                "{out}"
+            );
+            let lines = |how: &str| out.lines().filter(|l| l.contains(how)).count();
+            if pass == 0 {
+                assert_eq!(lines("grid solved in"), 2, "{out}");
+                assert!(out.contains("0 of 2 models from the cache"), "{out}");
+                assert!(
+                    out.contains("global grid: 24") && out.contains("solved"),
+                    "{out}"
+                );
+            } else {
+                assert_eq!(lines("grid from cache"), 2, "{out}");
+                assert!(out.contains("2 of 2 models from the cache"), "{out}");
+            }
+            // The solves ran across the ranks; rank 0 assembled and stored what one process
+            // stores, and the same global grid.
+            assert!(
+                basis_entries(Path::new(&cache)) == want,
+                "np {np} pass {pass}: the cache differs from one process's"
+            );
+        }
+    }
+
+    // A failing worker ends the job with its message, and nothing is cached.
+    let cache = d("failed-cache");
+    let (ok, out, err) = mpirun(
+        3,
+        &basis_args(&scene, &cache),
+        &[("SYLVA_MPI_FAIL_RANK", "2")],
+    );
+    assert!(!ok, "the job must fail\n{out}\n{err}");
+    assert!(
+        err.contains("error: rank 2 of 3: rank 2: failure injected by SYLVA_MPI_FAIL_RANK"),
+        "{err}"
+    );
+    assert!(!Path::new(&cache).exists() || basis_entries(Path::new(&cache)).is_empty());
+}
+
+#[test]
+fn mpi_render_solves_missing_bases_across_ranks() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write_scene(dir.path());
+    let d = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let args = |out: &str, cache: &str| -> Vec<String> {
+        let mut a: Vec<String> = render_args(&scene, out, cache)
+            .into_iter()
+            .map(String::from)
+            .collect();
+        a.extend(
+            [
+                "--light",
+                "paper",
+                "--basis",
+                "always",
+                "--global-grid",
+                "24",
+            ]
+            .map(String::from),
+        );
+        a
+    };
+    let (one_png, one_cache) = (d("one.png"), d("one-cache"));
+    let one = args(&one_png, &one_cache);
+    let (ok, out, err) = sylva(&one.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(ok, "{out}\n{err}");
+    assert!(out.contains("relit from base solutions"), "{out}");
+    let want_exr = std::fs::read(d("one.exr")).unwrap();
+    let want_cache = basis_entries(Path::new(&one_cache));
+
+    let (png, cache) = (d("np2.png"), d("np2-cache"));
+    let a = args(&png, &cache);
+    let (ok, out, err) = mpirun(2, &a.iter().map(String::as_str).collect::<Vec<_>>(), &[]);
+    assert!(ok, "{out}\n{err}");
+    assert!(out.contains("relit from base solutions"), "{out}");
+    assert_eq!(
+        out.lines().filter(|l| l.contains("grid solved in")).count(),
+        2,
+        "{out}"
+    );
+    // Both ranks rendered units with the bases rank 0 stored and sent them.
+    assert!(
+        out.contains("MPI: 2 ranks") && !out.contains("rank 1: 0 units"),
+        "{out}"
+    );
+    assert!(
+        std::fs::read(d("np2.exr")).unwrap() == want_exr,
+        "the linear image differs"
+    );
+    assert!(basis_entries(Path::new(&cache)) == want_cache);
 }
 
 #[test]

@@ -183,7 +183,11 @@ fn as_one_of_two(args: &[&str]) -> (bool, String) {
 
 #[test]
 fn under_mpirun_commands_that_do_not_split_their_work_refuse() {
-    for args in [&["scene", "list"][..], &["bench", "scene", "demo"]] {
+    for args in [
+        &["scene", "list"][..],
+        &["bench", "scene", "demo"],
+        &["relight", "demo"],
+    ] {
         let (ok, err) = as_one_of_two(args);
         assert!(!ok, "{args:?}");
         assert!(
@@ -197,7 +201,11 @@ fn under_mpirun_commands_that_do_not_split_their_work_refuse() {
 #[cfg(not(feature = "mpi"))]
 #[test]
 fn a_build_without_mpi_refuses_to_render_under_mpirun() {
-    for args in [&["render", "demo"][..], &["bench", "trace", "demo"]] {
+    for args in [
+        &["render", "demo"][..],
+        &["bench", "trace", "demo"],
+        &["basis", "demo"],
+    ] {
         let (ok, err) = as_one_of_two(args);
         assert!(!ok, "{args:?}");
         assert!(

@@ -9,18 +9,24 @@
 //!   rule ([`is_opaque`]) the voxelizer, the tracer's alpha test and the cache keys share.
 //! * [`scene`]: the built [`Scene`]: models (each with its LB preset), [`Instance`]s, media,
 //!   [`Ground`], sun, sky, [`Camera`] and [`LbSettings`].
+//! * [`params`]: the LB presets a scene names ([`Preset`]) and their per-colour scattering
+//!   parameters ([`MediumParams`]): plain numbers that the LB solver (`sylva-lb`, which
+//!   re-exports them) and the exporters (`sylva-io`) both read.
 //!
-//! No file formats, no generators, no LB here: scene files and growing live in `sylva-scene`
-//! and `sylva-grow`, model files in `sylva-io`, the density grid in `sylva-voxel`.
+//! No file formats, no generators, no LB solver here: scene files and growing live in
+//! `sylva-scene` and `sylva-grow`, model files in `sylva-io`, the density grid in
+//! `sylva-voxel`, the solver in `sylva-lb`.
 
 pub mod material;
 pub mod medium;
 pub mod mesh;
+pub mod params;
 pub mod scene;
 pub mod texture;
 
 pub use material::{Material, MaterialKind, Optics, FOREST_LEAF_TRANSMISSION};
 pub use medium::Medium;
 pub use mesh::{Aabb, Mesh, Model};
+pub use params::{ColourParams, MediumParams, ParamError, Preset};
 pub use scene::{Camera, Ground, Instance, LbSettings, ModelOrigin, Scene};
 pub use texture::{is_opaque, nearest_texel_coords, Filter, Texture, Wrap, OPAQUE_ALPHA};

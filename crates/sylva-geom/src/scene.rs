@@ -35,7 +35,7 @@ pub struct Camera {
 pub struct LbSettings {
     /// Cells along each model's longest edge.
     pub grid: u32,
-    /// An LB preset name (`sylva_lb::Preset`).
+    /// An LB preset name ([`crate::Preset`]).
     pub preset: String,
 }
 

@@ -736,7 +736,7 @@ fn media_export_as_heterogeneous_volumes_in_world_units() {
             .map(floats)
             .unwrap()
     };
-    let cloud = sylva_lb::Preset::Cloud.params().colours[0];
+    let cloud = sylva_geom::Preset::Cloud.params().colours[0];
     let sigma_t = cloud.sigma_t() as f32;
     assert!(close(&param("float", "scale"), &[sigma_t / h], 1e-6));
     assert!(close(

@@ -20,7 +20,9 @@ pub mod grid_file;
 pub mod kernel;
 pub mod lattice;
 pub mod light;
-pub mod params;
+/// The presets and per-colour parameters live in `sylva-geom` (scenes name presets, and
+/// export reads their optics without the solver); re-exported here where the solver uses them.
+pub use sylva_geom::params;
 pub mod preview;
 pub mod relight;
 pub mod shapes;

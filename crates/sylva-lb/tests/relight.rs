@@ -491,6 +491,9 @@ fn compressed_files_round_trip_and_bad_ones_are_refused() {
         let (back, meta) = CompressedBasis::read(&p).unwrap();
         assert!(back == c, "{codec:?} {precision:?} round trip");
         assert!(meta.contains(&extra[0]));
+        // In memory (what MPI ranks send each other) too.
+        let sent = CompressedBasis::from_bytes(&c.to_bytes()).unwrap();
+        assert!(sent == c, "{codec:?} {precision:?} bytes round trip");
         let w = BasisWeights::three_basis([0.3, -0.8, 0.1])
             .unwrap()
             .with_ambient(0.3)
@@ -526,6 +529,19 @@ fn compressed_files_round_trip_and_bad_ones_are_refused() {
     wrong.write(&bad, &[]).unwrap();
     let e = CompressedBasis::read(&bad).unwrap_err().to_string();
     assert!(e.contains("bad.scbasis") && e.contains("codec"), "{e}");
+    // Bytes are checked like files: short, long, inconsistent.
+    let sent = c.to_bytes();
+    for (b, want) in [
+        (&sent[..sent.len() - 3], "stated"),
+        (&[sent.as_slice(), &[0]].concat()[..], "left over"),
+        (&wrong.to_bytes()[..], "codec"),
+    ] {
+        let e = CompressedBasis::from_bytes(b).unwrap_err().to_string();
+        assert!(
+            e.contains("compressed relighting basis file bytes") && e.contains(want),
+            "{e}"
+        );
+    }
 }
 
 #[test]

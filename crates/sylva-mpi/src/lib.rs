@@ -8,6 +8,8 @@
 //!   at rank 0: bit-identical to a one-process frame.
 //! * [`lighting`]: every model's LB lighting, colours solved as queue jobs, the cache at rank
 //!   0, the grids broadcast to every rank.
+//! * [`relight`]: relighting's base solutions (paper 004), models × bases × colours as queue
+//!   jobs, assembled, compressed and cached at rank 0 as one process does (`sylva basis`).
 //! * [`model`]: frame times on N ranks from measured per-tile costs, fixed strips (the
 //!   paper's split) against units on demand.
 //! * [`launch`]: whether this process was started by `mpirun` as one of several.
@@ -23,11 +25,13 @@ pub mod model;
 #[cfg(feature = "mpi")]
 pub mod mpi;
 pub mod queue;
+pub mod relight;
 
 pub use comm::{Comm, CommError, LocalComm};
 pub use frame::{render_frame, DistributedFrame, RankWork, UnitLayout};
 pub use lighting::{light_models, LbJob};
 pub use queue::{run_queue, QueueOutcome};
+pub use relight::{precompute_relighting, BasisModelJob};
 
 /// Why a rank cannot go on.
 #[derive(Debug, thiserror::Error)]

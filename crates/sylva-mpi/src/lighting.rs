@@ -23,22 +23,39 @@ use crate::comm::{agree, Comm, CommError, Reader, Writer};
 use crate::queue::run_queue;
 use crate::DistError;
 
-/// A solve that needs one model's density grid: what the LB queue runs. [`solve_model_jobs`]
-/// runs any list of them; the result of each is one value per site of its model's grid.
+/// A solve that needs one model's grid: what the LB queue runs. [`solve_model_jobs`] runs
+/// any list of them; the result of each is one value per site of its model's grid.
 pub trait ModelJob: Sync {
-    /// Index into the scene's models (and their [`LightingPlan`]s).
+    /// Index into the scene's models (and their plans, [`JobModel`]).
     fn model(&self) -> usize;
 }
 
-/// One solve of the LB precomputation: a model's colour under the sun.
-///
-/// Relighting's base solutions (004: `sylva_lb::relight::BasisJob`, a base solution in a
-/// colour) are listed the same way: a job type holding the model and its `BasisJob`,
-/// implementing [`ModelJob`], listed per model from `BasisJob::all` (or
-/// `BasisAssembly::missing` after a partial cache hit) and run by [`solve_model_jobs`], whose
-/// `solve` calls `solve_basis_jobs` with that one job; rank 0 puts the values in each model's
-/// `BasisAssembly`. The queue, the density grids kept between jobs, the gathering and the
-/// broadcast stay as they are.
+/// A model as its jobs need it on the rank that runs them: built there ([`JobModel::grid`]:
+/// voxelized) and kept while that rank's next job is of the same model.
+pub trait JobModel {
+    /// What a rank builds once for the model's jobs: its density grid ([`LightingPlan`]), or
+    /// a basis plan holding one ([`crate::relight`]).
+    type Grid;
+    fn grid(&self) -> Result<Self::Grid, DistError>;
+    /// Values of one job's result: one per site of the model's grid.
+    fn sites(&self) -> usize;
+}
+
+impl JobModel for LightingPlan<'_> {
+    type Grid = DensityGrid;
+
+    fn grid(&self) -> Result<DensityGrid, DistError> {
+        self.density()
+            .map_err(|source| lighting_error(self, source))
+    }
+
+    fn sites(&self) -> usize {
+        self.dims().sites()
+    }
+}
+
+/// One solve of the LB precomputation: a model's colour under the sun. (Relighting's base
+/// solutions are the other kind: [`crate::relight::BasisModelJob`].)
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct LbJob {
     /// Index into the scene's models.
@@ -74,21 +91,21 @@ pub struct JobValues {
     pub seconds: f64,
 }
 
-/// What computes one job on the rank that gets it: `solve(job, plan, density)`, one value
-/// per site of the model's grid.
-pub type SolveModelJob<'f, J> =
-    dyn FnMut(&J, &LightingPlan, &DensityGrid) -> Result<Vec<f32>, DistError> + 'f;
+/// What computes one job on the rank that gets it: `solve(job, plan, grid)`, one value per
+/// site of the model's grid.
+pub type SolveModelJob<'f, J, P> =
+    dyn FnMut(&J, &P, &<P as JobModel>::Grid) -> Result<Vec<f32>, DistError> + 'f;
 
 /// Runs `jobs` across the ranks through the work queue (every rank calls it with the same
-/// list): `solve(job, plan, density)` computes a job on whichever rank gets it, the model's
-/// density grid voxelized there and kept while that rank's next job is of the same model.
-/// Rank 0 gets `Some` of every job's values in job order (each checked to have one value per
-/// site), with `on_done(job)` as each arrives; the other ranks get `None`.
-pub fn solve_model_jobs<J: ModelJob>(
+/// list): `solve(job, plan, grid)` computes a job on whichever rank gets it, the model's
+/// grid built there ([`JobModel::grid`]) and kept while that rank's next job is of the same
+/// model. Rank 0 gets `Some` of every job's values in job order (each checked to have one
+/// value per site), with `on_done(job)` as each arrives; the other ranks get `None`.
+pub fn solve_model_jobs<J: ModelJob, P: JobModel>(
     comm: &dyn Comm,
-    plans: &[LightingPlan],
+    plans: &[P],
     jobs: &[J],
-    solve: &mut SolveModelJob<'_, J>,
+    solve: &mut SolveModelJob<'_, J, P>,
     on_done: &(dyn Fn(usize) + Sync),
 ) -> Result<Option<Vec<JobValues>>, DistError> {
     if let Some(job) = jobs.iter().find(|j| j.model() >= plans.len()) {
@@ -99,29 +116,26 @@ pub fn solve_model_jobs<J: ModelJob>(
         ))
         .into());
     }
-    let mut density: Option<(usize, DensityGrid)> = None;
+    let mut held: Option<(usize, P::Grid)> = None;
     let outcome = run_queue(
         comm,
         jobs.len(),
         &mut |j| {
             let job = &jobs[j];
             let plan = &plans[job.model()];
-            if density.as_ref().map(|d| d.0) != Some(job.model()) {
+            if held.as_ref().map(|d| d.0) != Some(job.model()) {
                 // One grid held at a time.
-                density = None;
-                let grid = plan
-                    .density()
-                    .map_err(|source| lighting_error(plan, source))?;
-                density = Some((job.model(), grid));
+                held = None;
+                held = Some((job.model(), plan.grid()?));
             }
-            let grid = &density.as_ref().expect("density").1;
+            let grid = &held.as_ref().expect("a grid").1;
             let mut w = Writer::default();
             w.f32s(&solve(job, plan, grid)?);
             Ok(w.0)
         },
         on_done,
     )?;
-    drop(density);
+    drop(held);
     let Some(outcome) = outcome else {
         return Ok(None);
     };
@@ -130,7 +144,7 @@ pub fn solve_model_jobs<J: ModelJob>(
         .zip(&outcome.done)
         .map(|((job, result), done)| {
             let mut r = Reader::new(result, "LB job values");
-            let values = r.f32s(plans[job.model()].dims().sites())?;
+            let values = r.f32s(plans[job.model()].sites())?;
             r.end()?;
             Ok(JobValues {
                 values,

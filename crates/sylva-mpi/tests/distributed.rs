@@ -218,7 +218,7 @@ fn ranks_with_different_frames_refuse_and_the_abort_ends_the_others() {
     });
 }
 
-/// A job kind other than `LbJob`, as relighting's base solutions will be: a model's density
+/// A job kind other than `LbJob` (as relighting's `BasisModelJob` is): a model's density
 /// scaled by a factor. Listed, queued and gathered by `solve_model_jobs` alone.
 struct ScaledDensity {
     model: usize,

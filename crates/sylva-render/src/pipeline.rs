@@ -967,24 +967,50 @@ impl PreparedScene {
 
 /// Every model's base solutions and the scene's global grid as `plan` asks (from the cache,
 /// or solved on `lb.solver` and cached), without building anything else: what `sylva basis`
-/// runs. `None` when the plan takes cached bases only and one is missing.
+/// runs. `None` when the plan takes cached bases only and one is missing. (Across MPI ranks:
+/// `sylva_mpi::relight::precompute_relighting`, which shares [`relight_options`],
+/// `model_basis`'s pieces and [`finish_relighting`] with this.)
 pub fn precompute_relighting(
     scene: &Scene,
     lb: &LbPlan,
     plan: &RelightPlan,
     progress: &dyn Progress,
 ) -> Result<Option<Relighting>, PipelineError> {
+    let (lopts, bopts) = relight_options(scene, lb, plan)?;
+    let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
+    prepare_bases(scene, &lopts, &bopts, lb, plan, progress)
+}
+
+/// The lighting options of `lb` for `scene` and, per model, how its basis is made and kept
+/// (each model's medium is its own preset's, [`Scene::model_preset`]). Base solutions are the
+/// paper light's: any other light is refused.
+pub fn relight_options(
+    scene: &Scene,
+    lb: &LbPlan,
+    plan: &RelightPlan,
+) -> Result<(LightingOptions, Vec<BasisCacheOptions>), PipelineError> {
     if lb.light != Light::Paper {
         return Err(PipelineError::BasisLight(lb.light.name()));
     }
-    let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
-    prepare_bases(scene, &lighting_options(scene, lb), lb, plan, progress)
+    let lopts = lighting_options(scene, lb);
+    let bopts = (0..scene.models.len())
+        .map(|k| BasisCacheOptions {
+            target: plan.target,
+            keep_raw: plan.keep_raw,
+            ..BasisCacheOptions::new(&LightingOptions {
+                preset: scene.model_preset(k).to_string(),
+                ..lopts.clone()
+            })
+        })
+        .collect();
+    Ok((lopts, bopts))
 }
 
-/// [`precompute_relighting`] with the lighting options made.
+/// [`precompute_relighting`] with the options made.
 fn prepare_bases(
     scene: &Scene,
     lopts: &LightingOptions,
+    bopts: &[BasisCacheOptions],
     lb: &LbPlan,
     plan: &RelightPlan,
     progress: &dyn Progress,
@@ -996,19 +1022,10 @@ fn prepare_bases(
     let mut bases: Vec<ModelBasis> = Vec::with_capacity(scene.models.len());
     let mut reports = Vec::with_capacity(scene.models.len());
     let mut cached = 0;
-    for (k, model) in scene.models.iter().enumerate() {
-        // Each model's medium is its own preset's ([`Scene::model_preset`]).
-        let bopts = BasisCacheOptions {
-            target: plan.target,
-            keep_raw: plan.keep_raw,
-            ..BasisCacheOptions::new(&LightingOptions {
-                preset: scene.model_preset(k).to_string(),
-                ..lopts.clone()
-            })
-        };
+    for (model, bopts) in scene.models.iter().zip(bopts) {
         let _m = tracing::info_span!(stage::LB_MODEL, model = %model.name).entered();
         progress.start(&format!("basis {}", model.name), 1);
-        let got = model_basis(model, &bopts, solver, &mut |p| {
+        let got = model_basis(model, bopts, solver, &mut |p| {
             progress.set(
                 (p.done * p.max_steps + p.step) as u64,
                 (p.solves * p.max_steps) as u64,
@@ -1034,6 +1051,21 @@ fn prepare_bases(
     for (model, report) in scene.models.iter().zip(&reports) {
         progress.model_basis(model, report);
     }
+    finish_relighting(scene, lopts, plan, bases, cached, progress).map(Some)
+}
+
+/// Every model's basis (in scene order; `cached` of them from the cache) and, as `plan`
+/// asks, the scene's global grid (from the cache, or solved and cached): the relighting a
+/// scene is prepared with. The end of the one-process and the distributed precompute alike.
+pub fn finish_relighting(
+    scene: &Scene,
+    lopts: &LightingOptions,
+    plan: &RelightPlan,
+    mut bases: Vec<ModelBasis>,
+    cached: usize,
+    progress: &dyn Progress,
+) -> Result<Relighting, PipelineError> {
+    assert_eq!(bases.len(), scene.models.len(), "one basis per model");
     let global = match plan.global {
         Some(gopts) => Some(global_grid(scene, lopts, &gopts, &mut bases, progress)?),
         None => None,
@@ -1044,12 +1076,12 @@ fn prepare_bases(
         compressed.push(Some(StoredBasis::Compressed(b.compressed)));
         raw.push(b.raw.map(StoredBasis::Full));
     }
-    Ok(Some(Relighting {
+    Ok(Relighting {
         compressed,
         raw,
         global,
         cached,
-    }))
+    })
 }
 
 /// The cache key of a scene's global grid: its models (as their fine grids depend on them),

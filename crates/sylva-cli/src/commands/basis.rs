@@ -1,12 +1,15 @@
 //! `sylva basis SCENE`: precomputes every model's 19 base solutions (paper 004 §3.1: 54
 //! solves per model, `B_0` summed), compresses and caches them, and the scene's coarse global
-//! grid; afterwards `sylva render` and `sylva relight` move the sun with no LB solve.
+//! grid; afterwards `sylva render` and `sylva relight` move the sun with no LB solve. Under
+//! `mpirun` the solves are jobs handed out across the ranks (`sylva_mpi::relight`); rank 0
+//! alone prints and writes the cache, which holds what one process writes.
 
 use std::time::Instant;
 
 use anyhow::Result;
 use clap::Args;
-use sylva_render::{load_scene, precompute_relighting, LbPlan};
+use sylva_mpi::Comm;
+use sylva_render::{load_scene, precompute_relighting, LbPlan, Progress, Silent};
 
 use super::progress::{Bars, Report};
 use super::render::{report_line, FrameArgs};
@@ -28,8 +31,9 @@ pub struct BasisArgs {
     pub list_jobs: bool,
 }
 
-pub fn run(a: BasisArgs) -> Result<()> {
+pub fn run(a: BasisArgs, comm: Option<&dyn Comm>) -> Result<()> {
     let t0 = Instant::now();
+    let root = comm.is_none_or(|c| c.rank() == 0);
     let scene = load_scene(&a.frame.scene, None)?;
     // Base solutions are the paper light's (004's boundary solves): basis sets it.
     let light = a.frame.light_for(true)?;
@@ -39,6 +43,9 @@ pub fn run(a: BasisArgs) -> Result<()> {
         .expect("forced plans exist");
     let grid = a.frame.lb_grid.unwrap_or(scene.lb.grid as usize);
     if a.list_jobs {
+        if !root {
+            return Ok(());
+        }
         println!("model\tbasis\tcolour");
         for (m, model) in scene.models.iter().enumerate() {
             let plan = sylva_render::relight::BasisPlan::new(model, grid, scene.model_preset(m))?;
@@ -48,15 +55,20 @@ pub fn run(a: BasisArgs) -> Result<()> {
         }
         return Ok(());
     }
-    println!(
+    let say = |s: String| {
+        if root {
+            println!("{s}")
+        }
+    };
+    say(format!(
         "scene {}: {} models, {} instances; LB grid {grid}, preset {}",
         scene.name,
         scene.models.len(),
         scene.instances.len(),
         scene.lb.preset
-    );
+    ));
     let solver = super::device::open_solver(a.frame.device, a.frame.precision)?;
-    println!("LB solver: {}", solver.describe());
+    say(format!("LB solver: {}", solver.describe()));
     let lb = LbPlan {
         solver: &*solver,
         grid: a.frame.lb_grid,
@@ -70,8 +82,24 @@ pub fn run(a: BasisArgs) -> Result<()> {
         }
         println!("{line}");
     });
-    let done = precompute_relighting(&scene, &lb, &plan, &progress)?
-        .expect("a forced plan solves what is missing");
+    let done = match comm {
+        None => precompute_relighting(&scene, &lb, &plan, &progress)?,
+        Some(comm) => {
+            let progress: &dyn Progress = if root { &progress } else { &Silent };
+            // Only rank 0 needs the sets: it prints their size.
+            sylva_mpi::precompute_relighting(comm, &scene, &lb, &plan, false, progress)?
+        }
+    };
+    if !root {
+        return Ok(());
+    }
+    let done = done.expect("a forced plan solves what is missing");
+    if let Some(comm) = comm {
+        say(format!(
+            "MPI: base solutions solved across {} ranks",
+            comm.size()
+        ));
+    }
     let bytes: u64 = done.compressed.iter().flatten().map(|b| b.bytes()).sum();
     println!(
         "{} of {} models from the cache; compressed bases {} in all ({}); {:.1} s",

@@ -14,9 +14,9 @@ use sylva_mpi::Comm;
 use sylva_render::lighting::{Light, LightingSource};
 use sylva_render::relight::{BasisReport, GlobalGridOptions, SunWeights};
 use sylva_render::{
-    image_paths, load_scene, precompute_relighting, resolution, stage, tone_map_modes,
-    write_images, BasisUse, LbPlan, Mode, PrepareOptions, PreparedScene, Progress, RelightPlan,
-    ShadingParams, ShadowMethod, Silent, StageClock, ToneMap,
+    image_paths, load_scene, resolution, stage, tone_map_modes, write_images, BasisUse, LbPlan,
+    Mode, PrepareOptions, PreparedScene, Progress, RelightPlan, ShadingParams, ShadowMethod,
+    Silent, StageClock, ToneMap,
 };
 use sylva_spp::trees::system::{SppLight, SppSystem, SystemConfig};
 use sylva_trace::TraversalConfig;
@@ -356,7 +356,7 @@ pub struct Prepared {
 /// kd-trees, printing what it does (to stdout, or stderr when stdout is for JSON).
 /// `rays_per_pixel`: the most a frame will use (default: the scene camera's); the frame's
 /// memory is checked for it before any LB or kd-tree work. Under MPI (`comm`) the models'
-/// LB colours are solved across the ranks and only rank 0 prints.
+/// LB colours, or their base solutions, are solved across the ranks and only rank 0 prints.
 pub fn prepare(
     a: &FrameArgs,
     need_lb: bool,
@@ -478,16 +478,12 @@ pub fn prepare_with(
             match &opts.lb {
                 Some(lb) => {
                     PreparedScene::check(&scene, &opts)?;
-                    // Cached bases serve every rank (no solve); missing ones are not solved
-                    // on every rank: `sylva basis` makes them, in one process.
-                    if opts.relight.is_some_and(|r| r.basis == BasisUse::Always) {
-                        bail!(
-                            "--basis always under mpirun: solve the bases first with `sylva basis` \
-                             (one process); render then relights from the cache"
-                        );
-                    }
+                    // Rank 0 reads the cached bases, missing ones (--basis always) are solved
+                    // across the ranks, and every rank gets the sets from rank 0.
                     let relit = match &opts.relight {
-                        Some(plan) => precompute_relighting(&scene, lb, plan, progress)?,
+                        Some(plan) => sylva_mpi::precompute_relighting(
+                            comm, &scene, lb, plan, true, progress,
+                        )?,
                         None => None,
                     };
                     match relit {

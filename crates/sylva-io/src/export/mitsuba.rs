@@ -393,7 +393,7 @@ fn cell_box(m: &Medium) -> (Vec3, Vec3) {
 /// The optical parameters of `m` in world units: σ_t per unit length at density 1 (the
 /// same for every colour in sylva's presets), albedo per colour, and one g.
 fn medium_optics(m: &Medium) -> Result<(f32, [f32; 3], f32, bool), ExportError> {
-    let params = sylva_lb::Preset::parse(&m.preset)
+    let params = sylva_geom::Preset::parse(&m.preset)
         .map_err(|e| ExportError::Option(format!("medium '{}': {e}", m.name)))?
         .params();
     let c = params.colours;

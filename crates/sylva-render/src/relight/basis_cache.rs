@@ -4,8 +4,9 @@
 //! * **Jobs.** [`BasisPlan`] holds what a model's basis depends on (its density grid, the
 //!   medium, the schedule) and lists the solves as [`BasisJob`]s (one base solution in one
 //!   colour); [`BasisPlan::run`] runs any of them on a solver, [`BasisPlan::assembly`]
-//!   collects results from anywhere. A distributed precompute hands out jobs and gathers
-//!   `(job, values)` pairs; [`model_basis`] runs them all in order.
+//!   collects results from anywhere. [`model_basis`] is [`lookup_basis`], every job run in
+//!   order, then [`store_basis`]; the distributed precompute (`sylva-mpi`) calls the same
+//!   lookup and store around jobs run across MPI ranks.
 //! * **Cache.** The compressed set is what is cached (`<model>-<key>.scbasis`,
 //!   `sylva_lb::relight::CompressedBasis::write`: CRC-checked, atomic). The key hashes the
 //!   model and medium ([`crate::lighting`]'s rules), the grid, the solve schedule, the solver
@@ -158,8 +159,7 @@ impl BasisPlan {
     /// Voxelizes `model` at `grid` sites along its longest edge; the medium from `preset`,
     /// the papers' schedule, `B_0` summed.
     pub fn new(model: &Model, grid: usize, preset: &str) -> Result<BasisPlan, LightingError> {
-        let medium = preset_medium(preset)?;
-        let placement = placement_for(model, grid)?;
+        let (medium, placement, options) = basis_setup(model, grid, preset)?;
         sylva_core::check_memory(
             &format!(
                 "voxelizing model '{}' on a {} grid",
@@ -175,7 +175,7 @@ impl BasisPlan {
                 occupancy: PAPER_OCCUPANCY,
             },
         )?;
-        let options = basis_options(density.dims);
+        debug_assert_eq!(density.dims, placement.dims);
         Ok(BasisPlan {
             model: model.name.clone(),
             density,
@@ -187,6 +187,18 @@ impl BasisPlan {
     /// Every solve of the basis, basis-major ([`BasisJob::all`]).
     pub fn jobs(&self) -> Vec<BasisJob> {
         BasisJob::all(&self.medium, &self.options)
+    }
+
+    /// The dimensions of `model`'s grid at `grid` and its [`BasisPlan::jobs`] with `preset`,
+    /// without voxelizing it: the list a work queue hands out before any rank has the
+    /// density grid.
+    pub fn jobs_of(
+        model: &Model,
+        grid: usize,
+        preset: &str,
+    ) -> Result<(Dims, Vec<BasisJob>), LightingError> {
+        let (medium, placement, options) = basis_setup(model, grid, preset)?;
+        Ok((placement.dims, BasisJob::all(&medium, &options)))
     }
 
     /// Runs `jobs` (any subset, any order) on `solver`: the jobs of one base solution in one
@@ -248,6 +260,19 @@ fn basis_options(dims: Dims) -> BasisOptions {
     BasisOptions::papers(dims)
 }
 
+/// What a model's basis depends on besides its density grid: the medium of `preset`, the
+/// grid's placement and the solve schedule.
+fn basis_setup(
+    model: &Model,
+    grid: usize,
+    preset: &str,
+) -> Result<(MediumParams, sylva_voxel::GridPlacement, BasisOptions), LightingError> {
+    let medium = preset_medium(preset)?;
+    let placement = placement_for(model, grid)?;
+    let options = basis_options(placement.dims);
+    Ok((medium, placement, options))
+}
+
 /// Reads the compressed entry at `path`; `Err` is why it is unusable, naming the file.
 fn read_compressed(
     path: &Path,
@@ -304,22 +329,29 @@ fn check_key(shown: &str, found: Option<&str>, key: u64) -> Result<(), String> {
     }
 }
 
-/// One model's basis: from the cache when it holds a valid entry; otherwise, with a solver,
-/// voxelized, solved (every job of [`BasisPlan::jobs`]), compressed and (with a cache)
-/// stored. Without a solver only the cache is read, and `None` means there is no valid entry.
-/// `progress` counts jobs and steps.
-pub fn model_basis(
+/// What the cache holds for a model's basis ([`lookup_basis`]).
+#[derive(Debug)]
+pub enum BasisLookup {
+    /// A valid entry: the compressed set (and the uncompressed one when kept), no solve.
+    Hit(Box<(ModelBasis, BasisReport)>),
+    /// No valid entry: the basis must be solved. `Computed` when there was none,
+    /// `Recomputed` with the reason when a damaged or stale entry is to be replaced.
+    Miss(LightingSource),
+}
+
+/// Looks `model`'s basis up in the cache of `opts` (creating the directory): under
+/// `solver`'s cache tag, or with no solver under the tag of any backend (a basis solved on
+/// the GPU serves a CPU render). A compressed entry missing beside a kept uncompressed one
+/// is compressed again and written (no solve). Without a cache, always a miss.
+pub fn lookup_basis(
     model: &Model,
     opts: &BasisCacheOptions,
     solver: Option<&dyn LbSolver>,
-    progress: &mut dyn FnMut(BasisProgress),
-) -> Result<Option<(ModelBasis, BasisReport)>, LightingError> {
+) -> Result<BasisLookup, LightingError> {
     let t0 = Instant::now();
-    let medium = preset_medium(&opts.preset)?;
+    let (medium, placement, options) = basis_setup(model, opts.grid, &opts.preset)?;
     opts.target.validate()?;
-    let placement = placement_for(model, opts.grid)?;
     let (dims, bounds) = (placement.dims, placement.bounds());
-    let options = basis_options(dims);
     let raw_bytes_of = |d: Dims| BasisSet::memory_needed(d);
 
     let mut tags: Vec<String> = Vec::new();
@@ -329,120 +361,117 @@ pub fn model_basis(
         tags.extend(KNOWN_TAGS.iter().map(|t| t.to_string()));
     }
     let mut source = LightingSource::Computed;
-    if let Some(dir) = &opts.cache_dir {
-        std::fs::create_dir_all(dir).map_err(|source| LightingError::CacheDir {
-            dir: dir.clone(),
-            source,
-        })?;
-        for tag in &tags {
-            let rkey = basis_key(model, opts.grid, &medium, &options, tag);
-            let ckey = compressed_key(rkey, &opts.target);
-            let cpath = basis_path(dir, model, ckey, COMPRESSED_EXTENSION);
-            let rpath = basis_path(dir, model, rkey, RAW_EXTENSION);
-            let raw = if opts.keep_raw {
-                match rpath.try_exists() {
-                    Ok(true) => match read_raw(&rpath, rkey, dims, bounds) {
-                        Ok(r) => Some(r),
-                        Err(reason) => {
-                            source = LightingSource::Recomputed { reason };
-                            continue;
-                        }
-                    },
-                    _ => continue,
-                }
-            } else {
-                None
-            };
-            let compressed = match cpath.try_exists() {
-                Ok(true) => match read_compressed(&cpath, ckey, dims, bounds) {
-                    Ok(c) => Some(c),
+    let Some(dir) = &opts.cache_dir else {
+        return Ok(BasisLookup::Miss(source));
+    };
+    std::fs::create_dir_all(dir).map_err(|source| LightingError::CacheDir {
+        dir: dir.clone(),
+        source,
+    })?;
+    for tag in &tags {
+        let rkey = basis_key(model, opts.grid, &medium, &options, tag);
+        let ckey = compressed_key(rkey, &opts.target);
+        let cpath = basis_path(dir, model, ckey, COMPRESSED_EXTENSION);
+        let rpath = basis_path(dir, model, rkey, RAW_EXTENSION);
+        let raw = if opts.keep_raw {
+            match rpath.try_exists() {
+                Ok(true) => match read_raw(&rpath, rkey, dims, bounds) {
+                    Ok(r) => Some(r),
                     Err(reason) => {
-                        if raw.is_none() {
-                            source = LightingSource::Recomputed { reason };
-                            continue;
-                        }
-                        None
+                        source = LightingSource::Recomputed { reason };
+                        continue;
                     }
                 },
-                Ok(false) => None,
-                Err(e) => {
+                _ => continue,
+            }
+        } else {
+            None
+        };
+        let compressed = match cpath.try_exists() {
+            Ok(true) => match read_compressed(&cpath, ckey, dims, bounds) {
+                Ok(c) => Some(c),
+                Err(reason) => {
                     if raw.is_none() {
-                        source = LightingSource::Recomputed {
-                            reason: format!("cannot read {}: {e}", cpath.display()),
-                        };
+                        source = LightingSource::Recomputed { reason };
                         continue;
                     }
                     None
                 }
-            };
-            match (compressed, raw) {
-                (Some((c, seconds, _)), raw) => {
-                    let report = BasisReport {
-                        source: LightingSource::Cached,
-                        seconds: t0.elapsed().as_secs_f64(),
-                        solve_seconds: seconds.or(raw.as_ref().and_then(|r| r.1)),
-                        path: Some(cpath),
-                        dims,
-                        raw_bytes: raw_bytes_of(dims),
-                        compressed_bytes: c.bytes(),
+            },
+            Ok(false) => None,
+            Err(e) => {
+                if raw.is_none() {
+                    source = LightingSource::Recomputed {
+                        reason: format!("cannot read {}: {e}", cpath.display()),
                     };
-                    let basis = ModelBasis {
-                        compressed: c,
-                        raw: raw.map(|r| r.0),
-                        density: None,
-                    };
-                    return Ok(Some((basis, report)));
+                    continue;
                 }
-                (None, Some((raw, seconds))) => {
-                    // The uncompressed set is there: compress it again (no solve).
-                    let density = BasisPlan::new(model, opts.grid, &opts.preset)?.density;
-                    let c = compress(&raw, &region_of(&density), &opts.target)?;
-                    write_compressed(&c, &cpath, ckey, model, opts, seconds, solver)?;
-                    let report = BasisReport {
-                        source: LightingSource::Cached,
-                        seconds: t0.elapsed().as_secs_f64(),
-                        solve_seconds: seconds,
-                        path: Some(cpath),
-                        dims,
-                        raw_bytes: raw_bytes_of(dims),
-                        compressed_bytes: c.bytes(),
-                    };
-                    let basis = ModelBasis {
-                        compressed: c,
-                        raw: Some(raw),
-                        density: Some(density),
-                    };
-                    return Ok(Some((basis, report)));
-                }
-                (None, None) => {}
+                None
             }
+        };
+        match (compressed, raw) {
+            (Some((c, seconds, _)), raw) => {
+                let report = BasisReport {
+                    source: LightingSource::Cached,
+                    seconds: t0.elapsed().as_secs_f64(),
+                    solve_seconds: seconds.or(raw.as_ref().and_then(|r| r.1)),
+                    path: Some(cpath),
+                    dims,
+                    raw_bytes: raw_bytes_of(dims),
+                    compressed_bytes: c.bytes(),
+                };
+                let basis = ModelBasis {
+                    compressed: c,
+                    raw: raw.map(|r| r.0),
+                    density: None,
+                };
+                return Ok(BasisLookup::Hit(Box::new((basis, report))));
+            }
+            (None, Some((raw, seconds))) => {
+                // The uncompressed set is there: compress it again (no solve).
+                let density = BasisPlan::new(model, opts.grid, &opts.preset)?.density;
+                let c = compress(&raw, &region_of(&density), &opts.target)?;
+                write_compressed(&c, &cpath, ckey, model, opts, seconds, solver)?;
+                let report = BasisReport {
+                    source: LightingSource::Cached,
+                    seconds: t0.elapsed().as_secs_f64(),
+                    solve_seconds: seconds,
+                    path: Some(cpath),
+                    dims,
+                    raw_bytes: raw_bytes_of(dims),
+                    compressed_bytes: c.bytes(),
+                };
+                let basis = ModelBasis {
+                    compressed: c,
+                    raw: Some(raw),
+                    density: Some(density),
+                };
+                return Ok(BasisLookup::Hit(Box::new((basis, report))));
+            }
+            (None, None) => {}
         }
     }
-    let Some(solver) = solver else {
-        return Ok(None);
-    };
+    Ok(BasisLookup::Miss(source))
+}
 
-    let plan = BasisPlan::new(model, opts.grid, &opts.preset)?;
-    debug_assert_eq!(plan.density.dims, dims);
-    let jobs = plan.jobs();
-    let max_steps = plan.options.solve.max_steps;
-    let solve_start = Instant::now();
-    let mut assembly = plan.assembly()?;
-    let results = plan.run(&jobs, solver, &mut |k, step| {
-        progress(BasisProgress {
-            done: k,
-            solves: jobs.len(),
-            basis: jobs[k].basis,
-            colour: jobs[k].colour,
-            step,
-            max_steps,
-        })
-    })?;
-    for (job, values) in results {
-        assembly.insert(job, values)?;
-    }
+/// The end of a model's solve, wherever its jobs ran: `assembly` (every job of `plan`
+/// inserted) finished into the basis set, compressed and, with a cache, stored (the
+/// compressed entry, and the uncompressed one with `keep_raw`) under `solver`'s tag.
+/// `source` is what the lookup found ([`BasisLookup::Miss`]), `solve_seconds` how long the
+/// solves took and `started` when the model's work began (for the report).
+#[allow(clippy::too_many_arguments)]
+pub fn store_basis(
+    model: &Model,
+    opts: &BasisCacheOptions,
+    plan: BasisPlan,
+    assembly: BasisAssembly,
+    solver: &dyn LbSolver,
+    source: LightingSource,
+    solve_seconds: f64,
+    started: Instant,
+) -> Result<(ModelBasis, BasisReport), LightingError> {
+    let dims = plan.density.dims;
     let raw = assembly.finish()?;
-    let solve_seconds = solve_start.elapsed().as_secs_f64();
     let compressed = compress(&raw, &region_of(&plan.density), &opts.target)?;
     let mut path = None;
     if let Some(dir) = &opts.cache_dir {
@@ -489,11 +518,11 @@ pub fn model_basis(
     }
     let report = BasisReport {
         source,
-        seconds: t0.elapsed().as_secs_f64(),
+        seconds: started.elapsed().as_secs_f64(),
         solve_seconds: Some(solve_seconds),
         path,
         dims,
-        raw_bytes: raw_bytes_of(dims),
+        raw_bytes: BasisSet::memory_needed(dims),
         compressed_bytes: compressed.bytes(),
     };
     let basis = ModelBasis {
@@ -501,7 +530,57 @@ pub fn model_basis(
         raw: opts.keep_raw.then_some(raw),
         density: Some(plan.density),
     };
-    Ok(Some((basis, report)))
+    Ok((basis, report))
+}
+
+/// One model's basis: from the cache when it holds a valid entry ([`lookup_basis`]);
+/// otherwise, with a solver, voxelized, solved (every job of [`BasisPlan::jobs`], in this
+/// process) and stored ([`store_basis`]). Without a solver only the cache is read, and
+/// `None` means there is no valid entry. `progress` counts jobs and steps.
+pub fn model_basis(
+    model: &Model,
+    opts: &BasisCacheOptions,
+    solver: Option<&dyn LbSolver>,
+    progress: &mut dyn FnMut(BasisProgress),
+) -> Result<Option<(ModelBasis, BasisReport)>, LightingError> {
+    let t0 = Instant::now();
+    let source = match lookup_basis(model, opts, solver)? {
+        BasisLookup::Hit(hit) => return Ok(Some(*hit)),
+        BasisLookup::Miss(source) => source,
+    };
+    let Some(solver) = solver else {
+        return Ok(None);
+    };
+    let plan = BasisPlan::new(model, opts.grid, &opts.preset)?;
+    let jobs = plan.jobs();
+    let max_steps = plan.options.solve.max_steps;
+    let solve_start = Instant::now();
+    let mut assembly = plan.assembly()?;
+    let results = plan.run(&jobs, solver, &mut |k, step| {
+        progress(BasisProgress {
+            done: k,
+            solves: jobs.len(),
+            basis: jobs[k].basis,
+            colour: jobs[k].colour,
+            step,
+            max_steps,
+        })
+    })?;
+    for (job, values) in results {
+        assembly.insert(job, values)?;
+    }
+    let solve_seconds = solve_start.elapsed().as_secs_f64();
+    store_basis(
+        model,
+        opts,
+        plan,
+        assembly,
+        solver,
+        source,
+        solve_seconds,
+        t0,
+    )
+    .map(Some)
 }
 
 fn write_compressed(

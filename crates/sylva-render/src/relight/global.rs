@@ -499,15 +499,6 @@ impl GlobalLight {
 
     /// Writes the grid's answer as a cache entry (atomically; `key` in its metadata).
     pub fn write(&self, path: &Path, key: u64) -> Result<(), LightingError> {
-        let mut w = ByteWriter::new();
-        for n in [self.dims.nx, self.dims.ny, self.dims.nz] {
-            w.u32(n as u32);
-        }
-        for v in self.origin {
-            w.f32(v);
-        }
-        w.f32(self.cell);
-        w.f32s(self.inflow.as_flattened());
         let meta = vec![
             (
                 crate::lighting::KEY_METADATA.to_string(),
@@ -515,7 +506,7 @@ impl GlobalLight {
             ),
             ("instances".to_string(), self.inflow.len().to_string()),
         ];
-        write_container(path, MAGIC, VERSION, &meta, &w.bytes).map_err(|source| {
+        write_container(path, MAGIC, VERSION, &meta, &self.to_bytes()).map_err(|source| {
             LightingError::CacheWrite {
                 path: path.into(),
                 source,
@@ -539,23 +530,42 @@ impl GlobalLight {
             }
             None => return Err(format!("{shown} has no cache key")),
         }
-        let bad = |e: String| format!("{shown}: {e}");
-        let mut r = ByteReader::new(&c.payload);
+        GlobalLight::from_bytes(&c.payload, instances).map_err(|e| format!("{shown}: {e}"))
+    }
+
+    /// The grid's answer as bytes: a cache entry's payload, and what MPI ranks send.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut w = ByteWriter::new();
+        for n in [self.dims.nx, self.dims.ny, self.dims.nz] {
+            w.u32(n as u32);
+        }
+        for v in self.origin {
+            w.f32(v);
+        }
+        w.f32(self.cell);
+        w.f32s(self.inflow.as_flattened());
+        w.bytes
+    }
+
+    /// The answer [`GlobalLight::to_bytes`] encoded, for `instances` instances; `Err` says
+    /// what is wrong with the bytes.
+    pub fn from_bytes(bytes: &[u8], instances: usize) -> Result<GlobalLight, String> {
+        let mut r = ByteReader::new(bytes);
         let mut n = [0usize; 3];
         for v in &mut n {
-            *v = r.u32("grid size").map_err(bad)? as usize;
+            *v = r.u32("grid size")? as usize;
         }
-        let dims = Dims::new(n[0], n[1], n[2]).map_err(|e| bad(e.to_string()))?;
+        let dims = Dims::new(n[0], n[1], n[2]).map_err(|e| e.to_string())?;
         let mut origin = [0f32; 3];
         for v in &mut origin {
-            *v = r.f32("origin").map_err(bad)?;
+            *v = r.f32("origin")?;
         }
-        let cell = r.f32("cell").map_err(bad)?;
-        let flat = r.f32s("inflow").map_err(bad)?;
-        r.finish().map_err(bad)?;
+        let cell = r.f32("cell")?;
+        let flat = r.f32s("inflow")?;
+        r.finish()?;
         if flat.len() != instances * BASES {
             return Err(format!(
-                "{shown} holds {} values, {instances} instances need {}",
+                "{} values, {instances} instances need {}",
                 flat.len(),
                 instances * BASES
             ));
@@ -564,9 +574,7 @@ impl GlobalLight {
             || !(cell.is_finite() && cell > 0.0)
             || origin.iter().any(|v| !v.is_finite())
         {
-            return Err(format!(
-                "{shown} holds a value that is not finite or negative"
-            ));
+            return Err("a value is not finite or negative".into());
         }
         Ok(GlobalLight {
             dims,

@@ -5,7 +5,8 @@
 //!   of the 19 base solutions ([`RelitIllumination::weights`]): the place to extend when the light
 //!   gains terms (sky, ground, a direct/scattered split).
 //! * [`basis_cache`]: per model, the base solutions as independent jobs on any
-//!   [`sylva_lb::LbSolver`] ([`BasisPlan`]), compressed and cached ([`model_basis`]).
+//!   [`sylva_lb::LbSolver`] ([`BasisPlan`]), compressed and cached ([`model_basis`]: the
+//!   cache lookup, the solves and the store, which a distributed precompute calls apart).
 //! * [`global`]: the coarse global grid over the forest (004 §3.2) and the per-instance
 //!   scales it gives ([`GlobalLight`]).
 //! * [`light`]: [`RelitLight`], the [`crate::IndirectLight`] that combines each instance's
@@ -17,8 +18,8 @@ pub mod light;
 pub mod weights;
 
 pub use basis_cache::{
-    basis_key, basis_path, compressed_key, model_basis, region_of, BasisCacheOptions, BasisPlan,
-    BasisReport, ModelBasis, RAW_EXTENSION,
+    basis_key, basis_path, compressed_key, lookup_basis, model_basis, region_of, store_basis,
+    BasisCacheOptions, BasisLookup, BasisPlan, BasisReport, ModelBasis, RAW_EXTENSION,
 };
 pub use global::{
     luminance_medium, GlobalGridOptions, GlobalInstance, GlobalLight, GlobalReport, InstanceScale,

@@ -32,6 +32,63 @@ impl CompressedBasis {
     /// set's own.
     pub fn write(&self, path: &Path, extra: &[(String, String)]) -> Result<(), RelightError> {
         sylva_core::check_memory(&format!("writing {}", path.display()), self.bytes() * 2)?;
+        let (metadata, payload) = self.encode(extra);
+        write_container(path, MAGIC, VERSION, &metadata, &payload).map_err(|source| {
+            RelightError::Write {
+                path: path.into(),
+                source,
+            }
+        })
+    }
+
+    /// Reads a file written by [`CompressedBasis::write`]: the set and the file's metadata.
+    /// Truncated, corrupted (CRC) or inconsistent files are refused with an error naming the
+    /// file and the problem.
+    pub fn read(path: &Path) -> Result<(CompressedBasis, Vec<(String, String)>), RelightError> {
+        let c = read_container(path, MAGIC, VERSION, WHAT)?;
+        let set = decode(&c.metadata, &c.payload).map_err(|what| RelightError::Format {
+            path: path.into(),
+            what,
+        })?;
+        Ok((set, c.metadata))
+    }
+
+    /// The set as bytes, for sending it to another process: the metadata and payload of its
+    /// file (without the file's header), so [`CompressedBasis::from_bytes`] gives back this
+    /// set exactly and checks it as [`CompressedBasis::read`] checks a file.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let (metadata, payload) = self.encode(&[]);
+        let mut w = ByteWriter::new();
+        w.u64(metadata.len() as u64);
+        for (k, v) in &metadata {
+            w.u8s(k.as_bytes());
+            w.u8s(v.as_bytes());
+        }
+        w.u8s(&payload);
+        w.bytes
+    }
+
+    /// The set [`CompressedBasis::to_bytes`] encoded; inconsistent bytes are refused.
+    pub fn from_bytes(bytes: &[u8]) -> Result<CompressedBasis, RelightError> {
+        let bad = |what: String| RelightError::Mismatch(format!("{WHAT} bytes: {what}"));
+        let mut r = ByteReader::new(bytes);
+        let text = |r: &mut ByteReader, what: &str| -> Result<String, String> {
+            String::from_utf8(r.u8s(what)?).map_err(|_| format!("{what} is not UTF-8"))
+        };
+        let n = r.u64("metadata count").map_err(bad)?;
+        let mut metadata = Vec::new();
+        for _ in 0..n {
+            let k = text(&mut r, "metadata key").map_err(bad)?;
+            let v = text(&mut r, "metadata value").map_err(bad)?;
+            metadata.push((k, v));
+        }
+        let payload = r.u8s("payload").map_err(bad)?;
+        r.finish().map_err(bad)?;
+        decode(&metadata, &payload).map_err(bad)
+    }
+
+    /// The metadata (the set's own, then `extra`) and the payload of its file.
+    fn encode(&self, extra: &[(String, String)]) -> (Vec<(String, String)>, Vec<u8>) {
         let mut metadata = vec![
             ("format".to_string(), WHAT.to_string()),
             ("codec".to_string(), self.target.codec.name()),
@@ -77,56 +134,44 @@ impl CompressedBasis {
                 h.write_to(&mut w);
             }
         }
-        write_container(path, MAGIC, VERSION, &metadata, &w.bytes).map_err(|source| {
-            RelightError::Write {
-                path: path.into(),
-                source,
-            }
-        })
+        (metadata, w.bytes)
     }
+}
 
-    /// Reads a file written by [`CompressedBasis::write`]: the set and the file's metadata.
-    /// Truncated, corrupted (CRC) or inconsistent files are refused with an error naming the
-    /// file and the problem.
-    pub fn read(path: &Path) -> Result<(CompressedBasis, Vec<(String, String)>), RelightError> {
-        let c = read_container(path, MAGIC, VERSION, WHAT)?;
-        let bad = |what: String| RelightError::Format {
-            path: path.into(),
-            what,
-        };
-        let (medium, options) = parse_basis_metadata(&|k| c.metadata_value(k)).map_err(&bad)?;
-        let get = |key: &str| {
-            c.metadata_value(key)
-                .ok_or_else(|| bad(format!("metadata has no '{key}'")))
-        };
-        let codec = Codec::parse(get("codec")?).map_err(&bad)?;
-        let precision = Precision::parse(get("precision")?)
-            .ok_or_else(|| bad("metadata 'precision' is not f16, f32 or packed".into()))?;
-        let far = get("far_threshold")?;
-        let far_threshold = far.parse::<f64>().map_err(|_| {
-            bad(format!(
-                "metadata 'far_threshold' = '{far}' is not a number"
-            ))
-        })?;
-        let target = CompressTarget {
-            codec,
-            precision,
-            far_threshold,
-        };
-        target.validate().map_err(|e| bad(e.to_string()))?;
-        let mut r = ByteReader::new(&c.payload);
-        let (transform, store, dims, bounds) = read_payload(&mut r, &target).map_err(&bad)?;
-        let set = CompressedBasis {
-            dims,
-            bounds,
-            medium,
-            options,
-            target,
-            transform,
-            store,
-        };
-        Ok((set, c.metadata))
-    }
+/// The set [`CompressedBasis::encode`] made; `Err` says what is inconsistent.
+fn decode(metadata: &[(String, String)], payload: &[u8]) -> Result<CompressedBasis, String> {
+    let value = |k: &str| {
+        metadata
+            .iter()
+            .find(|(m, _)| m == k)
+            .map(|(_, v)| v.as_str())
+    };
+    let (medium, options) = parse_basis_metadata(&value)?;
+    let get = |key: &str| value(key).ok_or_else(|| format!("metadata has no '{key}'"));
+    let codec = Codec::parse(get("codec")?)?;
+    let precision = Precision::parse(get("precision")?)
+        .ok_or_else(|| "metadata 'precision' is not f16, f32 or packed".to_string())?;
+    let far = get("far_threshold")?;
+    let far_threshold = far
+        .parse::<f64>()
+        .map_err(|_| format!("metadata 'far_threshold' = '{far}' is not a number"))?;
+    let target = CompressTarget {
+        codec,
+        precision,
+        far_threshold,
+    };
+    target.validate().map_err(|e| e.to_string())?;
+    let mut r = ByteReader::new(payload);
+    let (transform, store, dims, bounds) = read_payload(&mut r, &target)?;
+    Ok(CompressedBasis {
+        dims,
+        bounds,
+        medium,
+        options,
+        target,
+        transform,
+        store,
+    })
 }
 
 fn read_payload(
