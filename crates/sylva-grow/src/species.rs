@@ -1,6 +1,7 @@
 //! Species: Weber & Penn parameters plus the leaf and bark look. The built-in species are the
-//! trees of the papers (000 Table 2, a pine for 000 Fig. 3b, the dogrose of 002 §3.2.2), each
-//! with its own generated leaf and bark textures.
+//! trees of the papers (000 Table 2, a pine for 000 Fig. 3b, the dogrose of 002 §3.2.2, and a
+//! red maple thinned to the 18K triangles of 003's Table 3 tree), each with its own generated
+//! leaf and bark textures.
 
 use crate::textures::{bark_texture, leaf_texture, BarkPattern, LeafOutline};
 use crate::weber_penn::{self, GenerateError, Params, LEAF, WOOD};
@@ -41,6 +42,7 @@ pub const BUILTIN_NAMES: &[&str] = &[
     "american_beech",
     "pine",
     "dogrose",
+    "sparse_maple",
 ];
 
 /// `"Red Maple"`, `"red-maple"` → `"red_maple"`.
@@ -73,6 +75,7 @@ impl Species {
             "american_beech" => american_beech(),
             "pine" => pine(),
             "dogrose" | "dog_rose" => dogrose(),
+            "sparse_maple" => sparse_maple(),
             _ => return None,
         };
         Some(s)
@@ -557,6 +560,30 @@ fn dogrose() -> Species {
         "paper 002 §3.2.2 (Xfrog dogrose, Rosa canina)",
     )
     .with_leaf_transmission(DOGROSE_LEAF_TRANSMISSION)
+}
+
+/// Triangles of 003's Table 3 tree (§4.2: "The tree model consisted of 18K triangles").
+pub const PAPER_003_TREE_TRIANGLES: usize = 18_000;
+
+/// `red_maple` thinned to 003 §4.2's tree size: the same Weber & Penn model, seed, size, crown
+/// envelope, leaves and bark, with fewer branches (`1Branches` 45 → 20, `2Branches` 35 → 12),
+/// so the tree has about 18K triangles (003 Table 3's tree) and a sparse, open crown: about a
+/// seventh of `red_maple`'s leaves in the same 11 m wide, 17 m high envelope.
+fn sparse_maple() -> Species {
+    let mut s = red_maple();
+    for (name, value) in [("1Branches", 20.0), ("2Branches", 12.0)] {
+        s.params
+            .set(name, value)
+            .unwrap_or_else(|e| panic!("built-in species parameter: {e}"));
+    }
+    Species {
+        name: "sparse_maple".into(),
+        display_name: "sparse maple".into(),
+        reference_triangles: Some(PAPER_003_TREE_TRIANGLES),
+        source: "paper 003 §4.2 (the 18K-triangle tree of Table 3): red_maple with fewer branches"
+            .into(),
+        ..s
+    }
 }
 
 /// The dogrose's leaf transmittance / reflectance, `(1 + g) / (1 - g)` from the asymmetry

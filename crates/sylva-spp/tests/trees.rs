@@ -12,7 +12,7 @@ use sylva_spp::trees::experiment::{self, ExperimentConfig, LbPlan, MIN_CATEGORY_
 use sylva_spp::trees::meshes::SceneMeshes;
 use sylva_spp::trees::opacity_map::MapResolution;
 use sylva_spp::trees::photons::{trace_photons, PhotonConfig};
-use sylva_spp::trees::synthetic::{leaf_slab, plates, single_instance};
+use sylva_spp::trees::synthetic::{horizontal_leaves, leaf_slab, plates, single_instance};
 use sylva_spp::trees::system::{SppSystem, SystemConfig};
 use sylva_spp::{FullModel, Slab};
 use sylva_trace::{Ray, SceneAccel, TraceStats, TraversalConfig};
@@ -309,6 +309,97 @@ fn table_3_run_is_deterministic_and_consistent() {
     assert!((sum - 1.0).abs() < 1e-12);
     let json = serde_json::to_value(&a).unwrap();
     assert!(json["errors"]["sppg"].is_number() && json["categories"].is_array());
+}
+
+#[test]
+fn horizontal_leaves_turn_each_leaf_flat_where_it_hangs() {
+    // Randomly oriented square leaves, plus a wood quad of its own and one sharing a vertex
+    // with the first leaf: every free leaf ends horizontal with its centroid and area kept,
+    // wood and the leaf joined to it stay as they were.
+    let slab = leaf_slab(1.0, 0.0, 1.0, 0.2, 200, 5);
+    let mut mesh = slab.mesh.clone();
+    let w: Vec<u32> = [[3.0, 0.0, 0.0], [3.5, 0.0, 0.0], [3.5, 1.0, 0.2]]
+        .iter()
+        .map(|&p| mesh.push_vertex(Vec3::from_array(p), Vec3::X, [0.0, 0.0]))
+        .collect();
+    mesh.push_triangle(w[0], w[1], w[2], 1);
+    mesh.push_triangle(0, w[0], w[1], 1);
+    let wood = sylva_geom::Material {
+        name: "wood".into(),
+        kind: sylva_geom::MaterialKind::Wood,
+        base_color: [0.3, 0.2, 0.1],
+        texture: None,
+        two_sided: false,
+        optics: sylva_geom::Optics::OPAQUE,
+    };
+    let model = Model::new("test", mesh, vec![slab.materials[0].clone(), wood]);
+    let flat = horizontal_leaves(&model);
+    assert_eq!(flat.mesh.indices, model.mesh.indices);
+    let corners = |m: &Model, t: usize| {
+        m.mesh.indices[t].map(|i| Vec3::from_array(m.mesh.positions[i as usize]))
+    };
+    let leaf_tris = model
+        .mesh
+        .material_ids
+        .iter()
+        .filter(|&&id| id == 0)
+        .count();
+    assert_eq!(leaf_tris, 400);
+    // Leaf k is triangles 2k and 2k + 1 (4 vertices of its own).
+    for k in 0..200 {
+        let (mut area, mut c0, mut c1) = (0.0, Vec3::ZERO, Vec3::ZERO);
+        let mut area1 = 0.0;
+        for t in [2 * k, 2 * k + 1] {
+            let [a, b, c] = corners(&model, t);
+            let [a1, b1, c1_] = corners(&flat, t);
+            let n = (b1 - a1).cross(c1_ - a1);
+            let (s, s1) = (0.5 * (b - a).cross(c - a).length(), 0.5 * n.length());
+            area += s;
+            area1 += s1;
+            c0 += (a + b + c) / 3.0 * s;
+            c1 += (a1 + b1 + c1_) / 3.0 * s1;
+            if k > 0 {
+                assert!(n.normalize().y.abs() > 0.9999, "leaf {k}: normal {n}");
+                let vn = Vec3::from_array(flat.mesh.normals[flat.mesh.indices[t][0] as usize]);
+                assert!(vn.y.abs() > 0.9999, "leaf {k}: vertex normal {vn}");
+            }
+        }
+        assert!(
+            (area1 - area).abs() < 1e-5 * area.max(1e-3),
+            "leaf {k}: area"
+        );
+        assert!(
+            (c1 / area1 - c0 / area).length() < 1e-5,
+            "leaf {k}: centroid"
+        );
+    }
+    // The leaf that shares a vertex with wood, and the wood, did not move.
+    for v in (0..4).chain(800..803) {
+        assert_eq!(
+            flat.mesh.positions[v], model.mesh.positions[v],
+            "vertex {v}"
+        );
+    }
+    // The experiment's mean |n·s0| is 1/2 for isotropic leaves and 1 once they are flat.
+    let accel_cos = |m: &Model| {
+        let models = vec![m.clone()];
+        let accel = SceneAccel::from_parts(&models, &single_instance(), None).unwrap();
+        let meshes = SceneMeshes::new(&models, &accel);
+        let mm = &meshes.models[0];
+        (0..mm.leaf_count)
+            .map(|k| mm.mean_abs_cos(k, Vec3::NEG_Y) as f64)
+            .sum::<f64>()
+            / mm.leaf_count as f64
+    };
+    let (c_iso, c_flat) = (accel_cos(&model), accel_cos(&flat));
+    assert!(
+        (c_iso - 0.5).abs() < 0.06,
+        "isotropic leaves: mean |n·s0| {c_iso}"
+    );
+    assert!(
+        c_flat > 0.995 - 1.0 / 200.0,
+        "flat leaves: mean |n·s0| {c_flat}"
+    );
 }
 
 #[test]

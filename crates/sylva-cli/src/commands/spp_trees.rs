@@ -14,7 +14,7 @@ use super::progress::Bars;
 #[derive(clap::Args)]
 pub struct TreesArgs {
     /// Scene file (.toml), built-in scene name, or built-in species name (one tree of it):
-    /// `catalpa`, `red_maple`.
+    /// `catalpa`, `red_maple`, `sparse_maple` (003's 18K-triangle tree).
     scene: String,
     /// Repeat the scene's trees on a K × K lattice (003's "multiple trees": `--repeat 3`).
     #[arg(long, default_value_t = 1)]
@@ -50,6 +50,11 @@ pub struct TreesArgs {
     /// Texels along a sample-direction map's longer side (about two per grid cell).
     #[arg(long, default_value_t = 32)]
     map_texels: usize,
+    /// Turn every leaf horizontal where it hangs (the crown's planophile limit,
+    /// `trees::synthetic::horizontal_leaves`): separates the leaves' angles from the crown's
+    /// shape. A diagnostic, not 003's setup.
+    #[arg(long)]
+    horizontal_leaves: bool,
     /// Without the LB column (no LB solve).
     #[arg(long)]
     no_lb: bool,
@@ -74,7 +79,13 @@ pub fn run(a: TreesArgs) -> Result<()> {
     let sun =
         sylva_core::Sun::from_angles(a.elevation, a.azimuth).context("--elevation/--azimuth")?;
     let travel = sun.travel();
-    let base = load_scene_or_species(&a.scene)?;
+    let mut base = load_scene_or_species(&a.scene)?;
+    if a.horizontal_leaves {
+        for m in &mut base.models {
+            *m = sylva_spp::trees::synthetic::horizontal_leaves(m);
+        }
+        base.name = format!("{}-horizontal-leaves", base.name);
+    }
     let scene = experiment::repeated(&base, a.repeat, a.spacing)?;
     let leaf_meshes_hint: u64 = scene
         .instances
@@ -162,8 +173,8 @@ fn report_text(r: &TreeReport, categories: bool) -> String {
     );
     let _ = writeln!(
         s,
-        "  leaf meshes {} ({} compared, {} met by no light ray); mean depth {:.2}, thickness {:.2} surfaces; {} light rays {:.3} apart; {} directions, {} grid cells",
-        r.leaf_meshes, r.compared_meshes, r.unmet_meshes, r.mean_depth, r.mean_thickness, r.depth_rays, r.ray_spacing, r.sample_directions, r.grid_cells
+        "  leaf meshes {} ({} compared, {} met by no light ray); mean depth {:.2}, thickness {:.2} surfaces, |n·s0| {:.2}; {} light rays {:.3} apart; {} directions, {} grid cells",
+        r.leaf_meshes, r.compared_meshes, r.unmet_meshes, r.mean_depth, r.mean_thickness, r.mean_cos_light, r.depth_rays, r.ray_spacing, r.sample_directions, r.grid_cells
     );
     let b = &r.balance;
     let _ = writeln!(

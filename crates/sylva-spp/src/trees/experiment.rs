@@ -217,6 +217,10 @@ pub struct TreeReport {
     /// Area-weighted mean depth and thickness of the compared meshes (surfaces crossed).
     pub mean_depth: f64,
     pub mean_thickness: f64,
+    /// Area-weighted mean `|n·s0|` of the compared meshes: how squarely the leaves face the
+    /// light (1: all across it; 1/2 for random orientations). The direct light a leaf gets
+    /// per unit area, SS at depth 0.
+    pub mean_cos_light: f64,
     pub depth_rays: u64,
     pub ray_spacing: f32,
     pub sample_directions: usize,
@@ -326,6 +330,7 @@ pub fn lb_medium(albedo: f64) -> Result<MediumParams, TreeError> {
 /// Per mesh values of the models.
 struct MeshValues {
     depth: f64,
+    cos: f64,
     thickness: f64,
     area: f64,
     g: f64,
@@ -525,6 +530,7 @@ fn mesh_values(
             });
             out.push(Some(MeshValues {
                 depth: d,
+                cos,
                 thickness: w,
                 area: area[m],
                 g,
@@ -551,6 +557,7 @@ struct Sums {
     g: f64,
     depth: f64,
     thickness: f64,
+    cos: f64,
 }
 
 #[allow(clippy::too_many_arguments)] // the stages' results, once each
@@ -603,6 +610,7 @@ fn assemble(
             s.g += wgt * v.g;
             s.depth += wgt * v.depth;
             s.thickness += wgt * v.thickness;
+            s.cos += wgt * v.cos;
         };
         add(s, 1.0);
         add(&mut weighted, v.area);
@@ -693,6 +701,7 @@ fn assemble(
         meshes_in_categories: categories.iter().map(|c| c.meshes).sum(),
         mean_depth: weighted.depth / a,
         mean_thickness: weighted.thickness / a,
+        mean_cos_light: weighted.cos / a,
         depth_rays: counts.ray_count,
         ray_spacing: counts.spacing,
         sample_directions: system.directions().len(),

@@ -1,7 +1,8 @@
 //! Models with known answers for checking the tree machinery: a "tree" shaped like a slab
 //! (square leaves with random positions and orientations filling a wide, thin box: the
 //! plane-parallel condition) and stacks of large horizontal plates (closed-form
-//! inter-reflection).
+//! inter-reflection); and a grown tree's planophile limit ([`horizontal_leaves`]: every leaf
+//! turned flat where it hangs), for telling the leaves' angles from the crown's shape.
 
 use glam::{Quat, Vec3};
 use sylva_core::SplitMix64;
@@ -83,4 +84,91 @@ pub fn single_instance() -> Vec<Instance> {
         rotation_deg: 0.0,
         scale: 1.0,
     }]
+}
+
+/// `model` with every leaf mesh (a connected group of leaf triangles: one leaf quad of a
+/// grown tree) turned horizontal: rotated about its area-weighted centroid by the smallest
+/// rotation that takes its mean normal to the nearer of up and down. Position, area, outline
+/// and texture coordinates stay; wood stays as it is, and so does a leaf group that shares a
+/// vertex with wood (the generator's never do). Leaves of the result all have `|n·y| = 1`:
+/// the planophile limit of the same crown.
+pub fn horizontal_leaves(model: &Model) -> Model {
+    let mut mesh = model.mesh.clone();
+    let n = mesh.vertex_count();
+    let is_leaf = |t: usize| {
+        model
+            .materials
+            .get(mesh.material_ids[t] as usize)
+            .is_some_and(|m| m.kind == MaterialKind::Leaf)
+    };
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    fn find(parent: &mut [u32], mut x: u32) -> u32 {
+        while parent[x as usize] != x {
+            let next = parent[parent[x as usize] as usize];
+            parent[x as usize] = next;
+            x = next;
+        }
+        x
+    }
+    let mut on_wood = vec![false; n];
+    let mut on_leaf = vec![false; n];
+    for (t, tri) in mesh.indices.iter().enumerate() {
+        if !is_leaf(t) {
+            tri.iter().for_each(|&v| on_wood[v as usize] = true);
+            continue;
+        }
+        tri.iter().for_each(|&v| on_leaf[v as usize] = true);
+        let a = find(&mut parent, tri[0]);
+        for &v in &tri[1..] {
+            let b = find(&mut parent, v);
+            if a != b {
+                parent[a.max(b) as usize] = a.min(b);
+            }
+        }
+    }
+    // Per group (root vertex): twice the area-weighted normal, area-weighted centroid × 6,
+    // twice the area, and whether it touches wood.
+    let mut normal = vec![Vec3::ZERO; n];
+    let mut centroid = vec![Vec3::ZERO; n];
+    let mut area = vec![0.0f32; n];
+    let mut touches_wood = vec![false; n];
+    for (t, tri) in mesh.indices.iter().enumerate() {
+        if !is_leaf(t) {
+            continue;
+        }
+        let r = find(&mut parent, tri[0]) as usize;
+        let [a, b, c] = tri.map(|v| Vec3::from_array(mesh.positions[v as usize]));
+        let cross = (b - a).cross(c - a);
+        let twice_area = cross.length();
+        normal[r] += cross;
+        centroid[r] += (a + b + c) * twice_area;
+        area[r] += twice_area;
+        touches_wood[r] |= tri.iter().any(|&v| on_wood[v as usize]);
+    }
+    let mut turn = vec![None; n];
+    for r in 0..n {
+        if find(&mut parent, r as u32) as usize != r || area[r] <= 0.0 || touches_wood[r] {
+            continue;
+        }
+        let nrm = normal[r].normalize_or_zero();
+        if nrm == Vec3::ZERO {
+            continue;
+        }
+        let up = if nrm.y >= 0.0 { Vec3::Y } else { Vec3::NEG_Y };
+        turn[r] = Some((
+            centroid[r] / (3.0 * area[r]),
+            Quat::from_rotation_arc(nrm, up),
+        ));
+    }
+    for (v, _) in on_leaf.iter().enumerate().filter(|(_, &leaf)| leaf) {
+        let r = find(&mut parent, v as u32) as usize;
+        if let Some((c, q)) = turn[r] {
+            let p = Vec3::from_array(mesh.positions[v]);
+            mesh.positions[v] = (c + q * (p - c)).to_array();
+            if let Some(nv) = mesh.normals.get_mut(v) {
+                *nv = (q * Vec3::from_array(*nv)).to_array();
+            }
+        }
+    }
+    Model::new(model.name.clone(), mesh, model.materials.clone())
 }
