@@ -103,6 +103,9 @@ fn prepare_with(
         shade_on_gpu,
         light,
         relight,
+        // The per-model grids shade.wgsl mirrors; the forest grid's weighed parts shade on
+        // the CPU (tested below).
+        forest: None,
         ..PrepareOptions::default()
     };
     PreparedScene::new(scene, &opts, &Silent).unwrap()
@@ -200,6 +203,27 @@ fn gpu_shading_matches_the_cpu_per_pixel() {
         let gpu = prepare_with(dir.path(), Some(&ctx), true, None, light);
         frames_agree(&ctx, &cpu, &gpu, (1e-5, 1e-3), &format!("{light:?}"));
     }
+    // With the physical light's forest grid the GPU traces and the CPU shades, saying why.
+    let path = dir.path().join("roses.toml");
+    let scene = load_scene(path.to_str().unwrap(), None).unwrap();
+    let forest = PreparedScene::new(
+        scene,
+        &PrepareOptions {
+            lb: Some(LbPlan {
+                solver: &CpuSolver,
+                light: Light::Physical,
+                grid: None,
+                cache_dir: Some(&dir.path().join("cache")),
+            }),
+            trace_gpu: Some(&ctx),
+            light: Light::Physical,
+            ..PrepareOptions::default()
+        },
+        &Silent,
+    )
+    .unwrap();
+    assert!(forest.forest.is_some() && forest.gpu_frame.is_none());
+    assert!(forest.gpu_shading_note().unwrap().contains("forest grid"));
 }
 
 /// The GPU frame kernel of `gpu` against `cpu`'s frames, per pixel and part, at 1, 4 and 3
