@@ -3,33 +3,36 @@
 //! the light models exchange (a neighbour's shade, the light it scatters, the forest's
 //! shadow on the ground between the trees) reaches each instance's fine light.
 //!
-//! **Parts.** Each model's fine physical light is solved as three linear parts
+//! **Parts.** Each model's fine physical light is solved as four linear parts
 //! ([`crate::lighting::LightParts`]): `S`, the sun's (its first-collision source and the
-//! sunlit floor), `D`, the response to a unit sky (radiance 1 on the shell's downward
-//! directions, half on horizontal ones, and the floor's sky part), and `G`, the response to
-//! a unit ground on the side faces (upward directions, half on horizontal ones). The model
-//! alone is `S + L_sky D + L_g G` with `L_g` the open ground's radiance. An instance in the
-//! forest gets `τ S + a D + b G` per colour ([`PartWeights`]):
+//! sunlit floor); `D_top`, the response to a unit sky entering through the grid's top face;
+//! `D_side`, to a unit sky entering through its sides (radiance 1 on the downward
+//! directions, half on horizontal ones, with the floor's sky part); and `G`, to a unit ground
+//! on the side faces (upward directions, half on horizontal ones). The model alone is
+//! `S + L_sky (D_top + D_side) + L_g G` with `L_g` the open ground's radiance. An instance in
+//! the forest gets `τ S + a_top D_top + a D_side + b G` per colour ([`PartWeights`]):
 //!
 //! - `τ`, the sun's transmittance from the sun to the instance's box through the forest:
 //!   the coarse medium's extinction (as the fine first-collision source's, `κ = -ln(1 - ρ) /
 //!   k`) marched straight towards the sun from points just outside the box's sunward faces,
 //!   each face weighted by its area times the sun's cosine on it.
-//! - `a`, `b`: the light that actually arrives at the box. For every lattice direction `k`,
-//!   the flux-weighted mean of `f_k` over the coarse sites just outside the faces `c_k`
-//!   enters (the upwind shell, as the paper light's global grid measures it,
-//!   [`crate::relight::global`]), without the bottom face (the ground under the tree is the
-//!   fine grid's own floor). Summed per class (downward, horizontal, upward directions), that
-//!   is matched by least squares to `a` × a unit sky's values on the same directions plus
-//!   `b` × a unit ground's. In the open the fit is exact: `a = L_sky`, `b = L_g`. Light a
-//!   neighbour scatters towards the box counts, as sky-like or ground-like light by its
-//!   direction; a neighbour's shade lowers both.
+//! - `a_top`: the downward light arriving at the box's top face (per direction the mean `f_k`
+//!   over the coarse sites just above it, the upwind shell as the paper light's global grid
+//!   measures it, [`crate::relight::global`]) over a unit sky's.
+//! - `a`, `b`: the light that arrives through the side faces. For every lattice direction
+//!   `k`, the flux-weighted mean of `f_k` over the coarse sites just outside the side faces
+//!   `c_k` enters, summed per class (downward, horizontal, upward directions), matched by
+//!   least squares to `a` × a unit sky's values on the same directions plus `b` × a unit
+//!   ground's. The bottom face is not measured: the ground under the tree is the fine grid's
+//!   own floor. In the open every weight is exact: `τ = 1`, `a_top = a = L_sky`, `b = L_g`.
+//!   Light a neighbour scatters towards the box counts, as sky-like or ground-like light by
+//!   its direction; a neighbour's shade lowers them.
 //!
 //! The coarse solve is linear in the sun's irradiance and the sky's radiance (its boundary,
-//! floor and source are), so `a` and `b` are too, and `τ` depends on neither: the instance's
-//! light stays linear in them (tested). Luminance is not collapsed: the coarse grid is solved
-//! per colour with the forest's mean medium (each model's leaf and bark parameters weighted
-//! by their optical depth over the instances).
+//! floor and source are), so `a_top`, `a` and `b` are too (but where a fit is clamped at 0),
+//! and `τ` depends on neither: the instance's light stays linear in them (tested). Luminance
+//! is not collapsed: the coarse grid is solved per colour with the forest's mean medium (each
+//! model's leaf and bark parameters weighted by their optical depth over the instances).
 //!
 //! What it does not see: how the shade varies over one instance (the weights are per
 //! instance), foliage of a neighbour inside the instance's box (overlapping boxes), and

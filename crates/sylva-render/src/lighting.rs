@@ -262,6 +262,11 @@ pub struct LightParts {
 }
 
 impl LightParts {
+    /// Per site (site order), the four parts' RGB (for the GPU frame).
+    pub(crate) fn values(&self) -> &[[[f32; 3]; 4]] {
+        &self.values
+    }
+
     /// `w.sun ⊙ S + w.sky_top ⊙ D_top + w.sky ⊙ D_side + w.ground ⊙ G` of one site's parts.
     #[inline]
     pub fn combine(v: &[[f32; 3]; 4], w: &PartWeights) -> Vec3 {
@@ -335,7 +340,7 @@ impl ModelLighting {
         }
     }
 
-    /// The three parts when the grid was solved so ([`model_lighting_parts`]).
+    /// The four parts when the grid was solved so ([`model_lighting_parts`]).
     pub fn parts(&self) -> Option<&LightParts> {
         self.parts.as_ref()
     }
@@ -1311,7 +1316,7 @@ pub fn model_lighting_parts(
         radiance: std::array::from_fn(|_| vec![1.0; dims.nx * dims.nz]),
     };
     let mut grids = Vec::with_capacity(4);
-    let mut all_cached = true;
+    let mut report_source = LightingSource::Cached;
     let mut path = None;
     for (k, tag) in ["sun", "sky", "ground", "skytop"].into_iter().enumerate() {
         let mut h = Fnv64::new();
@@ -1383,7 +1388,15 @@ pub fn model_lighting_parts(
             metadata,
             solve,
         )?;
-        all_cached &= source == LightingSource::Cached;
+        // Reported as one: a bad entry's reason first, else computed if any part was.
+        report_source = match (report_source, source) {
+            (r @ LightingSource::Recomputed { .. }, _) => r,
+            (_, r @ LightingSource::Recomputed { .. }) => r,
+            (LightingSource::Computed, _) | (_, LightingSource::Computed) => {
+                LightingSource::Computed
+            }
+            _ => LightingSource::Cached,
+        };
         path = path.or(p);
         grids.push(grid);
     }
@@ -1391,11 +1404,7 @@ pub fn model_lighting_parts(
     let side = light::subtract(&grids[1], &grids[3]);
     let lighting = ModelLighting::physical_parts([&grids[0], &grids[3], &side, &grids[2]], &env);
     let report = LightingReport {
-        source: if all_cached {
-            LightingSource::Cached
-        } else {
-            LightingSource::Computed
-        },
+        source: report_source,
         seconds: t0.elapsed().as_secs_f64(),
         path,
         dims,

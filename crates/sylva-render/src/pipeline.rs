@@ -502,7 +502,7 @@ pub fn uses_forest(scene: &Scene, light: Light, forest: Option<&GlobalGridOption
     light == Light::Physical && forest.is_some() && scene.instances.len() > 1
 }
 
-/// Every model's physical light as its three parts ([`crate::lighting::model_lighting_parts`],
+/// Every model's physical light as its four parts ([`crate::lighting::model_lighting_parts`],
 /// each from the cache when it can), and the coarse forest grid's weights of them per
 /// instance ([`ForestLight`]); how many models came from the cache.
 pub fn light_forest(
@@ -776,7 +776,6 @@ impl PreparedScene {
         };
         let mut light =
             ModelGridLight::new(lighting, &scene.models, tracer.cpu().accel.instances());
-        let forest_on = forest_weights.is_some();
         if let Some(w) = forest_weights {
             light = light.with_instance_weights(w);
         }
@@ -804,11 +803,6 @@ impl PreparedScene {
             Some(
                 "the scene has media (clouds), which the CPU's volume tracer draws; the GPU \
                  traces the rays",
-            )
-        } else if gpu_on && forest_on && relit.is_none() {
-            Some(
-                "the physical light's forest grid weighs each instance's light parts, which \
-                 shade.wgsl does not yet; the GPU traces the rays",
             )
         } else {
             None
