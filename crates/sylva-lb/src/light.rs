@@ -390,7 +390,7 @@ pub fn floor_sun_transmittance(
 /// Extinction per cell edge of each site for colour `colour`: `κ = -ln(1 - ρ σ_t) / k`, the
 /// medium's optical depth per unit length ([`step_optical_depth_factor`] `k`; brown sites
 /// with their own `σ_t`).
-fn extinction(grid: &DensityGrid, medium: &MediumParams, colour: usize) -> Vec<f64> {
+pub fn extinction(grid: &DensityGrid, medium: &MediumParams, colour: usize) -> Vec<f64> {
     let k = step_optical_depth_factor();
     let (green, brown) = (
         medium.colours[colour].sigma_t(),
@@ -415,8 +415,9 @@ fn extinction(grid: &DensityGrid, medium: &MediumParams, colour: usize) -> Vec<f
 }
 
 /// Optical depth from site-unit point `p` to the edge of the interior, straight towards
-/// `to_sun` (unit), in steps of a quarter cell through the nearest sites' extinction.
-fn optical_depth_to_sun(dims: Dims, kappa: &[f64], mut p: [f64; 3], to_sun: [f64; 3]) -> f64 {
+/// `to_sun` (unit), in steps of a quarter cell through the nearest sites' extinction
+/// (`kappa` per site, as [`extinction`] gives it).
+pub fn optical_depth_to_sun(dims: Dims, kappa: &[f64], mut p: [f64; 3], to_sun: [f64; 3]) -> f64 {
     const STEP: f64 = 0.25;
     // Interior sites cover [1/2, n - 3/2] along each axis.
     let last = [dims.nx - 2, dims.ny - 2, dims.nz - 2].map(|v| v as f64 + 0.5);

@@ -58,6 +58,8 @@ fn options(cache: &Path) -> PrepareOptions<'_> {
             cache_dir: Some(cache),
         }),
         largest_frame: Some((61, 37, 4)),
+        // Ranks light models per colour without the forest grid (docs/light.md, Limits).
+        forest: None,
         ..PrepareOptions::default()
     }
 }

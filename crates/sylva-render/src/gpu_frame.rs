@@ -127,9 +127,14 @@ impl FrameLight<'_> {
     fn words(&self, scene: &Scene) -> u64 {
         (0..scene.models.len())
             .map(|m| match self {
-                FrameLight::Grids(l) => l
-                    .model(m)
-                    .map_or(0, |g| 3 * g.dims().sites() as u64 + LIGHT_HEADER as u64),
+                FrameLight::Grids(l) => l.model(m).map_or(0, |g| {
+                    // The parts (12 words per site) when the forest grid weighs them.
+                    let parts = match (g.parts(), l.instance_weights()) {
+                        (Some(_), Some(_)) => 12,
+                        _ => 0,
+                    };
+                    (3 + parts) * g.dims().sites() as u64 + LIGHT_HEADER as u64
+                }),
                 FrameLight::Relit(l) => l.model(m).map_or(0, |b| {
                     let stored = match b {
                         StoredBasis::Full(set) => BasisSet::memory_needed(set.dims),
@@ -148,6 +153,9 @@ impl FrameLight<'_> {
 const LIGHT_HEADER: u32 = 28;
 /// Where a relit record's kind (0 fields, 1 Haar split, 2 Haar packed) sits in its header.
 const RELIT_KIND: usize = 19;
+/// Where a grid record's parts (their offset, NONE: none) and the instances' weights of them
+/// sit in its header (shade.wgsl: LIGHT_PARTS).
+const LIGHT_PARTS: usize = 26;
 /// Words of a material record (shade.wgsl: MATERIAL_WORDS).
 const MATERIAL_WORDS: usize = 16;
 /// Words of an instance's entry in the relit words (first term, count, constant, padding)
@@ -285,6 +293,19 @@ impl Pool {
             p.v3(t.matrix3.z_axis.into());
             p.v3(t.translation.into());
         }
+        // Per instance, the forest grid's weights of its model's light parts (12 words:
+        // sun, sky through the top, through the sides, ground; RGB each).
+        let mut weights_at = NONE;
+        if let FrameLight::Grids(light) = light {
+            if let Some(w) = light.instance_weights() {
+                weights_at = p.at();
+                for w in w {
+                    for v in [w.sun, w.sky_top, w.sky, w.ground] {
+                        p.v3(v);
+                    }
+                }
+            }
+        }
         for (m, model) in scene.models.iter().enumerate() {
             let mesh = &model.mesh;
             let mut rec = [NONE; 8];
@@ -348,8 +369,24 @@ impl Pool {
                             open[1..4].copy_from_slice(&sky.to_array().map(f32::to_bits));
                             open[4..7].copy_from_slice(&bottom.to_array().map(f32::to_bits));
                         }
+                        let header = p.at() as usize;
                         p.light_header(dims, (origin, inv_cell, last), light.model_bounds(m), open);
                         p.words.extend(values.iter().flatten().map(|v| v.to_bits()));
+                        // The forest grid's weighed parts (shade.wgsl: parts_sample): the four
+                        // parts' RGB per site, and where the instances' weights are.
+                        p.words[header + LIGHT_PARTS] = NONE;
+                        if let (Some(parts), Some(_)) = (l.parts(), light.instance_weights()) {
+                            p.words[header + LIGHT_PARTS] = p.at();
+                            p.words[header + LIGHT_PARTS + 1] = weights_at;
+                            p.words.extend(
+                                parts
+                                    .values()
+                                    .iter()
+                                    .flatten()
+                                    .flatten()
+                                    .map(|v| v.to_bits()),
+                            );
+                        }
                     }
                 }
                 FrameLight::Relit(light) => {
@@ -425,7 +462,7 @@ fn relit_capacity(light: &RelitLight, scene: &Scene) -> usize {
 
 /// Device bytes of a scene's shading data (for memory checks and reports).
 pub fn shading_bytes(scene: &Scene, light: FrameLight) -> u64 {
-    let mut words = 8 * scene.models.len() as u64 + 12 * scene.instances.len() as u64;
+    let mut words = 8 * scene.models.len() as u64 + 24 * scene.instances.len() as u64;
     for m in &scene.models {
         let mesh = &m.mesh;
         words += 3 * mesh.indices.len() as u64

@@ -10,7 +10,7 @@ use glam::{Affine3A, Vec2, Vec3};
 use sylva_geom::{Aabb, Model};
 use sylva_trace::TraceInstance;
 
-use crate::lighting::ModelLighting;
+use crate::lighting::{ModelLighting, PartWeights};
 
 /// Indirect light sources for shading. Implementations are read from many threads at once.
 pub trait IndirectLight: Sync {
@@ -55,6 +55,9 @@ pub struct ModelGridLight {
     instances: Vec<(u32, Affine3A)>,
     /// Instances over each ground cell, for the LB light under trees.
     ground_index: GroundIndex,
+    /// Per instance, the weights of its model's light parts (the physical light's forest
+    /// grid, [`crate::forest`]); `None`: every instance as its model in the open.
+    weights: Option<Vec<PartWeights>>,
 }
 
 impl ModelGridLight {
@@ -76,7 +79,27 @@ impl ModelGridLight {
             model_bounds: models.iter().map(|m| m.bounds).collect(),
             instances: instances.iter().map(|i| (i.model, i.to_model)).collect(),
             ground_index,
+            weights: None,
         }
+    }
+
+    /// Weighs instance `i`'s light parts by `weights[i]` (models whose grids have parts,
+    /// [`ModelLighting::parts`]; others keep their light).
+    pub fn with_instance_weights(self, weights: Vec<PartWeights>) -> ModelGridLight {
+        assert_eq!(
+            weights.len(),
+            self.instances.len(),
+            "one weight per instance"
+        );
+        ModelGridLight {
+            weights: Some(weights),
+            ..self
+        }
+    }
+
+    /// The per-instance weights, when the forest grid set them.
+    pub fn instance_weights(&self) -> Option<&[PartWeights]> {
+        self.weights.as_deref()
     }
 
     /// Model `m`'s grid.
@@ -96,9 +119,13 @@ impl ModelGridLight {
 }
 
 impl IndirectLight for ModelGridLight {
-    fn plant(&self, _: u32, placed: &TraceInstance, world: Vec3) -> Option<Vec3> {
+    fn plant(&self, instance: u32, placed: &TraceInstance, world: Vec3) -> Option<Vec3> {
         let l = self.lighting[placed.model as usize].as_ref()?;
-        Some(l.sample(placed.to_model.transform_point3(world)))
+        let p = placed.to_model.transform_point3(world);
+        Some(match &self.weights {
+            Some(w) => l.sample_weighted(p, &w[instance as usize]),
+            None => l.sample(p),
+        })
     }
 
     /// The product, over the trees whose LB grid covers `point`, of the share of the open

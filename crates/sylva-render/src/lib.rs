@@ -26,6 +26,7 @@
 //! * [`output`]: PNG (8-bit sRGB), animated PNG and EXR (linear) files, written atomically.
 //! * [`stages`]: the stages as `tracing` spans and [`StageClock`], which times them.
 
+pub mod forest;
 pub mod gpu_frame;
 pub mod indirect;
 pub mod lighting;

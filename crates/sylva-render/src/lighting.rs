@@ -32,7 +32,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use glam::{DVec3, Vec3};
+use glam::DVec3;
+pub use glam::Vec3;
 use sylva_core::colour::luminance;
 use sylva_core::Fnv64;
 use sylva_geom::{is_opaque, LbSettings, MaterialKind, Model, Wrap, OPAQUE_ALPHA};
@@ -228,6 +229,52 @@ pub struct ModelLighting {
     values: Vec<[f32; 3]>,
     /// The physical light's free field; `None` for the paper's.
     open: Option<OpenField>,
+    /// The physical light split into its parts ([`LightParts`]), when it was solved so.
+    parts: Option<LightParts>,
+}
+
+/// Weights of a physical grid's four parts ([`LightParts`]), per colour: the sun part's
+/// factor (1 for the sun it was solved for), and the radiance of the sky-like light arriving
+/// through the grid's top face and through its sides (both the sky's `L_sky` in the open),
+/// and of the ground-like light arriving through its sides (the open ground's `L_g`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PartWeights {
+    pub sun: Vec3,
+    pub sky_top: Vec3,
+    pub sky: Vec3,
+    pub ground: Vec3,
+}
+
+/// A physical grid as four linear parts (docs/light.md, "Forests"), per site and colour:
+/// the sun's (its first-collision source and the sunlit floor, for the sun solved for), the
+/// response to a unit sky entering through the top face, to a unit sky entering through the
+/// side faces (with the floor's sky part), and to a unit ground (the side faces' upward
+/// directions, radiance 1; the floor dark). Under [`LightParts::free`] they sum to the
+/// model's physical light in the open.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LightParts {
+    /// Per site: sun, unit sky through the top, unit sky through the sides, unit ground;
+    /// RGB each.
+    values: Vec<[[f32; 3]; 4]>,
+    /// The weights that give the light of the model standing alone: sun 1, the scene's sky
+    /// radiance and its open ground's.
+    pub free: PartWeights,
+}
+
+impl LightParts {
+    /// Per site (site order), the four parts' RGB (for the GPU frame).
+    pub(crate) fn values(&self) -> &[[[f32; 3]; 4]] {
+        &self.values
+    }
+
+    /// `w.sun ⊙ S + w.sky_top ⊙ D_top + w.sky ⊙ D_side + w.ground ⊙ G` of one site's parts.
+    #[inline]
+    pub fn combine(v: &[[f32; 3]; 4], w: &PartWeights) -> Vec3 {
+        Vec3::from_array(v[0]) * w.sun
+            + Vec3::from_array(v[1]) * w.sky_top
+            + Vec3::from_array(v[2]) * w.sky
+            + Vec3::from_array(v[3]) * w.ground
+    }
 }
 
 impl ModelLighting {
@@ -259,7 +306,59 @@ impl ModelLighting {
             placement: Placement::new(grid.dims, grid.bounds),
             values,
             open: None,
+            parts: None,
         }
+    }
+
+    /// A physical grid from its four parts ([`LightParts`]: sun, unit sky through the top,
+    /// unit sky through the sides, unit ground), lit by `env`: the values are the parts under
+    /// the free weights.
+    fn physical_parts(parts: [&LightingGrid; 4], env: &Environment) -> ModelLighting {
+        let f = |v: [f64; 3]| Vec3::from_array(v.map(|x| x as f32));
+        let free = PartWeights {
+            sun: Vec3::ONE,
+            sky_top: f(env.sky_radiance),
+            sky: f(env.sky_radiance),
+            ground: f(env.ground_radiance()),
+        };
+        let values: Vec<[[f32; 3]; 4]> = (0..parts[0].dims.sites())
+            .map(|i| std::array::from_fn(|k| std::array::from_fn(|c| parts[k].colours[c][i])))
+            .collect();
+        let total = LightingGrid {
+            dims: parts[0].dims,
+            bounds: parts[0].bounds,
+            colours: std::array::from_fn(|c| {
+                values
+                    .iter()
+                    .map(|v| LightParts::combine(v, &free)[c])
+                    .collect()
+            }),
+        };
+        ModelLighting {
+            parts: Some(LightParts { values, free }),
+            ..Self::physical(&total, env)
+        }
+    }
+
+    /// The four parts when the grid was solved so ([`model_lighting_parts`]).
+    pub fn parts(&self) -> Option<&LightParts> {
+        self.parts.as_ref()
+    }
+
+    /// The light at model-space point `p` under part weights `w` (trilinear, as
+    /// [`ModelLighting::sample`]); the plain sample when the grid has no parts.
+    #[inline]
+    pub fn sample_weighted(&self, p: Vec3, w: &PartWeights) -> Vec3 {
+        let Some(parts) = &self.parts else {
+            return self.sample(p);
+        };
+        let fp = Footprint::at(self.dims, self.placement.grid_coords(p.to_array()));
+        let (sites, wt) = (fp.sites(self.dims), fp.weights());
+        let mut out = Vec3::ZERO;
+        for k in 0..8 {
+            out += LightParts::combine(&parts.values[sites[k]], w) * wt[k];
+        }
+        out
     }
 
     /// A physical-light grid as stored (LB units), lit by `env`.
@@ -348,8 +447,12 @@ impl ModelLighting {
 
     /// Bytes held (the values and the struct).
     pub fn memory_bytes(&self) -> u64 {
-        (self.values.capacity() * std::mem::size_of::<[f32; 3]>() + std::mem::size_of::<Self>())
-            as u64
+        let parts = self.parts.as_ref().map_or(0, |p| {
+            p.values.capacity() * std::mem::size_of::<[[f32; 3]; 4]>()
+        });
+        (self.values.capacity() * std::mem::size_of::<[f32; 3]>()
+            + parts
+            + std::mem::size_of::<Self>()) as u64
     }
 
     /// What the GPU frame uploads: dims, origin, sites per unit, last site per axis, and the
@@ -396,6 +499,15 @@ pub struct LightingReport {
     /// The cache entry (read or written); `None` without a cache.
     pub path: Option<PathBuf>,
     pub dims: Dims,
+}
+
+/// The physical light's [`Environment`] of `illum`, its sun direction quantised as the
+/// models' grids are solved with it.
+pub fn physical_environment(illum: &Illumination) -> Result<Environment, LightingError> {
+    let (_, sun) = quantise_sun(illum.sun_to)?;
+    let env = illum.environment(sun);
+    env.validate().map_err(LightingError::Illumination)?;
+    Ok(env)
 }
 
 /// The sun direction rounded to [`SUN_QUANTUM`]: the integer components (hashed) and the unit
@@ -1153,6 +1265,185 @@ pub fn model_lighting(
     drop(density);
     plan.store(&grid, solver)?;
     Ok((plan.lighting(&grid), report(source)))
+}
+
+/// A model's physical light solved as its four parts ([`LightParts`]: the sun's, a unit sky's
+/// through the top face and through the sides, a unit ground's; four solves, the top one on
+/// the model mirrored in y with its floor as the top face), each cached on its own, for the forest grid
+/// to weigh per instance ([`crate::forest`]). Also returns the density grid and medium the
+/// parts were solved with (the forest grid resamples them). Under the free weights the
+/// parts sum to [`model_lighting`]'s grid (the LB is linear; tested).
+pub fn model_lighting_parts(
+    model: &Model,
+    illum: &Illumination,
+    opts: &LightingOptions,
+    solver: &dyn LbSolver,
+    progress: &mut dyn FnMut(usize, usize, usize),
+) -> Result<(ModelLighting, LightingReport, DensityGrid, MediumParams), LightingError> {
+    let t0 = Instant::now();
+    if opts.light != Light::Physical {
+        return Err(LightingError::Illumination(
+            "the light's parts are the physical light's".into(),
+        ));
+    }
+    let plan = LightingPlan::new(model, illum, opts, solver)?;
+    let env = plan
+        .solve
+        .environment
+        .expect("the physical light has an environment");
+    let medium = plan.solve.medium.clone();
+    let density = plan.density()?;
+    let dims = plan.dims();
+    let bounds = plan.placement.bounds();
+    let zero = [Boundary {
+        values: [0.0; sylva_lb::lattice::Q],
+    }; 3];
+    let dark_floor = env.ground_albedo.map(|_| Floor {
+        nx: dims.nx,
+        nz: dims.nz,
+        radiance: std::array::from_fn(|_| vec![0.0; dims.nx * dims.nz]),
+    });
+    let err = |source| LightingError::Solve {
+        model: model.name.clone(),
+        source,
+    };
+    let stem = sylva_core::file_stem(&model.name, "model");
+    // The plant upside down: its floor is the top face, lit by a unit sky there.
+    let flipped = flip_y(&density);
+    let unit_floor = Floor {
+        nx: dims.nx,
+        nz: dims.nz,
+        radiance: std::array::from_fn(|_| vec![1.0; dims.nx * dims.nz]),
+    };
+    let mut grids = Vec::with_capacity(4);
+    let mut report_source = LightingSource::Cached;
+    let mut path = None;
+    for (k, tag) in ["sun", "sky", "ground", "skytop"].into_iter().enumerate() {
+        let mut h = Fnv64::new();
+        h.str("sylva-render physical light part");
+        h.u64(plan.key);
+        h.str(tag);
+        let key = h.finish();
+        let solve = || -> Result<LightingGrid, LightingError> {
+            let (boundaries, floor, source) = match k {
+                0 => {
+                    let sun_only = Environment {
+                        sky_radiance: [0.0; 3],
+                        ..env
+                    };
+                    let floor = sun_only
+                        .floor(&density, &medium)
+                        .map_err(|e| err(e.into()))?;
+                    let source = light::first_collision_source(
+                        &density,
+                        &medium,
+                        env.sun_travel,
+                        env.sun_irradiance,
+                    )
+                    .map_err(|e| err(e.into()))?;
+                    (zero, floor, Some(source))
+                }
+                1 => {
+                    let unit_sky = Environment {
+                        sun_irradiance: [0.0; 3],
+                        sky_radiance: [1.0; 3],
+                        ..env
+                    };
+                    let floor = unit_sky
+                        .floor(&density, &medium)
+                        .map_err(|e| err(e.into()))?;
+                    (light::sky_boundaries([1.0; 3]), floor, None)
+                }
+                2 => (light::ground_boundaries([1.0; 3]), dark_floor.clone(), None),
+                _ => (zero, Some(unit_floor.clone()), None),
+            };
+            let sopts = solve_options(dims);
+            let max = sopts.max_steps;
+            let grid = if k == 3 { &flipped } else { &density };
+            let (grid, _) = solver
+                .solve_lighting_rgb(
+                    grid,
+                    &medium,
+                    &boundaries,
+                    floor.as_ref(),
+                    source.as_ref(),
+                    &sopts,
+                    &mut |c, s, _| progress(c, s, max),
+                )
+                .map_err(err)?;
+            Ok(if k == 3 { flip_lighting(&grid) } else { grid })
+        };
+        let metadata = vec![
+            ("source".to_string(), model.name.clone()),
+            ("light".to_string(), format!("physical, {tag} part")),
+            ("grid".to_string(), opts.grid.to_string()),
+            ("solver".to_string(), solver.describe()),
+        ];
+        let (grid, source, p) = cached_solve(
+            opts.cache_dir.as_deref(),
+            &format!("{stem}-{tag}"),
+            key,
+            dims,
+            bounds,
+            metadata,
+            solve,
+        )?;
+        // Reported as one: a bad entry's reason first, else computed if any part was.
+        report_source = match (report_source, source) {
+            (r @ LightingSource::Recomputed { .. }, _) => r,
+            (_, r @ LightingSource::Recomputed { .. }) => r,
+            (LightingSource::Computed, _) | (_, LightingSource::Computed) => {
+                LightingSource::Computed
+            }
+            _ => LightingSource::Cached,
+        };
+        path = path.or(p);
+        grids.push(grid);
+    }
+    // The sky through the sides (and the floor's sky part): the whole sky's less the top's.
+    let side = light::subtract(&grids[1], &grids[3]);
+    let lighting = ModelLighting::physical_parts([&grids[0], &grids[3], &side, &grids[2]], &env);
+    let report = LightingReport {
+        source: report_source,
+        seconds: t0.elapsed().as_secs_f64(),
+        path,
+        dims,
+    };
+    Ok((lighting, report, density, medium))
+}
+
+/// `grid` mirrored in y (site `(x, y, z)` ↔ `(x, ny − 1 − y, z)`); the D3Q19 lattice and the
+/// media's phase functions are symmetric under it, so a solve of the mirror is the mirror of
+/// a solve.
+fn flip_y(grid: &DensityGrid) -> DensityGrid {
+    let d = grid.dims;
+    let at = |v: &[f32], i: usize| {
+        let (x, y, z) = d.coords(i);
+        v[d.index(x, d.ny - 1 - y, z)]
+    };
+    DensityGrid {
+        dims: d,
+        bounds: grid.bounds,
+        density: (0..d.sites()).map(|i| at(&grid.density, i)).collect(),
+        wood: (0..d.sites()).map(|i| at(&grid.wood, i)).collect(),
+    }
+}
+
+/// A lighting grid of the mirrored density ([`flip_y`]) back in the model's frame.
+fn flip_lighting(grid: &LightingGrid) -> LightingGrid {
+    let d = grid.dims;
+    LightingGrid {
+        dims: d,
+        bounds: grid.bounds,
+        colours: std::array::from_fn(|c| {
+            (0..d.sites())
+                .map(|i| {
+                    let (x, y, z) = d.coords(i);
+                    grid.colours[c][d.index(x, d.ny - 1 - y, z)]
+                })
+                .collect()
+        }),
+    }
 }
 
 #[cfg(test)]

@@ -21,11 +21,13 @@ use sylva_trace::{KdTracer, RayQuery, SceneAccel, TraceError, TraversalConfig};
 use sylva_trace_gpu::{GpuTracer, TraceGpuError};
 use sylva_wgpu::GpuContext;
 
+use crate::forest::{ForestInstance, ForestLight};
 use crate::gpu_frame::{FrameError, FrameLight, GpuFrame};
 use crate::indirect::{IndirectLight, ModelGridLight};
 use crate::lighting::{
-    hash_model_medium, model_lighting, preset_medium, Illumination, Light, LightingError,
-    LightingOptions, LightingReport, LightingSource, ModelLighting, CACHE_VERSION, PAPER_OCCUPANCY,
+    hash_model_medium, model_lighting, model_lighting_parts, physical_environment, preset_medium,
+    Illumination, Light, LightingError, LightingOptions, LightingReport, LightingSource,
+    ModelLighting, PartWeights, CACHE_VERSION, PAPER_OCCUPANCY,
 };
 use crate::media::{prepare_medium, Media, MediumSolve};
 use crate::output::{encode_exr, encode_png, OutputError};
@@ -288,6 +290,9 @@ pub struct PrepareOptions<'a> {
     /// Relighting from base solutions (with `lb`); `None`: LB solved for the scene's sun.
     pub relight: Option<RelightPlan>,
     pub shadows: ShadowMethod,
+    /// The physical light's coarse forest grid ([`crate::forest`]) for scenes of more than
+    /// one instance; `None`: each instance keeps its model's light in the open.
+    pub forest: Option<GlobalGridOptions>,
 }
 
 impl Default for PrepareOptions<'_> {
@@ -305,6 +310,7 @@ impl Default for PrepareOptions<'_> {
             output_images: 1,
             relight: None,
             shadows: ShadowMethod::default(),
+            forest: Some(GlobalGridOptions::default()),
         }
     }
 }
@@ -435,6 +441,8 @@ pub struct PreparedScene {
     pub materials: Vec<Vec<ShadeMaterial>>,
     /// Models whose LB lighting came from the cache.
     pub lb_models_cached: usize,
+    /// The physical light's forest grid, when the scene was lit through it.
+    pub forest: Option<ForestLight>,
 }
 
 /// The unit vector towards the scene's sun.
@@ -486,6 +494,79 @@ pub fn light_models(
         lighting.push(l);
     }
     Ok((lighting, cached))
+}
+
+/// Whether `PreparedScene::new` lights `scene` through the forest grid: the physical light,
+/// a forest grid asked for, and more than one instance (a lone tree's light is its model's).
+pub fn uses_forest(scene: &Scene, light: Light, forest: Option<&GlobalGridOptions>) -> bool {
+    light == Light::Physical && forest.is_some() && scene.instances.len() > 1
+}
+
+/// Every model's physical light as its four parts ([`crate::lighting::model_lighting_parts`],
+/// each from the cache when it can), and the coarse forest grid's weights of them per
+/// instance ([`ForestLight`]); how many models came from the cache.
+pub fn light_forest(
+    scene: &Scene,
+    lb: &LbPlan,
+    gopts: &GlobalGridOptions,
+    progress: &dyn Progress,
+) -> Result<(Vec<ModelLighting>, usize, ForestLight), PipelineError> {
+    let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
+    let lopts = lighting_options(scene, lb);
+    let illum = scene_illumination(scene);
+    let mut lighting = Vec::with_capacity(scene.models.len());
+    let mut fine = Vec::with_capacity(scene.models.len());
+    let mut cached = 0;
+    for (k, model) in scene.models.iter().enumerate() {
+        let lopts = LightingOptions {
+            preset: scene.model_preset(k).to_string(),
+            ..lopts.clone()
+        };
+        let _m = tracing::info_span!(stage::LB_MODEL, model = %model.name).entered();
+        progress.start(&format!("LB {} (parts)", model.name), 3);
+        let lit = model_lighting_parts(model, &illum, &lopts, lb.solver, &mut |c, step, max| {
+            progress.set((c * max + step) as u64, 3 * max as u64)
+        });
+        progress.finish();
+        let (l, report, density, medium) = lit.map_err(|source| PipelineError::Lighting {
+            model: model.name.clone(),
+            source,
+        })?;
+        cached += (report.source == LightingSource::Cached) as usize;
+        progress.model_lit(model, &report);
+        lighting.push(l);
+        fine.push((density, medium));
+    }
+    let t0 = std::time::Instant::now();
+    let err = |source| PipelineError::Global {
+        scene: scene.name.clone(),
+        source,
+    };
+    let env = physical_environment(&illum).map_err(err)?;
+    let instances: Vec<ForestInstance> = scene
+        .instances
+        .iter()
+        .map(|i| {
+            let (d, m) = &fine[i.model as usize];
+            ForestInstance {
+                model: Some((d, m)),
+                to_world: i.transform(),
+            }
+        })
+        .collect();
+    progress.start("forest grid", 3);
+    let forest = ForestLight::solve(&instances, &env, 0.0, gopts, &mut |done, total| {
+        progress.set(done as u64, total as u64)
+    });
+    progress.finish();
+    let forest = forest.map_err(err)?;
+    progress.global_grid(&GlobalReport {
+        source: LightingSource::Computed,
+        seconds: t0.elapsed().as_secs_f64(),
+        dims: forest.dims,
+        path: None,
+    });
+    Ok((lighting, cached, forest))
 }
 
 /// The scene's media ready to draw: each lit by its two LB solves (sun and sky, cached) when
@@ -557,23 +638,33 @@ impl PreparedScene {
         if let (Some(lb), Some(plan)) = (&lb, &opts.relight) {
             relit_parts = precompute_relighting(&scene, lb, plan, progress)?;
         }
+        let mut forest = None;
         let (lighting, cached) = match (&lb, &relit_parts) {
             (_, Some(parts)) => (none(), parts.cached),
+            (Some(lb), None) if uses_forest(&scene, lb.light, opts.forest.as_ref()) => {
+                let gopts = opts.forest.expect("uses_forest checks it");
+                let (lit, cached, f) = light_forest(&scene, lb, &gopts, progress)?;
+                forest = Some(f);
+                (lit.into_iter().map(Some).collect(), cached)
+            }
             (Some(lb), None) => {
                 let (lit, cached) = light_models(&scene, lb, progress)?;
                 (lit.into_iter().map(Some).collect(), cached)
             }
             (None, None) => (none(), 0),
         };
-        Self::build(
+        let mut prepared = Self::build(
             scene,
             opts,
             shading,
             lighting,
             cached,
             relit_parts,
+            forest.as_ref().map(|f| f.weights.clone()),
             progress,
-        )
+        )?;
+        prepared.forest = forest;
+        Ok(prepared)
     }
 
     /// A scene whose models were lit elsewhere (`lighting` in scene order; `cached` of them
@@ -594,6 +685,7 @@ impl PreparedScene {
             shading,
             lighting.into_iter().map(Some).collect(),
             cached,
+            None,
             None,
             &Silent,
         )
@@ -616,6 +708,7 @@ impl PreparedScene {
             none,
             cached,
             Some(relighting),
+            None,
             &Silent,
         )
     }
@@ -658,6 +751,9 @@ impl PreparedScene {
         Ok(shading)
     }
 
+    // The lighting comes in its three forms (per-model grids, their forest weights, relit
+    // parts), each optional.
+    #[allow(clippy::too_many_arguments)]
     fn build(
         scene: Scene,
         opts: &PrepareOptions,
@@ -665,6 +761,7 @@ impl PreparedScene {
         lighting: Vec<Option<ModelLighting>>,
         lb_models_cached: usize,
         relit_parts: Option<Relighting>,
+        forest_weights: Option<Vec<PartWeights>>,
         progress: &dyn Progress,
     ) -> Result<PreparedScene, PipelineError> {
         let to_sun = scene_to_sun(&scene);
@@ -677,7 +774,11 @@ impl PreparedScene {
                 None => Tracer::Cpu(Box::new(cpu)),
             }
         };
-        let light = ModelGridLight::new(lighting, &scene.models, tracer.cpu().accel.instances());
+        let mut light =
+            ModelGridLight::new(lighting, &scene.models, tracer.cpu().accel.instances());
+        if let Some(w) = forest_weights {
+            light = light.with_instance_weights(w);
+        }
         let materials = shade_materials(&scene.models);
         let (relit, spare_bases) = match relit_parts {
             Some(parts) => {
@@ -698,12 +799,16 @@ impl PreparedScene {
         // base solutions. It has no volume tracer: scenes with media shade on the CPU (the
         // GPU still answers their ray queries).
         let gpu_on = tracer.gpu().is_some() && opts.shade_on_gpu;
-        let gpu_shading_note = (gpu_on && !media.is_empty()).then_some(
-            "the scene has media (clouds), which the CPU's volume tracer draws; the GPU traces \
-             the rays",
-        );
+        let gpu_shading_note = if gpu_on && !media.is_empty() {
+            Some(
+                "the scene has media (clouds), which the CPU's volume tracer draws; the GPU \
+                 traces the rays",
+            )
+        } else {
+            None
+        };
         let gpu_frame = match tracer.gpu() {
-            Some(t) if gpu_on && media.is_empty() => {
+            Some(t) if gpu_on && gpu_shading_note.is_none() => {
                 let _span = tracing::info_span!(stage::ACCEL_BUILD).entered();
                 let frame_light = match &relit {
                     Some(r) => FrameLight::Relit(r),
@@ -718,6 +823,7 @@ impl PreparedScene {
             _ => None,
         };
         Ok(PreparedScene {
+            forest: None,
             materials,
             gpu_frame,
             gpu_shading_note,

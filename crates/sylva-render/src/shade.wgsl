@@ -296,11 +296,14 @@ fn linear_texture_sample(sm: ShadeModel, mat: u32, uv_in: vec2<f32>) -> vec3<f32
 
 // An LB light record: nx, ny, nz, values (first word of the values or stored fields),
 // origin (3), inv_cell (3), last (3), model bounds min (3), max (3), then 9 words: a grid's
-// free field (physical light: 1, open sky (3), open bottom (3)), or a relit record's kind
+// free field (physical light: 1, open sky (3), open bottom (3)) and its forest-grid parts
+// (LIGHT_PARTS: where the parts start, NONE: none; where the instances' weights start), or a
+// relit record's kind
 // (RELIT_FIELDS, RELIT_HAAR_SPLIT, RELIT_HAAR_PACKED), field count, site count, Haar blocks
 // along y and z, and where the Haar starts, counts, indices or packed words, and values or
 // steps begin.
 const LIGHT_OPEN: u32 = 19u;
+const LIGHT_PARTS: u32 = 26u;
 const RELIT_KIND: u32 = 19u;
 const RELIT_FIELDS: u32 = 0u;
 const RELIT_HAAR_SPLIT: u32 = 1u;
@@ -470,6 +473,26 @@ fn relit_sample(g: u32, i: u32, p: vec3<f32>) -> vec3<f32> {
     return out;
 }
 
+// ModelLighting::sample_weighted: the four parts (sun, sky through the top, through the sides,
+// ground; RGB each, 12 words per site at `parts`) trilinearly at p, weighed by instance i's
+// weights (12 words per instance at `weights`): the physical light's forest grid.
+fn parts_sample(g: u32, parts: u32, weights: u32, i: u32, p: vec3<f32>) -> vec3<f32> {
+    let fp = footprint(g, p);
+    let w = weights + 12u * i;
+    let w_sun = word_vec3(w);
+    let w_top = word_vec3(w + 3u);
+    let w_side = word_vec3(w + 6u);
+    let w_ground = word_vec3(w + 9u);
+    var out = vec3<f32>(0.0, 0.0, 0.0);
+    for (var k = 0u; k < 8u; k++) {
+        let v = parts + 12u * fp.sites[k];
+        let c = word_vec3(v) * w_sun + word_vec3(v + 3u) * w_top + word_vec3(v + 6u) * w_side
+            + word_vec3(v + 9u) * w_ground;
+        out += c * fp.weights[k];
+    }
+    return out;
+}
+
 // IndirectLight::plant: the LB light on instance i at world point p; w = 0 when it gets none.
 fn plant_light(i: u32, p: vec3<f32>) -> vec4<f32> {
     let g = shade_model(instance_model(i)).grid;
@@ -479,6 +502,10 @@ fn plant_light(i: u32, p: vec3<f32>) -> vec4<f32> {
     let pm = model_point(i, p);
     if (shading.tables.w == RELIT) {
         return vec4<f32>(relit_sample(g, i, pm), 1.0);
+    }
+    let parts = shade_word_at(g + LIGHT_PARTS);
+    if (parts != NONE) {
+        return vec4<f32>(parts_sample(g, parts, shade_word_at(g + LIGHT_PARTS + 1u), i, pm), 1.0);
     }
     return vec4<f32>(lighting_sample(g, pm), 1.0);
 }

@@ -103,6 +103,9 @@ fn prepare_with(
         shade_on_gpu,
         light,
         relight,
+        // The per-model grids shade.wgsl mirrors; the forest grid's weighed parts shade on
+        // the CPU (tested below).
+        forest: None,
         ..PrepareOptions::default()
     };
     PreparedScene::new(scene, &opts, &Silent).unwrap()
@@ -200,6 +203,32 @@ fn gpu_shading_matches_the_cpu_per_pixel() {
         let gpu = prepare_with(dir.path(), Some(&ctx), true, None, light);
         frames_agree(&ctx, &cpu, &gpu, (1e-5, 1e-3), &format!("{light:?}"));
     }
+    // The physical light's forest grid: each instance's weighed parts, on the GPU as on the
+    // CPU.
+    let forest = |gpu: Option<&GpuContext>| {
+        let path = dir.path().join("roses.toml");
+        let scene = load_scene(path.to_str().unwrap(), None).unwrap();
+        PreparedScene::new(
+            scene,
+            &PrepareOptions {
+                lb: Some(LbPlan {
+                    solver: &CpuSolver,
+                    light: Light::Physical,
+                    grid: None,
+                    cache_dir: Some(&dir.path().join("cache")),
+                }),
+                trace_gpu: gpu,
+                shade_on_gpu: gpu.is_some(),
+                light: Light::Physical,
+                ..PrepareOptions::default()
+            },
+            &Silent,
+        )
+        .unwrap()
+    };
+    let (cpu, gpu) = (forest(None), forest(Some(&ctx)));
+    assert!(gpu.forest.is_some() && gpu.gpu_frame.is_some());
+    frames_agree(&ctx, &cpu, &gpu, (1e-5, 1e-3), "physical, forest grid");
 }
 
 /// The GPU frame kernel of `gpu` against `cpu`'s frames, per pixel and part, at 1, 4 and 3

@@ -84,6 +84,8 @@ fn prepare(path: &Path, cache: &Path, progress: &dyn Progress) -> PreparedScene 
             cache_dir: Some(cache),
         }),
         largest_frame: Some((40, 30, 4)),
+        // The per-model pipeline (the forest grid's is tests/forest.rs').
+        forest: None,
         ..PrepareOptions::default()
     };
     PreparedScene::new(scene, &opts, progress).unwrap()

@@ -141,10 +141,12 @@ pub struct FrameArgs {
     /// Ambient light from the ambient base solution, as a fraction of unobstructed sunlight.
     #[arg(long, default_value_t = 0.0)]
     pub ambient: f64,
-    /// Without the coarse global grid (instances do not shade each other's indirect light).
+    /// Without the coarse global grid (instances do not shade each other's indirect light):
+    /// the paper light's relighting grid and the physical light's forest grid.
     #[arg(long)]
     pub no_global: bool,
-    /// Sites of the coarse global grid along the forest's longest edge.
+    /// Sites of the coarse global grid (relighting) or forest grid (physical light) along the
+    /// forest's longest edge.
     #[arg(long, default_value_t = GlobalGridOptions::default().sites)]
     pub global_grid: usize,
     /// Shadow rays through the sun-aligned grid (004 §4.1) or the top-level kd-tree.
@@ -232,6 +234,20 @@ impl FrameArgs {
             target,
             keep_raw,
         }))
+    }
+
+    /// The physical light's coarse forest grid (`--global-grid`, off with `--no-global`);
+    /// `None` for other lights.
+    pub fn forest_grid(&self, light: Light) -> Result<Option<GlobalGridOptions>> {
+        if self.no_global || light != Light::Physical {
+            return Ok(None);
+        }
+        let g = GlobalGridOptions {
+            sites: self.global_grid,
+        };
+        g.validate()
+            .map_err(|e| anyhow::anyhow!("--global-grid: {e}"))?;
+        Ok(Some(g))
     }
 
     pub fn shadow_method(&self) -> ShadowMethod {
@@ -459,6 +475,7 @@ pub fn prepare_with(
         output_images,
         relight,
         shadows: a.shadow_method(),
+        forest: a.forest_grid(light)?,
     };
     let basis = Mutex::new(Vec::new());
     let progress = Bars::new(|r: Report| {
@@ -525,6 +542,45 @@ pub fn prepare_with(
                 .unwrap_or_else(|| "off".into()),
             scene.shadows().name()
         ));
+    }
+    if let Some(f) = &scene.forest {
+        // Luminance of each part's weight over its open value, per instance.
+        let y = |v: sylva_render::lighting::Vec3| sylva_core::colour::luminance(v.to_array());
+        let range =
+            |part: fn(&sylva_render::lighting::PartWeights) -> sylva_render::lighting::Vec3| {
+                let free = y(part(&f.free));
+                let r: Vec<f32> = f
+                    .weights
+                    .iter()
+                    .map(|w| if free > 0.0 { y(part(w)) / free } else { 1.0 })
+                    .collect();
+                let (lo, hi) = r
+                    .iter()
+                    .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
+                        (a.min(v), b.max(v))
+                    });
+                format!("{lo:.2}–{hi:.2}")
+            };
+        say(format!(
+            "forest grid {}: per instance, of the open's: sun {}, sky through the top {}, \
+             through the sides {}, ground {}",
+            f.dims,
+            range(|w| w.sun),
+            range(|w| w.sky_top),
+            range(|w| w.sky),
+            range(|w| w.ground)
+        ));
+        if std::env::var_os("SYLVA_FOREST_WEIGHTS").is_some() {
+            for (i, w) in f.weights.iter().enumerate() {
+                say(format!(
+                    "  instance {i}: sun {:.3} sky top {:.3} sides {:.3} ground {:.3}",
+                    y(w.sun),
+                    y(w.sky_top) / y(f.free.sky_top).max(f32::MIN_POSITIVE),
+                    y(w.sky) / y(f.free.sky).max(f32::MIN_POSITIVE),
+                    y(w.ground) / y(f.free.ground).max(f32::MIN_POSITIVE)
+                ));
+            }
+        }
     }
     drop(progress);
     Ok(Prepared {

@@ -52,7 +52,7 @@ use sylva_lb::{Boundary, Bounds, ColourParams, DensityGrid, Dims, MediumParams};
 use crate::lighting::LightingError;
 
 /// Coarse cells between the forest's box and the grid's shell on every side.
-const MARGIN: usize = 3;
+pub(crate) const MARGIN: usize = 3;
 /// Largest fine density used for the extinction (−ln(1 − ρ) is infinite at 1).
 const RHO_CAP: f32 = 0.999;
 /// Samples per coarse cell and axis at most, per instance.
@@ -138,17 +138,17 @@ pub struct GlobalInstance<'a> {
 }
 
 /// A fine grid placed in the world.
-struct Placed<'a> {
+pub(crate) struct Placed<'a> {
     grid: &'a DensityGrid,
     to_model: Affine3A,
     /// World box of the fine cells (the model grid's box, half a cell beyond the sites).
-    world: Aabb,
+    pub(crate) world: Aabb,
     /// Fine cell edge in model space, and in the world.
-    cell_model: f32,
-    cell_world: f32,
+    pub(crate) cell_model: f32,
+    pub(crate) cell_world: f32,
 }
 
-fn placed<'a>(i: &GlobalInstance<'a>) -> Option<Placed<'a>> {
+pub(crate) fn placed<'a>(i: &GlobalInstance<'a>) -> Option<Placed<'a>> {
     let grid = i.density?;
     let b = grid.bounds;
     let cell_model = (b.max[0] - b.min[0]) / (grid.dims.nx - 1) as f32;
@@ -191,12 +191,12 @@ pub fn luminance_medium(medium: &MediumParams) -> MediumParams {
 
 /// One face of an instance's upwind shell: coarse sites on a plane just outside the box.
 #[derive(Debug, Clone)]
-struct ShellFace {
-    axis: usize,
+pub(crate) struct ShellFace {
+    pub(crate) axis: usize,
     /// The face at the box's high side (entered by directions with `c[axis] < 0`).
-    high: bool,
-    area: f32,
-    sites: Vec<[usize; 3]>,
+    pub(crate) high: bool,
+    pub(crate) area: f32,
+    pub(crate) sites: Vec<[usize; 3]>,
 }
 
 /// The coarse layout over the instances' boxes: dims, origin, cell.
@@ -214,7 +214,7 @@ fn layout(boxes: &[Aabb], opts: &GlobalGridOptions) -> Result<(Dims, Vec3, f32),
 }
 
 /// The coarse density grid: each site's cell resampled from the fine grids overlapping it.
-fn coarse_density(
+pub(crate) fn coarse_density(
     dims: Dims,
     origin: Vec3,
     cell: f32,
@@ -322,7 +322,7 @@ fn cell_extinction(p: &Placed, lo: Vec3, cell: f32) -> (f64, f64) {
 
 /// The upwind shell faces of a world box: the coarse planes just outside each of its six
 /// faces (their cells do not reach into the box), over the face's extent.
-fn shell_faces(b: &Aabb, dims: Dims, origin: Vec3, cell: f32) -> Vec<ShellFace> {
+pub(crate) fn shell_faces(b: &Aabb, dims: Dims, origin: Vec3, cell: f32) -> Vec<ShellFace> {
     let n = [dims.nx, dims.ny, dims.nz];
     let coord = |a: usize, v: f32| (v - origin[a]) / cell;
     let clamp = |a: usize, i: f32| (i.max(1.0) as usize).min(n[a] - 2);

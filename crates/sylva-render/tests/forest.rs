@@ -1,0 +1,250 @@
+//! The physical light's coarse forest grid (docs/light.md, "Forests"): a model's light parts
+//! sum to its light in the open, a lone tree keeps its light, a tree in its neighbours'
+//! shade gets less, and every weight is linear in the sun's irradiance and the sky's
+//! radiance.
+
+use glam::{Affine3A, Vec3};
+use sylva_core::colour::luminance;
+use sylva_lb::light::Environment;
+use sylva_lb::{CpuSolver, DensityGrid, MediumParams};
+use sylva_render::forest::{free_weights, ForestInstance, ForestLight};
+use sylva_render::lighting::{
+    model_lighting, model_lighting_parts, physical_environment, LightingOptions, PartWeights,
+};
+use sylva_render::pipeline::scene_illumination;
+use sylva_render::relight::GlobalGridOptions;
+use sylva_render::{load_scene, LbPlan, Light, PrepareOptions, PreparedScene, Silent};
+
+const GRID: usize = 24;
+
+fn opts() -> LightingOptions {
+    LightingOptions {
+        grid: GRID,
+        light: Light::Physical,
+        preset: "leaf".into(),
+        cache_dir: None,
+    }
+}
+
+/// The `shade` scene's models as parts: (density, medium) per model.
+fn shade_parts() -> (sylva_geom::Scene, Vec<(DensityGrid, MediumParams)>) {
+    let scene = load_scene("shade", None).unwrap();
+    let illum = scene_illumination(&scene);
+    let fine = scene
+        .models
+        .iter()
+        .map(|m| {
+            let (_, _, d, medium) =
+                model_lighting_parts(m, &illum, &opts(), &CpuSolver, &mut |_, _, _| {}).unwrap();
+            (d, medium)
+        })
+        .collect();
+    (scene, fine)
+}
+
+fn instances<'a>(
+    scene: &sylva_geom::Scene,
+    fine: &'a [(DensityGrid, MediumParams)],
+    which: &[usize],
+) -> Vec<ForestInstance<'a>> {
+    which
+        .iter()
+        .map(|&k| {
+            let i = &scene.instances[k];
+            let (d, m) = &fine[i.model as usize];
+            ForestInstance {
+                model: Some((d, m)),
+                to_world: i.transform(),
+            }
+        })
+        .collect()
+}
+
+fn y(v: Vec3) -> f32 {
+    luminance(v.to_array())
+}
+
+#[test]
+fn the_parts_sum_to_the_model_alone() {
+    let scene = load_scene("shade", None).unwrap();
+    let illum = scene_illumination(&scene);
+    let model = &scene.models[1];
+    let (whole, _) = model_lighting(model, &illum, &opts(), &CpuSolver, &mut |_, _, _| {}).unwrap();
+    let (parts, _, _, _) =
+        model_lighting_parts(model, &illum, &opts(), &CpuSolver, &mut |_, _, _| {}).unwrap();
+    let free = parts.parts().unwrap().free;
+    let d = whole.dims();
+    let mut worst = 0.0f32;
+    let mut peak = 0.0f32;
+    for x in 0..d.nx {
+        for yy in 0..d.ny {
+            for z in 0..d.nz {
+                let p = whole.site_position(x, yy, z);
+                let a = whole.sample(p);
+                let b = parts.sample_weighted(p, &free);
+                worst = worst.max((a - b).abs().max_element());
+                peak = peak.max(a.max_element());
+            }
+        }
+    }
+    assert!(peak > 0.0);
+    assert!(
+        worst <= 1e-4 * peak,
+        "parts differ by {worst} (peak {peak})"
+    );
+}
+
+#[test]
+fn a_lone_tree_keeps_its_light() {
+    let (scene, fine) = shade_parts();
+    let env = physical_environment(&scene_illumination(&scene)).unwrap();
+    let free = free_weights(&env);
+    let g = ForestLight::solve(
+        &instances(&scene, &fine, &[2]),
+        &env,
+        0.0,
+        &GlobalGridOptions { sites: 32 },
+        &mut |_, _| {},
+    )
+    .unwrap();
+    let w = g.weights[0];
+    let r = |a: Vec3, b: Vec3| y(a) / y(b);
+    assert!((y(w.sun) - 1.0).abs() < 0.02, "sun {}", y(w.sun));
+    assert!(
+        (r(w.sky, free.sky) - 1.0).abs() < 0.05,
+        "sky {w:?} / {free:?}"
+    );
+    assert!(
+        (r(w.sky_top, free.sky_top) - 1.0).abs() < 0.02,
+        "sky through the top {w:?} / {free:?}"
+    );
+    // The ground around a lone tree is its own shade's too (the fine grid assumes it open):
+    // less, but not far.
+    let ground = r(w.ground, free.ground);
+    assert!(ground > 0.6 && ground < 1.05, "ground {ground}");
+    // No instance with a grid: the free weights exactly.
+    let g = ForestLight::solve(
+        &[ForestInstance {
+            model: None,
+            to_world: Affine3A::IDENTITY,
+        }],
+        &env,
+        0.0,
+        &GlobalGridOptions { sites: 32 },
+        &mut |_, _| {},
+    )
+    .unwrap();
+    assert_eq!(g.weights, vec![free]);
+    assert!(ForestLight::solve(
+        &instances(&scene, &fine, &[2]),
+        &env,
+        0.0,
+        &GlobalGridOptions { sites: 4 },
+        &mut |_, _| {},
+    )
+    .is_err());
+}
+
+#[test]
+fn a_tree_in_its_neighbours_shade_gets_less_light() {
+    // 004 Fig. 2: instance 1 stands in the beech's shade, instance 2, the same model, in
+    // the open.
+    let (scene, fine) = shade_parts();
+    let env = physical_environment(&scene_illumination(&scene)).unwrap();
+    let g = ForestLight::solve(
+        &instances(&scene, &fine, &[0, 1, 2]),
+        &env,
+        0.0,
+        &GlobalGridOptions::default(),
+        &mut |_, _| {},
+    )
+    .unwrap();
+    let (shaded, open) = (g.weights[1], g.weights[2]);
+    assert!(y(open.sun) > 0.95, "open {open:?}");
+    assert!(
+        y(shaded.sun) < 0.5 * y(open.sun),
+        "shaded {shaded:?} open {open:?}"
+    );
+    assert!(
+        y(shaded.sky) < y(open.sky),
+        "shaded {shaded:?} open {open:?}"
+    );
+
+    // In the renderer: the shaded instance's crown gets less indirect light than with its
+    // model's light in the open (the same instance, --no-global).
+    let prepare = |forest| {
+        PreparedScene::new(
+            scene.clone(),
+            &PrepareOptions {
+                lb: Some(LbPlan {
+                    solver: &CpuSolver,
+                    grid: Some(GRID),
+                    cache_dir: None,
+                    light: Light::Physical,
+                }),
+                forest,
+                ..PrepareOptions::default()
+            },
+            &Silent,
+        )
+        .unwrap()
+    };
+    let with = prepare(Some(GlobalGridOptions::default()));
+    let without = prepare(None);
+    assert!(with.forest.is_some() && without.forest.is_none());
+    let inst = &with.tracer.cpu().accel.instances()[1];
+    let centre = 0.5 * (inst.world_bounds.min + inst.world_bounds.max);
+    let (a, b) = (
+        with.indirect().plant(1, inst, centre).unwrap(),
+        without.indirect().plant(1, inst, centre).unwrap(),
+    );
+    assert!(y(a) < 0.9 * y(b), "with the forest grid {a}, without {b}");
+}
+
+#[test]
+fn the_weights_are_linear_in_the_sun_and_the_sky() {
+    let (scene, fine) = shade_parts();
+    let env = physical_environment(&scene_illumination(&scene)).unwrap();
+    let inst = instances(&scene, &fine, &[0, 1, 2]);
+    let solve = |e: &Environment| {
+        ForestLight::solve(
+            &inst,
+            e,
+            0.0,
+            &GlobalGridOptions { sites: 32 },
+            &mut |_, _| {},
+        )
+        .unwrap()
+        .weights
+    };
+    let both = solve(&env);
+    let sun = solve(&Environment {
+        sky_radiance: [0.0; 3],
+        ..env
+    });
+    let sky = solve(&Environment {
+        sun_irradiance: [0.0; 3],
+        ..env
+    });
+    let twice = solve(&Environment {
+        sun_irradiance: env.sun_irradiance.map(|v| 2.0 * v),
+        sky_radiance: env.sky_radiance.map(|v| 2.0 * v),
+        ..env
+    });
+    let close = |a: Vec3, b: Vec3, what: &str| {
+        let tol = 1e-3 * a.max_element().max(b.max_element()).max(1e-3);
+        assert!((a - b).abs().max_element() <= tol, "{what}: {a} vs {b}");
+    };
+    for i in 0..inst.len() {
+        let (w, s, k, t): (PartWeights, PartWeights, PartWeights, PartWeights) =
+            (both[i], sun[i], sky[i], twice[i]);
+        // The sun's transmittance depends on neither.
+        close(w.sun, s.sun, "sun part, sun only");
+        close(w.sun, t.sun, "sun part, doubled");
+        // The arriving light: the sun's share plus the sky's, and twice under both doubled.
+        close(w.sky, s.sky + k.sky, "sky part, sum");
+        close(w.ground, s.ground + k.ground, "ground part, sum");
+        close(2.0 * w.sky, t.sky, "sky part, doubled");
+        close(2.0 * w.ground, t.ground, "ground part, doubled");
+    }
+}
