@@ -505,6 +505,19 @@ pub fn prepare_with(
                     };
                     match relit {
                         Some(parts) => PreparedScene::with_relighting(scene, &opts, parts)?,
+                        None if sylva_render::uses_forest(
+                            &scene,
+                            lb.light,
+                            opts.forest.as_ref(),
+                        ) =>
+                        {
+                            // The forest grid weighs every model's light parts by the whole
+                            // forest: rank 0 solves and caches them, the other ranks then
+                            // prepare from the cache (the same inputs, so the same light).
+                            prepare_on_root_first(comm, || {
+                                PreparedScene::new(scene.clone(), &opts, progress)
+                            })?
+                        }
                         None => {
                             let (lighting, cached) =
                                 sylva_mpi::light_models(comm, &scene, lb, progress)?;
@@ -756,4 +769,35 @@ pub fn split_summary(d: &sylva_mpi::DistributedFrame) -> String {
         ranks.join(", "),
         100.0 * d.imbalance()
     )
+}
+
+/// Runs `prepare` on rank 0, then (rank 0 having succeeded) on every other rank; a failure on
+/// rank 0 ends every rank with a message instead of leaving them waiting.
+fn prepare_on_root_first<T>(
+    comm: &dyn Comm,
+    prepare: impl Fn() -> Result<T, sylva_render::PipelineError>,
+) -> Result<T> {
+    let mut done = Vec::new();
+    let mine = if comm.rank() == 0 {
+        let r = prepare();
+        done = match &r {
+            Ok(_) => b"ok".to_vec(),
+            Err(e) => format!("rank 0 failed preparing the scene: {e}").into_bytes(),
+        };
+        Some(r)
+    } else {
+        None
+    };
+    comm.broadcast(0, &mut done)
+        .map_err(|e| anyhow::anyhow!("waiting for rank 0: {e}"))?;
+    if done != b"ok" {
+        match mine {
+            Some(r) => return Ok(r?),
+            None => bail!("{}", String::from_utf8_lossy(&done)),
+        }
+    }
+    match mine {
+        Some(r) => Ok(r?),
+        None => Ok(prepare()?),
+    }
 }
