@@ -254,6 +254,20 @@ fn a_volume_source_agrees_with_the_cpu() {
         green: std::array::from_fn(|c| std::array::from_fn(|m| ((m + c) % 4) as f32 / 36.0)),
         brown: std::array::from_fn(|c| std::array::from_fn(|m| ((m * 3 + c) % 5) as f32 / 50.0)),
     };
+    let on_gpu = |source: Option<&VolumeSource>, opts: &SolveOptions| {
+        solve_lighting_gpu(
+            &ctx,
+            &grid,
+            &medium,
+            &boundaries,
+            Some(&floor),
+            source,
+            opts,
+            Precision::F32,
+            &mut |_, _, _| {},
+        )
+        .unwrap()
+    };
     for opts in [1, 2, 3, 17]
         .map(|n| SolveOptions {
             max_steps: n,
@@ -275,18 +289,7 @@ fn a_volume_source_agrees_with_the_cpu() {
             &mut |_, _, _| {},
         )
         .unwrap();
-        let (gpu, gpu_reports) = solve_lighting_gpu(
-            &ctx,
-            &grid,
-            &medium,
-            &boundaries,
-            Some(&floor),
-            Some(&source),
-            &opts,
-            Precision::F32,
-            &mut |_, _, _| {},
-        )
-        .unwrap();
+        let (gpu, gpu_reports) = on_gpu(Some(&source), &opts);
         for c in 0..3 {
             let err = max_relative_error(&gpu.colours[c], &cpu.colours[c]);
             assert!(err < 1e-5, "{opts:?} colour {c}: {err}");
@@ -298,30 +301,8 @@ fn a_volume_source_agrees_with_the_cpu() {
         max_steps: 17,
         tolerance: None,
     };
-    let (with, _) = solve_lighting_gpu(
-        &ctx,
-        &grid,
-        &medium,
-        &boundaries,
-        Some(&floor),
-        Some(&source),
-        &opts,
-        Precision::F32,
-        &mut |_, _, _| {},
-    )
-    .unwrap();
-    let (without, _) = solve_lighting_gpu(
-        &ctx,
-        &grid,
-        &medium,
-        &boundaries,
-        Some(&floor),
-        None,
-        &opts,
-        Precision::F32,
-        &mut |_, _, _| {},
-    )
-    .unwrap();
+    let (with, _) = on_gpu(Some(&source), &opts);
+    let (without, _) = on_gpu(None, &opts);
     assert!(max_relative_error(&with.colours[1], &without.colours[1]) > 1e-2);
 }
 

@@ -470,9 +470,35 @@ pub fn light_models(
     progress: &dyn Progress,
 ) -> Result<(Vec<ModelLighting>, usize), PipelineError> {
     let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
+    light_each_model(scene, lb, "", progress, |model, illum, lopts, progress| {
+        let (l, report) = model_lighting(model, illum, lopts, lb.solver, progress)?;
+        Ok((l, report, ()))
+    })
+    .map(|(lighting, cached, _)| (lighting, cached))
+}
+
+/// One model's LB light with its cache report and whatever else the caller keeps of it.
+type LitModel<T> = (ModelLighting, LightingReport, T);
+
+/// Lights every model in scene order through `light` (with the model's preset, a progress
+/// bar labelled `LB NAME{label}`, its span and report); returns the lights, how many came from
+/// the cache, and each model's extra.
+fn light_each_model<T>(
+    scene: &Scene,
+    lb: &LbPlan,
+    label: &str,
+    progress: &dyn Progress,
+    mut light: impl FnMut(
+        &Model,
+        &Illumination,
+        &LightingOptions,
+        &mut dyn FnMut(usize, usize, usize),
+    ) -> Result<LitModel<T>, LightingError>,
+) -> Result<(Vec<ModelLighting>, usize, Vec<T>), PipelineError> {
     let lopts = lighting_options(scene, lb);
     let illum = scene_illumination(scene);
     let mut lighting = Vec::with_capacity(scene.models.len());
+    let mut extra = Vec::with_capacity(scene.models.len());
     let mut cached = 0;
     for (k, model) in scene.models.iter().enumerate() {
         let lopts = LightingOptions {
@@ -480,20 +506,21 @@ pub fn light_models(
             ..lopts.clone()
         };
         let _m = tracing::info_span!(stage::LB_MODEL, model = %model.name).entered();
-        progress.start(&format!("LB {}", model.name), 3);
-        let lit = model_lighting(model, &illum, &lopts, lb.solver, &mut |c, step, max| {
+        progress.start(&format!("LB {}{label}", model.name), 3);
+        let lit = light(model, &illum, &lopts, &mut |c, step, max| {
             progress.set((c * max + step) as u64, 3 * max as u64)
         });
         progress.finish();
-        let (l, report) = lit.map_err(|source| PipelineError::Lighting {
+        let (l, report, more) = lit.map_err(|source| PipelineError::Lighting {
             model: model.name.clone(),
             source,
         })?;
         cached += (report.source == LightingSource::Cached) as usize;
         progress.model_lit(model, &report);
         lighting.push(l);
+        extra.push(more);
     }
-    Ok((lighting, cached))
+    Ok((lighting, cached, extra))
 }
 
 /// Whether `PreparedScene::new` lights `scene` through the forest grid: the physical light,
@@ -512,31 +539,18 @@ pub fn light_forest(
     progress: &dyn Progress,
 ) -> Result<(Vec<ModelLighting>, usize, ForestLight), PipelineError> {
     let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
-    let lopts = lighting_options(scene, lb);
+    let (lighting, cached, fine) = light_each_model(
+        scene,
+        lb,
+        " (parts)",
+        progress,
+        |model, illum, lopts, progress| {
+            let (l, report, density, medium) =
+                model_lighting_parts(model, illum, lopts, lb.solver, progress)?;
+            Ok((l, report, (density, medium)))
+        },
+    )?;
     let illum = scene_illumination(scene);
-    let mut lighting = Vec::with_capacity(scene.models.len());
-    let mut fine = Vec::with_capacity(scene.models.len());
-    let mut cached = 0;
-    for (k, model) in scene.models.iter().enumerate() {
-        let lopts = LightingOptions {
-            preset: scene.model_preset(k).to_string(),
-            ..lopts.clone()
-        };
-        let _m = tracing::info_span!(stage::LB_MODEL, model = %model.name).entered();
-        progress.start(&format!("LB {} (parts)", model.name), 3);
-        let lit = model_lighting_parts(model, &illum, &lopts, lb.solver, &mut |c, step, max| {
-            progress.set((c * max + step) as u64, 3 * max as u64)
-        });
-        progress.finish();
-        let (l, report, density, medium) = lit.map_err(|source| PipelineError::Lighting {
-            model: model.name.clone(),
-            source,
-        })?;
-        cached += (report.source == LightingSource::Cached) as usize;
-        progress.model_lit(model, &report);
-        lighting.push(l);
-        fine.push((density, medium));
-    }
     let t0 = std::time::Instant::now();
     let err = |source| PipelineError::Global {
         scene: scene.name.clone(),
