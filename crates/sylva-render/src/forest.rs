@@ -34,11 +34,18 @@
 //! is not collapsed: the coarse grid is solved per colour with the forest's mean medium (each
 //! model's leaf and bark parameters weighted by their optical depth over the instances).
 //!
+//! **Neighbours inside the box.** Where boxes overlap, the neighbours' foliage inside a
+//! model's boxes (the coarse extinction less the instance's own, averaged over the model's
+//! instances) is added to the density its sun part is solved on ([`neighbour_shade`]): the
+//! beam and its first collisions then pass the neighbours' crowns, not only the model's own.
+//!
 //! What it does not see: how the shade varies over one instance (the weights are per
-//! instance), foliage of a neighbour inside the instance's box (overlapping boxes), and
-//! detail below the coarse cell.
+//! instance, the neighbours' foliage a mean over the model's instances), the neighbours
+//! inside the box for the diffuse parts, and detail below the coarse cell.
 
 use std::collections::HashMap;
+
+use rayon::prelude::*;
 
 use glam::{Affine3A, Vec3};
 use sylva_geom::Aabb;
@@ -49,14 +56,20 @@ use sylva_lb::{ColourParams, DensityGrid, Dims, MediumParams};
 
 use crate::lighting::{LightingError, PartWeights};
 use crate::relight::global::{
-    coarse_density, placed, shell_faces, GlobalGridOptions, GlobalInstance, Placed, ShellFace,
-    MARGIN,
+    coarse_density, instance_extinction, placed, shell_faces, ExtinctionBlock, GlobalGridOptions,
+    GlobalInstance, Placed, ShellFace, MARGIN,
 };
 
 /// Largest fine density used for the optical-depth weights of the coarse medium.
 const RHO_CAP: f64 = 0.999;
 /// Points per axis on each sunward face for the sun's transmittance.
 const SUN_SAMPLES: usize = 8;
+/// Points per axis (at most) at which a model's neighbour foliage is measured; the fine
+/// sites interpolate between them (the foliage comes from the coarse grid: smooth).
+const SHADE_SAMPLES: usize = 33;
+/// Largest optical depth a fine cell may gain from the neighbours below which the model
+/// keeps its own density (and its cache keys).
+const SHADE_MIN: f64 = 1e-4;
 
 /// An instance as the forest grid sees it.
 #[derive(Debug, Clone, Copy)]
@@ -304,6 +317,242 @@ fn sun_transmittance(
     Vec3::from_array(sum.map(|s| (s / weight) as f32))
 }
 
+/// A model's density with its neighbours' foliage inside its instances' boxes added
+/// ([`neighbour_shade`]), for its sun part's solve.
+#[derive(Debug, Clone)]
+pub struct ShadedDensity {
+    /// The density the model's light parts are solved on.
+    pub density: DensityGrid,
+    /// A hash of the added foliage, for the parts' cache keys.
+    pub key: u64,
+    /// Optical depth (`Σ -ln(1 - ρ)` over the interior sites) of the model's own foliage and
+    /// of the neighbours' that was added.
+    pub own_depth: f64,
+    pub added_depth: f64,
+}
+
+/// Per model, its density with the foliage of its instances' neighbours that reaches into
+/// their boxes added (`None`: none does, the model keeps its own density). The model's sun
+/// part is solved on it (docs/light.md, "Neighbours inside the box").
+///
+/// A fine grid is solved with only its own model inside; in a dense stand the boxes overlap
+/// and the neighbours' crowns fill part of every box (in the canopy 4 to 18 times the
+/// model's own optical depth), so the sun's beam reached the inside of a crown through
+/// foliage the solve did not see, and its first collisions there scattered light into
+/// leaves the neighbours shade (the canopy's shadowed leaves were 1.4× the path-traced
+/// light, docs/reference.md). The forest grid's `τ` says what reaches the box's faces; this
+/// says what stands between the faces and the model's own leaves. Per instance the
+/// neighbours' extinction is the coarse forest extinction less the instance's own share, on
+/// the coarse sites (as [`ForestLight`]'s coarse grid resamples the fine grids),
+/// interpolated at the model's fine sites through the instance's transform; the model's
+/// instances are averaged (one fine grid serves them all) and the optical depths added site
+/// by site, the wood share carried along. Exactly nothing is added where no neighbour's box
+/// reaches.
+///
+/// The diffuse parts (sky, ground) keep the model's own density: the added foliage is the
+/// coarse grid's mean, without the gaps between leaves and crowns through which diffuse
+/// light reaches deep, and solved on it the canopy went 0.66× the reference (measured,
+/// docs/reference.md); the beam's transmittance through the coarse medium is not biased
+/// (checked against shadow rays through the geometry).
+pub fn neighbour_shade(
+    models: &[&DensityGrid],
+    instances: &[(usize, Affine3A)],
+    ground_y: f32,
+    opts: &GlobalGridOptions,
+) -> Result<Vec<Option<ShadedDensity>>, LightingError> {
+    opts.validate().map_err(LightingError::Global)?;
+    let none = || (0..models.len()).map(|_| None).collect();
+    let global: Vec<GlobalInstance> = instances
+        .iter()
+        .map(|&(m, to_world)| GlobalInstance {
+            density: models.get(m).copied(),
+            to_world,
+        })
+        .collect();
+    let fine: Vec<Option<Placed>> = global.iter().map(placed).collect();
+    let boxes: Vec<Aabb> = fine.iter().flatten().map(|p| p.world).collect();
+    if boxes.len() < 2 {
+        return Ok(none());
+    }
+    let (dims, origin, cell) = layout(&boxes, ground_y, opts).map_err(LightingError::Global)?;
+    sylva_core::check_memory(
+        &format!("the forest's extinction ({dims})"),
+        dims.sites() as u64 * 16,
+    )?;
+    let blocks: Vec<Option<ExtinctionBlock>> = fine
+        .par_iter()
+        .map(|p| {
+            p.as_ref()
+                .map(|p| instance_extinction(p, dims, origin, cell))
+        })
+        .collect();
+    // The forest's extinction, summed in instance order (the same for any thread count).
+    let mut total = vec![[0.0f64; 2]; dims.sites()];
+    for b in blocks.iter().flatten() {
+        let mut i = 0;
+        for x in 0..b.n[0] {
+            for y in 0..b.n[1] {
+                for z in 0..b.n[2] {
+                    let t = &mut total[dims.index(b.lo[0] + x, b.lo[1] + y, b.lo[2] + z)];
+                    t[0] += b.kappa[i] as f64;
+                    t[1] += b.kappa_wood[i] as f64;
+                    i += 1;
+                }
+            }
+        }
+    }
+    // Instance `i`'s neighbours' (κ, κ_wood) at world point `w`, trilinear between sites.
+    let neighbours = |i: usize, w: Vec3| -> (f64, f64) {
+        let Some(own) = &blocks[i] else {
+            return (0.0, 0.0);
+        };
+        let n = [dims.nx, dims.ny, dims.nz];
+        let c = (w - origin) / cell;
+        let mut base = [0usize; 3];
+        let mut t = [0.0f64; 3];
+        for a in 0..3 {
+            let f = (c[a].floor().max(0.0) as usize).min(n[a] - 2);
+            base[a] = f;
+            t[a] = (c[a] as f64 - f as f64).clamp(0.0, 1.0);
+        }
+        let (mut k, mut kw) = (0.0f64, 0.0f64);
+        for corner in 0..8 {
+            let s = [
+                base[0] + (corner & 1),
+                base[1] + ((corner >> 1) & 1),
+                base[2] + ((corner >> 2) & 1),
+            ];
+            let wgt = (0..3)
+                .map(|a| {
+                    if (corner >> a) & 1 == 1 {
+                        t[a]
+                    } else {
+                        1.0 - t[a]
+                    }
+                })
+                .product::<f64>();
+            if wgt == 0.0 {
+                continue;
+            }
+            let tot = total[dims.index(s[0], s[1], s[2])];
+            let (ok, okw) = own.at(s);
+            // The instance's own share is one of the summands: what remains is the others'.
+            let rest = tot[0] - ok as f64;
+            if rest > 1e-9 * tot[0].max(1e-30) {
+                k += wgt * rest;
+                kw += wgt * (tot[1] - okw as f64).clamp(0.0, rest);
+            }
+        }
+        (k, kw)
+    };
+    let mut out = Vec::with_capacity(models.len());
+    for (m, grid) in models.iter().enumerate() {
+        let mine: Vec<usize> = (0..instances.len())
+            .filter(|&i| instances[i].0 == m && fine[i].is_some())
+            .collect();
+        if mine.is_empty() {
+            out.push(None);
+            continue;
+        }
+        let d = grid.dims;
+        let nf = [d.nx, d.ny, d.nz];
+        let ns = nf.map(|n| n.min(SHADE_SAMPLES));
+        let min = Vec3::from_array(grid.bounds.min);
+        let cell_model = fine[mine[0]].as_ref().expect("filtered").cell_model;
+        // Sample point j of axis a sits at fine coordinate j (n_f - 1) / (n_s - 1).
+        let at = |a: usize, j: usize| j as f32 * (nf[a] - 1) as f32 / (ns[a] - 1).max(1) as f32;
+        let samples: Vec<[f64; 2]> = (0..ns[0] * ns[1] * ns[2])
+            .into_par_iter()
+            .map(|j| {
+                let (x, y, z) = (j / (ns[1] * ns[2]), (j / ns[2]) % ns[1], j % ns[2]);
+                let p = min + Vec3::new(at(0, x), at(1, y), at(2, z)) * cell_model;
+                let mut sum = [0.0f64; 2];
+                for &i in &mine {
+                    let placed = fine[i].as_ref().expect("filtered");
+                    let w = instances[i].1.transform_point3(p);
+                    let (k, kw) = neighbours(i, w);
+                    // Optical depth over one fine cell of this instance.
+                    sum[0] += k * placed.cell_world as f64;
+                    sum[1] += kw * placed.cell_world as f64;
+                }
+                sum.map(|v| v / mine.len() as f64)
+            })
+            .collect();
+        let peak = samples.iter().map(|s| s[0]).fold(0.0f64, f64::max);
+        if peak.is_nan() || peak < SHADE_MIN {
+            out.push(None);
+            continue;
+        }
+        let mut h = sylva_core::Fnv64::new();
+        h.str("sylva-render neighbour shade");
+        for n in ns {
+            h.u64(n as u64);
+        }
+        for s in &samples {
+            h.f32(s[0] as f32);
+            h.f32(s[1] as f32);
+        }
+        // Site `x` of axis `a` between sample points.
+        let sample = |f: [usize; 3]| -> [f64; 2] {
+            let mut base = [0usize; 3];
+            let mut t = [0.0f64; 3];
+            for a in 0..3 {
+                if ns[a] < 2 {
+                    continue;
+                }
+                let u = f[a] as f64 * (ns[a] - 1) as f64 / (nf[a] - 1) as f64;
+                let b = (u.floor() as usize).min(ns[a] - 2);
+                base[a] = b;
+                t[a] = (u - b as f64).clamp(0.0, 1.0);
+            }
+            let mut v = [0.0f64; 2];
+            for corner in 0..8 {
+                let s: [usize; 3] =
+                    std::array::from_fn(|a| (base[a] + ((corner >> a) & 1)).min(ns[a] - 1));
+                let wgt = (0..3)
+                    .map(|a| {
+                        if (corner >> a) & 1 == 1 {
+                            t[a]
+                        } else {
+                            1.0 - t[a]
+                        }
+                    })
+                    .product::<f64>();
+                let sv = samples[(s[0] * ns[1] + s[1]) * ns[2] + s[2]];
+                v[0] += wgt * sv[0];
+                v[1] += wgt * sv[1];
+            }
+            v
+        };
+        let mut density = (*grid).clone();
+        let (mut own_depth, mut added_depth) = (0.0f64, 0.0f64);
+        for i in 0..d.sites() {
+            let (x, y, z) = d.coords(i);
+            if d.on_shell(x, y, z) {
+                continue;
+            }
+            let rho = (grid.density[i] as f64).min(RHO_CAP);
+            let own = -(1.0 - rho).ln();
+            let [add, add_wood] = sample([x, y, z]);
+            let tau = own + add;
+            own_depth += own;
+            added_depth += add;
+            if tau > 0.0 {
+                density.density[i] = (1.0 - (-tau).exp()) as f32;
+                density.wood[i] =
+                    ((own * grid.wood[i] as f64 + add_wood) / tau).clamp(0.0, 1.0) as f32;
+            }
+        }
+        out.push(Some(ShadedDensity {
+            density,
+            key: h.finish(),
+            own_depth,
+            added_depth,
+        }));
+    }
+    Ok(out)
+}
+
 impl ForestLight {
     /// Lays the coarse grid over `instances` (ground at `ground_y`), resamples their fine
     /// grids into it, solves it per colour under `env` (sky and open ground on the shell, the
@@ -387,7 +636,7 @@ impl ForestLight {
             .filter(|&k| class(k) == 0)
             .map(|k| unit_sky.values[k] as f64)
             .sum();
-        let weights = fine
+        let weights: Vec<PartWeights> = fine
             .iter()
             .zip(&inflow)
             .map(|(p, m)| {
@@ -424,6 +673,84 @@ impl ForestLight {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use sylva_lb::Bounds;
+
+    /// A cube of uniform density `rho` over `[-1, 1]³` (shell empty), `n` sites per axis.
+    fn cube(n: usize, rho: f32) -> DensityGrid {
+        let dims = Dims::new(n, n, n).unwrap();
+        let density = (0..dims.sites())
+            .map(|i| {
+                let (x, y, z) = dims.coords(i);
+                if dims.on_shell(x, y, z) {
+                    0.0
+                } else {
+                    rho
+                }
+            })
+            .collect();
+        DensityGrid {
+            dims,
+            bounds: Bounds {
+                min: [-1.0; 3],
+                max: [1.0; 3],
+            },
+            density,
+            wood: vec![0.0; dims.sites()],
+        }
+    }
+
+    fn depth(rho: f32) -> f64 {
+        -(1.0 - rho as f64).ln()
+    }
+
+    #[test]
+    fn neighbour_shade_adds_the_overlapping_crown_and_nothing_elsewhere() {
+        let (a, b) = (cube(24, 0.2), cube(24, 0.2));
+        let opts = GlobalGridOptions { sites: 40 };
+        let at = |x: f32| Affine3A::from_translation(Vec3::new(x, 1.0, 0.0));
+        // B overlaps A's +x half.
+        let shades = neighbour_shade(&[&a, &b], &[(0, at(0.0)), (1, at(1.0))], 0.0, &opts).unwrap();
+        let s = shades[0].as_ref().expect("A's box holds B's foliage");
+        let d = a.dims;
+        let site = |x: usize| d.index(x, 12, 12);
+        // Model x = -1 + 2 i / 23: site 17 is at 0.48 (0.5 inside B's box, which starts at
+        // -0.04), site 3 at -0.74 (0.7 outside it, several coarse cells).
+        let added = |i: usize| depth(s.density.density[i]) - depth(a.density[i]);
+        let inside = added(site(17));
+        assert!(
+            (inside / depth(0.2) - 1.0).abs() < 0.1,
+            "inside B: added {inside}, B's own {}",
+            depth(0.2)
+        );
+        assert_eq!(s.density.density[site(3)], a.density[site(3)], "far from B");
+        assert!(s.added_depth > 0.2 * s.own_depth && s.added_depth < 0.8 * s.own_depth);
+        // B gets A's the same way (mirror image).
+        let t = shades[1].as_ref().unwrap();
+        assert_eq!(
+            t.density.density[d.index(23 - 17, 12, 12)],
+            s.density.density[site(17)]
+        );
+        assert!(s.density.wood.iter().all(|&w| w == 0.0));
+        // Deterministic, and its key follows the added foliage.
+        let again = neighbour_shade(&[&a, &b], &[(0, at(0.0)), (1, at(1.0))], 0.0, &opts).unwrap();
+        assert_eq!(again[0].as_ref().unwrap().key, s.key);
+        let nearer = neighbour_shade(&[&a, &b], &[(0, at(0.0)), (1, at(0.8))], 0.0, &opts).unwrap();
+        assert_ne!(nearer[0].as_ref().unwrap().key, s.key);
+    }
+
+    #[test]
+    fn apart_or_alone_no_shade_is_added() {
+        let (a, b) = (cube(16, 0.3), cube(16, 0.3));
+        let opts = GlobalGridOptions { sites: 32 };
+        let at = |x: f32| Affine3A::from_translation(Vec3::new(x, 1.0, 0.0));
+        let apart = neighbour_shade(&[&a, &b], &[(0, at(0.0)), (1, at(3.0))], 0.0, &opts).unwrap();
+        assert!(apart.iter().all(Option::is_none));
+        let alone = neighbour_shade(&[&a], &[(0, at(0.0))], 0.0, &opts).unwrap();
+        assert!(alone[0].is_none());
+        // A model without instances, and one whose instances stand apart.
+        let unused = neighbour_shade(&[&a, &b], &[(0, at(0.0)), (0, at(5.0))], 0.0, &opts).unwrap();
+        assert!(unused.iter().all(Option::is_none));
+    }
 
     #[test]
     fn the_fit_is_exact_in_the_open() {

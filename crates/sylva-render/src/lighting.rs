@@ -1280,6 +1280,34 @@ pub fn model_lighting_parts(
     solver: &dyn LbSolver,
     progress: &mut dyn FnMut(usize, usize, usize),
 ) -> Result<(ModelLighting, LightingReport, DensityGrid, MediumParams), LightingError> {
+    let (density, _) = model_density(model, illum, opts, solver)?;
+    model_lighting_parts_on(model, illum, opts, solver, density, None, progress)
+}
+
+/// A model's density grid (voxelized as its LB solve sees it) and the medium of `opts`'s
+/// light, for whoever prepares the solve's density first (the forest's neighbour shade).
+pub fn model_density(
+    model: &Model,
+    illum: &Illumination,
+    opts: &LightingOptions,
+    solver: &dyn LbSolver,
+) -> Result<(DensityGrid, MediumParams), LightingError> {
+    let plan = LightingPlan::new(model, illum, opts, solver)?;
+    Ok((plan.density()?, plan.solve.medium.clone()))
+}
+
+/// [`model_lighting_parts`] on the model's `own` density ([`model_density`]), its sun part
+/// solved on `shade`'s density when given (its neighbours' foliage added,
+/// [`crate::forest::neighbour_shade`]; its hash joins that part's cache key). Returns `own`.
+pub fn model_lighting_parts_on(
+    model: &Model,
+    illum: &Illumination,
+    opts: &LightingOptions,
+    solver: &dyn LbSolver,
+    own: DensityGrid,
+    shade: Option<&crate::forest::ShadedDensity>,
+    progress: &mut dyn FnMut(usize, usize, usize),
+) -> Result<(ModelLighting, LightingReport, DensityGrid, MediumParams), LightingError> {
     let t0 = Instant::now();
     if opts.light != Light::Physical {
         return Err(LightingError::Illumination(
@@ -1292,8 +1320,24 @@ pub fn model_lighting_parts(
         .environment
         .expect("the physical light has an environment");
     let medium = plan.solve.medium.clone();
-    let density = plan.density()?;
     let dims = plan.dims();
+    if own.dims != dims {
+        return Err(LightingError::Illumination(format!(
+            "model '{}': a {} density for a {dims} grid",
+            model.name, own.dims
+        )));
+    }
+    let density = &own;
+    let sun_density: &DensityGrid = match shade {
+        Some(s) if s.density.dims == dims => &s.density,
+        Some(s) => {
+            return Err(LightingError::Illumination(format!(
+                "model '{}': a {} shaded density for a {dims} grid",
+                model.name, s.density.dims
+            )))
+        }
+        None => &own,
+    };
     let bounds = plan.placement.bounds();
     let zero = [Boundary {
         values: [0.0; sylva_lb::lattice::Q],
@@ -1309,7 +1353,7 @@ pub fn model_lighting_parts(
     };
     let stem = sylva_core::file_stem(&model.name, "model");
     // The plant upside down: its floor is the top face, lit by a unit sky there.
-    let flipped = flip_y(&density);
+    let flipped = flip_y(density);
     let unit_floor = Floor {
         nx: dims.nx,
         nz: dims.nz,
@@ -1323,6 +1367,9 @@ pub fn model_lighting_parts(
         h.str("sylva-render physical light part");
         h.u64(plan.key);
         h.str(tag);
+        if let (Some(s), 0) = (shade, k) {
+            h.u64(s.key);
+        }
         let key = h.finish();
         let solve = || -> Result<LightingGrid, LightingError> {
             let (boundaries, floor, source) = match k {
@@ -1332,10 +1379,10 @@ pub fn model_lighting_parts(
                         ..env
                     };
                     let floor = sun_only
-                        .floor(&density, &medium)
+                        .floor(sun_density, &medium)
                         .map_err(|e| err(e.into()))?;
                     let source = light::first_collision_source(
-                        &density,
+                        sun_density,
                         &medium,
                         env.sun_travel,
                         env.sun_irradiance,
@@ -1350,7 +1397,7 @@ pub fn model_lighting_parts(
                         ..env
                     };
                     let floor = unit_sky
-                        .floor(&density, &medium)
+                        .floor(density, &medium)
                         .map_err(|e| err(e.into()))?;
                     (light::sky_boundaries([1.0; 3]), floor, None)
                 }
@@ -1359,7 +1406,11 @@ pub fn model_lighting_parts(
             };
             let sopts = solve_options(dims);
             let max = sopts.max_steps;
-            let grid = if k == 3 { &flipped } else { &density };
+            let grid = match k {
+                0 => sun_density,
+                3 => &flipped,
+                _ => density,
+            };
             let (grid, _) = solver
                 .solve_lighting_rgb(
                     grid,
@@ -1409,7 +1460,7 @@ pub fn model_lighting_parts(
         path,
         dims,
     };
-    Ok((lighting, report, density, medium))
+    Ok((lighting, report, own, medium))
 }
 
 /// `grid` mirrored in y (site `(x, y, z)` ↔ `(x, ny − 1 − y, z)`); the D3Q19 lattice and the

@@ -21,13 +21,13 @@ use sylva_trace::{KdTracer, RayQuery, SceneAccel, TraceError, TraversalConfig};
 use sylva_trace_gpu::{GpuTracer, TraceGpuError};
 use sylva_wgpu::GpuContext;
 
-use crate::forest::{ForestInstance, ForestLight};
+use crate::forest::{neighbour_shade, ForestInstance, ForestLight, ShadedDensity};
 use crate::gpu_frame::{FrameError, FrameLight, GpuFrame};
 use crate::indirect::{IndirectLight, ModelGridLight};
 use crate::lighting::{
-    hash_model_medium, model_lighting, model_lighting_parts, physical_environment, preset_medium,
-    Illumination, Light, LightingError, LightingOptions, LightingReport, LightingSource,
-    ModelLighting, PartWeights, CACHE_VERSION, PAPER_OCCUPANCY,
+    hash_model_medium, model_density, model_lighting, model_lighting_parts_on,
+    physical_environment, preset_medium, Illumination, Light, LightingError, LightingOptions,
+    LightingReport, LightingSource, ModelLighting, CACHE_VERSION, PAPER_OCCUPANCY,
 };
 use crate::media::{prepare_medium, Media, MediumSolve};
 use crate::output::{encode_exr, encode_png, OutputError};
@@ -69,6 +69,8 @@ pub trait Progress: Sync {
     fn model_basis(&self, _model: &Model, _report: &BasisReport) {}
     /// The coarse global grid is ready.
     fn global_grid(&self, _report: &GlobalReport) {}
+    /// The neighbours' foliage added to a model's density in a forest.
+    fn neighbour_shade(&self, _model: &Model, _shade: &ShadedDensity) {}
 }
 
 /// Reports nothing.
@@ -470,10 +472,16 @@ pub fn light_models(
     progress: &dyn Progress,
 ) -> Result<(Vec<ModelLighting>, usize), PipelineError> {
     let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
-    light_each_model(scene, lb, "", progress, |model, illum, lopts, progress| {
-        let (l, report) = model_lighting(model, illum, lopts, lb.solver, progress)?;
-        Ok((l, report, ()))
-    })
+    light_each_model(
+        scene,
+        lb,
+        "",
+        progress,
+        |_, model, illum, lopts, progress| {
+            let (l, report) = model_lighting(model, illum, lopts, lb.solver, progress)?;
+            Ok((l, report, ()))
+        },
+    )
     .map(|(lighting, cached, _)| (lighting, cached))
 }
 
@@ -489,6 +497,7 @@ fn light_each_model<T>(
     label: &str,
     progress: &dyn Progress,
     mut light: impl FnMut(
+        usize,
         &Model,
         &Illumination,
         &LightingOptions,
@@ -507,7 +516,7 @@ fn light_each_model<T>(
         };
         let _m = tracing::info_span!(stage::LB_MODEL, model = %model.name).entered();
         progress.start(&format!("LB {}{label}", model.name), 3);
-        let lit = light(model, &illum, &lopts, &mut |c, step, max| {
+        let lit = light(k, model, &illum, &lopts, &mut |c, step, max| {
             progress.set((c * max + step) as u64, 3 * max as u64)
         });
         progress.finish();
@@ -539,23 +548,63 @@ pub fn light_forest(
     progress: &dyn Progress,
 ) -> Result<(Vec<ModelLighting>, usize, ForestLight), PipelineError> {
     let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
+    let illum = scene_illumination(scene);
+    let err = |source| PipelineError::Global {
+        scene: scene.name.clone(),
+        source,
+    };
+    // The models' own densities first: the neighbours' foliage inside each model's boxes
+    // joins the density its sun part is solved on.
+    let lopts = lighting_options(scene, lb);
+    let mut own = Vec::with_capacity(scene.models.len());
+    for (k, model) in scene.models.iter().enumerate() {
+        let lopts = LightingOptions {
+            preset: scene.model_preset(k).to_string(),
+            ..lopts.clone()
+        };
+        let (density, _) = model_density(model, &illum, &lopts, lb.solver).map_err(|source| {
+            PipelineError::Lighting {
+                model: model.name.clone(),
+                source,
+            }
+        })?;
+        own.push(Some(density));
+    }
+    let shades = {
+        let grids: Vec<&sylva_lb::DensityGrid> =
+            own.iter().map(|d| d.as_ref().expect("set")).collect();
+        let placed: Vec<(usize, glam::Affine3A)> = scene
+            .instances
+            .iter()
+            .map(|i| (i.model as usize, i.transform()))
+            .collect();
+        neighbour_shade(&grids, &placed, 0.0, gopts).map_err(err)?
+    };
+    for (model, shade) in scene.models.iter().zip(&shades) {
+        if let Some(s) = shade {
+            progress.neighbour_shade(model, s);
+        }
+    }
     let (lighting, cached, fine) = light_each_model(
         scene,
         lb,
         " (parts)",
         progress,
-        |model, illum, lopts, progress| {
-            let (l, report, density, medium) =
-                model_lighting_parts(model, illum, lopts, lb.solver, progress)?;
+        |k, model, illum, lopts, progress| {
+            let density = own[k].take().expect("one solve per model");
+            let (l, report, density, medium) = model_lighting_parts_on(
+                model,
+                illum,
+                lopts,
+                lb.solver,
+                density,
+                shades[k].as_ref(),
+                progress,
+            )?;
             Ok((l, report, (density, medium)))
         },
     )?;
-    let illum = scene_illumination(scene);
     let t0 = std::time::Instant::now();
-    let err = |source| PipelineError::Global {
-        scene: scene.name.clone(),
-        source,
-    };
     let env = physical_environment(&illum).map_err(err)?;
     let instances: Vec<ForestInstance> = scene
         .instances
@@ -674,7 +723,7 @@ impl PreparedScene {
             lighting,
             cached,
             relit_parts,
-            forest.as_ref().map(|f| f.weights.clone()),
+            forest.as_ref(),
             progress,
         )?;
         prepared.forest = forest;
@@ -775,7 +824,7 @@ impl PreparedScene {
         lighting: Vec<Option<ModelLighting>>,
         lb_models_cached: usize,
         relit_parts: Option<Relighting>,
-        forest_weights: Option<Vec<PartWeights>>,
+        forest: Option<&ForestLight>,
         progress: &dyn Progress,
     ) -> Result<PreparedScene, PipelineError> {
         let to_sun = scene_to_sun(&scene);
@@ -790,8 +839,8 @@ impl PreparedScene {
         };
         let mut light =
             ModelGridLight::new(lighting, &scene.models, tracer.cpu().accel.instances());
-        if let Some(w) = forest_weights {
-            light = light.with_instance_weights(w);
+        if let Some(f) = forest {
+            light = light.with_instance_weights(f.weights.clone());
         }
         let materials = shade_materials(&scene.models);
         let (relit, spare_bases) = match relit_parts {

@@ -7,9 +7,10 @@ use glam::{Affine3A, Vec3};
 use sylva_core::colour::luminance;
 use sylva_lb::light::Environment;
 use sylva_lb::{CpuSolver, DensityGrid, MediumParams};
-use sylva_render::forest::{free_weights, ForestInstance, ForestLight};
+use sylva_render::forest::{free_weights, neighbour_shade, ForestInstance, ForestLight};
 use sylva_render::lighting::{
-    model_lighting, model_lighting_parts, physical_environment, LightingOptions, PartWeights,
+    model_density, model_lighting, model_lighting_parts, model_lighting_parts_on,
+    physical_environment, LightingOptions, PartWeights,
 };
 use sylva_render::pipeline::scene_illumination;
 use sylva_render::relight::GlobalGridOptions;
@@ -247,4 +248,85 @@ fn the_weights_are_linear_in_the_sun_and_the_sky() {
         close(2.0 * w.sky, t.sky, "sky part, doubled");
         close(2.0 * w.ground, t.ground, "ground part, doubled");
     }
+}
+
+#[test]
+fn neighbours_inside_the_box_shade_only_the_sun_part() {
+    // The shade scene's beech box holds part of a catalpa's crown: its sun part is solved
+    // with that foliage added, its diffuse parts on its own density. (Not less light
+    // everywhere: the added leaves also scatter the beam, towards some of the sites.)
+    let scene = load_scene("shade", None).unwrap();
+    let illum = scene_illumination(&scene);
+    let own: Vec<(DensityGrid, MediumParams)> = scene
+        .models
+        .iter()
+        .map(|m| model_density(m, &illum, &opts(), &CpuSolver).unwrap())
+        .collect();
+    let grids: Vec<&DensityGrid> = own.iter().map(|(d, _)| d).collect();
+    let placed: Vec<(usize, Affine3A)> = scene
+        .instances
+        .iter()
+        .map(|i| (i.model as usize, i.transform()))
+        .collect();
+    let shades = neighbour_shade(&grids, &placed, 0.0, &GlobalGridOptions::default()).unwrap();
+    let (k, shade) = shades
+        .iter()
+        .enumerate()
+        .find_map(|(k, s)| s.as_ref().map(|s| (k, s)))
+        .expect("a box with a neighbour's foliage in it");
+    assert!(shade.added_depth > 0.0 && shade.added_depth < shade.own_depth);
+    let model = &scene.models[k];
+    let lit = |shade| {
+        model_lighting_parts_on(
+            model,
+            &illum,
+            &opts(),
+            &CpuSolver,
+            own[k].0.clone(),
+            shade,
+            &mut |_, _, _| {},
+        )
+        .unwrap()
+    };
+    let (plain, _, d0, _) = lit(None);
+    let (shaded, _, d1, _) = lit(Some(shade));
+    // The density handed on (to the forest grid) is the model's own either way.
+    assert_eq!(d0.density, d1.density);
+    let only = |sun: f32, sky_top: f32, sky: f32, ground: f32| PartWeights {
+        sun: Vec3::splat(sun),
+        sky_top: Vec3::splat(sky_top),
+        sky: Vec3::splat(sky),
+        ground: Vec3::splat(ground),
+    };
+    let d = plain.dims();
+    let (mut changed, mut peak) = (0.0f32, 0.0f32);
+    for x in 0..d.nx {
+        for yy in 0..d.ny {
+            for z in 0..d.nz {
+                let p = plain.site_position(x, yy, z);
+                for w in [
+                    only(0.0, 1.0, 0.0, 0.0),
+                    only(0.0, 0.0, 1.0, 0.0),
+                    only(0.0, 0.0, 0.0, 1.0),
+                ] {
+                    assert_eq!(
+                        plain.sample_weighted(p, &w),
+                        shaded.sample_weighted(p, &w),
+                        "a diffuse part changed at {p}"
+                    );
+                }
+                let sun = only(1.0, 0.0, 0.0, 0.0);
+                let (a, b) = (
+                    plain.sample_weighted(p, &sun),
+                    shaded.sample_weighted(p, &sun),
+                );
+                changed = changed.max((y(a) - y(b)).abs());
+                peak = peak.max(y(a));
+            }
+        }
+    }
+    assert!(
+        changed > 0.01 * peak,
+        "the sun part did not change: {changed} of {peak}"
+    );
 }

@@ -5,6 +5,7 @@ use std::sync::Mutex;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use sylva_geom::{Medium, Model};
+use sylva_render::forest::ShadedDensity;
 use sylva_render::lighting::LightingReport;
 use sylva_render::relight::{BasisReport, GlobalReport};
 use sylva_render::Progress;
@@ -31,6 +32,9 @@ pub enum Report<'a> {
     Basis(&'a Model, &'a BasisReport),
     /// The coarse global grid.
     Global(&'a GlobalReport),
+    /// A model's neighbours' foliage added to its density in a forest: (model, own optical
+    /// depth, added).
+    Shade(&'a str, f64, f64),
 }
 
 /// One bar per piece of pipeline work; `on_report` hears each LB report.
@@ -96,5 +100,14 @@ impl<F: Fn(Report) + Sync> Progress for Bars<F> {
     fn global_grid(&self, report: &GlobalReport) {
         self.finish();
         (self.on_report)(Report::Global(report));
+    }
+
+    fn neighbour_shade(&self, model: &Model, shade: &ShadedDensity) {
+        self.finish();
+        (self.on_report)(Report::Shade(
+            &model.name,
+            shade.own_depth,
+            shade.added_depth,
+        ));
     }
 }

@@ -329,6 +329,13 @@ pub fn report_line(r: Report) -> (String, Option<String>) {
                 warn(&report.source),
             )
         }
+        Report::Shade(name, own, added) => (
+            format!(
+                "  {name}: neighbours' foliage inside its boxes adds {:.0} % to its optical depth",
+                100.0 * added / own.max(1e-12)
+            ),
+            None,
+        ),
     }
 }
 

@@ -283,6 +283,72 @@ pub(crate) fn coarse_density(
     })
 }
 
+/// One instance's own extinction on the coarse sites whose cells overlap its box: a block of
+/// sites from `lo` with `n` per axis, `κ` and its wood part per site (x, then y, then z).
+pub(crate) struct ExtinctionBlock {
+    pub(crate) lo: [usize; 3],
+    pub(crate) n: [usize; 3],
+    pub(crate) kappa: Vec<f32>,
+    pub(crate) kappa_wood: Vec<f32>,
+}
+
+impl ExtinctionBlock {
+    /// `(κ, κ_wood)` at coarse site `s`; zero outside the block.
+    pub(crate) fn at(&self, s: [usize; 3]) -> (f32, f32) {
+        let mut r = [0usize; 3];
+        for a in 0..3 {
+            if s[a] < self.lo[a] || s[a] >= self.lo[a] + self.n[a] {
+                return (0.0, 0.0);
+            }
+            r[a] = s[a] - self.lo[a];
+        }
+        let i = (r[0] * self.n[1] + r[1]) * self.n[2] + r[2];
+        (self.kappa[i], self.kappa_wood[i])
+    }
+}
+
+/// `p`'s extinction on the coarse grid (`dims`, `origin`, `cell`), as [`coarse_density`]
+/// resamples it, over the sites whose cells overlap its box.
+pub(crate) fn instance_extinction(
+    p: &Placed,
+    dims: Dims,
+    origin: Vec3,
+    cell: f32,
+) -> ExtinctionBlock {
+    let n = [dims.nx, dims.ny, dims.nz];
+    let mut lo = [0usize; 3];
+    let mut count = [0usize; 3];
+    for a in 0..3 {
+        let first = ((p.world.min[a] - origin[a]) / cell - 0.5).ceil().max(0.0) as usize;
+        let last =
+            (((p.world.max[a] - origin[a]) / cell + 0.5).floor().max(0.0) as usize).min(n[a] - 1);
+        lo[a] = first.min(n[a] - 1);
+        count[a] = (last + 1).saturating_sub(lo[a]);
+    }
+    let sites = count[0] * count[1] * count[2];
+    let mut kappa = vec![0.0f32; sites];
+    let mut kappa_wood = vec![0.0f32; sites];
+    let mut i = 0;
+    for x in 0..count[0] {
+        for y in 0..count[1] {
+            for z in 0..count[2] {
+                let s = Vec3::new((lo[0] + x) as f32, (lo[1] + y) as f32, (lo[2] + z) as f32);
+                let corner = origin + (s - Vec3::splat(0.5)) * cell;
+                let (k, kw) = cell_extinction(p, corner, cell);
+                kappa[i] = k as f32;
+                kappa_wood[i] = kw as f32;
+                i += 1;
+            }
+        }
+    }
+    ExtinctionBlock {
+        lo,
+        n: count,
+        kappa,
+        kappa_wood,
+    }
+}
+
 /// Mean extinction per unit length of one fine grid over the coarse cell at `lo` (edge
 /// `cell`), and its wood part, from a few samples per axis (nearest fine site).
 fn cell_extinction(p: &Placed, lo: Vec3, cell: f32) -> (f64, f64) {
