@@ -87,7 +87,8 @@ pub struct MediumParams {
     /// Per-colour coefficients (R, G, B).
     pub colours: [ColourParams; 3],
     /// Zero `f_0` on green (leaf) sites after every step: the visible light a leaf absorbs is
-    /// lost (000 §3). Off for clouds and plastics, whose absorbed part stays in `f_0`.
+    /// lost (000 §3). On for the cloud too (its albedo is 002's σ_s/σ_t = 0.99); off for the
+    /// plastic, whose absorbed part stays in `f_0` and re-enters through `Ω_i0`.
     pub zero_f0_on_green: bool,
     /// Zero `f_0` on brown (wood) sites too. The papers are silent; bark absorbs visible light
     /// and does not re-emit it, so the default is `true`.
@@ -189,16 +190,21 @@ impl Preset {
                 g: g[c],
             })
         };
-        let (colours, plant_like) = match self {
+        let (colours, zero_f0) = match self {
             Preset::Leaf => (plant([-0.120, 0.091, -0.333]), true),
             Preset::Dogrose => (plant([-0.231, 0.103, -0.750]), true),
+            // 002 §3.2.1: σ_a and σ_s "together give a relatively high scattering albedo,
+            // σ_s/σ_t = 0.99": the absorbed part is lost, as on leaves. Kept in f_0 it would
+            // re-enter through Ω_i0 and make the cloud conservative (albedo 1), which the
+            // Mitsuba reference measures as 1.33× the light of the albedo-0.99 cloud
+            // (docs/media.md, "Against Mitsuba").
             Preset::Cloud => (
                 [ColourParams {
                     sigma_a: 0.008,
                     sigma_s: 0.792,
                     g: 0.9,
                 }; 3],
-                false,
+                true,
             ),
             Preset::Pmma => (
                 [0.80, -0.88, -0.88].map(|g| ColourParams {
@@ -211,7 +217,7 @@ impl Preset {
         };
         MediumParams {
             colours,
-            zero_f0_on_green: plant_like,
+            zero_f0_on_green: zero_f0,
             zero_f0_on_brown: true,
             brown_threshold: 0.5,
             brown: None,

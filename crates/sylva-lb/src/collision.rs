@@ -180,6 +180,39 @@ mod tests {
         }
     }
 
+    /// Mean cosine of the lattice phase for light arriving along direction `j`:
+    /// `Σ_i w_i pn_ij (n_i · n_j)`, the discrete counterpart of the continuous HG's g.
+    fn lattice_mean_cosine(g: f64, j: usize) -> f64 {
+        let pn = normalised_phase(g);
+        (1..Q).map(|i| weight(i) * pn[i][j] * dot(i, j)).sum()
+    }
+
+    #[test]
+    fn the_cloud_g_is_far_more_forward_on_the_lattice() {
+        // docs/media.md ("Against Mitsuba"): eq. 8 normalises HG over the 18 directions, so at
+        // the cloud's g = 0.9 nearly all scattered light returns to its own direction and the
+        // lattice phase's mean cosine is about 0.995 (axial) and 0.990 (diagonal), not 0.9.
+        let (axial, diagonal) = (lattice_mean_cosine(0.9, 1), lattice_mean_cosine(0.9, 7));
+        assert!((axial - 0.9952).abs() < 5e-4, "axial {axial}");
+        assert!((diagonal - 0.9896).abs() < 5e-4, "diagonal {diagonal}");
+        let pn = normalised_phase(0.9);
+        let back_to_itself = weight(1) * pn[1][1];
+        assert!((back_to_itself - 0.992).abs() < 1e-3, "{back_to_itself}");
+        // The lattice g whose axial mean cosine is 0.9 (bisection: it grows with g).
+        let (mut lo, mut hi) = (0.0, 0.9);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if lattice_mean_cosine(mid, 1) < 0.9 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        assert!((lo - 0.730).abs() < 1e-3, "{lo}");
+        // Isotropic scattering stays isotropic on the lattice.
+        assert!(lattice_mean_cosine(0.0, 1).abs() < 1e-12);
+    }
+
     proptest! {
         #[test]
         fn every_column_sums_to_zero(sa in 0.0f64..0.5, ss in 0.0f64..0.5, g in -1.0f64..=1.0) {

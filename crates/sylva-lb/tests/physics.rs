@@ -165,6 +165,42 @@ fn no_absorption_full_forward_scattering_is_a_pass_through() {
     assert!(empty.colours[0][dims.index(7, 5, 8)] > 0.1);
 }
 
+/// One collision on a density-1 site, through the real kernel: the light the site holds
+/// leaves it scattered, `σ_s/σ_t` of what interacted (the preset's albedo), when `f_0` is
+/// zeroed; with `f_0` kept the absorbed part stays in the rest direction and nothing is lost.
+fn kept_after_one_collision(preset: Preset) -> (f64, f64) {
+    let dims = Dims::cube(7).unwrap();
+    let m = preset.params();
+    let mut lat = Lattice::new(&uniform(dims, 1.0), &m, 1, Boundary { values: [0.0; Q] }).unwrap();
+    let mut before = 0.0f64;
+    for q in 1..Q {
+        let v = 0.5 + 0.1 * q as f32;
+        lat.set_f(3, 3, 3, q, v);
+        before += v as f64;
+    }
+    lat.step();
+    let after: f64 = lat.site_totals().iter().map(|&v| v as f64).sum();
+    let c = m.colours[1];
+    (after / before, c.sigma_s / c.sigma_t())
+}
+
+#[test]
+fn the_cloud_scatters_with_the_albedo_of_002() {
+    // 002 §3.2.1: σ_a = 0.008, σ_s = 0.792 "give a relatively high scattering albedo,
+    // σ_s/σ_t = 0.99". At density 1 every direction interacts (ρ σ_t = σ_t of it leaves the
+    // direction, σ_s of it scattered back): the site keeps 1 - σ_a of its light.
+    let (kept, albedo) = kept_after_one_collision(Preset::Cloud);
+    assert!((albedo - 0.99).abs() < 1e-12);
+    let expect = 1.0 - 0.008;
+    assert!(
+        (kept - expect).abs() < 1e-6,
+        "kept {kept}, expected {expect}"
+    );
+    // The plastic keeps f_0 (docs/lb.md): its collision conserves the light.
+    let (kept, _) = kept_after_one_collision(Preset::Pmma);
+    assert!((kept - 1.0).abs() < 1e-6, "PMMA kept {kept}");
+}
+
 /// Second moment per axis of the site totals about the centre.
 fn second_moment(lat: &Lattice, c: usize) -> f64 {
     let d = lat.dims();
