@@ -87,8 +87,9 @@ pub struct MediumParams {
     /// Per-colour coefficients (R, G, B).
     pub colours: [ColourParams; 3],
     /// Zero `f_0` on green (leaf) sites after every step: the visible light a leaf absorbs is
-    /// lost (000 §3). On for the cloud too (its albedo is 002's σ_s/σ_t = 0.99); off for the
-    /// plastic, whose absorbed part stays in `f_0` and re-enters through `Ω_i0`.
+    /// lost (000 §3). On for every preset: the cloud's and the plastic's σ_a (002 §3.2.1,
+    /// Table 2: albedo 0.99) are absorbed too; kept in `f_0`, the absorbed part would re-enter
+    /// through `Ω_i0` and the medium would lose no light (`sylva lb --keep-f0` does that).
     pub zero_f0_on_green: bool,
     /// Zero `f_0` on brown (wood) sites too. The papers are silent; bark absorbs visible light
     /// and does not re-emit it, so the default is `true`.
@@ -206,13 +207,14 @@ impl Preset {
                 }; 3],
                 true,
             ),
+            // 002 Table 2's σ_a = 0.01 is absorbed as the cloud's is (albedo 0.99).
             Preset::Pmma => (
                 [0.80, -0.88, -0.88].map(|g| ColourParams {
                     sigma_a: 0.01,
                     sigma_s: 0.99,
                     g,
                 }),
-                false,
+                true,
             ),
         };
         MediumParams {

@@ -169,9 +169,12 @@ fn no_absorption_full_forward_scattering_is_a_pass_through() {
 /// leaves it scattered, `σ_s/σ_t` of what interacted (the preset's albedo), when `f_0` is
 /// zeroed; with `f_0` kept the absorbed part stays in the rest direction and nothing is lost.
 fn kept_after_one_collision(preset: Preset) -> (f64, f64) {
+    kept_after_medium(&preset.params())
+}
+
+fn kept_after_medium(m: &MediumParams) -> (f64, f64) {
     let dims = Dims::cube(7).unwrap();
-    let m = preset.params();
-    let mut lat = Lattice::new(&uniform(dims, 1.0), &m, 1, Boundary { values: [0.0; Q] }).unwrap();
+    let mut lat = Lattice::new(&uniform(dims, 1.0), m, 1, Boundary { values: [0.0; Q] }).unwrap();
     let mut before = 0.0f64;
     for q in 1..Q {
         let v = 0.5 + 0.1 * q as f32;
@@ -196,9 +199,15 @@ fn the_cloud_scatters_with_the_albedo_of_002() {
         (kept - expect).abs() < 1e-6,
         "kept {kept}, expected {expect}"
     );
-    // The plastic keeps f_0 (docs/lb.md): its collision conserves the light.
-    let (kept, _) = kept_after_one_collision(Preset::Pmma);
-    assert!((kept - 1.0).abs() < 1e-6, "PMMA kept {kept}");
+    // The plastic too (002 Table 2: σ_a = 0.01, σ_s = 0.99).
+    let (kept, albedo) = kept_after_one_collision(Preset::Pmma);
+    assert!((albedo - 0.99).abs() < 1e-12);
+    assert!((kept - 0.99).abs() < 1e-6, "PMMA kept {kept}");
+    // With f_0 kept the collision conserves the light: the absorbed part stays in f_0.
+    let mut m = Preset::Cloud.params();
+    m.zero_f0_on_green = false;
+    let (kept, _) = kept_after_medium(&m);
+    assert!((kept - 1.0).abs() < 1e-6, "kept {kept} with f_0 kept");
 }
 
 /// Second moment per axis of the site totals about the centre.

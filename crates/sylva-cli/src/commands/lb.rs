@@ -105,7 +105,7 @@ pub struct SolveArgs {
     #[arg(long, value_name = "V|R,G,B", allow_hyphen_values = true)]
     g: Option<String>,
     /// Keep f_0 on green sites instead of zeroing it each step (the absorbed light then
-    /// re-scatters, as in a cloud).
+    /// re-scatters: a conservative medium).
     #[arg(long)]
     keep_f0: bool,
     /// Do not zero f_0 on brown (wood) sites.
