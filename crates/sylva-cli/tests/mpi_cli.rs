@@ -148,11 +148,17 @@ fn mpi_render_and_lb_are_bit_identical_to_one_process() {
             assert_eq!(out.matches("wrote ").count(), 1, "{out}");
             assert!(out.contains(&format!("MPI: {np} ranks")), "{out}");
             let lb_lines = |how: &str| out.lines().filter(|l| l.contains(how)).count();
+            // The forest's light parts (2 models × 4) are solved across the ranks and
+            // stored in rank 0's cache; rank 0 then prepares from it.
             if pass == 0 {
-                assert_eq!(lb_lines("grid solved in"), 2, "{out}");
+                assert!(
+                    out.contains(&format!("LB: 8 light parts solved across {np} ranks")),
+                    "{out}"
+                );
             } else {
-                assert_eq!(lb_lines("grid from cache"), 2, "{out}");
+                assert_eq!(lb_lines("light parts solved"), 0, "{out}");
             }
+            assert_eq!(lb_lines("grid from cache"), 2, "{out}");
             let exr = std::fs::read(d(&format!("np{np}.exr"))).unwrap();
             assert!(exr == want_exr, "np {np}: the linear image differs");
             assert!(
@@ -280,8 +286,9 @@ fn mpi_basis_is_bit_identical_to_one_process() {
         &[("SYLVA_MPI_FAIL_RANK", "2")],
     );
     assert!(!ok, "the job must fail\n{out}\n{err}");
+    // (Not the whole line: under load another rank's stderr can interleave with it.)
     assert!(
-        err.contains("error: rank 2 of 3: rank 2: failure injected by SYLVA_MPI_FAIL_RANK"),
+        err.contains("rank 2: failure injected by SYLVA_MPI_FAIL_RANK"),
         "{err}"
     );
     assert!(!Path::new(&cache).exists() || basis_entries(Path::new(&cache)).is_empty());

@@ -8,6 +8,8 @@
 //!   at rank 0: bit-identical to a one-process frame.
 //! * [`lighting`]: every model's LB lighting, colours solved as queue jobs, the cache at rank
 //!   0, the grids broadcast to every rank.
+//! * [`forest`]: the physical light's parts of a scene lit through the forest grid, models ×
+//!   parts as queue jobs, stored in rank 0's cache.
 //! * [`relight`]: relighting's base solutions (paper 004), models × bases × colours as queue
 //!   jobs, assembled, compressed and cached at rank 0 as one process does (`sylva basis`).
 //! * [`model`]: frame times on N ranks from measured per-tile costs, fixed strips (the
@@ -18,6 +20,7 @@
 //! calls [`Comm::abort`], which ends every rank (the others may be waiting for it).
 
 pub mod comm;
+pub mod forest;
 pub mod frame;
 pub mod launch;
 pub mod lighting;
@@ -28,6 +31,7 @@ pub mod queue;
 pub mod relight;
 
 pub use comm::{Comm, CommError, LocalComm};
+pub use forest::solve_forest_parts;
 pub use frame::{render_frame, DistributedFrame, RankWork, UnitLayout};
 pub use lighting::{light_models, LbJob};
 pub use queue::{run_queue, QueueOutcome};

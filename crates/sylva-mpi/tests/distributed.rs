@@ -8,7 +8,9 @@ use std::path::Path;
 use sylva_geom::Scene;
 use sylva_lb::CpuSolver;
 use sylva_mpi::lighting::{solve_model_jobs, ModelJob};
-use sylva_mpi::{light_models, render_frame, Comm, CommError, DistError, LocalComm};
+use sylva_mpi::{
+    light_models, render_frame, solve_forest_parts, Comm, CommError, DistError, LocalComm,
+};
 use sylva_render::lighting::LightingPlan;
 use sylva_render::{
     lighting_options, load_scene, Frame, LbPlan, PrepareOptions, PreparedScene, Region,
@@ -320,4 +322,55 @@ fn any_list_of_model_jobs_runs_through_the_queue_in_job_order() {
     )
     .unwrap_err();
     assert!(err.to_string().contains("model 2 of 2"), "{err}");
+}
+
+#[test]
+fn forest_parts_solved_across_ranks_are_the_one_process_entries() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene_file = dir.path().join("roses.toml");
+    std::fs::write(&scene_file, SCENE).unwrap();
+    let scene = load_scene(scene_file.to_str().unwrap(), None).unwrap();
+    let gopts = sylva_render::relight::GlobalGridOptions::default();
+    fn forest_options(cache: &Path) -> PrepareOptions<'_> {
+        PrepareOptions {
+            forest: Some(sylva_render::relight::GlobalGridOptions::default()),
+            ..options(cache)
+        }
+    }
+    // One process: the forest path solves and caches every model's four parts.
+    let one_cache = dir.path().join("one");
+    let one = PreparedScene::new(scene.clone(), &forest_options(&one_cache), &Silent).unwrap();
+    assert!(one.forest.is_some());
+    let parts = 4 * scene.models.len();
+    assert_eq!(entries(&one_cache).len(), parts);
+    for ranks in [2, 3] {
+        let cache = dir.path().join(format!("forest{ranks}"));
+        for pass in 0..2 {
+            let group = LocalComm::group(ranks);
+            let solved: Vec<usize> = std::thread::scope(|s| {
+                let handles: Vec<_> = group
+                    .iter()
+                    .map(|c| {
+                        let (scene, cache, gopts) = (&scene, &cache, &gopts);
+                        s.spawn(move || {
+                            let opts = options(cache);
+                            solve_forest_parts(c, scene, opts.lb.as_ref().unwrap(), gopts, &Silent)
+                                .unwrap()
+                        })
+                    })
+                    .collect();
+                handles.into_iter().map(|h| h.join().unwrap()).collect()
+            });
+            // Every part on the first pass, none once cached; every rank agrees.
+            let want = if pass == 0 { parts } else { 0 };
+            assert_eq!(solved, vec![want; ranks], "{ranks} ranks, pass {pass}");
+            // Rank 0 stored the entries one process stores, byte for byte.
+            assert_eq!(entries(&cache), entries(&one_cache), "{ranks} ranks");
+        }
+        // Prepared from that cache, the light is the one process's.
+        let p = PreparedScene::new(scene.clone(), &forest_options(&cache), &Silent).unwrap();
+        assert_eq!(p.forest, one.forest);
+        let s = &settings(&one)[0];
+        assert!(bits(&p.render(s, &Silent).unwrap()) == bits(&one.render(s, &Silent).unwrap()));
+    }
 }

@@ -1309,136 +1309,12 @@ pub fn model_lighting_parts_on(
     progress: &mut dyn FnMut(usize, usize, usize),
 ) -> Result<(ModelLighting, LightingReport, DensityGrid, MediumParams), LightingError> {
     let t0 = Instant::now();
-    if opts.light != Light::Physical {
-        return Err(LightingError::Illumination(
-            "the light's parts are the physical light's".into(),
-        ));
-    }
-    let plan = LightingPlan::new(model, illum, opts, solver)?;
-    let env = plan
-        .solve
-        .environment
-        .expect("the physical light has an environment");
-    let medium = plan.solve.medium.clone();
-    let dims = plan.dims();
-    if own.dims != dims {
-        return Err(LightingError::Illumination(format!(
-            "model '{}': a {} density for a {dims} grid",
-            model.name, own.dims
-        )));
-    }
-    let density = &own;
-    let sun_density: &DensityGrid = match shade {
-        Some(s) if s.density.dims == dims => &s.density,
-        Some(s) => {
-            return Err(LightingError::Illumination(format!(
-                "model '{}': a {} shaded density for a {dims} grid",
-                model.name, s.density.dims
-            )))
-        }
-        None => &own,
-    };
-    let bounds = plan.placement.bounds();
-    let zero = [Boundary {
-        values: [0.0; sylva_lb::lattice::Q],
-    }; 3];
-    let dark_floor = env.ground_albedo.map(|_| Floor {
-        nx: dims.nx,
-        nz: dims.nz,
-        radiance: std::array::from_fn(|_| vec![0.0; dims.nx * dims.nz]),
-    });
-    let err = |source| LightingError::Solve {
-        model: model.name.clone(),
-        source,
-    };
-    let stem = sylva_core::file_stem(&model.name, "model");
-    // The plant upside down: its floor is the top face, lit by a unit sky there.
-    let flipped = flip_y(density);
-    let unit_floor = Floor {
-        nx: dims.nx,
-        nz: dims.nz,
-        radiance: std::array::from_fn(|_| vec![1.0; dims.nx * dims.nz]),
-    };
-    let mut grids = Vec::with_capacity(4);
+    let plan = PartsPlan::new(model, illum, opts, solver, own, shade)?;
+    let mut grids = Vec::with_capacity(PARTS.len());
     let mut report_source = LightingSource::Cached;
     let mut path = None;
-    for (k, tag) in ["sun", "sky", "ground", "skytop"].into_iter().enumerate() {
-        let mut h = Fnv64::new();
-        h.str("sylva-render physical light part");
-        h.u64(plan.key);
-        h.str(tag);
-        if let (Some(s), 0) = (shade, k) {
-            h.u64(s.key);
-        }
-        let key = h.finish();
-        let solve = || -> Result<LightingGrid, LightingError> {
-            let (boundaries, floor, source) = match k {
-                0 => {
-                    let sun_only = Environment {
-                        sky_radiance: [0.0; 3],
-                        ..env
-                    };
-                    let floor = sun_only
-                        .floor(sun_density, &medium)
-                        .map_err(|e| err(e.into()))?;
-                    let source = light::first_collision_source(
-                        sun_density,
-                        &medium,
-                        env.sun_travel,
-                        env.sun_irradiance,
-                    )
-                    .map_err(|e| err(e.into()))?;
-                    (zero, floor, Some(source))
-                }
-                1 => {
-                    let unit_sky = Environment {
-                        sun_irradiance: [0.0; 3],
-                        sky_radiance: [1.0; 3],
-                        ..env
-                    };
-                    let floor = unit_sky
-                        .floor(density, &medium)
-                        .map_err(|e| err(e.into()))?;
-                    (light::sky_boundaries([1.0; 3]), floor, None)
-                }
-                2 => (light::ground_boundaries([1.0; 3]), dark_floor.clone(), None),
-                _ => (zero, Some(unit_floor.clone()), None),
-            };
-            let sopts = solve_options(dims);
-            let max = sopts.max_steps;
-            let grid = match k {
-                0 => sun_density,
-                3 => &flipped,
-                _ => density,
-            };
-            let (grid, _) = solver
-                .solve_lighting_rgb(
-                    grid,
-                    &medium,
-                    &boundaries,
-                    floor.as_ref(),
-                    source.as_ref(),
-                    &sopts,
-                    &mut |c, s, _| progress(c, s, max),
-                )
-                .map_err(err)?;
-            Ok(if k == 3 { flip_lighting(&grid) } else { grid })
-        };
-        let metadata = vec![
-            ("source".to_string(), model.name.clone()),
-            ("light".to_string(), format!("physical, {tag} part")),
-            ("grid".to_string(), opts.grid.to_string()),
-            ("solver".to_string(), solver.describe()),
-        ];
-        let (grid, source, p) = cached_solve(
-            opts.cache_dir.as_deref(),
-            &format!("{stem}-{tag}"),
-            key,
-            dims,
-            bounds,
-            metadata,
-            solve,
-        )?;
+    for k in 0..PARTS.len() {
+        let (grid, source, p) = plan.cached(k, solver, || plan.solve(k, solver, progress))?;
         // Reported as one: a bad entry's reason first, else computed if any part was.
         report_source = match (report_source, source) {
             (r @ LightingSource::Recomputed { .. }, _) => r,
@@ -1451,9 +1327,8 @@ pub fn model_lighting_parts_on(
         path = path.or(p);
         grids.push(grid);
     }
-    // The sky through the sides (and the floor's sky part): the whole sky's less the top's.
-    let side = light::subtract(&grids[1], &grids[3]);
-    let lighting = ModelLighting::physical_parts([&grids[0], &grids[3], &side, &grids[2]], &env);
+    let dims = plan.dims();
+    let (lighting, own, medium) = plan.assemble(&grids);
     let report = LightingReport {
         source: report_source,
         seconds: t0.elapsed().as_secs_f64(),
@@ -1461,6 +1336,253 @@ pub fn model_lighting_parts_on(
         dims,
     };
     Ok((lighting, report, own, medium))
+}
+
+/// The physical light's parts as solved and cached, in order: the sun's, a unit sky's
+/// (through every face, with the floor's sky part), a unit ground's, a unit sky's through the
+/// top face (solved on the model mirrored in y).
+pub const PARTS: [&str; 4] = ["sun", "sky", "ground", "skytop"];
+
+/// One model's physical light parts as separate solves, for whoever schedules them:
+/// [`model_lighting_parts_on`] runs them in order; `sylva-mpi` hands them to different
+/// processes and caches them at rank 0. A part solved alone is bit for bit the part of the
+/// one-process solve.
+pub struct PartsPlan<'a> {
+    model: &'a Model,
+    plan: LightingPlan<'a>,
+    env: Environment,
+    medium: MediumParams,
+    own: DensityGrid,
+    /// The density the sun part is solved on, when the neighbours' foliage is added.
+    shaded: Option<DensityGrid>,
+    keys: [u64; 4],
+}
+
+impl<'a> PartsPlan<'a> {
+    /// The plan for `model` on its `own` density ([`model_density`]) and, for the sun part,
+    /// `shade`'s.
+    pub fn new(
+        model: &'a Model,
+        illum: &Illumination,
+        opts: &LightingOptions,
+        solver: &dyn LbSolver,
+        own: DensityGrid,
+        shade: Option<&crate::forest::ShadedDensity>,
+    ) -> Result<PartsPlan<'a>, LightingError> {
+        if opts.light != Light::Physical {
+            return Err(LightingError::Illumination(
+                "the light's parts are the physical light's".into(),
+            ));
+        }
+        let plan = LightingPlan::new(model, illum, opts, solver)?;
+        let env = plan
+            .solve
+            .environment
+            .expect("the physical light has an environment");
+        let medium = plan.solve.medium.clone();
+        let dims = plan.dims();
+        if own.dims != dims {
+            return Err(LightingError::Illumination(format!(
+                "model '{}': a {} density for a {dims} grid",
+                model.name, own.dims
+            )));
+        }
+        if let Some(s) = shade {
+            if s.density.dims != dims {
+                return Err(LightingError::Illumination(format!(
+                    "model '{}': a {} shaded density for a {dims} grid",
+                    model.name, s.density.dims
+                )));
+            }
+        }
+        let keys = std::array::from_fn(|k| {
+            let mut h = Fnv64::new();
+            h.str("sylva-render physical light part");
+            h.u64(plan.key);
+            h.str(PARTS[k]);
+            if let (Some(s), 0) = (shade, k) {
+                h.u64(s.key);
+            }
+            h.finish()
+        });
+        Ok(PartsPlan {
+            model,
+            plan,
+            env,
+            medium,
+            own,
+            shaded: shade.map(|s| s.density.clone()),
+            keys,
+        })
+    }
+
+    /// The parts' grid size.
+    pub fn dims(&self) -> Dims {
+        self.plan.dims()
+    }
+
+    /// Part `k`'s cache key.
+    pub fn key(&self, k: usize) -> u64 {
+        self.keys[k]
+    }
+
+    /// Solves part `k` (no cache). `progress(colour, step, max_steps)`.
+    pub fn solve(
+        &self,
+        k: usize,
+        solver: &dyn LbSolver,
+        progress: &mut dyn FnMut(usize, usize, usize),
+    ) -> Result<LightingGrid, LightingError> {
+        let (env, medium, dims) = (&self.env, &self.medium, self.dims());
+        let density = &self.own;
+        let sun_density = self.shaded.as_ref().unwrap_or(&self.own);
+        let err = |source| LightingError::Solve {
+            model: self.model.name.clone(),
+            source,
+        };
+        let zero = [Boundary {
+            values: [0.0; sylva_lb::lattice::Q],
+        }; 3];
+        let floor_of = |v: f32| Floor {
+            nx: dims.nx,
+            nz: dims.nz,
+            radiance: std::array::from_fn(|_| vec![v; dims.nx * dims.nz]),
+        };
+        let (boundaries, floor, source) = match k {
+            0 => {
+                let sun_only = Environment {
+                    sky_radiance: [0.0; 3],
+                    ..*env
+                };
+                let floor = sun_only
+                    .floor(sun_density, medium)
+                    .map_err(|e| err(e.into()))?;
+                let source = light::first_collision_source(
+                    sun_density,
+                    medium,
+                    env.sun_travel,
+                    env.sun_irradiance,
+                )
+                .map_err(|e| err(e.into()))?;
+                (zero, floor, Some(source))
+            }
+            1 => {
+                let unit_sky = Environment {
+                    sun_irradiance: [0.0; 3],
+                    sky_radiance: [1.0; 3],
+                    ..*env
+                };
+                let floor = unit_sky.floor(density, medium).map_err(|e| err(e.into()))?;
+                (light::sky_boundaries([1.0; 3]), floor, None)
+            }
+            2 => (
+                light::ground_boundaries([1.0; 3]),
+                env.ground_albedo.map(|_| floor_of(0.0)),
+                None,
+            ),
+            // The plant upside down: its floor is the top face, lit by a unit sky there.
+            3 => (zero, Some(floor_of(1.0)), None),
+            _ => {
+                return Err(LightingError::Illumination(format!(
+                    "no light part {k} (of {})",
+                    PARTS.len()
+                )))
+            }
+        };
+        let flipped;
+        let grid = match k {
+            0 => sun_density,
+            3 => {
+                flipped = flip_y(density);
+                &flipped
+            }
+            _ => density,
+        };
+        let sopts = solve_options(dims);
+        let max = sopts.max_steps;
+        let (grid, _) = solver
+            .solve_lighting_rgb(
+                grid,
+                medium,
+                &boundaries,
+                floor.as_ref(),
+                source.as_ref(),
+                &sopts,
+                &mut |c, s, _| progress(c, s, max),
+            )
+            .map_err(err)?;
+        Ok(if k == 3 { flip_lighting(&grid) } else { grid })
+    }
+
+    /// Part `k` from the cache, else `solve()`d and (with a cache) stored.
+    pub fn cached(
+        &self,
+        k: usize,
+        solver: &dyn LbSolver,
+        solve: impl FnOnce() -> Result<LightingGrid, LightingError>,
+    ) -> Result<(LightingGrid, LightingSource, Option<PathBuf>), LightingError> {
+        let metadata = vec![
+            ("source".to_string(), self.model.name.clone()),
+            ("light".to_string(), format!("physical, {} part", PARTS[k])),
+            ("grid".to_string(), self.plan.opts.grid.to_string()),
+            ("solver".to_string(), solver.describe()),
+        ];
+        let stem = sylva_core::file_stem(&self.model.name, "model");
+        cached_solve(
+            self.plan.opts.cache_dir.as_deref(),
+            &format!("{stem}-{}", PARTS[k]),
+            self.keys[k],
+            self.dims(),
+            self.plan.placement.bounds(),
+            metadata,
+            solve,
+        )
+    }
+
+    /// Whether the cache holds a valid entry of part `k`.
+    pub fn is_cached(&self, k: usize) -> bool {
+        let Some(dir) = self.plan.opts.cache_dir.as_deref() else {
+            return false;
+        };
+        let stem = sylva_core::file_stem(&self.model.name, "model");
+        let path = entry_path(dir, &format!("{stem}-{}", PARTS[k]), self.keys[k]);
+        read_entry(
+            &path,
+            self.keys[k],
+            self.dims(),
+            self.plan.placement.bounds(),
+        )
+        .is_ok()
+    }
+
+    /// The grid of part `k` from its values (colour-major, one per site each), checked.
+    pub fn grid_from(&self, values: Vec<f32>) -> Result<LightingGrid, LightingError> {
+        let dims = self.dims();
+        let n = dims.sites();
+        if values.len() != 3 * n {
+            return Err(LightingError::Illumination(format!(
+                "model '{}': a light part of {} values for a {dims} grid",
+                self.model.name,
+                values.len()
+            )));
+        }
+        let mut c = values.chunks_exact(n).map(<[f32]>::to_vec);
+        Ok(LightingGrid {
+            dims,
+            bounds: self.plan.placement.bounds(),
+            colours: std::array::from_fn(|_| c.next().expect("three colours")),
+        })
+    }
+
+    /// The model's light from its four parts (in [`PARTS`] order), with its own density and
+    /// medium.
+    pub fn assemble(self, grids: &[LightingGrid]) -> (ModelLighting, DensityGrid, MediumParams) {
+        // The sky through the sides (and the floor's sky part): the whole sky's less the top's.
+        let side = light::subtract(&grids[1], &grids[3]);
+        let lighting =
+            ModelLighting::physical_parts([&grids[0], &grids[3], &side, &grids[2]], &self.env);
+        (lighting, self.own, self.medium)
+    }
 }
 
 /// `grid` mirrored in y (site `(x, y, z)` ↔ `(x, ny − 1 − y, z)`); the D3Q19 lattice and the

@@ -519,8 +519,20 @@ pub fn prepare_with(
                         ) =>
                         {
                             // The forest grid weighs every model's light parts by the whole
-                            // forest: rank 0 solves and caches them, the other ranks then
-                            // prepare from the cache (the same inputs, so the same light).
+                            // forest: the parts missing from rank 0's cache are solved across
+                            // the ranks and stored there; rank 0 then prepares from the cache,
+                            // and the other ranks after it (the same inputs, so the same light).
+                            let gopts = opts.forest.expect("uses_forest checks it");
+                            let t = std::time::Instant::now();
+                            let solved =
+                                sylva_mpi::solve_forest_parts(comm, &scene, lb, &gopts, progress)?;
+                            if solved > 0 {
+                                say(format!(
+                                    "  LB: {solved} light parts solved across {} ranks in {:.1} s",
+                                    comm.size(),
+                                    t.elapsed().as_secs_f64()
+                                ));
+                            }
                             prepare_on_root_first(comm, || {
                                 PreparedScene::new(scene.clone(), &opts, progress)
                             })?
