@@ -62,7 +62,7 @@ enum Command {
 /// Whether `command` runs across MPI ranks, and its name for messages.
 fn distributed(command: &Command) -> Result<(), &'static str> {
     match command {
-        Command::Render(_) | Command::Basis(_) => Ok(()),
+        Command::Render(_) | Command::Basis(_) | Command::Relight(_) => Ok(()),
         Command::Bench(b) if b.is_trace() => Ok(()),
         Command::Bench(_) => Err("bench (other than bench trace)"),
         Command::Scene(_) => Err("scene"),
@@ -71,7 +71,6 @@ fn distributed(command: &Command) -> Result<(), &'static str> {
         Command::Lb(_) => Err("lb"),
         Command::Spp(_) => Err("spp"),
         Command::Export(_) => Err("export"),
-        Command::Relight(_) => Err("relight"),
     }
 }
 
@@ -86,7 +85,7 @@ fn run(command: Command, comm: Option<&dyn sylva_mpi::Comm>) -> anyhow::Result<(
         Command::Export(a) => commands::export::run(a),
         Command::Render(a) => commands::render::run(a, comm),
         Command::Basis(a) => commands::basis::run(a, comm),
-        Command::Relight(a) => commands::relight::run(a),
+        Command::Relight(a) => commands::relight::run(a, comm),
     }
 }
 
@@ -118,7 +117,7 @@ fn main() -> std::process::ExitCode {
         if let Err(what) = distributed(&cli.command) {
             return commands::finish(Err(anyhow::anyhow!(
                 "started by mpirun as one of {n} processes, but `sylva {what}` does not split \
-                 its work across processes: run it without mpirun (render, basis and bench trace do)"
+                 its work across processes: run it without mpirun (render, basis, relight and bench trace do)"
             )));
         }
         if !cfg!(feature = "mpi") {

@@ -417,3 +417,53 @@ fn a_failing_rank_ends_the_job_with_its_message() {
         assert!(!png.exists(), "no image from a failed job");
     }
 }
+
+#[test]
+fn mpi_relight_frames_are_the_one_process_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write_scene(dir.path());
+    let d = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let args = |out: &str, cache: &str| -> Vec<String> {
+        [
+            "relight",
+            &scene,
+            "--suns",
+            "3",
+            "-o",
+            out,
+            "--lb-grid",
+            "12",
+            "--global-grid",
+            "24",
+            "--cache-dir",
+            cache,
+            "--device",
+            "cpu",
+            "--threads",
+            "1",
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let one = args(&d("one"), &d("one-cache"));
+    let (ok, out, err) = sylva(&one.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(ok, "{out}\n{err}");
+    let files = ["frame-00.png", "frame-01.png", "frame-02.png", "roses.png"];
+    let want: Vec<Vec<u8>> = files
+        .iter()
+        .map(|f| std::fs::read(dir.path().join("one").join(f)).unwrap())
+        .collect();
+    let a = args(&d("np2"), &d("np2-cache"));
+    let (ok, out, err) = mpirun(2, &a.iter().map(String::as_str).collect::<Vec<_>>(), &[]);
+    assert!(ok, "{out}\n{err}");
+    // Rank 0 alone prints and writes; the bases were solved across the ranks.
+    assert!(
+        out.contains("3 suns over 90°") && out.contains("2 MPI ranks"),
+        "{out}"
+    );
+    assert_eq!(out.matches("wrote 3 frames").count(), 1, "{out}");
+    for (f, w) in files.iter().zip(&want) {
+        let got = std::fs::read(dir.path().join("np2").join(f)).unwrap();
+        assert!(&got == w, "{f} differs from one process's");
+    }
+}

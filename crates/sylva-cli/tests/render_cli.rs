@@ -186,7 +186,7 @@ fn under_mpirun_commands_that_do_not_split_their_work_refuse() {
     for args in [
         &["scene", "list"][..],
         &["bench", "scene", "demo"],
-        &["relight", "demo"],
+        &["bench", "relight", "demo"],
     ] {
         let (ok, err) = as_one_of_two(args);
         assert!(!ok, "{args:?}");

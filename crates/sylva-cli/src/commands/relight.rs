@@ -1,13 +1,16 @@
 //! `sylva relight SCENE --suns 24`: 004 Table 1's sequence. The sun moves over 90° about the
 //! zenith; each frame relights every instance from its model's base solutions (no LB solve)
 //! and renders. Numbered PNGs and an animated PNG, tone mapped with one exposure for the
-//! whole sequence so frames compare, and the time of every frame.
+//! whole sequence so frames compare, and the time of every frame. Under `mpirun` the missing
+//! base solutions are solved across the ranks and every frame is rendered across them
+//! (`sylva_mpi::render_frame`); rank 0 writes the images, the same as one process's.
 
 use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use sylva_mpi::Comm;
 use sylva_render::output::{encode_apng, encode_png};
 use sylva_render::relight::sun_path;
 use sylva_render::tonemap::srgb8;
@@ -46,7 +49,8 @@ pub struct RelightArgs {
     pub white: Option<f32>,
 }
 
-pub fn run(a: RelightArgs) -> Result<()> {
+pub fn run(a: RelightArgs, comm: Option<&dyn Comm>) -> Result<()> {
+    let root = comm.is_none_or(|c| c.rank() == 0);
     if let Some(r) = a.rpp {
         let range = sylva_core::limits::RAYS_PER_PIXEL;
         if !range.contains(&r) {
@@ -70,7 +74,7 @@ pub fn run(a: RelightArgs) -> Result<()> {
         white: a.white,
     };
     tm.validate().map_err(anyhow::Error::msg)?;
-    let p = prepare_with(&a.frame, true, a.rpp, 1, true, None, true, false)?;
+    let p = prepare_with(&a.frame, true, a.rpp, 1, true, comm, true, false)?;
     let mut prepared = p.scene;
     let rpp = a.rpp.unwrap_or(prepared.scene.camera.rays_per_pixel);
     let camera = prepared.camera(p.width, p.height);
@@ -95,22 +99,37 @@ pub fn run(a: RelightArgs) -> Result<()> {
         sylva_core::file_stem(&prepared.scene.name, "scene")
     ));
     let mut outputs = sylva_core::OutputSet::new::<&std::path::Path>(&[]);
-    outputs.plan(&frame_paths)?;
-    outputs.plan(&[&anim])?;
-    println!(
-        "{} suns over 90° about the zenith, path azimuth {azimuth:.1}°; {}x{} at {rpp} rays/pixel",
-        suns.len(),
-        p.width,
-        p.height
-    );
-    let pb = bar(suns.len() as u64, "relight");
+    if root {
+        outputs.plan(&frame_paths)?;
+        outputs.plan(&[&anim])?;
+        println!(
+            "{} suns over 90° about the zenith, path azimuth {azimuth:.1}°; {}x{} at {rpp} rays/pixel{}",
+            suns.len(),
+            p.width,
+            p.height,
+            comm.map(|c| format!(", {} MPI ranks", c.size()))
+                .unwrap_or_default()
+        );
+    }
+    let pb = if root {
+        bar(suns.len() as u64, "relight")
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
     let mut frames = Vec::with_capacity(suns.len());
     let mut times = Vec::with_capacity(suns.len());
     for (k, &sun) in suns.iter().enumerate() {
         let t0 = Instant::now();
         prepared.set_sun(sun)?;
         let t1 = Instant::now();
-        let frame = prepared.render(&settings, &Silent)?;
+        // Every rank relights (cheap) and renders its share; rank 0 gets the frame.
+        let frame = match comm {
+            None => prepared.render(&settings, &Silent)?,
+            Some(c) => match sylva_mpi::render_frame(c, &prepared, &settings, &Silent)? {
+                Some(d) => d.frame,
+                None => continue,
+            },
+        };
         let t2 = Instant::now();
         let (relight, render) = ((t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64());
         pb.suspend(|| {
@@ -131,6 +150,9 @@ pub fn run(a: RelightArgs) -> Result<()> {
         pb.inc(1);
     }
     pb.finish_and_clear();
+    if !root {
+        return Ok(());
+    }
     // One exposure for the sequence: measured over every frame's pixels together.
     let all: Vec<[f32; 3]> = frames.iter().flatten().copied().collect();
     let stats = tm.measure(&all);
