@@ -3,19 +3,20 @@
 //!
 //! A scene lit through the forest grid ([`sylva_render::forest`]) needs each model's parts,
 //! its sun part solved on its density with the neighbours' foliage added. Every rank builds
-//! the models' densities and that foliage (the same on every rank: the same inputs, a
-//! deterministic computation), rank 0 lists the parts its cache lacks, the ranks solve them
-//! through the queue, and rank 0 stores each as one process would (the same file, byte for
-//! byte). The scene is then prepared from the cache (rank 0 first; the other ranks read it
-//! where they share its filesystem, else solve again): this spreads the solves, the
-//! expensive part, over the ranks.
+//! the models' densities and that foliage once ([`sylva_render::forest_densities`]: the same
+//! inputs and a deterministic computation, so the same on every rank), rank 0 lists the
+//! parts its cache lacks, the ranks solve them through the queue, and rank 0 stores each as
+//! one process would (the same file, byte for byte). Each rank then prepares the scene from
+//! the cache with the same densities ([`sylva_render::PreparedScene::with_forest_densities`];
+//! rank 0 first, the other ranks read its cache where they share its filesystem, else solve
+//! again): this spreads the solves, the expensive part, over the ranks.
 
 use sylva_geom::Scene;
-use sylva_render::forest::neighbour_shade;
-use sylva_render::lighting::{model_density, LightingOptions, PartsPlan, PARTS};
+use sylva_render::lighting::{LightingOptions, PartsPlan, PARTS};
 use sylva_render::relight::GlobalGridOptions;
 use sylva_render::{
-    lighting_options, scene_illumination, scene_to_sun, stage, LbPlan, PipelineError, Progress,
+    lighting_options, scene_illumination, scene_to_sun, stage, ForestDensities, LbPlan,
+    PipelineError, Progress,
 };
 
 use crate::comm::{agree, Comm, CommError, Reader, Writer};
@@ -23,13 +24,15 @@ use crate::queue::run_queue;
 use crate::DistError;
 
 /// Solves the parts missing from rank 0's cache across the ranks and stores them there
-/// (every rank calls it with the same scene and plan; that is checked). Returns how many
-/// parts were solved. Without a cache at rank 0 nothing is solved here.
+/// (every rank calls it with the same scene, plan and `densities`, its own
+/// [`sylva_render::forest_densities`] of them; the scene and plan are checked). Returns how
+/// many parts were solved. Without a cache at rank 0 nothing is solved here.
 pub fn solve_forest_parts(
     comm: &dyn Comm,
     scene: &Scene,
     lb: &LbPlan,
     gopts: &GlobalGridOptions,
+    densities: &ForestDensities,
     progress: &dyn Progress,
 ) -> Result<usize, DistError> {
     let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
@@ -60,6 +63,14 @@ pub fn solve_forest_parts(
     if !root {
         opts.cache_dir = None;
     }
+    if densities.own.len() != scene.models.len() || densities.shades.len() != scene.models.len() {
+        return Err(CommError::Protocol(format!(
+            "forest densities of {} models for {} models",
+            densities.own.len(),
+            scene.models.len()
+        ))
+        .into());
+    }
     let illum = scene_illumination(scene);
     let lighting_err = |k: usize, source| {
         DistError::Pipeline(PipelineError::Lighting {
@@ -67,42 +78,25 @@ pub fn solve_forest_parts(
             source,
         })
     };
-    let model_opts = |k: usize| LightingOptions {
-        preset: scene.model_preset(k).to_string(),
-        ..opts.clone()
-    };
-    let own = scene
+    let plans = scene
         .models
         .iter()
         .enumerate()
         .map(|(k, m)| {
-            model_density(m, &illum, &model_opts(k), lb.solver)
-                .map(|(d, _)| d)
-                .map_err(|e| lighting_err(k, e))
-        })
-        .collect::<Result<Vec<_>, _>>()?;
-    let shades = {
-        let grids: Vec<&sylva_lb::DensityGrid> = own.iter().collect();
-        let placed: Vec<(usize, glam::Affine3A)> = scene
-            .instances
-            .iter()
-            .map(|i| (i.model as usize, i.transform()))
-            .collect();
-        neighbour_shade(&grids, &placed, 0.0, gopts).map_err(|source| {
-            DistError::Pipeline(PipelineError::Global {
-                scene: scene.name.clone(),
-                source,
-            })
-        })?
-    };
-    let plans = scene
-        .models
-        .iter()
-        .zip(own)
-        .enumerate()
-        .map(|(k, (m, d))| {
-            PartsPlan::new(m, &illum, &model_opts(k), lb.solver, d, shades[k].as_ref())
-                .map_err(|e| lighting_err(k, e))
+            let opts = LightingOptions {
+                preset: scene.model_preset(k).to_string(),
+                ..opts.clone()
+            };
+            let own = densities.own[k].clone();
+            PartsPlan::new(
+                m,
+                &illum,
+                &opts,
+                lb.solver,
+                own,
+                densities.shades[k].as_ref(),
+            )
+            .map_err(|e| lighting_err(k, e))
         })
         .collect::<Result<Vec<_>, _>>()?;
 

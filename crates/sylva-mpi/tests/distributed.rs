@@ -13,8 +13,8 @@ use sylva_mpi::{
 };
 use sylva_render::lighting::LightingPlan;
 use sylva_render::{
-    lighting_options, load_scene, Frame, LbPlan, PrepareOptions, PreparedScene, Region,
-    RenderSettings, Silent,
+    forest_densities, lighting_options, load_scene, Frame, LbPlan, PrepareOptions, PreparedScene,
+    Region, RenderSettings, Silent,
 };
 
 const SCENE: &str = r#"
@@ -354,8 +354,9 @@ fn forest_parts_solved_across_ranks_are_the_one_process_entries() {
                         let (scene, cache, gopts) = (&scene, &cache, &gopts);
                         s.spawn(move || {
                             let opts = options(cache);
-                            solve_forest_parts(c, scene, opts.lb.as_ref().unwrap(), gopts, &Silent)
-                                .unwrap()
+                            let lb = opts.lb.as_ref().unwrap();
+                            let densities = forest_densities(scene, lb, gopts).unwrap();
+                            solve_forest_parts(c, scene, lb, gopts, &densities, &Silent).unwrap()
                         })
                     })
                     .collect();

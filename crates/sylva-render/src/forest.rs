@@ -51,6 +51,7 @@ use glam::{Affine3A, Vec3};
 use sylva_geom::Aabb;
 use sylva_lb::lattice::{C, Q};
 use sylva_lb::light::{self, Environment};
+use sylva_lb::relight::Footprint;
 use sylva_lb::solver::{Lattice, SolveOptions};
 use sylva_lb::{ColourParams, DensityGrid, Dims, MediumParams};
 
@@ -406,35 +407,16 @@ pub fn neighbour_shade(
         let Some(own) = &blocks[i] else {
             return (0.0, 0.0);
         };
-        let n = [dims.nx, dims.ny, dims.nz];
-        let c = (w - origin) / cell;
-        let mut base = [0usize; 3];
-        let mut t = [0.0f64; 3];
-        for a in 0..3 {
-            let f = (c[a].floor().max(0.0) as usize).min(n[a] - 2);
-            base[a] = f;
-            t[a] = (c[a] as f64 - f as f64).clamp(0.0, 1.0);
-        }
+        let fp = Footprint::at(dims, ((w - origin) / cell).to_array());
         let (mut k, mut kw) = (0.0f64, 0.0f64);
-        for corner in 0..8 {
-            let s = [
-                base[0] + (corner & 1),
-                base[1] + ((corner >> 1) & 1),
-                base[2] + ((corner >> 2) & 1),
-            ];
-            let wgt = (0..3)
-                .map(|a| {
-                    if (corner >> a) & 1 == 1 {
-                        t[a]
-                    } else {
-                        1.0 - t[a]
-                    }
-                })
-                .product::<f64>();
+        for (corner, (site, wgt)) in fp.sites(dims).into_iter().zip(fp.weights()).enumerate() {
             if wgt == 0.0 {
                 continue;
             }
-            let tot = total[dims.index(s[0], s[1], s[2])];
+            let wgt = wgt as f64;
+            let [x, y, z] = fp.corner;
+            let s = [x + (corner >> 2), y + (corner >> 1 & 1), z + (corner & 1)];
+            let tot = total[site];
             let (ok, okw) = own.at(s);
             // The instance's own share is one of the summands: what remains is the others'.
             let rest = tot[0] - ok as f64;
@@ -456,15 +438,22 @@ pub fn neighbour_shade(
         }
         let d = grid.dims;
         let nf = [d.nx, d.ny, d.nz];
-        let ns = nf.map(|n| n.min(SHADE_SAMPLES));
+        // The sample lattice: fine grids have at least 3 sites per axis, so it has too.
+        let ns = Dims::new(
+            d.nx.min(SHADE_SAMPLES),
+            d.ny.min(SHADE_SAMPLES),
+            d.nz.min(SHADE_SAMPLES),
+        )
+        .expect("at least 3 sites per axis");
+        let n_s = [ns.nx, ns.ny, ns.nz];
         let min = Vec3::from_array(grid.bounds.min);
         let cell_model = fine[mine[0]].as_ref().expect("filtered").cell_model;
         // Sample point j of axis a sits at fine coordinate j (n_f - 1) / (n_s - 1).
-        let at = |a: usize, j: usize| j as f32 * (nf[a] - 1) as f32 / (ns[a] - 1).max(1) as f32;
-        let samples: Vec<[f64; 2]> = (0..ns[0] * ns[1] * ns[2])
+        let at = |a: usize, j: usize| j as f32 * (nf[a] - 1) as f32 / (n_s[a] - 1) as f32;
+        let samples: Vec<[f64; 2]> = (0..ns.sites())
             .into_par_iter()
             .map(|j| {
-                let (x, y, z) = (j / (ns[1] * ns[2]), (j / ns[2]) % ns[1], j % ns[2]);
+                let (x, y, z) = ns.coords(j);
                 let p = min + Vec3::new(at(0, x), at(1, y), at(2, z)) * cell_model;
                 let mut sum = [0.0f64; 2];
                 for &i in &mine {
@@ -485,42 +474,22 @@ pub fn neighbour_shade(
         }
         let mut h = sylva_core::Fnv64::new();
         h.str("sylva-render neighbour shade");
-        for n in ns {
+        for n in n_s {
             h.u64(n as u64);
         }
         for s in &samples {
             h.f32(s[0] as f32);
             h.f32(s[1] as f32);
         }
-        // Site `x` of axis `a` between sample points.
+        // A fine site between sample points.
         let sample = |f: [usize; 3]| -> [f64; 2] {
-            let mut base = [0usize; 3];
-            let mut t = [0.0f64; 3];
-            for a in 0..3 {
-                if ns[a] < 2 {
-                    continue;
-                }
-                let u = f[a] as f64 * (ns[a] - 1) as f64 / (nf[a] - 1) as f64;
-                let b = (u.floor() as usize).min(ns[a] - 2);
-                base[a] = b;
-                t[a] = (u - b as f64).clamp(0.0, 1.0);
-            }
+            let g: [f32; 3] =
+                std::array::from_fn(|a| f[a] as f32 * (n_s[a] - 1) as f32 / (nf[a] - 1) as f32);
+            let fp = Footprint::at(ns, g);
             let mut v = [0.0f64; 2];
-            for corner in 0..8 {
-                let s: [usize; 3] =
-                    std::array::from_fn(|a| (base[a] + ((corner >> a) & 1)).min(ns[a] - 1));
-                let wgt = (0..3)
-                    .map(|a| {
-                        if (corner >> a) & 1 == 1 {
-                            t[a]
-                        } else {
-                            1.0 - t[a]
-                        }
-                    })
-                    .product::<f64>();
-                let sv = samples[(s[0] * ns[1] + s[1]) * ns[2] + s[2]];
-                v[0] += wgt * sv[0];
-                v[1] += wgt * sv[1];
+            for (site, wgt) in fp.sites(ns).into_iter().zip(fp.weights()) {
+                v[0] += wgt as f64 * samples[site][0];
+                v[1] += wgt as f64 * samples[site][1];
             }
             v
         };

@@ -43,11 +43,11 @@ pub use indirect::{IndirectLight, ModelGridLight, NoIndirectLight};
 pub use lighting::{Illumination, Light};
 pub use media::{Media, MediumVolume, Segment};
 pub use pipeline::{
-    finish_relighting, global_key, illumination, image_paths, light_models, lighting_options,
-    load_scene, mode_path, precompute_relighting, relight_options, resolution, scene_illumination,
-    scene_to_sun, tone_map_modes, uses_forest, write_images, BasisUse, LbPlan, ModeImage,
-    PipelineError, PrepareOptions, PreparedScene, Progress, RelightPlan, Relighting, ShadowMethod,
-    Silent, Tracer, WrittenImage,
+    finish_relighting, forest_densities, global_key, illumination, image_paths, light_models,
+    lighting_options, load_scene, mode_path, precompute_relighting, relight_options, resolution,
+    scene_illumination, scene_to_sun, tone_map_modes, uses_forest, write_images, BasisUse,
+    ForestDensities, LbPlan, ModeImage, PipelineError, PrepareOptions, PreparedScene, Progress,
+    RelightPlan, Relighting, ShadowMethod, Silent, Tracer, WrittenImage,
 };
 pub use relight::{RelitIllumination, RelitLight, SunWeights};
 pub use render::{

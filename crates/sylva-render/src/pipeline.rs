@@ -538,13 +538,64 @@ pub fn uses_forest(scene: &Scene, light: Light, forest: Option<&GlobalGridOption
     light == Light::Physical && forest.is_some() && scene.instances.len() > 1
 }
 
-/// Every model's physical light as its four parts ([`crate::lighting::model_lighting_parts`],
-/// each from the cache when it can), and the coarse forest grid's weights of them per
-/// instance ([`ForestLight`]); how many models came from the cache.
+/// What a forest's light parts are solved on ([`light_forest`]): every model's own density
+/// (voxelized as its LB solve sees it, scene order) and the neighbours' foliage added to its
+/// sun part's ([`neighbour_shade`]; `None`: none reaches into its boxes). The same on every
+/// process that builds it (MPI ranks solve parts of it: `sylva_mpi::solve_forest_parts`).
+#[derive(Debug, Clone)]
+pub struct ForestDensities {
+    pub own: Vec<sylva_lb::DensityGrid>,
+    pub shades: Vec<Option<ShadedDensity>>,
+}
+
+/// [`ForestDensities`] of `scene`: its models voxelized, the neighbours' foliage measured on
+/// the coarse grid of `gopts`.
+pub fn forest_densities(
+    scene: &Scene,
+    lb: &LbPlan,
+    gopts: &GlobalGridOptions,
+) -> Result<ForestDensities, PipelineError> {
+    let illum = scene_illumination(scene);
+    let lopts = lighting_options(scene, lb);
+    let own = scene
+        .models
+        .iter()
+        .enumerate()
+        .map(|(k, model)| {
+            let lopts = LightingOptions {
+                preset: scene.model_preset(k).to_string(),
+                ..lopts.clone()
+            };
+            model_density(model, &illum, &lopts, lb.solver)
+                .map(|(density, _)| density)
+                .map_err(|source| PipelineError::Lighting {
+                    model: model.name.clone(),
+                    source,
+                })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let grids: Vec<&sylva_lb::DensityGrid> = own.iter().collect();
+    let placed: Vec<(usize, glam::Affine3A)> = scene
+        .instances
+        .iter()
+        .map(|i| (i.model as usize, i.transform()))
+        .collect();
+    let shades =
+        neighbour_shade(&grids, &placed, 0.0, gopts).map_err(|source| PipelineError::Global {
+            scene: scene.name.clone(),
+            source,
+        })?;
+    Ok(ForestDensities { own, shades })
+}
+
+/// Every model's physical light as its four parts ([`crate::lighting::PartsPlan`], each from
+/// the cache when it can), solved on `densities` ([`forest_densities`]), and the coarse forest
+/// grid's weights of them per instance ([`ForestLight`]); how many models came from the cache.
 pub fn light_forest(
     scene: &Scene,
     lb: &LbPlan,
     gopts: &GlobalGridOptions,
+    densities: ForestDensities,
     progress: &dyn Progress,
 ) -> Result<(Vec<ModelLighting>, usize, ForestLight), PipelineError> {
     let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
@@ -553,38 +604,20 @@ pub fn light_forest(
         scene: scene.name.clone(),
         source,
     };
-    // The models' own densities first: the neighbours' foliage inside each model's boxes
-    // joins the density its sun part is solved on.
-    let lopts = lighting_options(scene, lb);
-    let mut own = Vec::with_capacity(scene.models.len());
-    for (k, model) in scene.models.iter().enumerate() {
-        let lopts = LightingOptions {
-            preset: scene.model_preset(k).to_string(),
-            ..lopts.clone()
-        };
-        let (density, _) = model_density(model, &illum, &lopts, lb.solver).map_err(|source| {
-            PipelineError::Lighting {
-                model: model.name.clone(),
-                source,
-            }
-        })?;
-        own.push(Some(density));
+    let ForestDensities { own, shades } = densities;
+    if own.len() != scene.models.len() || shades.len() != scene.models.len() {
+        return Err(err(LightingError::Global(format!(
+            "forest densities of {} models for {} models",
+            own.len(),
+            scene.models.len()
+        ))));
     }
-    let shades = {
-        let grids: Vec<&sylva_lb::DensityGrid> =
-            own.iter().map(|d| d.as_ref().expect("set")).collect();
-        let placed: Vec<(usize, glam::Affine3A)> = scene
-            .instances
-            .iter()
-            .map(|i| (i.model as usize, i.transform()))
-            .collect();
-        neighbour_shade(&grids, &placed, 0.0, gopts).map_err(err)?
-    };
     for (model, shade) in scene.models.iter().zip(&shades) {
         if let Some(s) = shade {
             progress.neighbour_shade(model, s);
         }
     }
+    let mut own: Vec<Option<sylva_lb::DensityGrid>> = own.into_iter().map(Some).collect();
     let (lighting, cached, fine) = light_each_model(
         scene,
         lb,
@@ -691,6 +724,27 @@ impl PreparedScene {
         opts: &PrepareOptions,
         progress: &dyn Progress,
     ) -> Result<PreparedScene, PipelineError> {
+        Self::prepare(scene, opts, None, progress)
+    }
+
+    /// [`PreparedScene::new`] of a scene lit through the forest grid, its models' densities
+    /// already built ([`forest_densities`] of the same scene, plan and grid options; under
+    /// mpirun each rank builds them once for the parts' solves and the preparation).
+    pub fn with_forest_densities(
+        scene: Scene,
+        opts: &PrepareOptions,
+        densities: ForestDensities,
+        progress: &dyn Progress,
+    ) -> Result<PreparedScene, PipelineError> {
+        Self::prepare(scene, opts, Some(densities), progress)
+    }
+
+    fn prepare(
+        scene: Scene,
+        opts: &PrepareOptions,
+        densities: Option<ForestDensities>,
+        progress: &dyn Progress,
+    ) -> Result<PreparedScene, PipelineError> {
         let shading = Self::check(&scene, opts)?;
         let none = || (0..scene.models.len()).map(|_| None).collect();
         let lb = opts.lb.as_ref().map(|lb| LbPlan {
@@ -706,7 +760,11 @@ impl PreparedScene {
             (_, Some(parts)) => (none(), parts.cached),
             (Some(lb), None) if uses_forest(&scene, lb.light, opts.forest.as_ref()) => {
                 let gopts = opts.forest.expect("uses_forest checks it");
-                let (lit, cached, f) = light_forest(&scene, lb, &gopts, progress)?;
+                let densities = match densities {
+                    Some(d) => d,
+                    None => forest_densities(&scene, lb, &gopts)?,
+                };
+                let (lit, cached, f) = light_forest(&scene, lb, &gopts, densities, progress)?;
                 forest = Some(f);
                 (lit.into_iter().map(Some).collect(), cached)
             }

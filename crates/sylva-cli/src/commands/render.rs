@@ -524,8 +524,12 @@ pub fn prepare_with(
                             // and the other ranks after it (the same inputs, so the same light).
                             let gopts = opts.forest.expect("uses_forest checks it");
                             let t = std::time::Instant::now();
-                            let solved =
-                                sylva_mpi::solve_forest_parts(comm, &scene, lb, &gopts, progress)?;
+                            // Each rank builds the densities once, for the solves and the
+                            // preparation.
+                            let densities = sylva_render::forest_densities(&scene, lb, &gopts)?;
+                            let solved = sylva_mpi::solve_forest_parts(
+                                comm, &scene, lb, &gopts, &densities, progress,
+                            )?;
                             if solved > 0 {
                                 say(format!(
                                     "  LB: {solved} light parts solved across {} ranks in {:.1} s",
@@ -534,7 +538,12 @@ pub fn prepare_with(
                                 ));
                             }
                             prepare_on_root_first(comm, || {
-                                PreparedScene::new(scene.clone(), &opts, progress)
+                                PreparedScene::with_forest_densities(
+                                    scene.clone(),
+                                    &opts,
+                                    densities.clone(),
+                                    progress,
+                                )
                             })?
                         }
                         None => {
