@@ -95,6 +95,8 @@ struct ShadeParams {
     ground: [u32; 4],
     ground_box: [f32; 4],
     ground_cell: [f32; 4],
+    /// The final gather: rays per plant sample (0: none), the seed's low and high 32 bits.
+    gather: [u32; 4],
 }
 
 /// The shading data as one array of words, and where its tables start.
@@ -498,6 +500,10 @@ pub struct GpuFrame {
     frame_layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
     max_binding: u64,
+    /// Invocations per workgroup along x and y: 8, or 1 on a software adapter, where
+    /// lavapipe lost iterations of the final gather's loop when the invocations of one SIMD
+    /// batch left it at different times (each invocation alone gave the CPU's pixel).
+    tile: u32,
     cpu_pixels: AtomicU64,
     /// The last frame's ray, pixel and read-back buffers, reused while they are large enough
     /// (creating and zeroing them each frame cost more than the kernel on small frames).
@@ -534,6 +540,7 @@ impl GpuFrame {
         light: FrameLight,
     ) -> Result<GpuFrame, TraceGpuError> {
         let ctx = tracer.context().clone();
+        let tile: u32 = if ctx.is_software() { 1 } else { 8 };
         sylva_core::check_memory(
             "the scene's shading data for the GPU (host staging)",
             shading_bytes(scene, light),
@@ -630,7 +637,10 @@ impl GpuFrame {
              fn relit_word_at(i: u32) -> u32 {{ return relit_words[i]; }}\n{}",
             tracer.scene().wgsl(),
             words.declare(1, 1),
-            SHADE_WGSL
+            SHADE_WGSL.replace(
+                "@workgroup_size(8, 8)",
+                &format!("@workgroup_size({tile}, {tile})")
+            )
         );
         debug_assert_eq!(SCENE_GROUP, 0);
         let module = tracer.scene().module(&ctx, "frame", src);
@@ -669,6 +679,7 @@ impl GpuFrame {
             frame_layout,
             pipeline,
             max_binding,
+            tile,
             cpu_pixels: AtomicU64::new(0),
             buffers: Mutex::new(None),
             timer,
@@ -824,7 +835,8 @@ impl GpuFrame {
                 pass.set_bind_group(0, tracer.scene().group(), &[]);
                 pass.set_bind_group(1, &self.shade_group, &[]);
                 pass.set_bind_group(2, &bufs.group, &[]);
-                pass.dispatch_workgroups(w.div_ceil(8) as u32, rows.div_ceil(8) as u32, 1);
+                let tile = self.tile as usize;
+                pass.dispatch_workgroups(w.div_ceil(tile) as u32, rows.div_ceil(tile) as u32, 1);
             }
             let band_pixels = rows * w;
             let (radiance_bytes, flag_bytes) =
@@ -975,6 +987,13 @@ impl GpuFrame {
             to_sun: v4(to_sun, 0.0),
             ground_colour: v4(ground, 0.0),
             sky: v4(sky, 0.0),
+            // The final gather's rays per plant sample and the seed its directions come from.
+            gather: [
+                cpu.gather_count(s),
+                settings.seed as u32,
+                (settings.seed >> 32) as u32,
+                0,
+            ],
             leaf_transmission: v4(Vec3::from_array(s.leaf_transmission), 0.0),
             k: [
                 s.indirect,

@@ -24,6 +24,12 @@ pub trait IndirectLight: Sync {
 
     /// Bytes held.
     fn memory_bytes(&self) -> u64;
+
+    /// Whether plants' indirect light may be final-gathered ([`crate::gather`]): the light is
+    /// the physical light's, whose LB value at a point the gather's hits can shade with.
+    fn gatherable(&self) -> bool {
+        false
+    }
 }
 
 /// No indirect light: plants get none, the ground sees the whole sky.
@@ -147,6 +153,13 @@ impl IndirectLight for ModelGridLight {
             .flatten()
             .map(ModelLighting::memory_bytes)
             .sum()
+    }
+
+    fn gatherable(&self) -> bool {
+        self.lighting
+            .iter()
+            .flatten()
+            .any(ModelLighting::is_physical)
     }
 }
 

@@ -18,6 +18,7 @@
 //!   and [`ModelGridLight`], one LB grid per model.
 //! * [`shade`]: local sunlight (two-sided leaves reflecting and transmitting) and the
 //!   indirect, albedo and sky parts the comparison modes combine.
+//! * [`gather`]: the final gather on plants: its ray directions.
 //! * [`render`]: primary rays, shadow rays (through a [`sylva_trace::RayQuery`]) and
 //!   shading over 8×8 tiles; the modes of 000 Fig. 2.
 //! * [`gpu_frame`]: the same frame on a GPU, one kernel per band (`shade.wgsl` mirrors the
@@ -27,6 +28,7 @@
 //! * [`stages`]: the stages as `tracing` spans and [`StageClock`], which times them.
 
 pub mod forest;
+pub mod gather;
 pub mod gpu_frame;
 pub mod indirect;
 pub mod lighting;

@@ -283,6 +283,8 @@ pub struct PrepareOptions<'a> {
     pub indirect: f32,
     /// Paper light: sky light on the ground as a fraction of the sun's.
     pub sky_ambient: f32,
+    /// Physical light: final-gather rays per camera sample on plants ([`crate::gather`]).
+    pub gather_rays: u32,
     /// The largest frame that will be rendered, `(width, height, rays per pixel)`: its memory
     /// is checked before any LB or acceleration work.
     pub largest_frame: Option<(u32, u32, u32)>,
@@ -308,6 +310,7 @@ impl Default for PrepareOptions<'_> {
             light: s.light,
             indirect: s.indirect,
             sky_ambient: s.sky_ambient,
+            gather_rays: s.gather_rays,
             largest_frame: None,
             output_images: 1,
             relight: None,
@@ -865,6 +868,7 @@ impl PreparedScene {
             light: opts.light,
             indirect: opts.indirect,
             sky_ambient: opts.sky_ambient,
+            gather_rays: opts.gather_rays,
             leaf_transmission: transmission_from_g(g),
             ..ShadingParams::default()
         };

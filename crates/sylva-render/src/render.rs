@@ -285,6 +285,15 @@ enum SampleGeom {
         point: Vec3,
         normal: Vec3,
         lit: bool,
+        /// The mean radiance the front's and the back's gather rays brought back
+        /// ([`crate::gather`]; zero when nothing is gathered).
+        gather: [Vec3; 2],
+        /// The gather rays cast on each side (front, back).
+        gather_rays: (u32, u32),
+        /// The geometric normal on the viewer's side and whether the surface transmits
+        /// (where gather rays start and which sides they take).
+        ng: Vec3,
+        transmits: bool,
     },
 }
 
@@ -293,6 +302,23 @@ impl SampleGeom {
         match self {
             SampleGeom::Sky => {}
             SampleGeom::Ground { lit, .. } | SampleGeom::Plant { lit, .. } => *lit = sunlit,
+        }
+    }
+
+    /// One of side `side`'s gather rays brought back `radiance`.
+    fn add_gathered(&mut self, side: usize, radiance: Vec3) {
+        if let SampleGeom::Plant {
+            gather,
+            gather_rays,
+            ..
+        } = self
+        {
+            let count = if side == 0 {
+                gather_rays.0
+            } else {
+                gather_rays.1
+            };
+            gather[side] += radiance / count as f32;
         }
     }
 }
@@ -319,6 +345,12 @@ struct Scratch {
     shadow_rays: Vec<ShadowRay>,
     waiting: Vec<(usize, usize)>,
     blocked: Vec<bool>,
+    /// Gather rays, whose they are, `(tile, sample, side)`, their hits and the geometry
+    /// of those.
+    gather_rays: Vec<Ray>,
+    gather_owner: Vec<(usize, usize, usize)>,
+    gather_hits: Vec<Option<Hit>>,
+    gather_geoms: Vec<SampleGeom>,
 }
 
 /// A scene, something that answers its ray queries and its indirect light, ready to render
@@ -570,6 +602,61 @@ impl<'a> Renderer<'a> {
         for (&(t, i), &blocked) in scratch.waiting.iter().zip(&scratch.blocked) {
             tiles[t].1[i].set_lit(!blocked);
         }
+        if self.gathers(&settings.shading) {
+            // The final gather: rays from every plant sample, the geometry they hit, the
+            // sun's shadow rays of those points, then what each brings back.
+            scratch.gather_rays.clear();
+            scratch.gather_owner.clear();
+            for (t, tile) in unit.iter().enumerate() {
+                let tw = (tile.x1 - tile.x0) as usize;
+                for (i, g) in tiles[t].1.iter_mut().enumerate() {
+                    let k = i / n as usize;
+                    let (x, y) = (tile.x0 + (k % tw) as u32, tile.y0 + (k / tw) as u32);
+                    let pixel = crate::gather::pixel_key(x, y, camera.width);
+                    let s = (i % n as usize) as u32;
+                    self.gather_rays(g, pixel, s, settings, &mut |ray, side| {
+                        scratch.gather_rays.push(ray);
+                        scratch.gather_owner.push((t, i, side));
+                    });
+                }
+            }
+            scratch.gather_hits.clear();
+            scratch.gather_hits.resize(scratch.gather_rays.len(), None);
+            self.query
+                .closest_hits(&scratch.gather_rays, &mut scratch.gather_hits, &mut shadow);
+            scratch.gather_geoms.clear();
+            scratch.shadow_rays.clear();
+            scratch.waiting.clear();
+            for (j, (ray, hit)) in scratch
+                .gather_rays
+                .iter()
+                .zip(&scratch.gather_hits)
+                .enumerate()
+            {
+                let (geom, shadow_ray) = self.sample_geometry(ray, hit.as_ref());
+                if let Some(s) = shadow_ray {
+                    scratch.shadow_rays.push(s);
+                    scratch.waiting.push((j, 0));
+                }
+                scratch.gather_geoms.push(geom);
+            }
+            scratch.blocked.clear();
+            scratch.blocked.resize(scratch.shadow_rays.len(), false);
+            self.query
+                .any_hits(&scratch.shadow_rays, &mut scratch.blocked, &mut shadow);
+            for (&(j, _), &blocked) in scratch.waiting.iter().zip(&scratch.blocked) {
+                scratch.gather_geoms[j].set_lit(!blocked);
+            }
+            for (j, &(t, i, side)) in scratch.gather_owner.iter().enumerate() {
+                let l = self.gathered(
+                    &scratch.gather_rays[j],
+                    scratch.gather_hits[j].as_ref(),
+                    &scratch.gather_geoms[j],
+                    &settings.shading,
+                );
+                tiles[t].1[i].add_gathered(side, l);
+            }
+        }
         progress(unit.len() as u64);
         let end = Instant::now();
         TracedUnit {
@@ -581,7 +668,7 @@ impl<'a> Renderer<'a> {
     }
 
     /// Pixel `(x, y)` of the whole image of `settings.camera` traced and shaded on its own,
-    /// sample by sample: the value a frame holds for it, and the shadow rays it traced.
+    /// sample by sample: the value a frame holds for it, and the secondary rays (shadow and gather) it traced.
     pub(crate) fn pixel(
         &self,
         camera: &PinholeCamera,
@@ -603,6 +690,29 @@ impl<'a> Renderer<'a> {
                 self.query.any_hits(&[shadow], &mut blocked, stats);
                 geom.set_lit(!blocked[0]);
                 shadow_rays += 1;
+            }
+            if self.gathers(&settings.shading) {
+                let pixel = crate::gather::pixel_key(x, y, camera.width);
+                let mut rays = Vec::new();
+                self.gather_rays(&mut geom, pixel, s, settings, &mut |r, side| {
+                    rays.push((r, side))
+                });
+                for (r, side) in rays {
+                    let mut hit = [None];
+                    self.query.closest_hits(&[r], &mut hit, stats);
+                    shadow_rays += 1;
+                    let (mut g, shadow) = self.sample_geometry(&r, hit[0].as_ref());
+                    if let Some(shadow) = shadow {
+                        let mut blocked = [false];
+                        self.query.any_hits(&[shadow], &mut blocked, stats);
+                        g.set_lit(!blocked[0]);
+                        shadow_rays += 1;
+                    }
+                    geom.add_gathered(
+                        side,
+                        self.gathered(&r, hit[0].as_ref(), &g, &settings.shading),
+                    );
+                }
             }
             acc += self.shade(&ray, hit[0].as_ref(), &geom, &settings.shading);
         }
@@ -646,6 +756,9 @@ impl<'a> Renderer<'a> {
             normal = -normal;
         }
         let leaf = self.is_leaf(inst.model, hit.triangle);
+        let transmits = self
+            .material(inst.model, hit.triangle)
+            .is_some_and(|m| m.leaf && m.optics.transmit.iter().any(|&t| t > 0.0));
         let probe = SurfacePoint {
             normal,
             view,
@@ -660,21 +773,93 @@ impl<'a> Renderer<'a> {
                 point,
                 normal,
                 lit: false,
+                gather: [Vec3::ZERO; 2],
+                gather_rays: (0, 0),
+                ng: ng_view,
+                transmits,
             },
             shadow,
         )
     }
 
-    fn is_leaf(&self, model: u32, triangle: u32) -> bool {
+    fn material(&self, model: u32, triangle: u32) -> Option<&ShadeMaterial> {
         let mesh = &self.scene.models[model as usize].mesh;
         let m = mesh
             .material_ids
             .get(triangle as usize)
             .copied()
             .unwrap_or(0) as usize;
-        self.materials[model as usize]
-            .get(m)
-            .is_some_and(|m| m.leaf)
+        self.materials[model as usize].get(m)
+    }
+
+    fn is_leaf(&self, model: u32, triangle: u32) -> bool {
+        self.material(model, triangle).is_some_and(|m| m.leaf)
+    }
+
+    /// The final gather's rays per plant sample, 0 when it does not gather (for the GPU
+    /// frame).
+    pub(crate) fn gather_count(&self, p: &ShadingParams) -> u32 {
+        if self.gathers(p) {
+            p.gather_rays
+        } else {
+            0
+        }
+    }
+
+    /// Whether plants' indirect light is gathered ([`crate::gather`]): the physical light and
+    /// an indirect light that has it ([`IndirectLight::gatherable`]).
+    fn gathers(&self, p: &ShadingParams) -> bool {
+        p.light == Light::Physical && p.gather_rays > 0 && self.light.gatherable()
+    }
+
+    /// A plant sample's gather rays ([`crate::gather`]): `settings.shading.gather_rays` split
+    /// between its front and (leaves that transmit) back, cosine-distributed about the
+    /// shading normal and its opposite, each handed to `cast` with its side. Sets the
+    /// sample's ray counts.
+    fn gather_rays(
+        &self,
+        g: &mut SampleGeom,
+        pixel: u32,
+        sample: u32,
+        settings: &RenderSettings,
+        cast: &mut dyn FnMut(Ray, usize),
+    ) {
+        let SampleGeom::Plant {
+            point,
+            normal,
+            gather_rays,
+            ng,
+            transmits,
+            ..
+        } = g
+        else {
+            return;
+        };
+        *gather_rays = crate::gather::split(settings.shading.gather_rays, *transmits);
+        let eps = 1e-4 * point.abs().max_element().max(1.0);
+        for (side, count, n) in [(0, gather_rays.0, *normal), (1, gather_rays.1, -*normal)] {
+            for j in 0..count {
+                let u = crate::gather::sample_point(
+                    settings.seed,
+                    pixel,
+                    side as u32,
+                    sample.wrapping_mul(count).wrapping_add(j),
+                );
+                let dir = crate::gather::cosine_direction(n, u);
+                // Off the surface on the ray's side of the triangle (as Renderer::shadow_ray).
+                let off = if dir.dot(*ng) >= 0.0 { eps } else { -eps };
+                cast(Ray::new(*point + *ng * off, dir), side);
+            }
+        }
+    }
+
+    /// The radiance a gather ray brings back: what the surface it hits sends back along it,
+    /// its direct sunlight and its LB light ([`Renderer::shade`] of that point, `g` lit by
+    /// its own shadow ray), or the sky where it hits nothing (in any direction, as a camera
+    /// ray past the ground's edge sees it).
+    fn gathered(&self, ray: &Ray, hit: Option<&Hit>, g: &SampleGeom, p: &ShadingParams) -> Vec3 {
+        let r = self.shade(ray, hit, g, p);
+        r.local + r.indirect + r.sky
     }
 
     /// The ray towards the sun from `point` (on instance `from`, if any), starting a little
@@ -749,7 +934,14 @@ impl<'a> Renderer<'a> {
                     },
                 }
             }
-            SampleGeom::Plant { point, normal, lit } => {
+            SampleGeom::Plant {
+                point,
+                normal,
+                lit,
+                gather,
+                gather_rays,
+                ..
+            } => {
                 let hit = hit.expect("plant geometry comes from a hit");
                 let inst = &self.query.instances()[hit.instance as usize];
                 let mi = inst.model as usize;
@@ -780,9 +972,14 @@ impl<'a> Renderer<'a> {
                     Light::Physical => s.albedo(Light::Physical),
                     Light::Paper => colour * self.sun,
                 };
-                let indirect = match self.light.plant(hit.instance, inst, point) {
-                    Some(l) => indirect_light(&s, l, self.sun, p),
-                    None => Vec3::ZERO,
+                let indirect = if gather_rays != (0, 0) {
+                    // Gathered: R of the light in front, T of the light behind.
+                    (s.reflectance() * gather[0] + s.transmittance() * gather[1]) * p.indirect
+                } else {
+                    match self.light.plant(hit.instance, inst, point) {
+                        Some(l) => indirect_light(&s, l, self.sun, p),
+                        None => Vec3::ZERO,
+                    }
                 };
                 Radiance {
                     local: local_light(&s, self.to_sun, lit, p) * self.sun,

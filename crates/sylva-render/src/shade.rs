@@ -30,8 +30,13 @@ pub struct ShadingParams {
     pub sun_irradiance: f32,
     /// The light model.
     pub light: Light,
-    /// Scale of the LB light added as indirect light (1: as computed).
+    /// Scale of the indirect light (the LB light, or on plants the gathered light; 1: as
+    /// computed).
     pub indirect: f32,
+    /// Physical light: final-gather rays per camera sample on a plant ([`crate::gather`]), up to
+    /// [`crate::gather::MAX_GATHER_RAYS`]; 0: the LB light at the point itself (faster, less
+    /// exact).
+    pub gather_rays: u32,
     /// Paper light: constant sky light on the ground, as a fraction of the sun irradiance.
     pub sky_ambient: f32,
     /// Paper light: specular coefficient and exponent of leaves (waxy cuticle) and of bark.
@@ -48,6 +53,7 @@ impl Default for ShadingParams {
             sun_irradiance: 1.0,
             light: Light::Physical,
             indirect: 1.0,
+            gather_rays: crate::gather::DEFAULT_GATHER_RAYS,
             sky_ambient: 0.25,
             leaf_specular: (0.06, 24.0),
             wood_specular: (0.02, 8.0),
@@ -79,6 +85,13 @@ impl ShadingParams {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(format!("{what} {v} must be a finite number ≥ 0"));
             }
+        }
+        if self.gather_rays > crate::gather::MAX_GATHER_RAYS {
+            return Err(format!(
+                "gather rays {} must be 0 to {} per sample",
+                self.gather_rays,
+                crate::gather::MAX_GATHER_RAYS
+            ));
         }
         if !self
             .leaf_transmission

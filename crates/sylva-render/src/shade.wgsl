@@ -6,6 +6,8 @@
 //                   LinearTexture::sample
 //   indirect.rs     ModelGridLight::plant, ground_shade, GroundIndex::at
 //   lighting.rs     ModelLighting::sample, ModelLighting::ground_sky
+//   gather.rs       the final gather's directions (hash32, sample_point, cos_sin_turn, basis,
+//                   cosine_direction; Renderer::gather_rays and Renderer::gathered)
 //   relight/light.rs RelitLight::sample_instance (base solutions combined per instance, 004)
 //
 // Included after the scene's WGSL (sylva-trace-gpu: closest_hit, any_hit, to_model, ...)
@@ -39,6 +41,8 @@ struct ShadeParams {
     ground_box: vec4<f32>,
     // Ground index: 1 / cell size.
     ground_cell: vec4<f32>,
+    // The final gather: rays per plant sample (0: none), the seed's low and high 32 bits.
+    gather: vec4<u32>,
 }
 
 const PHYSICAL: u32 = 1u;
@@ -590,6 +594,70 @@ fn ground_sky(p: vec3<f32>) -> vec3<f32> {
     return f;
 }
 
+// ---- gather.rs ------------------------------------------------------------------------------
+
+fn hash32(v: u32) -> u32 {
+    var x = v;
+    x ^= x >> 16u;
+    x *= 0x7feb352du;
+    x ^= x >> 15u;
+    x *= 0x846ca68bu;
+    x ^= x >> 16u;
+    return x;
+}
+
+// gather::sample_point with the frame's seed.
+fn gather_point(pixel: u32, side: u32, index: u32) -> vec2<f32> {
+    let seed_lo = shading.gather.y;
+    let seed_hi = shading.gather.z;
+    let key = hash32(hash32(pixel ^ hash32(seed_lo ^ hash32(seed_hi))) ^ (side * 0x9e3779b9u));
+    let sx = hash32(key);
+    let sy = hash32(key ^ 0x85ebca6bu);
+    let unit = 1.0 / 16777216.0;
+    return vec2<f32>(f32((sx + mul32(index, 3242174889u)) >> 8u) * unit, f32((sy + mul32(index, 2447445413u)) >> 8u) * unit);
+}
+
+// a · b mod 2³² from 16-bit halves (no product overflows).
+fn mul32(a: u32, b: u32) -> u32 {
+    let lo = (a & 0xffffu) * (b & 0xffffu);
+    let mid = ((a >> 16u) * (b & 0xffffu) + (a & 0xffffu) * (b >> 16u)) & 0xffffu;
+    return lo + (mid << 16u);
+}
+
+fn cos_sin_turn(t: f32) -> vec2<f32> {
+    let q = floor(4.0 * t);
+    let a = (4.0 * t - q) * 1.5707964;
+    let a2 = a * a;
+    let s = a * (1.0 + a2 * (-0.16666667 + a2 * (0.008333334 + a2 * (-0.0001984127 + a2 * (2.7557319e-6 + a2 * -2.5052108e-8)))));
+    let c = 1.0 + a2 * (-0.5 + a2 * (0.041666668 + a2 * (-0.0013888889 + a2 * (2.4801588e-5 + a2 * (-2.755732e-7 + a2 * 2.0876758e-9)))));
+    let k = i32(q);
+    if (k == 0) {
+        return vec2<f32>(c, s);
+    }
+    if (k == 1) {
+        return vec2<f32>(-s, c);
+    }
+    if (k == 2) {
+        return vec2<f32>(-c, -s);
+    }
+    return vec2<f32>(s, -c);
+}
+
+fn cosine_direction(n: vec3<f32>, u: vec2<f32>) -> vec3<f32> {
+    let r = sqrt(u.x);
+    let cs = cos_sin_turn(u.y);
+    let z = sqrt(fmax_(1.0 - u.x, 0.0));
+    var sign = -1.0;
+    if (n.z >= 0.0) {
+        sign = 1.0;
+    }
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    let b1 = vec3<f32>(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x);
+    let b2 = vec3<f32>(b, sign + n.y * n.y * a, -n.y);
+    return b1 * (r * cs.x) + b2 * (r * cs.y) + n * z;
+}
+
 // ---- render.rs ------------------------------------------------------------------------------
 
 struct Radiance {
@@ -604,6 +672,8 @@ struct Geom {
     kind: u32,
     point: vec3<f32>,
     normal: vec3<f32>,
+    // The geometric normal on the viewer's side (plants).
+    ng: vec3<f32>,
     shadow: bool,
     shadow_origin: vec3<f32>,
     from_instance: u32,
@@ -633,7 +703,8 @@ fn shadow_origin(point: vec3<f32>, ng: vec3<f32>) -> vec3<f32> {
 
 // Renderer::sample_geometry.
 fn sample_geometry(o: vec3<f32>, d: vec3<f32>, h: Best) -> Geom {
-    var g = Geom(0u, vec3<f32>(0.0, 0.0, 0.0), vec3<f32>(0.0, 0.0, 0.0), false, vec3<f32>(0.0, 0.0, 0.0), NONE);
+    let zero = vec3<f32>(0.0, 0.0, 0.0);
+    var g = Geom(0u, zero, zero, zero, false, zero, NONE);
     if (h.triangle == NONE) {
         return g;
     }
@@ -676,6 +747,7 @@ fn sample_geometry(o: vec3<f32>, d: vec3<f32>, h: Best) -> Geom {
     let probe = SurfacePoint(normal, view, one, is_leaf(sm, h.triangle), one, one);
     g.kind = 2u;
     g.normal = normal;
+    g.ng = ng_view;
     g.shadow = needs_shadow_ray(probe, to_sun);
     g.shadow_origin = shadow_origin(point, ng);
     g.from_instance = h.instance;
@@ -704,6 +776,23 @@ fn shade(d: vec3<f32>, h: Best, g: Geom, lit: bool) -> Radiance {
         }
         return Radiance(local, c * (shading.k.y * ground_sky(g.point).x), c, zero);
     }
+    let s = plant_surface(d, h, g);
+    let sm = shade_model(instance_model(h.instance));
+    let mat = material_id(sm, h.triangle);
+    var albedo = s.colour * sun;
+    if (shading.tables.z == PHYSICAL) {
+        albedo = reflectance(s) + transmittance(s);
+    }
+    var indirect = zero;
+    let l = plant_light(h.instance, g.point);
+    if (l.w != 0.0) {
+        indirect = indirect_light(s, l.xyz, sun);
+    }
+    return Radiance(local_light(s, to_sun, lit) * sun, indirect, albedo, zero);
+}
+
+// The plant surface a hit shades (Renderer::shade's SurfacePoint).
+fn plant_surface(d: vec3<f32>, h: Best, g: Geom) -> SurfacePoint {
     let sm = shade_model(instance_model(h.instance));
     let mat = material_id(sm, h.triangle);
     var colour = material_vec3(sm, mat, 1u);
@@ -716,18 +805,99 @@ fn shade(d: vec3<f32>, h: Best, g: Geom, lit: bool) -> Radiance {
         let uv2 = vec2<f32>(word_f(sm.uvs + 2u * t2), word_f(sm.uvs + 2u * t2 + 1u));
         colour = linear_texture_sample(sm, mat, uv0 * (1.0 - h.u - h.v) + uv1 * h.u + uv2 * h.v);
     }
-    let s = SurfacePoint(g.normal, -d, colour, material_word(sm, mat, 0u) == 1u, material_vec3(sm, mat, 8u),
+    return SurfacePoint(g.normal, -d, colour, material_word(sm, mat, 0u) == 1u, material_vec3(sm, mat, 8u),
         material_vec3(sm, mat, 11u));
-    var albedo = colour * sun;
-    if (shading.tables.z == PHYSICAL) {
-        albedo = reflectance(s) + transmittance(s);
+}
+
+// Whether a plant hit's surface transmits (Renderer::sample_geometry): a leaf material with
+// some transmittance.
+fn transmits(h: Best) -> bool {
+    let sm = shade_model(instance_model(h.instance));
+    let m = material_id(sm, h.triangle);
+    return m < sm.material_count && material_word(sm, m, 0u) == 1u
+        && any(material_vec3(sm, m, 11u) > vec3<f32>(0.0, 0.0, 0.0));
+}
+
+struct Gathered {
+    // R of the light in front plus T of the light behind, times the indirect scale.
+    light: vec3<f32>,
+    // Rays traced (gather and shadow rays).
+    rays: u32,
+    // The CPU must render the pixel.
+    to_cpu: bool,
+}
+
+// Renderer::gather_rays, Renderer::gathered and the gathered indirect light of
+// Renderer::shade: what sample s's gather rays bring back to the plant point g.
+fn gather(d: vec3<f32>, h: Best, g: Geom, pixel: u32, s: u32) -> Gathered {
+    let zero = vec3<f32>(0.0, 0.0, 0.0);
+    let k = shading.gather.x;
+    var front_count = k;
+    var back_count = 0u;
+    let plant = g.kind == 2u;
+    if (plant && transmits(h)) {
+        front_count = k - k / 2u;
+        back_count = k / 2u;
     }
-    var indirect = zero;
-    let l = plant_light(h.instance, g.point);
-    if (l.w != 0.0) {
-        indirect = indirect_light(s, l.xyz, sun);
+    var front = zero;
+    var back_sum = zero;
+    let a = abs(g.point);
+    let eps = 1e-4f * fmax_(fmax_(fmax_(a.x, a.y), a.z), 1.0);
+    let t_max = bitcast<f32>(0x7f800000u);
+    var rays = 0u;
+    var to_cpu = false;
+    // One flat loop over the front's rays, then the back's (nested loops here lost
+    // iterations on lavapipe).
+    // The loop's trip count is the same for every invocation and its body has no break or
+    // continue: lavapipe lost iterations of gather loops that invocations left at different
+    // times.
+    for (var i = 0u; i < k; i++) {
+        if (plant) {
+            var side = 0u;
+            var count = front_count;
+            var j = i;
+            var n = g.normal;
+            if (i >= front_count) {
+                side = 1u;
+                count = back_count;
+                j = i - front_count;
+                n = -g.normal;
+            }
+            let dir = cosine_direction(n, gather_point(pixel, side, s * count + j));
+            var off = -eps;
+            if (dot_(dir, g.ng) >= 0.0) {
+                off = eps;
+            }
+            let o = g.point + g.ng * off;
+            // A ray the CPU must trace flags the pixel; the loop goes on (its light is dropped).
+            let c = closest_hit(o, dir, 0.0, t_max);
+            to_cpu = to_cpu || c.fallback;
+            rays += 1u;
+            let g2 = sample_geometry(o, dir, c.best);
+            var lit = false;
+            if (g2.shadow) {
+                let blocked = any_hit(g2.shadow_origin, shading.to_sun.xyz, 0.0, shading.sun.w, g2.from_instance);
+                to_cpu = to_cpu || blocked.y != 0u;
+                lit = blocked.x == 0u;
+                rays += 1u;
+            }
+            let r = shade(dir, c.best, g2, lit);
+            let l = (r.local + r.indirect + r.sky) / f32(count);
+            if (side == 0u) {
+                front += l;
+            } else {
+                back_sum += l;
+            }
+        }
     }
-    return Radiance(local_light(s, to_sun, lit) * sun, indirect, albedo, zero);
+    if (to_cpu) {
+        return Gathered(zero, 0u, true);
+    }
+    if (!plant) {
+        return Gathered(zero, 0u, false);
+    }
+    let sp = plant_surface(d, h, g);
+    return Gathered((reflectance(sp) * front + transmittance(sp) * back_sum) * shading.k.x, rays, false);
 }
 
 // render::sample_offset for 1 and 4 samples per pixel (the others come from the host).
@@ -789,7 +959,18 @@ fn render_frame(@builtin(global_invocation_id) id: vec3<u32>) {
             lit = blocked.x == 0u;
             shadow_rays += 1u;
         }
-        let r = shade(d, c.best, g, lit);
+        var r = shade(d, c.best, g, lit);
+        if (shading.gather.x > 0u) {
+            let gathered = gather(d, c.best, g, y * frame.origin.z + x, s);
+            if (gathered.to_cpu) {
+                to_cpu = true;
+                break;
+            }
+            shadow_rays += gathered.rays;
+            if (g.kind == 2u) {
+                r.indirect = gathered.light;
+            }
+        }
         acc.local += r.local;
         acc.indirect += r.indirect;
         acc.albedo += r.albedo;

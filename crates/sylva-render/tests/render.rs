@@ -280,6 +280,46 @@ fn modes_recombine_as_in_fig_2() {
 }
 
 #[test]
+fn the_gathered_light_on_an_open_board_is_its_reflectance_times_the_sky() {
+    // The board's top faces the whole sky and nothing stands above it: every gather ray of
+    // its front hemisphere escapes to the sky, so the gathered light is R ⊙ L_sky exactly,
+    // whatever the number of rays. Without the gather (0 rays) the board takes the LB light
+    // at its point through the sheet formula, R u / 4.
+    let dir = tempfile::tempdir().unwrap();
+    let scene = board_scene(dir.path(), "");
+    let lighting = with_lb(&scene);
+    let l = lighting[0].as_ref().unwrap();
+    let cam = PinholeCamera::new(&scene.camera).unwrap();
+    for rays in [0, 1, 8] {
+        let p = ShadingParams {
+            gather_rays: rays,
+            ..ShadingParams::default()
+        };
+        let frame = render_with(
+            &scene,
+            &lighting,
+            &RenderSettings::full(scene.camera, 1, 7, p),
+        );
+        for (x, z) in [(0.3, 0.6), (-0.5, -0.2), (0.7, -0.7)] {
+            let (px, py) = pixel_of(&cam, Vec3::new(x, 2.0, z));
+            let ray = cam.pixel_ray(px, py);
+            let hit = ray.at((2.0 - ray.origin.y) / ray.dir.y);
+            assert!(hit.x.abs() < 1.0 && hit.z.abs() < 1.0);
+            let got = frame.pixels[(py * frame.width + px) as usize].indirect;
+            let want = if rays == 0 {
+                KD * l.sample(hit) * 0.25
+            } else {
+                KD * SKY
+            };
+            assert!(
+                (got - want).abs().max_element() < 1e-5,
+                "{rays} rays at {hit}: {got} vs {want}"
+            );
+        }
+    }
+}
+
+#[test]
 fn frames_do_not_depend_on_the_thread_count() {
     let dir = tempfile::tempdir().unwrap();
     let scene = board_scene(

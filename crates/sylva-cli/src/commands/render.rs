@@ -100,9 +100,15 @@ pub struct FrameArgs {
     /// [default: physical; paper for the commands that relight: basis, relight, bench relight]
     #[arg(long, value_parser = ["physical", "paper", "spp"])]
     pub light: Option<String>,
-    /// Scale of the LB indirect light (1: as computed).
+    /// Scale of the indirect light: the LB light and the traced sky (1: as computed).
     #[arg(long, default_value_t = ShadingParams::default().indirect)]
     pub indirect: f32,
+    /// Physical light: final-gather rays per camera sample on a plant, 0 to 256: the light
+    /// arriving at a leaf is traced one bounce (sky, ground, other leaves lit by the sun and
+    /// their LB light); 0 takes the LB light at the leaf itself, several times faster and less
+    /// exact (docs/light.md, "The final gather").
+    #[arg(long, default_value_t = ShadingParams::default().gather_rays)]
+    pub gather_rays: u32,
     /// Paper light: sky light on the ground as a fraction of the sun's.
     #[arg(long, default_value_t = ShadingParams::default().sky_ambient)]
     pub sky_ambient: f32,
@@ -478,6 +484,7 @@ pub fn prepare_with(
         light,
         indirect: a.indirect,
         sky_ambient: a.sky_ambient,
+        gather_rays: a.gather_rays,
         largest_frame: Some((width, height, rays_per_pixel)),
         output_images,
         relight,

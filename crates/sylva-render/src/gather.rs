@@ -1,0 +1,207 @@
+//! The final gather on plants (docs/light.md, "The final gather"): where its rays go.
+//!
+//! A model's LB grid is solved on the model alone and shared by all its instances; at a
+//! leaf it holds the cell's mean light, not the light at that leaf in that instance's
+//! neighbourhood (the gaps its own neighbours leave, the sunlit leaf next to it). So the
+//! renderer gathers the light arriving at a plant point one bounce deep: per camera sample a
+//! few rays, cosine-distributed about the shading normal (the reflecting side, `R`) and, for
+//! leaves that transmit, about its opposite (`T`); each brings back the sky where it escapes,
+//! or what the surface it meets sends back, that surface's direct sunlight (its own shadow
+//! ray) plus its LB light. The LB light thus lights the second bounce on; the first is
+//! traced through the real geometry of the forest.
+//!
+//! The directions are a per-pixel Cranley–Patterson rotation of Roberts' R2 sequence in
+//! 32-bit fixed point, with a polynomial sine and cosine, so the CPU and `shade.wgsl` draw
+//! the same directions from the seed, the pixel and the sample alone (any thread count, any
+//! batching).
+
+use glam::Vec3;
+
+/// Gather rays per camera sample on a plant, by default.
+pub const DEFAULT_GATHER_RAYS: u32 = 8;
+/// The most gather rays per camera sample.
+pub const MAX_GATHER_RAYS: u32 = 256;
+
+/// R2's two irrational steps (1/φ₂ and 1/φ₂², φ₂ the plastic number) in 32-bit fixed point.
+const R2: [u32; 2] = [3_242_174_889, 2_447_445_413];
+
+/// How a sample's `rays` split between the front (reflecting) and back (transmitting)
+/// hemispheres: half each, rounded to the front, for a surface that transmits; all in front
+/// otherwise.
+pub fn split(rays: u32, transmits: bool) -> (u32, u32) {
+    if transmits {
+        (rays - rays / 2, rays / 2)
+    } else {
+        (rays, 0)
+    }
+}
+
+/// A 32-bit integer hash (Wellons' lowbias32): every output bit depends on every input bit.
+pub fn hash32(mut x: u32) -> u32 {
+    x ^= x >> 16;
+    x = x.wrapping_mul(0x7feb_352d);
+    x ^= x >> 15;
+    x = x.wrapping_mul(0x846c_a68b);
+    x ^= x >> 16;
+    x
+}
+
+/// The image pixel's index as the gather rays key it: `y · width + x` in wrapping 32-bit
+/// arithmetic (as `shade.wgsl` computes it).
+pub fn pixel_key(x: u32, y: u32, width: u32) -> u32 {
+    y.wrapping_mul(width).wrapping_add(x)
+}
+
+/// Point `index` of hemisphere `side` (0 front, 1 back) of pixel `pixel` on the unit square:
+/// R2 rotated by a hash of the seed, the pixel and the side. The pixel's `n` samples with
+/// `k` rays each on a side use indices `s · k + j`, so they stratify together.
+pub fn sample_point(seed: u64, pixel: u32, side: u32, index: u32) -> [f32; 2] {
+    let key = hash32(
+        hash32(pixel ^ hash32(seed as u32 ^ hash32((seed >> 32) as u32)))
+            ^ side.wrapping_mul(0x9e37_79b9),
+    );
+    let shift = [hash32(key), hash32(key ^ 0x85eb_ca6b)];
+    let to_unit = |v: u32| (v >> 8) as f32 * (1.0 / 16_777_216.0);
+    [
+        to_unit(shift[0].wrapping_add(index.wrapping_mul(R2[0]))),
+        to_unit(shift[1].wrapping_add(index.wrapping_mul(R2[1]))),
+    ]
+}
+
+/// Two unit vectors completing unit `n` to an orthonormal basis (Duff et al. 2017).
+pub fn basis(n: Vec3) -> (Vec3, Vec3) {
+    let sign = if n.z >= 0.0 { 1.0 } else { -1.0 };
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    (
+        Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
+        Vec3::new(b, sign + n.y * n.y * a, -n.y),
+    )
+}
+
+/// `(cos 2πt, sin 2πt)` for `t` in [0, 1), to about 1e-7, from a quadrant and Taylor
+/// polynomials in plain f32 arithmetic: `shade.wgsl` computes the same bits (the platforms'
+/// own sine and cosine need not agree in their last bits).
+pub fn cos_sin_turn(t: f32) -> (f32, f32) {
+    let q = (4.0 * t).floor();
+    let a = (4.0 * t - q) * 1.570_796_4;
+    let a2 = a * a;
+    let s = a
+        * (1.0
+            + a2 * (-0.166_666_67
+                + a2 * (0.008_333_334
+                    + a2 * (-0.000_198_412_7 + a2 * (2.755_731_9e-6 + a2 * -2.505_210_8e-8)))));
+    let c = 1.0
+        + a2 * (-0.5
+            + a2 * (0.041_666_668
+                + a2 * (-0.001_388_888_9
+                    + a2 * (2.480_158_8e-5 + a2 * (-2.755_732e-7 + a2 * 2.087_675_8e-9)))));
+    match q as i32 {
+        0 => (c, s),
+        1 => (-s, c),
+        2 => (-c, -s),
+        _ => (s, -c),
+    }
+}
+
+/// The direction of square point `u` cosine-distributed about unit `n` (Malley's method:
+/// the unit disc lifted to the hemisphere).
+pub fn cosine_direction(n: Vec3, u: [f32; 2]) -> Vec3 {
+    let r = u[0].sqrt();
+    let (c, s) = cos_sin_turn(u[1]);
+    let z = (1.0 - u[0]).max(0.0).sqrt();
+    let (b1, b2) = basis(n);
+    b1 * (r * c) + b2 * (r * s) + n * z
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The share of `count` cosine-distributed directions about `n` that point above the
+    /// horizon.
+    fn above_horizon(n: Vec3, count: u32, seed: u64, pixel: u32) -> f64 {
+        (0..count)
+            .filter(|&i| cosine_direction(n, sample_point(seed, pixel, 0, i)).y > 0.0)
+            .count() as f64
+            / count as f64
+    }
+
+    #[test]
+    fn the_turn_polynomials_are_cosine_and_sine() {
+        for i in 0..=4096 {
+            let t = (i as f32 / 4096.0).min(0.999_999_94);
+            let (c, s) = cos_sin_turn(t);
+            let a = std::f64::consts::TAU * t as f64;
+            assert!((c as f64 - a.cos()).abs() < 3e-7, "cos at {t}: {c}");
+            assert!((s as f64 - a.sin()).abs() < 3e-7, "sin at {t}: {s}");
+        }
+    }
+
+    #[test]
+    fn directions_are_unit_and_in_the_hemisphere() {
+        for n in [
+            Vec3::Y,
+            -Vec3::Y,
+            Vec3::Z,
+            -Vec3::Z,
+            Vec3::new(0.3, -0.5, 0.81).normalize(),
+        ] {
+            let (b1, b2) = basis(n);
+            for (a, b) in [(b1, b2), (b1, n), (b2, n)] {
+                assert!(a.dot(b).abs() < 1e-6, "{n}: {a} · {b}");
+            }
+            assert!((b1.length() - 1.0).abs() < 1e-6 && (b2.length() - 1.0).abs() < 1e-6);
+            for i in 0..256 {
+                let d = cosine_direction(n, sample_point(7, 3, 1, i));
+                assert!((d.length() - 1.0).abs() < 1e-5, "{d}");
+                assert!(d.dot(n) >= 0.0, "{n}: {d}");
+            }
+        }
+    }
+
+    #[test]
+    fn cosine_weighting_matches_closed_forms() {
+        // A cosine-weighted hemisphere about a normal tilted θ from the zenith has
+        // (1 + cos θ) / 2 of its weight above the horizon, and E[cos] = 2/3.
+        for theta in [0.0f32, 0.4, 1.0, std::f32::consts::FRAC_PI_2, 2.2] {
+            let n = Vec3::new(theta.sin(), theta.cos(), 0.0);
+            let want = (1.0 + theta.cos() as f64) / 2.0;
+            let got = above_horizon(n, 4096, 11, 12345);
+            assert!((got - want).abs() < 0.01, "θ {theta}: {got} vs {want}");
+        }
+        let n = Vec3::new(0.2, 0.9, -0.3).normalize();
+        let mean_cos: f64 = (0..4096)
+            .map(|i| cosine_direction(n, sample_point(1, 9, 0, i)).dot(n) as f64)
+            .sum::<f64>()
+            / 4096.0;
+        assert!((mean_cos - 2.0 / 3.0).abs() < 0.005, "{mean_cos}");
+    }
+
+    #[test]
+    fn few_rays_stratify_better_than_independent_ones() {
+        // 64 points (a pixel's 16 samples × 4 rays) on a vertical leaf: the pixels' shares of
+        // sky-bound rays scatter far less about 1/2 than binomial noise (σ = 1/16).
+        let n = Vec3::X;
+        let errs: Vec<f64> = (0..200u32)
+            .map(|p| (above_horizon(n, 64, 5, p) - 0.5).powi(2))
+            .collect();
+        let rms = (errs.iter().sum::<f64>() / errs.len() as f64).sqrt();
+        assert!(rms < 0.5 / 16.0, "RMS error {rms}");
+    }
+
+    #[test]
+    fn points_depend_on_seed_pixel_and_side_only() {
+        let p = sample_point(3, 77, 0, 5);
+        assert_eq!(p, sample_point(3, 77, 0, 5));
+        assert_ne!(p, sample_point(4, 77, 0, 5));
+        assert_ne!(p, sample_point(3, 78, 0, 5));
+        assert_ne!(p, sample_point(3, 77, 1, 5));
+        assert_ne!(p, sample_point(3, 77, 0, 6));
+        assert!(p.iter().all(|v| (0.0..1.0).contains(v)));
+        assert_eq!(split(8, true), (4, 4));
+        assert_eq!(split(5, true), (3, 2));
+        assert_eq!(split(5, false), (5, 0));
+        assert_eq!(pixel_key(3, 2, 10), 23);
+    }
+}
