@@ -614,14 +614,7 @@ fn gather_point(pixel: u32, side: u32, index: u32) -> vec2<f32> {
     let sx = hash32(key);
     let sy = hash32(key ^ 0x85ebca6bu);
     let unit = 1.0 / 16777216.0;
-    return vec2<f32>(f32((sx + mul32(index, 3242174889u)) >> 8u) * unit, f32((sy + mul32(index, 2447445413u)) >> 8u) * unit);
-}
-
-// a · b mod 2³² from 16-bit halves (no product overflows).
-fn mul32(a: u32, b: u32) -> u32 {
-    let lo = (a & 0xffffu) * (b & 0xffffu);
-    let mid = ((a >> 16u) * (b & 0xffffu) + (a & 0xffffu) * (b >> 16u)) & 0xffffu;
-    return lo + (mid << 16u);
+    return vec2<f32>(f32((sx + index * 3242174889u) >> 8u) * unit, f32((sy + index * 2447445413u) >> 8u) * unit);
 }
 
 fn cos_sin_turn(t: f32) -> vec2<f32> {
@@ -828,14 +821,14 @@ struct Gathered {
 }
 
 // Renderer::gather_rays, Renderer::gathered and the gathered indirect light of
-// Renderer::shade: what sample s's gather rays bring back to the plant point g.
+// Renderer::shade: what sample s's gather rays bring back to the plant point g (the front's
+// rays, then the back's).
 fn gather(d: vec3<f32>, h: Best, g: Geom, pixel: u32, s: u32) -> Gathered {
     let zero = vec3<f32>(0.0, 0.0, 0.0);
     let k = shading.gather.x;
     var front_count = k;
     var back_count = 0u;
-    let plant = g.kind == 2u;
-    if (plant && transmits(h)) {
+    if (transmits(h)) {
         front_count = k - k / 2u;
         back_count = k / 2u;
     }
@@ -846,55 +839,45 @@ fn gather(d: vec3<f32>, h: Best, g: Geom, pixel: u32, s: u32) -> Gathered {
     let t_max = bitcast<f32>(0x7f800000u);
     var rays = 0u;
     var to_cpu = false;
-    // One flat loop over the front's rays, then the back's (nested loops here lost
-    // iterations on lavapipe).
-    // The loop's trip count is the same for every invocation and its body has no break or
-    // continue: lavapipe lost iterations of gather loops that invocations left at different
-    // times.
     for (var i = 0u; i < k; i++) {
-        if (plant) {
-            var side = 0u;
-            var count = front_count;
-            var j = i;
-            var n = g.normal;
-            if (i >= front_count) {
-                side = 1u;
-                count = back_count;
-                j = i - front_count;
-                n = -g.normal;
-            }
-            let dir = cosine_direction(n, gather_point(pixel, side, s * count + j));
-            var off = -eps;
-            if (dot_(dir, g.ng) >= 0.0) {
-                off = eps;
-            }
-            let o = g.point + g.ng * off;
-            // A ray the CPU must trace flags the pixel; the loop goes on (its light is dropped).
-            let c = closest_hit(o, dir, 0.0, t_max);
-            to_cpu = to_cpu || c.fallback;
+        var side = 0u;
+        var count = front_count;
+        var j = i;
+        var n = g.normal;
+        if (i >= front_count) {
+            side = 1u;
+            count = back_count;
+            j = i - front_count;
+            n = -g.normal;
+        }
+        let dir = cosine_direction(n, gather_point(pixel, side, s * count + j));
+        var off = -eps;
+        if (dot_(dir, g.ng) >= 0.0) {
+            off = eps;
+        }
+        let o = g.point + g.ng * off;
+        // A ray the CPU must trace flags the pixel; the loop goes on (its light is dropped).
+        let c = closest_hit(o, dir, 0.0, t_max);
+        to_cpu = to_cpu || c.fallback;
+        rays += 1u;
+        let g2 = sample_geometry(o, dir, c.best);
+        var lit = false;
+        if (g2.shadow) {
+            let blocked = any_hit(g2.shadow_origin, shading.to_sun.xyz, 0.0, shading.sun.w, g2.from_instance);
+            to_cpu = to_cpu || blocked.y != 0u;
+            lit = blocked.x == 0u;
             rays += 1u;
-            let g2 = sample_geometry(o, dir, c.best);
-            var lit = false;
-            if (g2.shadow) {
-                let blocked = any_hit(g2.shadow_origin, shading.to_sun.xyz, 0.0, shading.sun.w, g2.from_instance);
-                to_cpu = to_cpu || blocked.y != 0u;
-                lit = blocked.x == 0u;
-                rays += 1u;
-            }
-            let r = shade(dir, c.best, g2, lit);
-            let l = (r.local + r.indirect + r.sky) / f32(count);
-            if (side == 0u) {
-                front += l;
-            } else {
-                back_sum += l;
-            }
+        }
+        let r = shade(dir, c.best, g2, lit);
+        let l = (r.local + r.indirect + r.sky) / f32(count);
+        if (side == 0u) {
+            front += l;
+        } else {
+            back_sum += l;
         }
     }
     if (to_cpu) {
         return Gathered(zero, 0u, true);
-    }
-    if (!plant) {
-        return Gathered(zero, 0u, false);
     }
     let sp = plant_surface(d, h, g);
     return Gathered((reflectance(sp) * front + transmittance(sp) * back_sum) * shading.k.x, rays, false);
@@ -960,16 +943,14 @@ fn render_frame(@builtin(global_invocation_id) id: vec3<u32>) {
             shadow_rays += 1u;
         }
         var r = shade(d, c.best, g, lit);
-        if (shading.gather.x > 0u) {
+        if (g.kind == 2u && shading.gather.x > 0u) {
             let gathered = gather(d, c.best, g, y * frame.origin.z + x, s);
             if (gathered.to_cpu) {
                 to_cpu = true;
                 break;
             }
             shadow_rays += gathered.rays;
-            if (g.kind == 2u) {
-                r.indirect = gathered.light;
-            }
+            r.indirect = gathered.light;
         }
         acc.local += r.local;
         acc.indirect += r.indirect;
