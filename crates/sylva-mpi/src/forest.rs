@@ -12,7 +12,7 @@
 //! again): this spreads the solves, the expensive part, over the ranks.
 
 use sylva_geom::Scene;
-use sylva_render::lighting::{LightingOptions, PartsPlan, PARTS};
+use sylva_render::lighting::{PartsPlan, PARTS};
 use sylva_render::relight::GlobalGridOptions;
 use sylva_render::{
     lighting_options, scene_illumination, scene_to_sun, stage, ForestDensities, LbPlan,
@@ -83,10 +83,7 @@ pub fn solve_forest_parts(
         .iter()
         .enumerate()
         .map(|(k, m)| {
-            let opts = LightingOptions {
-                preset: scene.model_preset(k).to_string(),
-                ..opts.clone()
-            };
+            let opts = opts.for_model(scene, k);
             let own = densities.own[k].clone();
             PartsPlan::new(
                 m,

@@ -15,7 +15,7 @@ use std::time::Instant;
 use sylva_geom::Scene;
 use sylva_lb::{DensityGrid, LightingGrid};
 use sylva_render::lighting::{
-    CacheLookup, LightingOptions, LightingPlan, LightingReport, LightingSource, ModelLighting,
+    CacheLookup, LightingPlan, LightingReport, LightingSource, ModelLighting,
 };
 use sylva_render::{lighting_options, scene_illumination, scene_to_sun, stage, LbPlan, Progress};
 
@@ -199,10 +199,7 @@ pub fn light_models(
         .iter()
         .enumerate()
         .map(|(k, m)| {
-            let opts = LightingOptions {
-                preset: scene.model_preset(k).to_string(),
-                ..opts.clone()
-            };
+            let opts = opts.for_model(scene, k);
             LightingPlan::new(m, &illum, &opts, lb.solver).map_err(|source| {
                 DistError::Pipeline(sylva_render::PipelineError::Lighting {
                     model: m.name.clone(),

@@ -36,7 +36,7 @@ use glam::DVec3;
 pub use glam::Vec3;
 use sylva_core::colour::luminance;
 use sylva_core::Fnv64;
-use sylva_geom::{is_opaque, LbSettings, MaterialKind, Model, Wrap, OPAQUE_ALPHA};
+use sylva_geom::{is_opaque, LbSettings, MaterialKind, Model, Scene, Wrap, OPAQUE_ALPHA};
 use sylva_lb::light::{self, Environment, PlantOptics};
 use sylva_lb::relight::{Footprint, Placement};
 use sylva_lb::solver::{memory_needed, Boundary, Floor, SolveOptions, VolumeSource};
@@ -166,6 +166,14 @@ impl LightingOptions {
             light,
             preset: lb.preset.clone(),
             cache_dir,
+        }
+    }
+
+    /// These options for model `k` of `scene`: its own LB preset ([`Scene::model_preset`]).
+    pub fn for_model(&self, scene: &Scene, k: usize) -> LightingOptions {
+        LightingOptions {
+            preset: scene.model_preset(k).to_string(),
+            ..self.clone()
         }
     }
 }

@@ -513,10 +513,7 @@ fn light_each_model<T>(
     let mut extra = Vec::with_capacity(scene.models.len());
     let mut cached = 0;
     for (k, model) in scene.models.iter().enumerate() {
-        let lopts = LightingOptions {
-            preset: scene.model_preset(k).to_string(),
-            ..lopts.clone()
-        };
+        let lopts = lopts.for_model(scene, k);
         let _m = tracing::info_span!(stage::LB_MODEL, model = %model.name).entered();
         progress.start(&format!("LB {}{label}", model.name), 3);
         let lit = light(k, model, &illum, &lopts, &mut |c, step, max| {
@@ -565,10 +562,7 @@ pub fn forest_densities(
         .iter()
         .enumerate()
         .map(|(k, model)| {
-            let lopts = LightingOptions {
-                preset: scene.model_preset(k).to_string(),
-                ..lopts.clone()
-            };
+            let lopts = lopts.for_model(scene, k);
             model_density(model, &illum, &lopts, lb.solver)
                 .map(|(density, _)| density)
                 .map_err(|source| PipelineError::Lighting {
@@ -1228,10 +1222,7 @@ pub fn relight_options(
         .map(|k| BasisCacheOptions {
             target: plan.target,
             keep_raw: plan.keep_raw,
-            ..BasisCacheOptions::new(&LightingOptions {
-                preset: scene.model_preset(k).to_string(),
-                ..lopts.clone()
-            })
+            ..BasisCacheOptions::new(&lopts.for_model(scene, k))
         })
         .collect();
     Ok((lopts, bopts))

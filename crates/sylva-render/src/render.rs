@@ -682,15 +682,7 @@ impl<'a> Renderer<'a> {
         let mut shadow_rays = 0;
         for s in 0..n {
             let ray = sample_ray(camera, x, y, s, n, settings.seed);
-            let mut hit = [None];
-            self.query.closest_hits(&[ray], &mut hit, stats);
-            let (mut geom, shadow) = self.sample_geometry(&ray, hit[0].as_ref());
-            if let Some(shadow) = shadow {
-                let mut blocked = [false];
-                self.query.any_hits(&[shadow], &mut blocked, stats);
-                geom.set_lit(!blocked[0]);
-                shadow_rays += 1;
-            }
+            let (hit, mut geom) = self.trace_one(&ray, stats, &mut shadow_rays);
             if self.gathers(&settings.shading) {
                 let pixel = crate::gather::pixel_key(x, y, camera.width);
                 let mut rays = Vec::new();
@@ -698,25 +690,35 @@ impl<'a> Renderer<'a> {
                     rays.push((r, side))
                 });
                 for (r, side) in rays {
-                    let mut hit = [None];
-                    self.query.closest_hits(&[r], &mut hit, stats);
                     shadow_rays += 1;
-                    let (mut g, shadow) = self.sample_geometry(&r, hit[0].as_ref());
-                    if let Some(shadow) = shadow {
-                        let mut blocked = [false];
-                        self.query.any_hits(&[shadow], &mut blocked, stats);
-                        g.set_lit(!blocked[0]);
-                        shadow_rays += 1;
-                    }
-                    geom.add_gathered(
-                        side,
-                        self.gathered(&r, hit[0].as_ref(), &g, &settings.shading),
-                    );
+                    let (h, g) = self.trace_one(&r, stats, &mut shadow_rays);
+                    geom.add_gathered(side, self.gathered(&r, h.as_ref(), &g, &settings.shading));
                 }
             }
-            acc += self.shade(&ray, hit[0].as_ref(), &geom, &settings.shading);
+            acc += self.shade(&ray, hit.as_ref(), &geom, &settings.shading);
         }
         (acc * (1.0 / n as f32), shadow_rays)
+    }
+
+    /// One ray's closest hit and its shading inputs, lit by its shadow ray when it needs one
+    /// (counted in `shadow_rays`), each traced alone.
+    fn trace_one(
+        &self,
+        ray: &Ray,
+        stats: &mut TraceStats,
+        shadow_rays: &mut u64,
+    ) -> (Option<Hit>, SampleGeom) {
+        let mut hit = [None];
+        self.query
+            .closest_hits(std::slice::from_ref(ray), &mut hit, stats);
+        let (mut geom, shadow) = self.sample_geometry(ray, hit[0].as_ref());
+        if let Some(shadow) = shadow {
+            let mut blocked = [false];
+            self.query.any_hits(&[shadow], &mut blocked, stats);
+            geom.set_lit(!blocked[0]);
+            *shadow_rays += 1;
+        }
+        (hit[0], geom)
     }
 
     /// The hit point and viewer-facing normal (not yet lit), and the shadow ray that decides
@@ -755,10 +757,10 @@ impl<'a> Renderer<'a> {
         if normal.dot(ng_view) < 0.0 {
             normal = -normal;
         }
-        let leaf = self.is_leaf(inst.model, hit.triangle);
-        let transmits = self
-            .material(inst.model, hit.triangle)
-            .is_some_and(|m| m.leaf && m.optics.transmit.iter().any(|&t| t > 0.0));
+        let material = self.material(inst.model, hit.triangle);
+        let leaf = material.is_some_and(|m| m.leaf);
+        let transmits =
+            leaf && material.is_some_and(|m| m.optics.transmit.iter().any(|&t| t > 0.0));
         let probe = SurfacePoint {
             normal,
             view,
@@ -782,6 +784,7 @@ impl<'a> Renderer<'a> {
         )
     }
 
+    /// The material of `triangle` of `model` (material 0 past the id list, as on the GPU).
     fn material(&self, model: u32, triangle: u32) -> Option<&ShadeMaterial> {
         let mesh = &self.scene.models[model as usize].mesh;
         let m = mesh
@@ -790,10 +793,6 @@ impl<'a> Renderer<'a> {
             .copied()
             .unwrap_or(0) as usize;
         self.materials[model as usize].get(m)
-    }
-
-    fn is_leaf(&self, model: u32, triangle: u32) -> bool {
-        self.material(model, triangle).is_some_and(|m| m.leaf)
     }
 
     /// The final gather's rays per plant sample, 0 when it does not gather (for the GPU
@@ -1225,5 +1224,58 @@ mod tests {
         }
         assert_eq!(Mode::parse("fancy"), None);
         assert!(!Mode::Local.needs_lb() && Mode::Ambient.needs_lb());
+    }
+
+    #[test]
+    fn a_pixel_traced_alone_is_the_frame_s_pixel_with_the_gather() {
+        // Renderer::pixel (the GPU frame's fallback) against the batched frame: same rays,
+        // same gather, same light, bit for bit; and it counts the same secondary rays.
+        use crate::lighting::Light;
+        use crate::pipeline::{load_scene, LbPlan, PrepareOptions, PreparedScene, Silent};
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("rose.toml");
+        std::fs::write(
+            &path,
+            "name = \"rose\"\n[[models]]\nname = \"rose\"\nspecies = \"dogrose\"\n\
+             [[instances]]\nmodel = \"rose\"\nposition = [0.0, 0.0, 0.0]\n\
+             [ground]\nsize = [12.0, 12.0]\n\
+             [camera]\nposition = [0.0, 2.0, -4.5]\nlook_at = [0.2, 0.6, 0.5]\nfov = 45.0\n\
+             resolution = [32, 24]\n",
+        )
+        .unwrap();
+        let scene = load_scene(path.to_str().unwrap(), None).unwrap();
+        let opts = PrepareOptions {
+            lb: Some(LbPlan {
+                solver: &sylva_lb::CpuSolver,
+                light: Light::Physical,
+                grid: Some(24),
+                cache_dir: None,
+            }),
+            light: Light::Physical,
+            forest: None,
+            ..PrepareOptions::default()
+        };
+        let p = PreparedScene::new(scene, &opts, &Silent).unwrap();
+        let settings = p.settings(p.camera(32, 24), 3, 5);
+        assert!(settings.shading.gather_rays > 0);
+        let frame = p.render(&settings, &Silent).unwrap();
+        let r = p.renderer();
+        let camera = PinholeCamera::new(&settings.camera).unwrap();
+        let mut stats = TraceStats::default();
+        let mut secondary = 0;
+        let mut gathered = 0;
+        for y in 0..24 {
+            for x in 0..32 {
+                let (px, rays) = r.pixel(&camera, x, y, &settings, &mut stats);
+                assert_eq!(px, frame.pixels[(y * 32 + x) as usize], "pixel ({x}, {y})");
+                secondary += rays;
+                gathered += (px.albedo != Vec3::ZERO && px.indirect != Vec3::ZERO) as usize;
+            }
+        }
+        assert_eq!(secondary, frame.timings.shadow_rays);
+        assert!(
+            gathered > 50,
+            "{gathered} plant or ground pixels with indirect light"
+        );
     }
 }
