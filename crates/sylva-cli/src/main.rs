@@ -161,11 +161,22 @@ fn run_mpi(command: Command) -> std::process::ExitCode {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             let (rank, size) = (mpi.rank(), mpi.size());
-            eprintln!("error: rank {rank} of {size}: {e}");
+            // One write for the whole report: eprintln! writes a formatted line in pieces,
+            // and mpirun relays each as it comes, so its abort banner could split the line.
+            let mut report = format!("error: rank {rank} of {size}: {e}\n");
             for cause in e.chain().skip(1) {
-                eprintln!("  caused by: {cause}");
+                report.push_str(&format!("  caused by: {cause}\n"));
             }
-            eprintln!("sylva: rank {rank} failed; aborting the MPI job");
+            report.push_str(&format!(
+                "sylva: rank {rank} failed; aborting the MPI job\n"
+            ));
+            {
+                use std::io::Write;
+                let mut err = std::io::stderr().lock();
+                // Nothing better to do if stderr is gone: the abort below still ends the job.
+                let _ = err.write_all(report.as_bytes());
+                let _ = err.flush();
+            }
             mpi.abort(1)
         }
     }
