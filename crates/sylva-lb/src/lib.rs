@@ -1,8 +1,8 @@
 //! Lattice-Boltzmann photon transport (papers 000 §2.2-3, 002 §3, 004 §2.2; SPEC §1).
 //!
-//! Owns the D3Q19 lattice, the collision matrix with Henyey-Greenstein anisotropy, the
-//! parameter presets, the solver (boundary shell, green/brown sites, convergence), the
-//! density and lighting grids with their file format and previews, the built-in test
+//! Owns the collision matrix with Henyey-Greenstein anisotropy, the
+//! parameter presets, the solver (boundary shell, green/brown sites, convergence), grid
+//! previews, the built-in test
 //! shapes and relighting of one grid (paper 004: base solutions solved as independent jobs,
 //! the 32-face polyhedron, compression and the compressed file);
 //! [`LbSolver`] is the solver as a backend ([`CpuSolver`] here, the GPU one in
@@ -15,10 +15,10 @@ pub mod alloc;
 pub mod backend;
 pub mod bandwidth;
 pub mod collision;
-pub mod grid;
-pub mod grid_file;
 pub mod kernel;
-pub mod lattice;
+/// The lattice, the grids and their file format live in `sylva-grid` (the voxelizer writes
+/// them without the solver); re-exported here under their old paths.
+pub use sylva_grid::{grid, grid_file, lattice};
 pub mod light;
 /// The presets and per-colour parameters live in `sylva-geom` (scenes name presets, and
 /// export reads their optics without the solver); re-exported here where the solver uses them.

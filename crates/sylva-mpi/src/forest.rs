@@ -1,23 +1,24 @@
 //! The physical light's forest parts across ranks: every model's four light parts
-//! ([`sylva_render::lighting::PARTS`]) as jobs of the work queue, stored in rank 0's cache.
+//! ([`sylva_light::lighting::PARTS`]) as jobs of the work queue, stored in rank 0's cache.
 //!
-//! A scene lit through the forest grid ([`sylva_render::forest`]) needs each model's parts,
+//! A scene lit through the forest grid ([`sylva_light::forest`]) needs each model's parts,
 //! its sun part solved on its density with the neighbours' foliage added. Every rank builds
-//! the models' densities and that foliage once ([`sylva_render::forest_densities`]: the same
+//! the models' densities and that foliage once ([`sylva_pipeline::forest_densities`]: the same
 //! inputs and a deterministic computation, so the same on every rank), rank 0 lists the
 //! parts its cache lacks, the ranks solve them through the queue, and rank 0 stores each as
 //! one process would (the same file, byte for byte). Each rank then prepares the scene from
-//! the cache with the same densities ([`sylva_render::PreparedScene::with_forest_densities`];
+//! the cache with the same densities ([`sylva_pipeline::PreparedScene::with_forest_densities`];
 //! rank 0 first, the other ranks read its cache where they share its filesystem, else solve
 //! again): this spreads the solves, the expensive part, over the ranks.
 
 use sylva_geom::Scene;
-use sylva_render::lighting::{PartsPlan, PARTS};
-use sylva_render::relight::GlobalGridOptions;
-use sylva_render::{
-    lighting_options, scene_illumination, scene_to_sun, stage, ForestDensities, LbPlan,
-    PipelineError, Progress,
+use sylva_light::lighting::{PartsPlan, PARTS};
+use sylva_light::relight::GlobalGridOptions;
+use sylva_light::Progress;
+use sylva_pipeline::{
+    lighting_options, scene_illumination, scene_to_sun, ForestDensities, LbPlan, PipelineError,
 };
+use sylva_render::stage;
 
 use crate::comm::{agree, Comm, CommError, Reader, Writer};
 use crate::queue::run_queue;
@@ -25,7 +26,7 @@ use crate::DistError;
 
 /// Solves the parts missing from rank 0's cache across the ranks and stores them there
 /// (every rank calls it with the same scene, plan and `densities`, its own
-/// [`sylva_render::forest_densities`] of them; the scene and plan are checked). Returns how
+/// [`sylva_pipeline::forest_densities`] of them; the scene and plan are checked). Returns how
 /// many parts were solved. Without a cache at rank 0 nothing is solved here.
 pub fn solve_forest_parts(
     comm: &dyn Comm,

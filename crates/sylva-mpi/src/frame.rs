@@ -9,10 +9,10 @@
 
 use std::time::Instant;
 
+use sylva_light::Progress;
+use sylva_pipeline::PreparedScene;
 use sylva_render::render::{tile_count, TILE};
-use sylva_render::{
-    stage, Frame, FrameTimings, PreparedScene, Progress, Radiance, Region, RenderSettings,
-};
+use sylva_render::{stage, Frame, FrameTimings, Radiance, Region, RenderSettings};
 use sylva_trace::TraceStats;
 
 use crate::comm::{agree, Comm, Reader, Writer};

@@ -43,7 +43,7 @@ pub enum DistError {
     #[error(transparent)]
     Comm(#[from] CommError),
     #[error(transparent)]
-    Pipeline(#[from] sylva_render::PipelineError),
+    Pipeline(#[from] sylva_pipeline::PipelineError),
     #[error(transparent)]
     Render(#[from] sylva_render::RenderError),
     /// Ranks started with different inputs.

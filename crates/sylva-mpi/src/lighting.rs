@@ -14,10 +14,12 @@ use std::time::Instant;
 
 use sylva_geom::Scene;
 use sylva_lb::{DensityGrid, LightingGrid};
-use sylva_render::lighting::{
+use sylva_light::lighting::{
     CacheLookup, LightingPlan, LightingReport, LightingSource, ModelLighting,
 };
-use sylva_render::{lighting_options, scene_illumination, scene_to_sun, stage, LbPlan, Progress};
+use sylva_light::Progress;
+use sylva_pipeline::{lighting_options, scene_illumination, scene_to_sun, LbPlan};
+use sylva_render::stage;
 
 use crate::comm::{agree, Comm, CommError, Reader, Writer};
 use crate::queue::run_queue;
@@ -155,8 +157,8 @@ pub fn solve_model_jobs<J: ModelJob, P: JobModel>(
         .map(Some)
 }
 
-fn lighting_error(plan: &LightingPlan, source: sylva_render::lighting::LightingError) -> DistError {
-    DistError::Pipeline(sylva_render::PipelineError::Lighting {
+fn lighting_error(plan: &LightingPlan, source: sylva_light::lighting::LightingError) -> DistError {
+    DistError::Pipeline(sylva_pipeline::PipelineError::Lighting {
         model: plan.model.name.clone(),
         source,
     })
@@ -201,7 +203,7 @@ pub fn light_models(
         .map(|(k, m)| {
             let opts = opts.for_model(scene, k);
             LightingPlan::new(m, &illum, &opts, lb.solver).map_err(|source| {
-                DistError::Pipeline(sylva_render::PipelineError::Lighting {
+                DistError::Pipeline(sylva_pipeline::PipelineError::Lighting {
                     model: m.name.clone(),
                     source,
                 })

@@ -4,8 +4,8 @@
 //! ([`BasisModelJob`]: models × bases × colours, run by [`solve_model_jobs`]). Rank 0 owns the
 //! cache as in [`crate::lighting`]: it looks every model up, lists the missing models, and
 //! once the queue has gathered their jobs' values puts each model's in a `BasisAssembly` and
-//! stores it with the one-process code (`sylva_render::relight::store_basis`: finished,
-//! compressed, written), then makes the coarse global grid (`sylva_render::finish_relighting`).
+//! stores it with the one-process code (`sylva_light::relight::store_basis`: finished,
+//! compressed, written), then makes the coarse global grid (`sylva_pipeline::finish_relighting`).
 //! A job solved alone is bit for bit that job of the one-process solve (one colour of one
 //! base solution: `BasisPlan::run` on one job), so the sets, the cache entries and the global
 //! grid are those of one process whatever the rank count. With `everywhere`, rank 0 then
@@ -16,15 +16,16 @@ use std::time::Instant;
 
 use sylva_geom::{Model, Scene};
 use sylva_lb::relight::{BasisJob, BasisSet, CompressedBasis, CHANNELS};
-use sylva_render::lighting::{LightingError, LightingSource};
-use sylva_render::relight::{
+use sylva_light::lighting::{LightingError, LightingSource};
+use sylva_light::relight::{
     lookup_basis, store_basis, BasisCacheOptions, BasisLookup, BasisPlan, BasisReport, GlobalLight,
     ModelBasis, StoredBasis,
 };
-use sylva_render::{
-    finish_relighting, relight_options, stage, BasisUse, LbPlan, PipelineError, Progress,
-    RelightPlan, Relighting,
+use sylva_light::Progress;
+use sylva_pipeline::{
+    finish_relighting, relight_options, BasisUse, LbPlan, PipelineError, RelightPlan, Relighting,
 };
+use sylva_render::stage;
 
 use crate::comm::{agree, Comm, CommError, Reader, Writer};
 use crate::lighting::{solve_model_jobs, JobModel, ModelJob};
@@ -99,7 +100,7 @@ pub fn basis_jobs(
     Ok((jobs, sites))
 }
 
-/// [`sylva_render::precompute_relighting`] across the ranks of `comm` (every rank calls it
+/// [`sylva_pipeline::precompute_relighting`] across the ranks of `comm` (every rank calls it
 /// with the same scene and plans; that is checked, and with `--basis always` every rank must
 /// solve on the same kind of device, since CPU and GPU results differ in the last bits).
 /// Rank 0 reads and writes `lb`'s cache, reports each model's basis and the global grid to

@@ -7,15 +7,16 @@ use std::path::Path;
 
 use sylva_geom::Scene;
 use sylva_lb::CpuSolver;
+use sylva_light::lighting::LightingPlan;
+use sylva_light::Silent;
 use sylva_mpi::lighting::{solve_model_jobs, ModelJob};
 use sylva_mpi::{
     light_models, render_frame, solve_forest_parts, Comm, CommError, DistError, LocalComm,
 };
-use sylva_render::lighting::LightingPlan;
-use sylva_render::{
-    forest_densities, lighting_options, load_scene, Frame, LbPlan, PrepareOptions, PreparedScene,
-    Region, RenderSettings, Silent,
+use sylva_pipeline::{
+    forest_densities, lighting_options, load_scene, LbPlan, PrepareOptions, PreparedScene,
 };
+use sylva_render::{Frame, Region, RenderSettings};
 
 const SCENE: &str = r#"
 name = "two roses"
@@ -55,7 +56,7 @@ fn options(cache: &Path) -> PrepareOptions<'_> {
     PrepareOptions {
         lb: Some(LbPlan {
             solver: &CpuSolver,
-            light: sylva_render::Light::Physical,
+            light: sylva_light::Light::Physical,
             grid: None,
             cache_dir: Some(cache),
         }),
@@ -243,7 +244,7 @@ fn any_list_of_model_jobs_runs_through_the_queue_in_job_order() {
     let scene = load_scene(scene_file.to_str().unwrap(), None).unwrap();
     let lb = LbPlan {
         solver: &CpuSolver,
-        light: sylva_render::Light::Physical,
+        light: sylva_light::Light::Physical,
         grid: None,
         cache_dir: None,
     };
@@ -254,7 +255,7 @@ fn any_list_of_model_jobs_runs_through_the_queue_in_job_order() {
         .map(|m| {
             LightingPlan::new(
                 m,
-                &sylva_render::scene_illumination(&scene),
+                &sylva_pipeline::scene_illumination(&scene),
                 &opts,
                 &CpuSolver,
             )
@@ -330,10 +331,10 @@ fn forest_parts_solved_across_ranks_are_the_one_process_entries() {
     let scene_file = dir.path().join("roses.toml");
     std::fs::write(&scene_file, SCENE).unwrap();
     let scene = load_scene(scene_file.to_str().unwrap(), None).unwrap();
-    let gopts = sylva_render::relight::GlobalGridOptions::default();
+    let gopts = sylva_light::relight::GlobalGridOptions::default();
     fn forest_options(cache: &Path) -> PrepareOptions<'_> {
         PrepareOptions {
-            forest: Some(sylva_render::relight::GlobalGridOptions::default()),
+            forest: Some(sylva_light::relight::GlobalGridOptions::default()),
             ..options(cache)
         }
     }

@@ -9,12 +9,11 @@ use std::path::Path;
 use sylva_geom::Scene;
 use sylva_lb::relight::CompressedBasis;
 use sylva_lb::{CpuSolver, GridFile};
+use sylva_light::relight::{GlobalGridOptions, StoredBasis};
+use sylva_light::{Light, Silent};
 use sylva_mpi::relight::basis_jobs;
 use sylva_mpi::{precompute_relighting, Comm, LocalComm};
-use sylva_render::relight::{GlobalGridOptions, StoredBasis};
-use sylva_render::{
-    load_scene, relight_options, BasisUse, LbPlan, Light, RelightPlan, Relighting, Silent,
-};
+use sylva_pipeline::{load_scene, relight_options, BasisUse, LbPlan, RelightPlan, Relighting};
 
 const SCENE: &str = r#"
 name = "two roses"
@@ -161,9 +160,10 @@ fn distributed_bases_are_the_one_process_ones() {
     let (dir, scene) = scene();
     let one_cache = dir.path().join("one");
     let always = plan(BasisUse::Always);
-    let want = sylva_render::precompute_relighting(&scene, &lb(Some(&one_cache)), &always, &Silent)
-        .unwrap()
-        .expect("solved");
+    let want =
+        sylva_pipeline::precompute_relighting(&scene, &lb(Some(&one_cache)), &always, &Silent)
+            .unwrap()
+            .expect("solved");
     assert_eq!(want.cached, 0);
     let want_entries = entries(&one_cache);
     // Per model a compressed and an uncompressed entry, and the global grid.
@@ -210,7 +210,7 @@ fn a_cached_only_plan_falls_back_on_every_rank_or_shares_the_cache() {
     assert!(!cache.exists() || entries(&cache).is_empty());
 
     // Cached (by one process): every rank gets the sets rank 0 read.
-    let want = sylva_render::precompute_relighting(
+    let want = sylva_pipeline::precompute_relighting(
         &scene,
         &lb(Some(&cache)),
         &plan(BasisUse::Always),

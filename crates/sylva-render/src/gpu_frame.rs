@@ -26,12 +26,12 @@ use sylva_trace_gpu::split::{storage_entry, uniform_entry, SplitArray};
 use sylva_trace_gpu::{GpuTracer, TraceGpuError, SCENE_GROUP};
 use sylva_wgpu::{wgpu, GpuContext, GpuError, PassTimer};
 
-use crate::indirect::{GroundIndex, ModelGridLight};
-use crate::lighting::Light;
-use crate::relight::{RelitLight, StoredBasis};
 use crate::render::{sample_offset, Frame, FrameTimings, RenderError, RenderSettings, Renderer};
 use crate::shade::{Radiance, ShadeMaterial};
 use sylva_lb::light::SHEET_RADIANCE_PER_FLUENCE;
+use sylva_light::indirect::{GroundIndex, ModelGridLight};
+use sylva_light::lighting::Light;
+use sylva_light::relight::{RelitLight, StoredBasis};
 
 /// The kernel and the shading functions it calls (after the scene's WGSL).
 const SHADE_WGSL: &str = include_str!("shade.wgsl");
@@ -722,7 +722,7 @@ impl GpuFrame {
     /// Renders `settings.region` of `settings.camera`'s image on the GPU; `cpu` (the CPU
     /// renderer over the same scene, lights and tracer) renders the pixels the kernel hands
     /// back. `progress(n)` counts tiles × 3 as the CPU renderer does.
-    pub(crate) fn render(
+    pub fn render(
         &self,
         tracer: &GpuTracer,
         cpu: &Renderer,

@@ -21,13 +21,13 @@ use sylva_core::SplitMix64;
 use sylva_geom::{Camera, Scene};
 use sylva_trace::{Hit, PinholeCamera, Ray, RayQuery, ShadowRay, TraceError, TraceStats, PACKET};
 
-use crate::indirect::IndirectLight;
-use crate::lighting::Light;
-use crate::media::Media;
 use crate::shade::{
     indirect_light, local_light, needs_shadow_ray, Radiance, ShadeMaterial, ShadingParams,
     SurfacePoint,
 };
+use sylva_light::indirect::IndirectLight;
+use sylva_light::lighting::Light;
+use sylva_light::media::Media;
 
 /// Tile edge in pixels.
 pub const TILE: u32 = 8;
@@ -669,7 +669,7 @@ impl<'a> Renderer<'a> {
 
     /// Pixel `(x, y)` of the whole image of `settings.camera` traced and shaded on its own,
     /// sample by sample: the value a frame holds for it, and the secondary rays (shadow and gather) it traced.
-    pub(crate) fn pixel(
+    pub fn pixel(
         &self,
         camera: &PinholeCamera,
         x: u32,
@@ -1224,58 +1224,5 @@ mod tests {
         }
         assert_eq!(Mode::parse("fancy"), None);
         assert!(!Mode::Local.needs_lb() && Mode::Ambient.needs_lb());
-    }
-
-    #[test]
-    fn a_pixel_traced_alone_is_the_frame_s_pixel_with_the_gather() {
-        // Renderer::pixel (the GPU frame's fallback) against the batched frame: same rays,
-        // same gather, same light, bit for bit; and it counts the same secondary rays.
-        use crate::lighting::Light;
-        use crate::pipeline::{load_scene, LbPlan, PrepareOptions, PreparedScene, Silent};
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("rose.toml");
-        std::fs::write(
-            &path,
-            "name = \"rose\"\n[[models]]\nname = \"rose\"\nspecies = \"dogrose\"\n\
-             [[instances]]\nmodel = \"rose\"\nposition = [0.0, 0.0, 0.0]\n\
-             [ground]\nsize = [12.0, 12.0]\n\
-             [camera]\nposition = [0.0, 2.0, -4.5]\nlook_at = [0.2, 0.6, 0.5]\nfov = 45.0\n\
-             resolution = [32, 24]\n",
-        )
-        .unwrap();
-        let scene = load_scene(path.to_str().unwrap(), None).unwrap();
-        let opts = PrepareOptions {
-            lb: Some(LbPlan {
-                solver: &sylva_lb::CpuSolver,
-                light: Light::Physical,
-                grid: Some(24),
-                cache_dir: None,
-            }),
-            light: Light::Physical,
-            forest: None,
-            ..PrepareOptions::default()
-        };
-        let p = PreparedScene::new(scene, &opts, &Silent).unwrap();
-        let settings = p.settings(p.camera(32, 24), 3, 5);
-        assert!(settings.shading.gather_rays > 0);
-        let frame = p.render(&settings, &Silent).unwrap();
-        let r = p.renderer();
-        let camera = PinholeCamera::new(&settings.camera).unwrap();
-        let mut stats = TraceStats::default();
-        let mut secondary = 0;
-        let mut gathered = 0;
-        for y in 0..24 {
-            for x in 0..32 {
-                let (px, rays) = r.pixel(&camera, x, y, &settings, &mut stats);
-                assert_eq!(px, frame.pixels[(y * 32 + x) as usize], "pixel ({x}, {y})");
-                secondary += rays;
-                gathered += (px.albedo != Vec3::ZERO && px.indirect != Vec3::ZERO) as usize;
-            }
-        }
-        assert_eq!(secondary, frame.timings.shadow_rays);
-        assert!(
-            gathered > 50,
-            "{gathered} plant or ground pixels with indirect light"
-        );
     }
 }

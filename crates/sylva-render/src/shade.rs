@@ -21,7 +21,7 @@ use sylva_core::colour::srgb_to_linear;
 use sylva_geom::{Material, MaterialKind, Model, Optics, Texture, Wrap};
 use sylva_lb::light::SHEET_RADIANCE_PER_FLUENCE;
 
-use crate::lighting::Light;
+use sylva_light::lighting::Light;
 
 /// Shading constants that the papers leave open (documented in docs/render.md).
 #[derive(Debug, Clone, Copy, PartialEq)]

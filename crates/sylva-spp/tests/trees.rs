@@ -6,7 +6,7 @@
 use glam::Vec3;
 use sylva_geom::{Instance, Model};
 use sylva_lb::CpuSolver;
-use sylva_render::Silent;
+use sylva_light::Silent;
 use sylva_spp::trees::beam::{count_depths, Beam};
 use sylva_spp::trees::experiment::{self, ExperimentConfig, LbPlan, MIN_CATEGORY_MESHES};
 use sylva_spp::trees::meshes::SceneMeshes;
@@ -472,7 +472,7 @@ fn bad_input_is_an_error() {
 
 #[test]
 fn the_spp_light_is_the_slab_model_inside_a_slab_shaped_tree() {
-    use sylva_render::IndirectLight;
+    use sylva_light::IndirectLight;
     use sylva_spp::trees::shading::TreeSpp;
     use sylva_spp::trees::system::SppLight;
     // A slab-shaped tree 4 mean free paths thick (top at y = 1), lit from above. Over many

@@ -9,14 +9,14 @@
 //!
 //! [`AreaGrid::to_density_grid`] turns leaf and bark area into the LB site density: the
 //! probability that light crossing a cell meets a leaf or bark
-//! ([`sylva_lb::light::collision_probability`]), and the bark share of it as the wood fraction.
+//! ([`sylva_grid::density::collision_probability`]), and the bark share of it as the wood fraction.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use glam::DVec3;
 use rayon::prelude::*;
 use sylva_geom::{is_opaque, MaterialKind, Model, Texture, Wrap};
-use sylva_lb::{light::collision_probability, DensityGrid};
+use sylva_grid::{density::collision_probability, DensityGrid};
 
 use crate::{check_model, check_texture_uvs, GridPlacement, VoxelizeError};
 

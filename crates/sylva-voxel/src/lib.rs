@@ -31,7 +31,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use glam::DVec3;
 use rayon::prelude::*;
-use sylva_lb::{Bounds, DensityGrid, Dims, GridError};
+use sylva_grid::{Bounds, DensityGrid, Dims, GridError};
 use thiserror::Error;
 
 use sylva_geom::{is_opaque, MaterialKind, Model, Texture, Wrap};

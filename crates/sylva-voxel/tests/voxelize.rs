@@ -6,8 +6,8 @@ use std::sync::Arc;
 use glam::Vec3;
 use sylva_core::SplitMix64;
 use sylva_geom::{Material, MaterialKind, Mesh, Model, Texture, Wrap};
+use sylva_grid::Dims;
 use sylva_grow::Species;
-use sylva_lb::Dims;
 use sylva_voxel::{
     plant_area, subcell_bit, voxelize, voxelize_masks, GridPlacement, Occupancy, SubcellMasks,
     VoxelizeError, VoxelizeOptions, SUB, SUBCELLS,
@@ -691,7 +691,7 @@ fn area_density_is_the_collision_probability() {
     let a = plant_area(&model, &p, true).unwrap();
     let g = a.to_density_grid().unwrap();
     let i = d.index(1, 1, 1);
-    let (want, wood) = sylva_lb::light::collision_probability(4.0, 4.0, 3.0);
+    let (want, wood) = sylva_grid::density::collision_probability(4.0, 4.0, 3.0);
     assert!(near(g.density[i] as f64, want, 1e-6) && want > 0.0);
     assert!(near(g.wood[i] as f64, wood, 1e-6));
     // Bark counts a quarter of its area, leaves half: the wood share is 1/3.

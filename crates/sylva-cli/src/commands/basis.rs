@@ -8,8 +8,9 @@ use std::time::Instant;
 
 use anyhow::Result;
 use clap::Args;
+use sylva_light::{Progress, Silent};
 use sylva_mpi::Comm;
-use sylva_render::{load_scene, precompute_relighting, LbPlan, Progress, Silent};
+use sylva_pipeline::{load_scene, precompute_relighting, LbPlan};
 
 use super::progress::{Bars, Report};
 use super::render::{report_line, FrameArgs};
@@ -48,7 +49,7 @@ pub fn run(a: BasisArgs, comm: Option<&dyn Comm>) -> Result<()> {
         }
         println!("model\tbasis\tcolour");
         for (m, model) in scene.models.iter().enumerate() {
-            let plan = sylva_render::relight::BasisPlan::new(model, grid, scene.model_preset(m))?;
+            let plan = sylva_light::relight::BasisPlan::new(model, grid, scene.model_preset(m))?;
             for job in plan.jobs() {
                 println!("{m}\t{}\t{}", job.basis, job.colour);
             }
@@ -73,7 +74,7 @@ pub fn run(a: BasisArgs, comm: Option<&dyn Comm>) -> Result<()> {
         solver: &*solver,
         grid: a.frame.lb_grid,
         cache_dir: (!a.frame.no_cache).then_some(a.frame.cache_dir.as_path()),
-        light: sylva_render::Light::Paper,
+        light: sylva_light::Light::Paper,
     };
     let progress = Bars::new(|r: Report| {
         let (line, warning) = report_line(r);

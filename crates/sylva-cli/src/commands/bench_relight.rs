@@ -10,9 +10,11 @@ use std::time::Instant;
 use anyhow::Result;
 use sylva_core::colour::linear_to_srgb;
 use sylva_lb::relight::BasisWeights;
-use sylva_render::lighting::ModelLighting;
-use sylva_render::relight::{sun_path, StoredBasis};
-use sylva_render::{Frame, Mode, ModelGridLight, ShadowMethod, Silent, ToneMap};
+use sylva_light::lighting::ModelLighting;
+use sylva_light::relight::{sun_path, StoredBasis};
+use sylva_light::{ModelGridLight, Silent};
+use sylva_pipeline::ShadowMethod;
+use sylva_render::{Frame, Mode, ToneMap};
 
 use super::bench_scene::{median, peak_rss_bytes};
 use super::progress::bar;
@@ -76,7 +78,7 @@ pub fn run(a: BenchRelightArgs) -> Result<()> {
     let basis_seconds: Option<f64> = basis_per_model.iter().copied().sum();
     let basis_cached = reports
         .iter()
-        .all(|r| r.source == sylva_render::lighting::LightingSource::Cached);
+        .all(|r| r.source == sylva_light::lighting::LightingSource::Cached);
 
     // The static frame of paper 000: one grid per model for the scene's sun taken as the
     // model's own (exactly the direct solve's light: the exact combination of the
@@ -103,7 +105,7 @@ pub fn run(a: BenchRelightArgs) -> Result<()> {
     };
     prepared.use_uncompressed(false)?;
     // Rendered at the scene's sun (the one its grids were made for), kd-tree shadows.
-    let static_frame = |p: &sylva_render::PreparedScene| -> Result<Frame> {
+    let static_frame = |p: &sylva_pipeline::PreparedScene| -> Result<Frame> {
         Ok(p.renderer_with(&static_light).render(&settings, &|_| {})?)
     };
     let pb = if a.json {

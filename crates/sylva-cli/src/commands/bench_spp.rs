@@ -5,7 +5,8 @@
 use anyhow::{Context, Result};
 use serde::Serialize;
 use std::time::Instant;
-use sylva_render::{PrepareOptions, PreparedScene, Silent};
+use sylva_light::Silent;
+use sylva_pipeline::{PrepareOptions, PreparedScene};
 use sylva_spp::trees::meshes::SceneMeshes;
 use sylva_spp::trees::system::{SppLight, SppSystem, SystemConfig};
 
@@ -137,7 +138,7 @@ pub fn run(a: BenchSppArgs) -> Result<()> {
         &PrepareOptions {
             largest_frame: Some((a.width, a.height, 1)),
             // The SPP light is normalised like the paper's LB light and shaded as it.
-            light: sylva_render::Light::Paper,
+            light: sylva_light::Light::Paper,
             ..PrepareOptions::default()
         },
         &Silent,

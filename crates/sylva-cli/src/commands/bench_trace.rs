@@ -2,9 +2,10 @@
 //! rays, shading) at 1 and 4 rays per pixel, with LB lighting from the cache.
 
 use anyhow::Result;
+use sylva_light::Silent;
 use sylva_mpi::model::TileCosts;
 use sylva_mpi::{Comm, DistributedFrame};
-use sylva_render::{stage, Frame, FrameTimings, Silent, StageClock};
+use sylva_render::{stage, Frame, FrameTimings, StageClock};
 
 use super::bench_scene::{median, peak_rss_bytes};
 use super::render::{prepare, FrameArgs};
@@ -38,7 +39,7 @@ const PAPER_TABLE4: [(usize, f64); 5] =
 
 /// Every tile of the frame rendered alone, `runs` times: the median seconds per tile.
 fn tile_costs(
-    p: &sylva_render::PreparedScene,
+    p: &sylva_pipeline::PreparedScene,
     settings: &sylva_render::RenderSettings,
     runs: u32,
 ) -> Result<TileCosts> {

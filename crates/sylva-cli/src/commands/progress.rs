@@ -5,10 +5,10 @@ use std::sync::Mutex;
 
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use sylva_geom::{Medium, Model};
-use sylva_render::forest::ShadedDensity;
-use sylva_render::lighting::LightingReport;
-use sylva_render::relight::{BasisReport, GlobalReport};
-use sylva_render::Progress;
+use sylva_light::lighting::LightingReport;
+use sylva_light::lighting::ShadedDensity;
+use sylva_light::relight::{BasisReport, GlobalReport};
+use sylva_light::Progress;
 
 /// A bar over `len` units of work, labelled `what`.
 pub fn bar(len: u64, what: &str) -> ProgressBar {

@@ -10,11 +10,12 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use sylva_light::relight::sun_path;
+use sylva_light::Silent;
 use sylva_mpi::Comm;
 use sylva_render::output::{encode_apng, encode_png};
-use sylva_render::relight::sun_path;
 use sylva_render::tonemap::srgb8;
-use sylva_render::{mean_luminance, Mode, Silent, ToneMap};
+use sylva_render::{mean_luminance, Mode, ToneMap};
 
 use super::progress::bar;
 use super::render::{prepare_with, FrameArgs};

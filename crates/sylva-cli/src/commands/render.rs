@@ -10,14 +10,15 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use sylva_lb::relight::{Codec, CompressTarget, Precision};
 use sylva_lb::LbSolver;
+use sylva_light::lighting::{Light, LightingSource};
+use sylva_light::relight::{BasisReport, GlobalGridOptions, SunWeights};
+use sylva_light::{Progress, Silent};
 use sylva_mpi::Comm;
-use sylva_render::lighting::{Light, LightingSource};
-use sylva_render::relight::{BasisReport, GlobalGridOptions, SunWeights};
-use sylva_render::{
-    image_paths, load_scene, resolution, stage, tone_map_modes, write_images, BasisUse, LbPlan,
-    Mode, PrepareOptions, PreparedScene, Progress, RelightPlan, ShadingParams, ShadowMethod,
-    Silent, StageClock, ToneMap,
+use sylva_pipeline::{
+    image_paths, load_scene, resolution, tone_map_modes, write_images, BasisUse, LbPlan,
+    PrepareOptions, PreparedScene, RelightPlan, ShadowMethod,
 };
+use sylva_render::{stage, Mode, ShadingParams, StageClock, ToneMap};
 use sylva_spp::trees::system::{SppLight, SppSystem, SystemConfig};
 use sylva_trace::TraversalConfig;
 
@@ -519,7 +520,7 @@ pub fn prepare_with(
                     };
                     match relit {
                         Some(parts) => PreparedScene::with_relighting(scene, &opts, parts)?,
-                        None if sylva_render::uses_forest(
+                        None if sylva_pipeline::uses_forest(
                             &scene,
                             lb.light,
                             opts.forest.as_ref(),
@@ -533,7 +534,7 @@ pub fn prepare_with(
                             let t = std::time::Instant::now();
                             // Each rank builds the densities once, for the solves and the
                             // preparation.
-                            let densities = sylva_render::forest_densities(&scene, lb, &gopts)?;
+                            let densities = sylva_pipeline::forest_densities(&scene, lb, &gopts)?;
                             let solved = sylva_mpi::solve_forest_parts(
                                 comm, &scene, lb, &gopts, &densities, progress,
                             )?;
@@ -593,9 +594,9 @@ pub fn prepare_with(
     }
     if let Some(f) = &scene.forest {
         // Luminance of each part's weight over its open value, per instance.
-        let y = |v: sylva_render::lighting::Vec3| sylva_core::colour::luminance(v.to_array());
+        let y = |v: sylva_light::lighting::Vec3| sylva_core::colour::luminance(v.to_array());
         let range =
-            |part: fn(&sylva_render::lighting::PartWeights) -> sylva_render::lighting::Vec3| {
+            |part: fn(&sylva_light::lighting::PartWeights) -> sylva_light::lighting::Vec3| {
                 let free = y(part(&f.free));
                 let r: Vec<f32> = f
                     .weights
@@ -810,7 +811,7 @@ pub fn split_summary(d: &sylva_mpi::DistributedFrame) -> String {
 /// rank 0 ends every rank with a message instead of leaving them waiting.
 fn prepare_on_root_first<T>(
     comm: &dyn Comm,
-    prepare: impl Fn() -> Result<T, sylva_render::PipelineError>,
+    prepare: impl Fn() -> Result<T, sylva_pipeline::PipelineError>,
 ) -> Result<T> {
     let mut done = Vec::new();
     let mine = if comm.rank() == 0 {

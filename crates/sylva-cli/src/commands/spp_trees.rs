@@ -144,8 +144,8 @@ pub fn run(a: TreesArgs) -> Result<()> {
 
 /// A scene by file or built-in name, or else one tree of a built-in species.
 pub fn load_scene_or_species(name: &str) -> Result<sylva_geom::Scene> {
-    match sylva_render::load_scene(name, None) {
-        Err(sylva_render::PipelineError::Scene(sylva_scene::SceneError::NotFound(_))) => {
+    match sylva_pipeline::load_scene(name, None) {
+        Err(sylva_pipeline::PipelineError::Scene(sylva_scene::SceneError::NotFound(_))) => {
             let text = sylva_scene::builtin_scenes::single_tree(name).with_context(|| {
                 format!(
                     "'{name}' is no scene file, built-in scene or built-in species (scenes: {}; species: {})",

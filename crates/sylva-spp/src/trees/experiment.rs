@@ -45,8 +45,8 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 use sylva_geom::{Instance, Scene};
 use sylva_lb::{Boundary, ColourParams, LbSolver, MediumParams, SolveOptions};
-use sylva_render::lighting::ModelLighting;
-use sylva_render::Progress;
+use sylva_light::lighting::ModelLighting;
+use sylva_light::Progress;
 use sylva_trace::SceneAccel;
 
 /// 003 Table 3 (RMS by eq. 30, albedo 0.95): (SPPG, SPP, SS) for the single tree and for the

@@ -614,7 +614,7 @@ impl SppSystem {
     }
 }
 
-/// The SPP light of a plant as sylva's renderer takes it ([`sylva_render::IndirectLight`]):
+/// The SPP light of a plant as sylva's renderer takes it ([`sylva_light::IndirectLight`]):
 /// the compensated diffuse field at the point, per colour, as a fluence in the units of the
 /// LB light (unobstructed sunlight is 1). The diffuse fluxes `E±` of a field isotropic within
 /// each hemisphere make the fluence `2(E+ + E−)`, and the renderer's `--indirect` 0.5 turns a
@@ -640,7 +640,7 @@ impl<'a> SppLight<'a> {
     }
 }
 
-impl sylva_render::IndirectLight for SppLight<'_> {
+impl sylva_light::IndirectLight for SppLight<'_> {
     fn plant(&self, instance: u32, _: &TraceInstance, world: Vec3) -> Option<Vec3> {
         let (d, w) = self.system.light_depth(world);
         let g = self.system.g(instance as usize, world).clamp(0.0, 1.0);

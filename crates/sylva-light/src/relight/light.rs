@@ -294,18 +294,18 @@ impl RelitLight {
     }
 
     /// Model `m`'s bounds in model space (where its light ends on the ground).
-    pub(crate) fn model_bounds(&self, m: usize) -> Aabb {
+    pub fn model_bounds(&self, m: usize) -> Aabb {
         self.model_bounds[m]
     }
 
     /// The ground index (for the GPU frame); `None` when there is none.
-    pub(crate) fn ground_index(&self) -> Option<&GroundIndex> {
+    pub fn ground_index(&self) -> Option<&GroundIndex> {
         (!self.ground_index.cells.is_empty()).then_some(&self.ground_index)
     }
 
     /// The relit light's luminance in free space (`1 + ambient`), what the ground's shade is
     /// measured against.
-    pub(crate) fn free_space(&self) -> f32 {
+    pub fn free_space(&self) -> f32 {
         (1.0 + self.illumination.ambient) as f32
     }
 

@@ -55,7 +55,7 @@ use sylva_lb::relight::Footprint;
 use sylva_lb::solver::{Lattice, SolveOptions};
 use sylva_lb::{ColourParams, DensityGrid, Dims, MediumParams};
 
-use crate::lighting::{LightingError, PartWeights};
+use crate::lighting::{LightingError, PartWeights, ShadedDensity};
 use crate::relight::global::{
     coarse_density, instance_extinction, placed, shell_faces, ExtinctionBlock, GlobalGridOptions,
     GlobalInstance, Placed, ShellFace, MARGIN,
@@ -316,20 +316,6 @@ fn sun_transmittance(
         return Vec3::ONE;
     }
     Vec3::from_array(sum.map(|s| (s / weight) as f32))
-}
-
-/// A model's density with its neighbours' foliage inside its instances' boxes added
-/// ([`neighbour_shade`]), for its sun part's solve.
-#[derive(Debug, Clone)]
-pub struct ShadedDensity {
-    /// The density the model's light parts are solved on.
-    pub density: DensityGrid,
-    /// A hash of the added foliage, for the parts' cache keys.
-    pub key: u64,
-    /// Optical depth (`Σ -ln(1 - ρ)` over the interior sites) of the model's own foliage and
-    /// of the neighbours' that was added.
-    pub own_depth: f64,
-    pub added_depth: f64,
 }
 
 /// Per model, its density with the foliage of its instances' neighbours that reaches into

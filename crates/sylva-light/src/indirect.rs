@@ -62,7 +62,7 @@ pub struct ModelGridLight {
     /// Instances over each ground cell, for the LB light under trees.
     ground_index: GroundIndex,
     /// Per instance, the weights of its model's light parts (the physical light's forest
-    /// grid, [`crate::forest`]); `None`: every instance as its model in the open.
+    /// grid, the `forest` module); `None`: every instance as its model in the open.
     weights: Option<Vec<PartWeights>>,
 }
 
@@ -114,12 +114,12 @@ impl ModelGridLight {
     }
 
     /// Model `m`'s bounds in model space (where its grid ends on the ground).
-    pub(crate) fn model_bounds(&self, m: usize) -> Aabb {
+    pub fn model_bounds(&self, m: usize) -> Aabb {
         self.model_bounds[m]
     }
 
     /// The ground index (for the GPU frame); `None` when there is none.
-    pub(crate) fn ground_index(&self) -> Option<&GroundIndex> {
+    pub fn ground_index(&self) -> Option<&GroundIndex> {
         (!self.ground_index.cells.is_empty()).then_some(&self.ground_index)
     }
 }
@@ -209,16 +209,17 @@ pub(crate) fn ground_shade(
 }
 
 /// A uniform grid over the ground (x, z) listing the instances whose world box covers each
-/// cell: the ground's LB lookup visits a handful of trees, not all of them.
+/// cell: the ground's LB lookup visits a handful of trees, not all of them. Its fields are
+/// public for the GPU frame, which uploads them as they are.
 #[derive(Debug, Default)]
-pub(crate) struct GroundIndex {
-    pub(crate) origin: Vec2,
-    pub(crate) end: Vec2,
-    pub(crate) inv_cell: f32,
-    pub(crate) nx: usize,
-    pub(crate) nz: usize,
+pub struct GroundIndex {
+    pub origin: Vec2,
+    pub end: Vec2,
+    pub inv_cell: f32,
+    pub nx: usize,
+    pub nz: usize,
     /// Per cell, row by row in z, the instances whose box covers it.
-    pub(crate) cells: Vec<Vec<u32>>,
+    pub cells: Vec<Vec<u32>>,
 }
 
 impl GroundIndex {

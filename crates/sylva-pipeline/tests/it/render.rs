@@ -7,13 +7,14 @@ use std::path::Path;
 
 use glam::Vec3;
 use sylva_geom::Scene;
-use sylva_render::lighting::{model_lighting, Light, LightingOptions, ModelLighting};
+use sylva_light::lighting::{model_lighting, Light, LightingOptions, ModelLighting};
+use sylva_light::ModelGridLight;
+use sylva_pipeline::{load_scene, LbPlan, PrepareOptions, PreparedScene, Silent};
 use sylva_render::shade::shade_materials;
 use sylva_render::{
-    mean_luminance, Frame, Mode, ModelGridLight, Region, RenderError, RenderSettings, Renderer,
-    ShadingParams,
+    mean_luminance, Frame, Mode, Region, RenderError, RenderSettings, Renderer, ShadingParams,
 };
-use sylva_trace::{KdTracer, PinholeCamera, SceneAccel, TraversalConfig};
+use sylva_trace::{KdTracer, PinholeCamera, SceneAccel, TraceStats, TraversalConfig};
 
 const BOARD_OBJ: &str = "mtllib board.mtl\n\
 v -1 2 -1\nv 1 2 -1\nv 1 2 1\nv -1 2 1\n\
@@ -223,7 +224,7 @@ fn with_lb(scene: &Scene) -> Vec<Option<ModelLighting>> {
         preset: "leaf".into(),
         cache_dir: None,
     };
-    let illum = sylva_render::illumination(scene, to_sun(), 1.0);
+    let illum = sylva_pipeline::illumination(scene, to_sun(), 1.0);
     scene
         .models
         .iter()
@@ -533,4 +534,55 @@ fn any_camera_renders_its_own_view() {
     assert!(close(px.albedo, KD), "{px:?}");
     // Above the board: sky.
     assert_eq!(frame.pixels[0].sky, SKY);
+}
+
+#[test]
+fn a_pixel_traced_alone_is_the_frame_s_pixel_with_the_gather() {
+    // Renderer::pixel (the GPU frame's fallback) against the batched frame: same rays,
+    // same gather, same light, bit for bit; and it counts the same secondary rays.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("rose.toml");
+    std::fs::write(
+        &path,
+        "name = \"rose\"\n[[models]]\nname = \"rose\"\nspecies = \"dogrose\"\n\
+         [[instances]]\nmodel = \"rose\"\nposition = [0.0, 0.0, 0.0]\n\
+         [ground]\nsize = [12.0, 12.0]\n\
+         [camera]\nposition = [0.0, 2.0, -4.5]\nlook_at = [0.2, 0.6, 0.5]\nfov = 45.0\n\
+         resolution = [32, 24]\n",
+    )
+    .unwrap();
+    let scene = load_scene(path.to_str().unwrap(), None).unwrap();
+    let opts = PrepareOptions {
+        lb: Some(LbPlan {
+            solver: &sylva_lb::CpuSolver,
+            light: Light::Physical,
+            grid: Some(24),
+            cache_dir: None,
+        }),
+        light: Light::Physical,
+        forest: None,
+        ..PrepareOptions::default()
+    };
+    let p = PreparedScene::new(scene, &opts, &Silent).unwrap();
+    let settings = p.settings(p.camera(32, 24), 3, 5);
+    assert!(settings.shading.gather_rays > 0);
+    let frame = p.render(&settings, &Silent).unwrap();
+    let r = p.renderer();
+    let camera = PinholeCamera::new(&settings.camera).unwrap();
+    let mut stats = TraceStats::default();
+    let mut secondary = 0;
+    let mut gathered = 0;
+    for y in 0..24 {
+        for x in 0..32 {
+            let (px, rays) = r.pixel(&camera, x, y, &settings, &mut stats);
+            assert_eq!(px, frame.pixels[(y * 32 + x) as usize], "pixel ({x}, {y})");
+            secondary += rays;
+            gathered += (px.albedo != Vec3::ZERO && px.indirect != Vec3::ZERO) as usize;
+        }
+    }
+    assert_eq!(secondary, frame.timings.shadow_rays);
+    assert!(
+        gathered > 50,
+        "{gathered} plant or ground pixels with indirect light"
+    );
 }

@@ -6,7 +6,7 @@
 //! | --- | --- | --- |
 //! | 0 | 8 | magic `SYLVAGRD` |
 //! | 8 | 4 | format version (1) |
-//! | 12 | 4 | kind: 1 density (channels density, wood fraction), 2 lighting (R, G, B), 3 relighting basis (`B_0` R, G, B, …, `B_18` R, G, B: 57 channels, [`crate::relight::BasisSet`]) |
+//! | 12 | 4 | kind: 1 density (channels density, wood fraction), 2 lighting (R, G, B), 3 relighting basis (`B_0` R, G, B, …, `B_18` R, G, B: 57 channels, `sylva_lb::relight::BasisSet`) |
 //! | 16 | 12 | nx, ny, nz |
 //! | 28 | 4 | channel count |
 //! | 32 | 4 | element type: 1 f32, 2 f16 |
@@ -25,6 +25,67 @@ use half::f16;
 use thiserror::Error;
 
 use crate::grid::{Bounds, DensityGrid, Dims, GridError, LightingGrid};
+
+/// Channel names of a relighting basis grid file (`B_0..B_18` × R, G, B), in storage order.
+pub const BASIS_CHANNEL_NAMES: [&str; 3 * crate::lattice::Q] = [
+    "B0 red",
+    "B0 green",
+    "B0 blue",
+    "B1 red",
+    "B1 green",
+    "B1 blue",
+    "B2 red",
+    "B2 green",
+    "B2 blue",
+    "B3 red",
+    "B3 green",
+    "B3 blue",
+    "B4 red",
+    "B4 green",
+    "B4 blue",
+    "B5 red",
+    "B5 green",
+    "B5 blue",
+    "B6 red",
+    "B6 green",
+    "B6 blue",
+    "B7 red",
+    "B7 green",
+    "B7 blue",
+    "B8 red",
+    "B8 green",
+    "B8 blue",
+    "B9 red",
+    "B9 green",
+    "B9 blue",
+    "B10 red",
+    "B10 green",
+    "B10 blue",
+    "B11 red",
+    "B11 green",
+    "B11 blue",
+    "B12 red",
+    "B12 green",
+    "B12 blue",
+    "B13 red",
+    "B13 green",
+    "B13 blue",
+    "B14 red",
+    "B14 green",
+    "B14 blue",
+    "B15 red",
+    "B15 green",
+    "B15 blue",
+    "B16 red",
+    "B16 green",
+    "B16 blue",
+    "B17 red",
+    "B17 green",
+    "B17 blue",
+    "B18 red",
+    "B18 green",
+    "B18 blue",
+];
 
 pub const MAGIC: &[u8; 8] = b"SYLVAGRD";
 pub const VERSION: u32 = 1;
@@ -104,7 +165,7 @@ impl GridKind {
         match self {
             GridKind::Density => &["density", "wood fraction"],
             GridKind::Lighting => &["red", "green", "blue"],
-            GridKind::Basis => &crate::relight::CHANNEL_NAMES,
+            GridKind::Basis => &BASIS_CHANNEL_NAMES,
         }
     }
 }

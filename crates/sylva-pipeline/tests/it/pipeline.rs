@@ -8,11 +8,13 @@ use std::sync::Mutex;
 
 use sylva_geom::Model;
 use sylva_lb::CpuSolver;
-use sylva_render::lighting::{LightingReport, LightingSource};
-use sylva_render::{
-    load_scene, resolution, stage, tone_map_modes, write_images, LbPlan, Mode, PipelineError,
-    PrepareOptions, PreparedScene, Progress, Region, Silent, StageClock, ToneMap,
+use sylva_light::lighting::{LightingReport, LightingSource};
+use sylva_light::{Progress, Silent};
+use sylva_pipeline::{
+    load_scene, resolution, tone_map_modes, write_images, LbPlan, PipelineError, PrepareOptions,
+    PreparedScene,
 };
+use sylva_render::{stage, Mode, Region, StageClock, ToneMap};
 use tracing_subscriber::layer::SubscriberExt;
 
 const SCENE: &str = r#"
@@ -79,7 +81,7 @@ fn prepare(path: &Path, cache: &Path, progress: &dyn Progress) -> PreparedScene 
     let opts = PrepareOptions {
         lb: Some(LbPlan {
             solver: &CpuSolver,
-            light: sylva_render::Light::Physical,
+            light: sylva_light::Light::Physical,
             grid: None,
             cache_dir: Some(cache),
         }),

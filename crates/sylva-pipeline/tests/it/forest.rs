@@ -7,14 +7,15 @@ use glam::{Affine3A, Vec3};
 use sylva_core::colour::luminance;
 use sylva_lb::light::Environment;
 use sylva_lb::{CpuSolver, DensityGrid, MediumParams};
-use sylva_render::forest::{free_weights, neighbour_shade, ForestInstance, ForestLight};
-use sylva_render::lighting::{
+use sylva_light::forest::{free_weights, neighbour_shade, ForestInstance, ForestLight};
+use sylva_light::lighting::{
     model_density, model_lighting, model_lighting_parts, model_lighting_parts_on,
     physical_environment, LightingOptions, PartWeights,
 };
-use sylva_render::pipeline::scene_illumination;
-use sylva_render::relight::GlobalGridOptions;
-use sylva_render::{load_scene, LbPlan, Light, PrepareOptions, PreparedScene, Silent};
+use sylva_light::relight::GlobalGridOptions;
+use sylva_light::{Light, Silent};
+use sylva_pipeline::scene_illumination;
+use sylva_pipeline::{load_scene, LbPlan, PrepareOptions, PreparedScene};
 
 const GRID: usize = 24;
 

@@ -271,7 +271,7 @@ pub struct LightParts {
 
 impl LightParts {
     /// Per site (site order), the four parts' RGB (for the GPU frame).
-    pub(crate) fn values(&self) -> &[[[f32; 3]; 4]] {
+    pub fn values(&self) -> &[[[f32; 3]; 4]] {
         &self.values
     }
 
@@ -393,7 +393,7 @@ impl ModelLighting {
 
     /// The physical light's free field, open sky and open bottom per colour (what
     /// [`ModelLighting::ground_sky`] measures against); `None` for the paper light.
-    pub(crate) fn open_field(&self) -> Option<(Vec3, Vec3)> {
+    pub fn open_field(&self) -> Option<(Vec3, Vec3)> {
         self.open.map(|o| (o.sky, o.bottom))
     }
 
@@ -465,7 +465,7 @@ impl ModelLighting {
 
     /// What the GPU frame uploads: dims, origin, sites per unit, last site per axis, and the
     /// values (RGB per site, site order `(x * ny + y) * nz + z`).
-    pub(crate) fn raw(&self) -> (Dims, Vec3, Vec3, Vec3, &[[f32; 3]]) {
+    pub fn raw(&self) -> (Dims, Vec3, Vec3, Vec3, &[[f32; 3]]) {
         let d = self.dims;
         (
             d,
@@ -539,7 +539,7 @@ pub(crate) fn free_space_total(sun_to: DVec3) -> Option<f64> {
     light::sun_total((-sun_to).to_array())
 }
 
-pub(crate) fn preset_medium(preset: &str) -> Result<MediumParams, LightingError> {
+pub fn preset_medium(preset: &str) -> Result<MediumParams, LightingError> {
     let m = Preset::parse(preset)?.params();
     m.validate()?;
     Ok(m)
@@ -600,7 +600,7 @@ pub fn plant_medium(model: &Model) -> Result<MediumParams, LightingError> {
 }
 
 /// How the paper light (and its relighting bases) voxelizes: sub-cell occupancy.
-pub(crate) const PAPER_OCCUPANCY: Occupancy = Occupancy::SubCells;
+pub const PAPER_OCCUPANCY: Occupancy = Occupancy::SubCells;
 
 /// The medium, occupancy and boundaries (per colour) of a solve, and (physical light) the
 /// environment whose sun enters as a first-collision source and whose ground is the floor.
@@ -723,7 +723,7 @@ fn key_of(
 /// per material its kind and (for leaves) the texture's size, wrap and opaque texels, the
 /// grid size and the medium's parameters (bit patterns, brown sites' included). Shared by
 /// the per-sun lighting cache and the basis cache.
-pub(crate) fn hash_model_medium(
+pub fn hash_model_medium(
     h: &mut Fnv64,
     model: &Model,
     grid: usize,
@@ -1278,7 +1278,7 @@ pub fn model_lighting(
 /// A model's physical light solved as its four parts ([`LightParts`]: the sun's, a unit sky's
 /// through the top face and through the sides, a unit ground's; four solves, the top one on
 /// the model mirrored in y with its floor as the top face), each cached on its own, for the forest grid
-/// to weigh per instance ([`crate::forest`]). Also returns the density grid and medium the
+/// to weigh per instance (the `forest` module). Also returns the density grid and medium the
 /// parts were solved with (the forest grid resamples them). Under the free weights the
 /// parts sum to [`model_lighting`]'s grid (the LB is linear; tested).
 pub fn model_lighting_parts(
@@ -1306,14 +1306,14 @@ pub fn model_density(
 
 /// [`model_lighting_parts`] on the model's `own` density ([`model_density`]), its sun part
 /// solved on `shade`'s density when given (its neighbours' foliage added,
-/// [`crate::forest::neighbour_shade`]; its hash joins that part's cache key). Returns `own`.
+/// `forest::neighbour_shade`; its hash joins that part's cache key). Returns `own`.
 pub fn model_lighting_parts_on(
     model: &Model,
     illum: &Illumination,
     opts: &LightingOptions,
     solver: &dyn LbSolver,
     own: DensityGrid,
-    shade: Option<&crate::forest::ShadedDensity>,
+    shade: Option<&ShadedDensity>,
     progress: &mut dyn FnMut(usize, usize, usize),
 ) -> Result<(ModelLighting, LightingReport, DensityGrid, MediumParams), LightingError> {
     let t0 = Instant::now();
@@ -1346,6 +1346,20 @@ pub fn model_lighting_parts_on(
     Ok((lighting, report, own, medium))
 }
 
+/// A model's density with its neighbours' foliage inside its instances' boxes added
+/// (`forest::neighbour_shade`), for its sun part's solve.
+#[derive(Debug, Clone)]
+pub struct ShadedDensity {
+    /// The density the model's light parts are solved on.
+    pub density: DensityGrid,
+    /// A hash of the added foliage, for the parts' cache keys.
+    pub key: u64,
+    /// Optical depth (`Σ -ln(1 - ρ)` over the interior sites) of the model's own foliage and
+    /// of the neighbours' that was added.
+    pub own_depth: f64,
+    pub added_depth: f64,
+}
+
 /// The physical light's parts as solved and cached, in order: the sun's, a unit sky's
 /// (through every face, with the floor's sky part), a unit ground's, a unit sky's through the
 /// top face (solved on the model mirrored in y).
@@ -1375,7 +1389,7 @@ impl<'a> PartsPlan<'a> {
         opts: &LightingOptions,
         solver: &dyn LbSolver,
         own: DensityGrid,
-        shade: Option<&crate::forest::ShadedDensity>,
+        shade: Option<&ShadedDensity>,
     ) -> Result<PartsPlan<'a>, LightingError> {
         if opts.light != Light::Physical {
             return Err(LightingError::Illumination(

@@ -9,10 +9,11 @@ use std::path::Path;
 
 use sylva_lb::relight::{Codec, CompressTarget, Precision};
 use sylva_lb::CpuSolver;
-use sylva_render::{
-    load_scene, tone_map_modes, BasisUse, Frame, LbPlan, Light, Mode, PrepareOptions,
-    PreparedScene, Radiance, Region, RelightPlan, Silent, SunWeights, ToneMap,
+use sylva_light::{Light, Silent, SunWeights};
+use sylva_pipeline::{
+    load_scene, tone_map_modes, BasisUse, LbPlan, PrepareOptions, PreparedScene, RelightPlan,
 };
+use sylva_render::{Frame, Mode, Radiance, Region, ToneMap};
 use sylva_wgpu::{AdapterChoice, ContextOptions, GpuContext, GpuError};
 
 const SCENE: &str = r#"

@@ -9,13 +9,12 @@ use std::sync::Mutex;
 use glam::Vec3;
 use sylva_geom::{Aabb, Medium, Model, Scene};
 use sylva_lb::CpuSolver;
-use sylva_render::lighting::{Light, LightingReport, LightingSource};
-use sylva_render::media::MediumVolume;
+use sylva_light::lighting::{Light, LightingReport, LightingSource};
+use sylva_light::media::MediumVolume;
+use sylva_light::{Media, ModelGridLight, Progress};
+use sylva_pipeline::{load_scene, LbPlan, PrepareOptions, PreparedScene};
 use sylva_render::shade::shade_materials;
-use sylva_render::{
-    load_scene, LbPlan, Media, ModelGridLight, PrepareOptions, PreparedScene, Progress,
-    RenderSettings, Renderer, ShadingParams,
-};
+use sylva_render::{RenderSettings, Renderer, ShadingParams};
 use sylva_trace::{KdTracer, PinholeCamera, SceneAccel, TraversalConfig};
 
 const BOARD_OBJ: &str = "mtllib board.mtl\n\
@@ -359,7 +358,7 @@ fn media_and_model_presets_are_cached_by_what_they_depend_on() {
     assert_eq!(p.media.volumes.len(), 1);
     // The cloud is in view: the frame is not just sky.
     let frame = p
-        .render(&p.settings(p.camera(40, 30), 1, 1), &sylva_render::Silent)
+        .render(&p.settings(p.camera(40, 30), 1, 1), &sylva_light::Silent)
         .unwrap();
     let sky = Vec3::from_array(p.scene.sky_color);
     assert!(frame
@@ -376,7 +375,7 @@ fn media_and_model_presets_are_cached_by_what_they_depend_on() {
         .unwrap()
         .contains(&"lit puff cached cached".to_string()));
     let again = q
-        .render(&q.settings(q.camera(40, 30), 1, 1), &sylva_render::Silent)
+        .render(&q.settings(q.camera(40, 30), 1, 1), &sylva_light::Silent)
         .unwrap();
     assert_eq!(frame.pixels, again.pixels);
 

@@ -13,15 +13,16 @@ use sylva_lb::solver::{solve_lighting, Boundary, SolveOptions, SolveReport};
 use sylva_lb::{
     CpuSolver, DensityGrid, LbBenchmark, LbSolver, LbSolverError, LightingGrid, MediumParams,
 };
-use sylva_render::lighting::LightingSource;
-use sylva_render::relight::{
+use sylva_light::lighting::LightingSource;
+use sylva_light::relight::{
     model_basis, BasisCacheOptions, BasisPlan, BasisReport, GlobalGridOptions, GlobalInstance,
     GlobalLight, GlobalReport, RelitIllumination, RelitLight, StoredBasis, SunWeights,
 };
-use sylva_render::{
-    load_scene, BasisUse, Frame, LbPlan, Light, PipelineError, PrepareOptions, PreparedScene,
-    Progress, RelightPlan, Silent,
+use sylva_light::{Light, Progress, Silent};
+use sylva_pipeline::{
+    load_scene, BasisUse, LbPlan, PipelineError, PrepareOptions, PreparedScene, RelightPlan,
 };
+use sylva_render::Frame;
 
 const GRID: usize = 16;
 /// A small coarse grid keeps the tests quick (the rose is 2 m across).
@@ -326,7 +327,7 @@ fn only_moving_the_sun_solves_nothing() {
     );
     assert_eq!(p.lb_models_cached, 1);
     let mut means = Vec::new();
-    for sun in sylva_render::relight::sun_path(5, 30.0) {
+    for sun in sylva_light::relight::sun_path(5, 30.0) {
         p.set_sun(sun).unwrap();
         means.push(sylva_render::mean_luminance(
             &frame(&p).compose(sylva_render::Mode::Lb),
@@ -452,7 +453,7 @@ fn the_global_grid_leaves_a_lone_tree_alone() {
     for (instances, what) in [(&one[..], "one tree"), (&two[..], "two trees")] {
         let g = GlobalLight::solve(instances, &medium, &GLOBAL, &mut |_, _| {}).unwrap();
         assert_eq!(g.instances(), instances.len());
-        for sun in sylva_render::relight::sun_path(6, 0.0) {
+        for sun in sylva_light::relight::sun_path(6, 0.0) {
             for (i, (s, a)) in scales(&g, sun).into_iter().enumerate() {
                 assert!((s - 1.0).abs() < 0.05, "{what} {i}: sun scale {s} at {sun}");
                 assert!((a - 1.0).abs() < 0.05, "{what} {i}: ambient scale {a}");

@@ -1,7 +1,7 @@
 //! The render pipeline as a library: load a scene ([`load_scene`], with a sun override), light
 //! every model with LB (cached, on any [`LbSolver`]) and build the acceleration structure
 //! ([`PreparedScene::new`]), then render frames of any camera and image region
-//! ([`PreparedScene::render`]). Stages are `tracing` spans ([`crate::stages`]); progress goes
+//! ([`PreparedScene::render`]). Stages are `tracing` spans ([`sylva_render::stages`]); progress goes
 //! to a [`Progress`] the caller implements (the CLI draws bars); nothing here prints.
 //!
 //! LB light comes one of two ways: solved per model for the scene's sun ([`ModelGridLight`],
@@ -14,70 +14,41 @@ use std::path::{Path, PathBuf};
 
 use glam::Vec3;
 use sylva_core::{MemoryError, Sun};
-use sylva_geom::{Camera, Medium, Model, Scene};
+use sylva_geom::{Camera, Model, Scene};
 use sylva_lb::{LbSolver, ParamError, Preset};
 use sylva_scene::SceneError;
 use sylva_trace::{KdTracer, RayQuery, SceneAccel, TraceError, TraversalConfig};
 use sylva_trace_gpu::{GpuTracer, TraceGpuError};
 use sylva_wgpu::GpuContext;
 
-use crate::forest::{neighbour_shade, ForestInstance, ForestLight, ShadedDensity};
-use crate::gpu_frame::{FrameError, FrameLight, GpuFrame};
-use crate::indirect::{IndirectLight, ModelGridLight};
-use crate::lighting::{
+use sylva_lb::relight::{CompressTarget, RelightError};
+use sylva_light::forest::{neighbour_shade, ForestInstance, ForestLight};
+use sylva_light::indirect::{IndirectLight, ModelGridLight};
+use sylva_light::lighting::{
     hash_model_medium, model_density, model_lighting, model_lighting_parts_on,
     physical_environment, preset_medium, Illumination, Light, LightingError, LightingOptions,
-    LightingReport, LightingSource, ModelLighting, CACHE_VERSION, PAPER_OCCUPANCY,
+    LightingReport, LightingSource, ModelLighting, ShadedDensity, CACHE_VERSION, PAPER_OCCUPANCY,
 };
-use crate::media::{prepare_medium, Media, MediumSolve};
-use crate::output::{encode_exr, encode_png, OutputError};
-use crate::relight::{
-    model_basis, BasisCacheOptions, BasisPlan, BasisReport, GlobalGridOptions, GlobalInstance,
-    GlobalLight, GlobalReport, ModelBasis, RelitIllumination, RelitLight, StoredBasis, SunWeights,
+use sylva_light::media::{prepare_medium, Media, MediumSolve};
+pub use sylva_light::progress::{Progress, Silent};
+use sylva_light::relight::{
+    model_basis, BasisCacheOptions, BasisPlan, GlobalGridOptions, GlobalInstance, GlobalLight,
+    GlobalReport, ModelBasis, RelitIllumination, RelitLight, StoredBasis, SunWeights,
     GLOBAL_EXTENSION,
 };
-use crate::render::{
+use sylva_render::gpu_frame::{FrameError, FrameLight, GpuFrame};
+use sylva_render::output::{encode_exr, encode_png, OutputError};
+use sylva_render::render::{
     memory_needed, output_memory_needed, tile_count, Frame, Mode, RenderError, RenderSettings,
     Renderer,
 };
-use crate::shade::{shade_materials, transmission_from_g, ShadeMaterial, ShadingParams};
-use crate::stages::stage;
-use crate::tonemap::{srgb8, ToneMap};
-use sylva_lb::relight::{CompressTarget, RelightError};
+use sylva_render::shade::{shade_materials, transmission_from_g, ShadeMaterial, ShadingParams};
+use sylva_render::stages::stage;
+use sylva_render::tonemap::{srgb8, ToneMap};
 use sylva_trace::{SunGrid, SunGridQuery};
 
 /// Largest image edge in pixels ([`sylva_core::limits::IMAGE_EDGE`], as in scene files).
 pub const MAX_EDGE: u32 = *sylva_core::limits::IMAGE_EDGE.end();
-
-/// What the pipeline reports while it works. Every method has a default that ignores it;
-/// calls may come from worker threads.
-pub trait Progress: Sync {
-    /// Work named `what` begins: `total` units.
-    fn start(&self, _what: &str, _total: u64) {}
-    /// `done` of `total` units (the total may change as the work learns its size).
-    fn set(&self, _done: u64, _total: u64) {}
-    /// `n` more units done.
-    fn advance(&self, _n: u64) {}
-    /// The work begun last is over.
-    fn finish(&self) {}
-    /// Model `model`'s LB lighting is ready: read from the cache, solved, or solved again
-    /// because the cache entry was bad ([`LightingReport::source`]).
-    fn model_lit(&self, _model: &Model, _report: &LightingReport) {}
-    /// Medium `medium`'s LB lighting is ready: the reports of its sun and sky solves.
-    fn medium_lit(&self, _medium: &Medium, _reports: &[LightingReport]) {}
-    /// Model `model`'s base solutions are ready ([`BasisReport::source`] says from where).
-    fn model_basis(&self, _model: &Model, _report: &BasisReport) {}
-    /// The coarse global grid is ready.
-    fn global_grid(&self, _report: &GlobalReport) {}
-    /// The neighbours' foliage added to a model's density in a forest.
-    fn neighbour_shade(&self, _model: &Model, _shade: &ShadedDensity) {}
-}
-
-/// Reports nothing.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct Silent;
-
-impl Progress for Silent {}
 
 #[derive(Debug, thiserror::Error)]
 pub enum PipelineError {
@@ -283,7 +254,7 @@ pub struct PrepareOptions<'a> {
     pub indirect: f32,
     /// Paper light: sky light on the ground as a fraction of the sun's.
     pub sky_ambient: f32,
-    /// Physical light: final-gather rays per camera sample on plants ([`crate::gather`]).
+    /// Physical light: final-gather rays per camera sample on plants ([`sylva_render::gather`]).
     pub gather_rays: u32,
     /// The largest frame that will be rendered, `(width, height, rays per pixel)`: its memory
     /// is checked before any LB or acceleration work.
@@ -294,7 +265,7 @@ pub struct PrepareOptions<'a> {
     /// Relighting from base solutions (with `lb`); `None`: LB solved for the scene's sun.
     pub relight: Option<RelightPlan>,
     pub shadows: ShadowMethod,
-    /// The physical light's coarse forest grid ([`crate::forest`]) for scenes of more than
+    /// The physical light's coarse forest grid ([`sylva_light::forest`]) for scenes of more than
     /// one instance; `None`: each instance keeps its model's light in the open.
     pub forest: Option<GlobalGridOptions>,
 }
@@ -585,7 +556,7 @@ pub fn forest_densities(
     Ok(ForestDensities { own, shades })
 }
 
-/// Every model's physical light as its four parts ([`crate::lighting::PartsPlan`], each from
+/// Every model's physical light as its four parts ([`sylva_light::lighting::PartsPlan`], each from
 /// the cache when it can), solved on `densities` ([`forest_densities`]), and the coarse forest
 /// grid's weights of them per instance ([`ForestLight`]); how many models came from the cache.
 pub fn light_forest(
