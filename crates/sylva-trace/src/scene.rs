@@ -17,7 +17,6 @@ use crate::kdtree::{
 };
 use crate::model::{Best, ModelAccel};
 use crate::ray::{inverse_dir, ray_box, Hit, Ray};
-use crate::sun_grid::SunGrid;
 use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 use sylva_geom::{Aabb, Instance, Model, Scene};
@@ -648,22 +647,23 @@ impl SceneAccel {
         found.is_some()
     }
 
-    /// [`SceneAccel::any_hit_from`] for a ray towards the sun that `grid` was built for
-    /// ([`SunGrid::serves`]): the instances come from the ray's tile instead of the
-    /// top-level tree, and are entered in the same order with the same tests, so the answer
-    /// is the same. A ray the grid does not serve takes the kd path.
-    pub fn any_hit_sun_grid(
+    /// [`SceneAccel::any_hit_from`] with the instances a ray may meet given by a caller
+    /// (`candidates`: a superset, such as the sun grid's tile of the ray's origin,
+    /// `crate::sun_grid::SunGrid::any_hit`) instead of the top-level tree; they are entered in
+    /// the same order with the same tests, so the answer is the same. `None` takes the kd
+    /// path.
+    pub fn any_hit_among(
         &self,
-        grid: &SunGrid,
+        candidates: Option<&[u32]>,
         ray: &Ray,
         from: Option<u32>,
         cfg: TraversalConfig,
         stats: &mut TraceStats,
         cache: &mut OccluderCache,
     ) -> bool {
-        if !grid.serves(ray.dir) {
+        let Some(candidates) = candidates else {
             return self.any_hit_from(ray, from, cfg, stats, cache);
-        }
+        };
         stats.rays += 1;
         if !ray.is_valid() {
             return false;
@@ -691,7 +691,7 @@ impl SceneAccel {
             };
             let mut cand = [(0f32, 0u32); SORTED_INSTANCES];
             let n = self.entries(
-                grid.candidates(o),
+                candidates,
                 o,
                 inv_d,
                 ray.t_min,

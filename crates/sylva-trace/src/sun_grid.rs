@@ -14,7 +14,7 @@
 
 use glam::{Vec2, Vec3};
 
-use crate::kdtree::TraceStats;
+use crate::kdtree::{TraceStats, TraversalConfig};
 use crate::query::{KdTracer, RayQuery, ShadowRay};
 use crate::ray::{Hit, Ray};
 use crate::scene::{OccluderCache, SceneAccel, TraceInstance};
@@ -164,6 +164,21 @@ impl SunGrid {
         self.to_sun != Vec3::ZERO && dir.normalize_or_zero().dot(self.to_sun) >= 1.0 - 1e-6
     }
 
+    /// Whether `ray` meets an opaque surface, as [`SceneAccel::any_hit_from`] answers, with
+    /// the instances taken from the ray's tile when this grid serves its direction.
+    pub fn any_hit(
+        &self,
+        accel: &SceneAccel,
+        ray: &Ray,
+        from: Option<u32>,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+        cache: &mut OccluderCache,
+    ) -> bool {
+        let candidates = self.serves(ray.dir).then(|| self.candidates(ray.origin));
+        accel.any_hit_among(candidates, ray, from, cfg, stats, cache)
+    }
+
     /// The instances whose projected box covers the projection of world point `p` (a
     /// superset of those a ray from `p` towards the sun can meet).
     #[inline]
@@ -232,7 +247,7 @@ impl RayQuery for SunGridQuery<'_> {
         let (accel, cfg) = (&self.tracer.accel, self.tracer.traversal);
         for (r, b) in rays.iter().zip(blocked) {
             *b = if self.grid.serves(r.ray.dir) {
-                accel.any_hit_sun_grid(self.grid, &r.ray, r.from, cfg, stats, &mut cache)
+                self.grid.any_hit(accel, &r.ray, r.from, cfg, stats, &mut cache)
             } else {
                 accel.any_hit_from(&r.ray, r.from, cfg, stats, &mut cache)
             };
