@@ -13,6 +13,7 @@
 //!   on inputs live in [`limits`]. Cache files of sylva's own binary formats use the checked
 //!   [`container`] (header, metadata, CRC-32).
 //! * Large allocations are checked first with [`check_memory`].
+//! * Independent jobs run through a [`jobs::Runner`]: this process or many, the same bytes.
 //! * Light colours are linear sRGB; [`blackbody_rgb`] gives a black body's (the sun is 6500 K).
 //! * Randomness comes from [`SplitMix64`], seeded per task so results do not depend on the
 //!   thread count.
@@ -25,6 +26,7 @@ pub mod container;
 mod hash;
 mod input;
 pub mod interrupt;
+pub mod jobs;
 pub mod limits;
 mod memory;
 mod names;

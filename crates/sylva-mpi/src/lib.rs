@@ -12,6 +12,7 @@
 //!   parts as queue jobs, stored in rank 0's cache.
 //! * [`relight`]: relighting's base solutions (paper 004), models × bases × colours as queue
 //!   jobs, assembled, compressed and cached at rank 0 as one process does (`sylva basis`).
+//! * [`runner`]: [`QueueRunner`], the pipeline's job runner over the queue and `Comm`.
 //! * [`model`]: frame times on N ranks from measured per-tile costs, fixed strips (the
 //!   paper's split) against units on demand.
 //! * [`launch`]: whether this process was started by `mpirun` as one of several.
@@ -29,6 +30,7 @@ pub mod model;
 pub mod mpi;
 pub mod queue;
 pub mod relight;
+pub mod runner;
 
 pub use comm::{Comm, CommError, LocalComm};
 pub use forest::solve_forest_parts;
@@ -36,6 +38,7 @@ pub use frame::{render_frame, DistributedFrame, RankWork, UnitLayout};
 pub use lighting::{light_models, LbJob};
 pub use queue::{run_queue, QueueOutcome};
 pub use relight::{precompute_relighting, BasisModelJob};
+pub use runner::QueueRunner;
 
 /// Why a rank cannot go on.
 #[derive(Debug, thiserror::Error)]
@@ -49,6 +52,9 @@ pub enum DistError {
     /// Ranks started with different inputs.
     #[error("ranks disagree: {0}")]
     Disagree(String),
+    /// A job of a [`sylva_core::jobs::Runner`] failed.
+    #[error(transparent)]
+    Job(sylva_core::jobs::JobError),
     /// A failure asked for by the test hook [`queue::FAIL_RANK_ENV`].
     #[error("{0}")]
     Injected(String),
