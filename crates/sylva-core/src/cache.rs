@@ -186,9 +186,12 @@ impl Cache {
                 self.dir.display()
             ));
         }
-        write(path)
-            .err()
-            .map(|e| format!("cannot write the cache entry {}: {e}; the result is not cached", path.display()))
+        write(path).err().map(|e| {
+            format!(
+                "cannot write the cache entry {}: {e}; the result is not cached",
+                path.display()
+            )
+        })
     }
 
     /// The value at `path` when a valid entry holds it ([`Cache::lookup`] with `read`);
@@ -257,17 +260,56 @@ mod tests {
         let base = CacheKey::new(KIND, &inputs());
         assert_eq!(base, CacheKey::new(KIND, &inputs()), "deterministic");
         let changed: [(&str, Inputs); 6] = [
-            ("grid", Inputs { grid: 33, ..inputs() }),
-            ("name", Inputs { name: "a".into(), ..inputs() }),
-            ("sun", Inputs { sun: [1, 2, 4], ..inputs() }),
-            ("scale", Inputs { scale: -0.0, ..inputs() }),
-            ("texture", Inputs { texture: Some(vec![]), ..inputs() }),
-            ("texture bytes", Inputs { texture: Some(vec![0]), ..inputs() }),
+            (
+                "grid",
+                Inputs {
+                    grid: 33,
+                    ..inputs()
+                },
+            ),
+            (
+                "name",
+                Inputs {
+                    name: "a".into(),
+                    ..inputs()
+                },
+            ),
+            (
+                "sun",
+                Inputs {
+                    sun: [1, 2, 4],
+                    ..inputs()
+                },
+            ),
+            (
+                "scale",
+                Inputs {
+                    scale: -0.0,
+                    ..inputs()
+                },
+            ),
+            (
+                "texture",
+                Inputs {
+                    texture: Some(vec![]),
+                    ..inputs()
+                },
+            ),
+            (
+                "texture bytes",
+                Inputs {
+                    texture: Some(vec![0]),
+                    ..inputs()
+                },
+            ),
         ];
         for (field, v) in changed {
             assert_ne!(CacheKey::new(KIND, &v), base, "{field}");
         }
-        let other = CacheKind { name: "other", ..KIND };
+        let other = CacheKind {
+            name: "other",
+            ..KIND
+        };
         assert_ne!(CacheKey::new(other, &inputs()), base);
         let newer = CacheKind { version: 2, ..KIND };
         assert_ne!(CacheKey::new(newer, &inputs()), base);
@@ -298,7 +340,10 @@ mod tests {
     fn read(path: &Path, key: CacheKey) -> Result<u32, String> {
         let c = read_container(path, MAGIC, 1, "test entry").map_err(|e| e.to_string())?;
         key.check(path, c.metadata_value(KEY_METADATA))?;
-        let b: [u8; 4] = c.payload.try_into().map_err(|_| "not 4 bytes".to_string())?;
+        let b: [u8; 4] = c
+            .payload
+            .try_into()
+            .map_err(|_| "not 4 bytes".to_string())?;
         Ok(u32::from_le_bytes(b))
     }
 
@@ -325,10 +370,16 @@ mod tests {
         let mut computed = 0;
 
         let first = get(&cache, key, 7, &mut computed);
-        assert_eq!((first.value, first.outcome, computed), (7, CacheOutcome::Miss, 1));
+        assert_eq!(
+            (first.value, first.outcome, computed),
+            (7, CacheOutcome::Miss, 1)
+        );
         assert_eq!(first.write_warning, None);
         let again = get(&cache, key, 8, &mut computed);
-        assert_eq!((again.value, again.outcome, computed), (7, CacheOutcome::Hit, 1));
+        assert_eq!(
+            (again.value, again.outcome, computed),
+            (7, CacheOutcome::Hit, 1)
+        );
 
         // A damaged entry is reported naming the file, recomputed and replaced.
         let path = cache.entry("model", key, "bin");
@@ -347,7 +398,13 @@ mod tests {
         assert_eq!(get(&cache, key, 10, &mut computed).value, 9);
 
         // An entry of another key under this key's name is stale, not misread.
-        let other = CacheKey::new(KIND, &Inputs { grid: 1, ..inputs() });
+        let other = CacheKey::new(
+            KIND,
+            &Inputs {
+                grid: 1,
+                ..inputs()
+            },
+        );
         write(&5, &path, other).unwrap();
         let stale = get(&cache, key, 11, &mut computed);
         assert_eq!(stale.value, 11);
@@ -372,7 +429,10 @@ mod tests {
         assert_eq!((got.value, computed), (3, 1));
         assert_ne!(got.outcome, CacheOutcome::Hit);
         let warning = got.write_warning.expect("a warning");
-        assert!(warning.contains(&cache.dir().display().to_string()), "{warning}");
+        assert!(
+            warning.contains(&cache.dir().display().to_string()),
+            "{warning}"
+        );
 
         // A directory that exists but whose entry cannot be written.
         let cache = Cache::new(dir.path());

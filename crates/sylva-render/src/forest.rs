@@ -48,6 +48,8 @@ use std::collections::HashMap;
 use rayon::prelude::*;
 
 use glam::{Affine3A, Vec3};
+use serde::Serialize;
+use sylva_core::cache::{CacheKey, CacheKind};
 use sylva_geom::Aabb;
 use sylva_lb::lattice::{C, Q};
 use sylva_lb::light::{self, Environment};
@@ -318,14 +320,28 @@ fn sun_transmittance(
     Vec3::from_array(sum.map(|s| (s / weight) as f32))
 }
 
+/// The added foliage of a [`ShadedDensity`] (its fingerprint, part of the sun part's key).
+pub const NEIGHBOUR_SHADE: CacheKind = CacheKind {
+    name: "neighbour shade",
+    version: crate::lighting::CACHE_VERSION,
+};
+
+/// What the added foliage is made of: the sample lattice's size and, per sample point, the
+/// neighbours' optical depth of leaves and of wood per fine cell (f32).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub(crate) struct ShadeKey {
+    samples: [usize; 3],
+    depths: Vec<[f32; 2]>,
+}
+
 /// A model's density with its neighbours' foliage inside its instances' boxes added
 /// ([`neighbour_shade`]), for its sun part's solve.
 #[derive(Debug, Clone)]
 pub struct ShadedDensity {
     /// The density the model's light parts are solved on.
     pub density: DensityGrid,
-    /// A hash of the added foliage, for the parts' cache keys.
-    pub key: u64,
+    /// A fingerprint of the added foliage, for the parts' cache keys.
+    pub key: CacheKey,
     /// Optical depth (`Σ -ln(1 - ρ)` over the interior sites) of the model's own foliage and
     /// of the neighbours' that was added.
     pub own_depth: f64,
@@ -472,15 +488,13 @@ pub fn neighbour_shade(
             out.push(None);
             continue;
         }
-        let mut h = sylva_core::Fnv64::new();
-        h.str("sylva-render neighbour shade");
-        for n in n_s {
-            h.u64(n as u64);
-        }
-        for s in &samples {
-            h.f32(s[0] as f32);
-            h.f32(s[1] as f32);
-        }
+        let key = CacheKey::new(
+            NEIGHBOUR_SHADE,
+            &ShadeKey {
+                samples: n_s,
+                depths: samples.iter().map(|s| s.map(|v| v as f32)).collect(),
+            },
+        );
         // A fine site between sample points.
         let sample = |f: [usize; 3]| -> [f64; 2] {
             let g: [f32; 3] =
@@ -514,7 +528,7 @@ pub fn neighbour_shade(
         }
         out.push(Some(ShadedDensity {
             density,
-            key: h.finish(),
+            key,
             own_depth,
             added_depth,
         }));
