@@ -656,6 +656,40 @@ impl ForestLight {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn shade_key_changes_with_every_field() {
+        let base = ShadeKey {
+            samples: [3, 4, 5],
+            depths: vec![[0.5, 0.25]; 60],
+        };
+        let mut leaves = base.clone();
+        leaves.depths[59][0] = 0.5001;
+        let mut wood = base.clone();
+        wood.depths[0][1] = 0.0;
+        crate::lighting::assert_each_field_changes_the_key(
+            NEIGHBOUR_SHADE,
+            &base,
+            &[
+                (
+                    "samples",
+                    ShadeKey {
+                        samples: [3, 5, 4],
+                        ..base.clone()
+                    },
+                ),
+                ("depths: leaves", leaves),
+                ("depths: wood", wood),
+                (
+                    "depths: count",
+                    ShadeKey {
+                        depths: vec![[0.5, 0.25]; 59],
+                        ..base.clone()
+                    },
+                ),
+            ],
+        );
+    }
     use sylva_lb::Bounds;
 
     /// A cube of uniform density `rho` over `[-1, 1]³` (shell empty), `n` sites per axis.

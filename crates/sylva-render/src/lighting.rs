@@ -1688,6 +1688,125 @@ fn flip_lighting(grid: &LightingGrid) -> LightingGrid {
     }
 }
 
+/// Asserts that each of `variants` (a key struct with one field changed, named) has a key of
+/// `kind` of its own: different from `base`'s and from every other variant's.
+#[cfg(test)]
+pub(crate) fn assert_each_field_changes_the_key<T: Serialize>(
+    kind: CacheKind,
+    base: &T,
+    variants: &[(&str, T)],
+) {
+    let mut seen = vec![("base", CacheKey::new(kind, base))];
+    for (field, v) in variants {
+        let key = CacheKey::new(kind, v);
+        if let Some((other, _)) = seen.iter().find(|(_, k)| *k == key) {
+            panic!("{}: changing {field} gives the key of {other}", kind.name);
+        }
+        seen.push((field, key));
+    }
+}
+
+/// A model and medium key with a textured leaf, wood and a solid, for the key tests.
+#[cfg(test)]
+pub(crate) fn sample_model_medium_key() -> ModelMediumKey {
+    ModelMediumKey {
+        grid_file_version: sylva_lb::grid_file::VERSION,
+        geometry: 0x1234,
+        occupancy: Occupancy::Area.name(),
+        sub_cells: SUB,
+        opaque_alpha: OPAQUE_ALPHA,
+        alpha_test: true,
+        materials: vec![
+            MaterialKey::Leaf {
+                texture: Some(TextureKey {
+                    width: 4,
+                    height: 2,
+                    wrap: "clamp",
+                    opaque: vec![0b1010_0101],
+                }),
+            },
+            MaterialKey::Wood,
+        ],
+        grid: 16,
+        medium: MediumKey {
+            colours: [[[0.1, 0.2, 0.3], [0.4, 0.5, -1.0]]; 3],
+            zero_f0_on_green: true,
+            zero_f0_on_brown: true,
+            brown_threshold: 0.5,
+        },
+    }
+}
+
+/// Every field of [`sample_model_medium_key`] changed in turn, each sub-field of the
+/// materials and the medium included.
+#[cfg(test)]
+pub(crate) fn model_medium_variants() -> Vec<(String, ModelMediumKey)> {
+    let base = sample_model_medium_key;
+    let with = |f: &dyn Fn(&mut ModelMediumKey)| {
+        let mut k = base();
+        f(&mut k);
+        k
+    };
+    let texture = |f: &dyn Fn(&mut TextureKey)| {
+        with(&|k| {
+            if let MaterialKey::Leaf { texture: Some(t) } = &mut k.materials[0] {
+                f(t)
+            }
+        })
+    };
+    let mut v: Vec<(String, ModelMediumKey)> = vec![
+        (
+            "grid_file_version".into(),
+            with(&|k| k.grid_file_version += 1),
+        ),
+        ("geometry".into(), with(&|k| k.geometry += 1)),
+        (
+            "occupancy".into(),
+            with(&|k| k.occupancy = Occupancy::SubCells.name()),
+        ),
+        ("sub_cells".into(), with(&|k| k.sub_cells += 1)),
+        ("opaque_alpha".into(), with(&|k| k.opaque_alpha += 1)),
+        ("alpha_test".into(), with(&|k| k.alpha_test = false)),
+        (
+            "material kind".into(),
+            with(&|k| k.materials[1] = MaterialKey::Solid),
+        ),
+        ("material count".into(), with(&|k| k.materials.truncate(1))),
+        (
+            "leaf texture".into(),
+            with(&|k| k.materials[0] = MaterialKey::Leaf { texture: None }),
+        ),
+        ("texture width".into(), texture(&|t| t.width += 1)),
+        ("texture height".into(), texture(&|t| t.height += 1)),
+        ("texture wrap".into(), texture(&|t| t.wrap = "repeat")),
+        ("texture opacity".into(), texture(&|t| t.opaque[0] ^= 1)),
+        ("grid".into(), with(&|k| k.grid += 1)),
+        (
+            "zero_f0_on_green".into(),
+            with(&|k| k.medium.zero_f0_on_green = false),
+        ),
+        (
+            "zero_f0_on_brown".into(),
+            with(&|k| k.medium.zero_f0_on_brown = false),
+        ),
+        (
+            "brown_threshold".into(),
+            with(&|k| k.medium.brown_threshold = 0.6),
+        ),
+    ];
+    for c in 0..3 {
+        for (s, site) in ["green", "brown"].into_iter().enumerate() {
+            for (p, param) in ["sigma_a", "sigma_s", "g"].into_iter().enumerate() {
+                v.push((
+                    format!("medium colour {c} {site} {param}"),
+                    with(&|k| k.medium.colours[c][s][p] += 0.01),
+                ));
+            }
+        }
+    }
+    v
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -2046,6 +2165,200 @@ mod tests {
         };
         let e = cache_key(&m, &illum(sun()), &bad, &CpuSolver).unwrap_err();
         assert!(e.to_string().contains("granite"), "{e}");
+    }
+
+    #[test]
+    fn model_medium_key_changes_with_every_field() {
+        let variants = model_medium_variants();
+        let named: Vec<(&str, ModelMediumKey)> = variants
+            .iter()
+            .map(|(n, k)| (n.as_str(), k.clone()))
+            .collect();
+        assert_each_field_changes_the_key(MODEL_LIGHTING, &sample_model_medium_key(), &named);
+    }
+
+    #[test]
+    fn model_lighting_key_changes_with_every_field() {
+        let physical = PhysicalKey {
+            sun_travel: [0.0, -1.0, 0.0],
+            sun_irradiance: [1.0; 3],
+            sky_radiance: [0.2; 3],
+            ground_albedo: Some([0.1; 3]),
+            step_optical_depth_factor: 1.0,
+        };
+        let base = ModelLightingKey {
+            light: Light::Physical.name(),
+            solver: "cpu".into(),
+            model: sample_model_medium_key(),
+            sun: [0, 100_000, 0],
+            boundaries: vec![[0.5; sylva_lb::lattice::Q]; 3],
+            physical: Some(physical.clone()),
+            schedule: PAPERS_SCHEDULE,
+        };
+        let with_physical = |f: &dyn Fn(&mut PhysicalKey)| {
+            let mut p = physical.clone();
+            f(&mut p);
+            ModelLightingKey {
+                physical: Some(p),
+                ..base.clone()
+            }
+        };
+        let mut boundary = base.boundaries.clone();
+        boundary[2][18] = 0.0;
+        let mut variants: Vec<(String, ModelLightingKey)> = vec![
+            (
+                "light".into(),
+                ModelLightingKey {
+                    light: Light::Paper.name(),
+                    ..base.clone()
+                },
+            ),
+            (
+                "solver".into(),
+                ModelLightingKey {
+                    solver: "gpu-f32".into(),
+                    ..base.clone()
+                },
+            ),
+            (
+                "sun".into(),
+                ModelLightingKey {
+                    sun: [1, 100_000, 0],
+                    ..base.clone()
+                },
+            ),
+            (
+                "boundaries".into(),
+                ModelLightingKey {
+                    boundaries: boundary,
+                    ..base.clone()
+                },
+            ),
+            (
+                "physical".into(),
+                ModelLightingKey {
+                    physical: None,
+                    ..base.clone()
+                },
+            ),
+            (
+                "schedule".into(),
+                ModelLightingKey {
+                    schedule: "papers:3N",
+                    ..base.clone()
+                },
+            ),
+            (
+                "sun_travel".into(),
+                with_physical(&|p| p.sun_travel[0] = 0.1),
+            ),
+            (
+                "sun_irradiance".into(),
+                with_physical(&|p| p.sun_irradiance[1] = 0.9),
+            ),
+            (
+                "sky_radiance".into(),
+                with_physical(&|p| p.sky_radiance[2] = 0.3),
+            ),
+            (
+                "ground_albedo".into(),
+                with_physical(&|p| p.ground_albedo = None),
+            ),
+            (
+                "ground_albedo value".into(),
+                with_physical(&|p| p.ground_albedo = Some([0.2; 3])),
+            ),
+            (
+                "step_optical_depth_factor".into(),
+                with_physical(&|p| p.step_optical_depth_factor = 0.5),
+            ),
+        ];
+        for (name, m) in model_medium_variants() {
+            variants.push((
+                format!("model: {name}"),
+                ModelLightingKey {
+                    model: m,
+                    ..base.clone()
+                },
+            ));
+        }
+        let named: Vec<(&str, ModelLightingKey)> = variants
+            .iter()
+            .map(|(n, k)| (n.as_str(), k.clone()))
+            .collect();
+        assert_each_field_changes_the_key(MODEL_LIGHTING, &base, &named);
+    }
+
+    #[test]
+    fn light_part_key_changes_with_every_field() {
+        let base = LightPartKey {
+            model: 7,
+            part: PARTS[0],
+            shade: Some(3),
+        };
+        assert_each_field_changes_the_key(
+            LIGHT_PART,
+            &base,
+            &[
+                (
+                    "model",
+                    LightPartKey {
+                        model: 8,
+                        ..base.clone()
+                    },
+                ),
+                (
+                    "part",
+                    LightPartKey {
+                        part: PARTS[1],
+                        ..base.clone()
+                    },
+                ),
+                (
+                    "shade",
+                    LightPartKey {
+                        shade: None,
+                        ..base.clone()
+                    },
+                ),
+                (
+                    "shade value",
+                    LightPartKey {
+                        shade: Some(4),
+                        ..base.clone()
+                    },
+                ),
+            ],
+        );
+        // The same inputs under another kind are another key.
+        assert_ne!(
+            CacheKey::new(LIGHT_PART, &base),
+            CacheKey::new(MODEL_LIGHTING, &base)
+        );
+    }
+
+    #[test]
+    fn parts_keys_follow_the_model_key_and_the_shade() {
+        let m = model(1.0);
+        let o = opts(None);
+        let own = model_density(&m, &illum(sun()), &o, &CpuSolver).unwrap().0;
+        let plan = PartsPlan::new(&m, &illum(sun()), &o, &CpuSolver, own.clone(), None).unwrap();
+        let keys: Vec<CacheKey> = (0..PARTS.len()).map(|k| plan.key(k)).collect();
+        for (i, a) in keys.iter().enumerate() {
+            assert!(keys[..i].iter().all(|b| b != a), "parts {i} shares a key");
+        }
+        let other_sun = illum(Vec3::new(0.3, 0.8, 0.25));
+        let moved = PartsPlan::new(&m, &other_sun, &o, &CpuSolver, own.clone(), None).unwrap();
+        assert!((0..PARTS.len()).all(|k| moved.key(k) != keys[k]));
+        let shade = crate::forest::ShadedDensity {
+            density: own.clone(),
+            key: CacheKey::new(crate::forest::NEIGHBOUR_SHADE, &1u8),
+            own_depth: 1.0,
+            added_depth: 0.5,
+        };
+        let shaded = PartsPlan::new(&m, &illum(sun()), &o, &CpuSolver, own, Some(&shade)).unwrap();
+        assert_ne!(shaded.key(0), keys[0], "the shade is the sun part's input");
+        assert!((1..PARTS.len()).all(|k| shaded.key(k) == keys[k]));
     }
 
     #[test]

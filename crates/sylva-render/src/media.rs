@@ -671,6 +671,82 @@ pub fn prepare_medium(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn medium_lighting_key_changes_with_every_field() {
+        let base = MediumLightingKey {
+            solver: "cpu".into(),
+            grid_file_version: sylva_lb::grid_file::VERSION,
+            density: 0xabc,
+            colours: [[0.01, 0.2, 0.8]; 3],
+            zero_f0_on_green: true,
+            boundary: MediumBoundary::Sun([0, 100_000, 0]),
+            schedule: "papers:2N",
+        };
+        let mut variants: Vec<(String, MediumLightingKey)> = vec![
+            (
+                "solver".into(),
+                MediumLightingKey {
+                    solver: "gpu-f32".into(),
+                    ..base.clone()
+                },
+            ),
+            (
+                "grid_file_version".into(),
+                MediumLightingKey {
+                    grid_file_version: 1,
+                    ..base.clone()
+                },
+            ),
+            (
+                "density".into(),
+                MediumLightingKey {
+                    density: 0xabd,
+                    ..base.clone()
+                },
+            ),
+            (
+                "zero_f0_on_green".into(),
+                MediumLightingKey {
+                    zero_f0_on_green: false,
+                    ..base.clone()
+                },
+            ),
+            (
+                "boundary".into(),
+                MediumLightingKey {
+                    boundary: MediumBoundary::Sky,
+                    ..base.clone()
+                },
+            ),
+            (
+                "boundary sun".into(),
+                MediumLightingKey {
+                    boundary: MediumBoundary::Sun([1, 100_000, 0]),
+                    ..base.clone()
+                },
+            ),
+            (
+                "schedule".into(),
+                MediumLightingKey {
+                    schedule: "papers:3N",
+                    ..base.clone()
+                },
+            ),
+        ];
+        for c in 0..3 {
+            for p in 0..3 {
+                let mut k = base.clone();
+                k.colours[c][p] += 0.01;
+                variants.push((format!("colour {c} parameter {p}"), k));
+            }
+        }
+        let named: Vec<(&str, MediumLightingKey)> = variants
+            .iter()
+            .map(|(n, k)| (n.as_str(), k.clone()))
+            .collect();
+        crate::lighting::assert_each_field_changes_the_key(MEDIUM_LIGHTING, &base, &named);
+    }
     use sylva_geom::Aabb;
     use sylva_lb::{Bounds, ColourParams, Dims, Preset};
 

@@ -1572,3 +1572,103 @@ pub fn write_images(
     set.commit()?;
     Ok(written)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lighting::{
+        assert_each_field_changes_the_key, model_medium_variants, sample_model_medium_key,
+    };
+
+    #[test]
+    fn global_grid_key_changes_with_every_field() {
+        let instance = InstanceKey {
+            model: 0,
+            position: [1.0, 0.0, -2.0],
+            rotation_deg: 30.0,
+            scale: 1.0,
+        };
+        let base = GlobalGridKey {
+            models: vec![
+                GlobalModelKey::Fine(sample_model_medium_key()),
+                GlobalModelKey::UnknownPreset("granite".into()),
+            ],
+            preset: "leaf".into(),
+            medium: Some(MediumKey::new(&Preset::Leaf.params())),
+            sites: 64,
+            instances: vec![instance.clone(); 2],
+        };
+        let instances = |f: &dyn Fn(&mut InstanceKey)| {
+            let mut i = instance.clone();
+            f(&mut i);
+            GlobalGridKey {
+                instances: vec![instance.clone(), i],
+                ..base.clone()
+            }
+        };
+        let mut variants: Vec<(String, GlobalGridKey)> = vec![
+            (
+                "preset".into(),
+                GlobalGridKey {
+                    preset: "dogrose".into(),
+                    ..base.clone()
+                },
+            ),
+            (
+                "medium".into(),
+                GlobalGridKey {
+                    medium: Some(MediumKey::new(&Preset::Dogrose.params())),
+                    ..base.clone()
+                },
+            ),
+            (
+                "sites".into(),
+                GlobalGridKey {
+                    sites: 65,
+                    ..base.clone()
+                },
+            ),
+            (
+                "unknown preset".into(),
+                GlobalGridKey {
+                    models: vec![
+                        base.models[0].clone(),
+                        GlobalModelKey::UnknownPreset("basalt".into()),
+                    ],
+                    ..base.clone()
+                },
+            ),
+            (
+                "instance count".into(),
+                GlobalGridKey {
+                    instances: vec![instance.clone()],
+                    ..base.clone()
+                },
+            ),
+            ("instance model".into(), instances(&|i| i.model = 1)),
+            (
+                "instance position".into(),
+                instances(&|i| i.position[1] = 0.5),
+            ),
+            (
+                "instance rotation".into(),
+                instances(&|i| i.rotation_deg = 31.0),
+            ),
+            ("instance scale".into(), instances(&|i| i.scale = 1.5)),
+        ];
+        for (name, m) in model_medium_variants() {
+            variants.push((
+                format!("model: {name}"),
+                GlobalGridKey {
+                    models: vec![GlobalModelKey::Fine(m), base.models[1].clone()],
+                    ..base.clone()
+                },
+            ));
+        }
+        let named: Vec<(&str, GlobalGridKey)> = variants
+            .iter()
+            .map(|(n, k)| (n.as_str(), k.clone()))
+            .collect();
+        assert_each_field_changes_the_key(GLOBAL_GRID, &base, &named);
+    }
+}

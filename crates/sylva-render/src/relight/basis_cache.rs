@@ -658,3 +658,129 @@ fn write_compressed(
     }
     c.write(path, &meta).map_err(|e| e.to_string())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lighting::{
+        assert_each_field_changes_the_key, model_medium_variants, sample_model_medium_key,
+    };
+    use sylva_lb::relight::{Codec, Precision};
+
+    #[test]
+    fn basis_key_changes_with_every_field() {
+        let base = BasisKey {
+            solver: "cpu".into(),
+            model: sample_model_medium_key(),
+            max_steps: 64,
+            tolerance: None,
+            ambient: "sum",
+        };
+        let mut variants: Vec<(String, BasisKey)> = vec![
+            (
+                "solver".into(),
+                BasisKey {
+                    solver: "gpu-f16".into(),
+                    ..base.clone()
+                },
+            ),
+            (
+                "max_steps".into(),
+                BasisKey {
+                    max_steps: 65,
+                    ..base.clone()
+                },
+            ),
+            (
+                "tolerance".into(),
+                BasisKey {
+                    tolerance: Some(0.0),
+                    ..base.clone()
+                },
+            ),
+            (
+                "tolerance value".into(),
+                BasisKey {
+                    tolerance: Some(1e-6),
+                    ..base.clone()
+                },
+            ),
+            (
+                "ambient".into(),
+                BasisKey {
+                    ambient: "solve",
+                    ..base.clone()
+                },
+            ),
+        ];
+        for (name, m) in model_medium_variants() {
+            variants.push((
+                format!("model: {name}"),
+                BasisKey {
+                    model: m,
+                    ..base.clone()
+                },
+            ));
+        }
+        let named: Vec<(&str, BasisKey)> = variants
+            .iter()
+            .map(|(n, k)| (n.as_str(), k.clone()))
+            .collect();
+        assert_each_field_changes_the_key(BASIS_RAW, &base, &named);
+    }
+
+    #[test]
+    fn compressed_key_changes_with_every_field() {
+        let raw = CacheKey::new(BASIS_RAW, &1u8);
+        let target = CompressTarget::recommended();
+        let base = CompressedKey::new(raw, &target);
+        assert_eq!(base.raw, raw.value());
+        let other_raw = CacheKey::new(BASIS_RAW, &2u8);
+        assert_each_field_changes_the_key(
+            BASIS_COMPRESSED,
+            &base,
+            &[
+                ("raw", CompressedKey::new(other_raw, &target)),
+                (
+                    "codec",
+                    CompressedKey::new(
+                        raw,
+                        &CompressTarget {
+                            codec: Codec::Pca { rank: 3 },
+                            ..target
+                        },
+                    ),
+                ),
+                (
+                    "precision",
+                    CompressedKey::new(
+                        raw,
+                        &CompressTarget {
+                            precision: Precision::F32,
+                            ..target
+                        },
+                    ),
+                ),
+                (
+                    "far_threshold",
+                    CompressedKey::new(
+                        raw,
+                        &CompressTarget {
+                            far_threshold: 0.5,
+                            ..target
+                        },
+                    ),
+                ),
+                (
+                    "region",
+                    CompressedKey {
+                        region: "near_medium(2)",
+                        ..base.clone()
+                    },
+                ),
+            ],
+        );
+        // The raw and compressed keys of the same inputs never meet.
+        assert_ne!(compressed_key(raw, &target), raw);
+    }
+}
