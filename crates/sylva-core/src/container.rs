@@ -101,6 +101,21 @@ pub fn write_container(
     metadata: &[(String, String)],
     payload: &[u8],
 ) -> std::io::Result<()> {
+    let head = container_head(magic, version, metadata, payload)?;
+    crate::atomic_write_with(path, |w| {
+        w.write_all(&head)?;
+        w.write_all(payload)
+    })
+}
+
+/// The bytes of a container before its payload (header and metadata), for writers that place
+/// the file themselves (an [`crate::OutputSet`]): the file is these bytes, then `payload`.
+pub fn container_head(
+    magic: &[u8; 8],
+    version: u32,
+    metadata: &[(String, String)],
+    payload: &[u8],
+) -> std::io::Result<Vec<u8>> {
     let meta = metadata_text(metadata);
     if meta.len() > MAX_METADATA {
         return Err(std::io::Error::new(
@@ -119,11 +134,31 @@ pub fn write_container(
     crc.update(payload);
     h.extend_from_slice(&crc.finalize().to_le_bytes());
     h.extend_from_slice(&0u32.to_le_bytes());
-    crate::atomic_write_with(path, |w| {
-        w.write_all(&h)?;
-        w.write_all(meta.as_bytes())?;
-        w.write_all(payload)
-    })
+    h.extend_from_slice(meta.as_bytes());
+    Ok(h)
+}
+
+/// What [`read_container_head`] reads: everything but the payload past its first bytes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ContainerHead {
+    pub metadata: Vec<(String, String)>,
+    /// The payload's first bytes (as many as asked for, or the whole payload if shorter).
+    pub head: Vec<u8>,
+    pub payload_bytes: u64,
+    pub metadata_bytes: usize,
+    pub file_bytes: u64,
+    pub checksum: u32,
+}
+
+/// The opened, checked header of a container: the file at the start of its payload.
+struct Opened {
+    file: std::fs::File,
+    size: u64,
+    payload_len: u64,
+    meta_len: usize,
+    expected_crc: u32,
+    crc: crc32fast::Hasher,
+    metadata: Vec<(String, String)>,
 }
 
 /// Reads a container written by [`write_container`] with the same magic and version; `what`
@@ -135,6 +170,90 @@ pub fn read_container(
     version: u32,
     what: &'static str,
 ) -> Result<Container, ContainerError> {
+    let Opened {
+        mut file,
+        payload_len,
+        expected_crc,
+        mut crc,
+        metadata,
+        ..
+    } = open_container(path, magic, version, what)?;
+    crate::check_memory(&format!("reading {}", path.display()), payload_len)?;
+    let mut payload = vec![0u8; payload_len as usize];
+    file.read_exact(&mut payload)
+        .map_err(|source| ContainerError::Io {
+            path: path.into(),
+            source,
+        })?;
+    crc.update(&payload);
+    check_crc(path, crc, expected_crc)?;
+    Ok(Container { metadata, payload })
+}
+
+/// Reads a container's metadata and the first `head` bytes of its payload, and verifies its
+/// checksum streaming the rest (nothing past `head` is kept): what a file's summary needs.
+pub fn read_container_head(
+    path: &Path,
+    magic: &[u8; 8],
+    version: u32,
+    what: &'static str,
+    head: usize,
+) -> Result<ContainerHead, ContainerError> {
+    let Opened {
+        mut file,
+        size,
+        payload_len,
+        meta_len,
+        expected_crc,
+        mut crc,
+        metadata,
+    } = open_container(path, magic, version, what)?;
+    let io = |source| ContainerError::Io {
+        path: path.into(),
+        source,
+    };
+    let mut first = vec![0u8; (payload_len.min(head as u64)) as usize];
+    file.read_exact(&mut first).map_err(io)?;
+    crc.update(&first);
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        let n = file.read(&mut buf).map_err(io)?;
+        if n == 0 {
+            break;
+        }
+        crc.update(&buf[..n]);
+    }
+    check_crc(path, crc, expected_crc)?;
+    Ok(ContainerHead {
+        metadata,
+        head: first,
+        payload_bytes: payload_len,
+        metadata_bytes: meta_len,
+        file_bytes: size,
+        checksum: expected_crc,
+    })
+}
+
+fn check_crc(path: &Path, crc: crc32fast::Hasher, expected: u32) -> Result<(), ContainerError> {
+    let found = crc.finalize();
+    if found != expected {
+        return Err(ContainerError::Checksum {
+            path: path.into(),
+            expected,
+            found,
+        });
+    }
+    Ok(())
+}
+
+/// Opens a container and checks its header (magic, version, lengths against the file's
+/// size) and metadata; the CRC has consumed everything before the payload.
+fn open_container(
+    path: &Path,
+    magic: &[u8; 8],
+    version: u32,
+    what: &'static str,
+) -> Result<Opened, ContainerError> {
     let io = |source| ContainerError::Io {
         path: path.into(),
         source,
@@ -198,24 +317,11 @@ pub fn read_container(
             extra: size - expected,
         });
     }
-    crate::check_memory(&format!("reading {}", path.display()), payload_len)?;
     let mut meta = vec![0u8; meta_len];
     file.read_exact(&mut meta).map_err(io)?;
-    let mut payload = vec![0u8; payload_len as usize];
-    file.read_exact(&mut payload).map_err(io)?;
     let mut crc = crc32fast::Hasher::new();
     crc.update(&h[..24]);
     crc.update(&meta);
-    crc.update(&payload);
-    let found = crc.finalize();
-    let expected = u32_at(24);
-    if found != expected {
-        return Err(ContainerError::Checksum {
-            path: path.into(),
-            expected,
-            found,
-        });
-    }
     let text = String::from_utf8(meta).map_err(|_| ContainerError::Header {
         path: path.into(),
         what: "metadata is not UTF-8".into(),
@@ -228,7 +334,15 @@ pub fn read_container(
             None => (l.to_string(), String::new()),
         })
         .collect();
-    Ok(Container { metadata, payload })
+    Ok(Opened {
+        file,
+        size,
+        payload_len,
+        meta_len,
+        expected_crc: u32_at(24),
+        crc,
+        metadata,
+    })
 }
 
 /// Little-endian payload encoding.

@@ -1,6 +1,7 @@
-//! The one hasher for anything persisted or compared across runs (cache keys, geometry
-//! fingerprints): FNV-1a over explicit little-endian bytes, so a key depends on the values
+//! The hasher of geometry fingerprints (a mesh's arrays, a medium's density grid), which cache
+//! keys hold: FNV-1a over explicit little-endian bytes, so a fingerprint depends on the values
 //! hashed alone, never on the Rust release, the platform or `std`'s randomly seeded hashers.
+//! Cache keys themselves are derived from serialized input structs ([`crate::cache`]).
 
 /// FNV-1a, 64 bits. Feed values with the typed helpers (each writes a fixed byte layout) and
 /// read the result with [`Fnv64::finish`].

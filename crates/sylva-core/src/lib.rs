@@ -17,10 +17,14 @@
 //! * Light colours are linear sRGB; [`blackbody_rgb`] gives a black body's (the sun is 6500 K).
 //! * Randomness comes from [`SplitMix64`], seeded per task so results do not depend on the
 //!   thread count.
-//! * Cache keys and geometry fingerprints are hashed with [`Fnv64`] (FNV-1a over explicit
-//!   little-endian bytes): stable across Rust releases and platforms.
+//! * Computed results are cached through one [`cache::Cache`]: keys derived from one
+//!   serialized struct of every input ([`cache::CacheKey`], xxh3 of postcard bytes), entries
+//!   in the checked [`container`], a hit, miss or bad entry reported, a failed write a warning.
+//! * Geometry fingerprints are hashed with [`Fnv64`] (FNV-1a over explicit little-endian
+//!   bytes): stable across Rust releases and platforms.
 
 mod atomic;
+pub mod cache;
 pub mod colour;
 pub mod container;
 mod hash;

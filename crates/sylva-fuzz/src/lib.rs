@@ -95,16 +95,16 @@ pub fn arbaro_xml(data: &[u8]) -> bool {
 /// checksum. Headers that declare huge grids must be refused before allocating.
 ///
 /// A random checksum is almost never right, so the fuzzer would not get past it: when the
-/// header's reserved byte 76 is 0, the checksum is set to the one the bytes need (the header
-/// fields, metadata and payload are then fuzzed); otherwise it is left as it is (the check
-/// itself is fuzzed).
+/// container header's reserved byte 28 is 0, the checksum is set to the one the bytes need
+/// (the header fields, metadata and payload, the grid's header in it, are then fuzzed);
+/// otherwise it is left as it is (the check itself is fuzzed).
 pub fn sgrid(data: &[u8]) -> bool {
     let mut data = data.to_vec();
-    if data.len() >= 80 && data[76] == 0 {
+    if data.len() >= 32 && data[28] == 0 {
         let mut crc = crc32fast::Hasher::new();
-        crc.update(&data[..72]);
-        crc.update(&data[80..]);
-        data[72..76].copy_from_slice(&crc.finalize().to_le_bytes());
+        crc.update(&data[..24]);
+        crc.update(&data[32..]);
+        data[24..28].copy_from_slice(&crc.finalize().to_le_bytes());
     }
     let p = put("g.sgrid", &data);
     let header = sylva_lb::grid_file::read_header_verified(&p).is_ok();

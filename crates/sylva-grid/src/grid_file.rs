@@ -1,27 +1,26 @@
-//! The versioned binary grid file (`.sgrid`) for density and lighting grids.
+//! The versioned binary grid file (`.sgrid`) for density and lighting grids: a checked
+//! container of sylva-core ([`sylva_core::container`]: header, metadata, CRC-32, atomic
+//! writes), magic `SYLVAGRD`, format version 2, whose payload starts with the grid's header.
 //!
-//! Layout, little-endian:
+//! Payload, little-endian:
 //!
 //! | offset | size | field |
 //! | --- | --- | --- |
-//! | 0 | 8 | magic `SYLVAGRD` |
-//! | 8 | 4 | format version (1) |
-//! | 12 | 4 | kind: 1 density (channels density, wood fraction), 2 lighting (R, G, B), 3 relighting basis (`B_0` R, G, B, …, `B_18` R, G, B: 57 channels, `sylva_lb::relight::BasisSet`) |
-//! | 16 | 12 | nx, ny, nz |
-//! | 28 | 4 | channel count |
-//! | 32 | 4 | element type: 1 f32, 2 f16 |
-//! | 36 | 24 | bounds: min xyz, max xyz (f32) |
-//! | 60 | 4 | metadata length in bytes |
-//! | 64 | 8 | payload length in bytes |
-//! | 72 | 4 | CRC-32 of bytes 0..72, the metadata and the payload |
-//! | 76 | 4 | reserved, 0 |
-//! | 80 | … | metadata: UTF-8 `key=value` lines |
-//! | … | … | payload: channel after channel, each in site order `(x * ny + y) * nz + z` |
+//! | 0 | 4 | kind: 1 density (channels density, wood fraction), 2 lighting (R, G, B), 3 relighting basis (`B_0` R, G, B, …, `B_18` R, G, B: 57 channels, `sylva_lb::relight::BasisSet`) |
+//! | 4 | 12 | nx, ny, nz |
+//! | 16 | 4 | channel count |
+//! | 20 | 4 | element type: 1 f32, 2 f16 |
+//! | 24 | 24 | bounds: min xyz, max xyz (f32) |
+//! | 48 | … | channel after channel, each in site order `(x * ny + y) * nz + z` |
+//!
+//! Version 1 had its own framing (the same fields in an 80-byte header); it is refused by
+//! its version, naming the file.
 
-use std::io::{Read, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use half::f16;
+use sylva_core::container::{container_head, read_container, read_container_head, ContainerError};
 use thiserror::Error;
 
 use crate::grid::{Bounds, DensityGrid, Dims, GridError, LightingGrid};
@@ -88,9 +87,10 @@ pub const BASIS_CHANNEL_NAMES: [&str; 3 * crate::lattice::Q] = [
 ];
 
 pub const MAGIC: &[u8; 8] = b"SYLVAGRD";
-pub const VERSION: u32 = 1;
-const HEADER_LEN: usize = 80;
-const MAX_METADATA: usize = 1 << 20;
+pub const VERSION: u32 = 2;
+/// Bytes of the grid's header at the start of the payload.
+const GRID_HEADER_LEN: usize = 48;
+const WHAT: &str = "sylva grid file";
 
 #[derive(Debug, Error)]
 pub enum GridFileError {
@@ -104,7 +104,7 @@ pub enum GridFileError {
     Input(sylva_core::InputError),
     #[error("{path} is not a sylva grid file (bad magic; expected it to start with 'SYLVAGRD')")]
     Magic { path: PathBuf },
-    #[error("{path} has format version {found}; this sylva reads version {VERSION}")]
+    #[error("{path} has grid file format version {found}; this sylva reads version {VERSION}")]
     Version { path: PathBuf, found: u32 },
     #[error("{path} is truncated: the header says {expected} bytes, the file has {found}")]
     Truncated {
@@ -222,14 +222,6 @@ pub struct GridHeader {
     pub metadata_bytes: usize,
 }
 
-fn u32_at(b: &[u8], at: usize) -> u32 {
-    u32::from_le_bytes(b[at..at + 4].try_into().expect("4 bytes"))
-}
-
-fn f32_at(b: &[u8], at: usize) -> f32 {
-    f32::from_le_bytes(b[at..at + 4].try_into().expect("4 bytes"))
-}
-
 impl GridFile {
     pub fn from_density(g: &DensityGrid, metadata: Vec<(String, String)>) -> GridFile {
         GridFile {
@@ -297,10 +289,25 @@ impl GridFile {
         })
     }
 
-    fn encode(&self) -> (Vec<u8>, Vec<u8>) {
-        let meta = metadata_text(&self.metadata);
-        let mut payload =
-            Vec::with_capacity(self.channels.len() * self.dims.sites() * self.element.size());
+    /// The container's head (header and metadata) and payload.
+    fn encode(&self) -> std::io::Result<(Vec<u8>, Vec<u8>)> {
+        let mut payload = Vec::with_capacity(
+            GRID_HEADER_LEN + self.channels.len() * self.dims.sites() * self.element.size(),
+        );
+        for v in [
+            self.kind.code(),
+            self.dims.nx as u32,
+            self.dims.ny as u32,
+            self.dims.nz as u32,
+            self.channels.len() as u32,
+            self.element.code(),
+        ] {
+            payload.extend_from_slice(&v.to_le_bytes());
+        }
+        for v in self.bounds.min.iter().chain(self.bounds.max.iter()) {
+            payload.extend_from_slice(&v.to_le_bytes());
+        }
+        debug_assert_eq!(payload.len(), GRID_HEADER_LEN);
         for ch in &self.channels {
             match self.element {
                 Element::F32 => payload.extend_from_slice(bytemuck_f32(ch)),
@@ -311,46 +318,23 @@ impl GridFile {
                 }
             }
         }
-        let mut h = Vec::with_capacity(HEADER_LEN);
-        h.extend_from_slice(MAGIC);
-        for v in [
-            VERSION,
-            self.kind.code(),
-            self.dims.nx as u32,
-            self.dims.ny as u32,
-            self.dims.nz as u32,
-            self.channels.len() as u32,
-            self.element.code(),
-        ] {
-            h.extend_from_slice(&v.to_le_bytes());
-        }
-        for v in self.bounds.min.iter().chain(self.bounds.max.iter()) {
-            h.extend_from_slice(&v.to_le_bytes());
-        }
-        h.extend_from_slice(&(meta.len() as u32).to_le_bytes());
-        h.extend_from_slice(&(payload.len() as u64).to_le_bytes());
-        let mut crc = crc32fast::Hasher::new();
-        crc.update(&h);
-        crc.update(meta.as_bytes());
-        crc.update(&payload);
-        h.extend_from_slice(&crc.finalize().to_le_bytes());
-        h.extend_from_slice(&0u32.to_le_bytes());
-        debug_assert_eq!(h.len(), HEADER_LEN);
-        h.extend_from_slice(meta.as_bytes());
-        (h, payload)
+        let head = container_head(MAGIC, VERSION, &self.metadata, &payload)?;
+        Ok((head, payload))
     }
 
     /// Writes atomically (temporary file, then rename).
     pub fn write(&self, path: &Path) -> Result<(), GridFileError> {
-        let (head, payload) = self.encode();
-        sylva_core::atomic_write_with(path, |w: &mut dyn Write| {
-            w.write_all(&head)?;
-            w.write_all(&payload)
-        })
-        .map_err(|source| GridFileError::Io {
-            path: path.into(),
-            source,
-        })
+        self.encode()
+            .and_then(|(head, payload)| {
+                sylva_core::atomic_write_with(path, |w: &mut dyn Write| {
+                    w.write_all(&head)?;
+                    w.write_all(&payload)
+                })
+            })
+            .map_err(|source| GridFileError::Io {
+                path: path.into(),
+                source,
+            })
     }
 
     /// Writes into `outputs` (renamed into place with the command's other outputs).
@@ -359,7 +343,12 @@ impl GridFile {
         outputs: &mut sylva_core::OutputSet,
         path: &Path,
     ) -> Result<(), sylva_core::OutputError> {
-        let (head, payload) = self.encode();
+        let (head, payload) = self
+            .encode()
+            .map_err(|source| sylva_core::OutputError::Io {
+                path: path.into(),
+                source,
+            })?;
         outputs.write(path, |w: &mut dyn Write| {
             w.write_all(&head)?;
             w.write_all(&payload)
@@ -368,36 +357,21 @@ impl GridFile {
 
     /// Reads and fully validates a grid file.
     pub fn read(path: &Path) -> Result<GridFile, GridFileError> {
-        let io = |source| GridFileError::Io {
-            path: path.into(),
-            source,
-        };
-        let (mut file, header, mut crc) = open_grid(path)?;
-        let payload_len = header.file_bytes - HEADER_LEN as u64 - header.metadata_bytes as u64;
+        let c = read_container(path, MAGIC, VERSION, WHAT).map_err(|e| container_error(path, e))?;
+        let h = grid_header(path, &c.payload, c.payload.len() as u64)?;
+        // Decoding f16 doubles the payload; f32 copies it.
         sylva_core::check_memory(
             &format!("reading {}", path.display()),
-            payload_len * (4 / header.element.size() as u64 + 1),
+            (c.payload.len() as u64) * (4 / h.element.size() as u64),
         )
         .map_err(|source| GridFileError::Memory {
             path: path.into(),
             source,
         })?;
-        let mut payload = vec![0u8; payload_len as usize];
-        file.read_exact(&mut payload).map_err(io)?;
-        crc.update(&payload);
-        let found = crc.finalize();
-        if found != header.checksum {
-            return Err(GridFileError::Checksum {
-                path: path.into(),
-                expected: header.checksum,
-                found,
-            });
-        }
-        let sites = header.dims.sites();
-        let size = header.element.size();
-        let channels = payload
-            .chunks_exact(sites * size)
-            .map(|c| match header.element {
+        let sites = h.dims.sites();
+        let channels = c.payload[GRID_HEADER_LEN..]
+            .chunks_exact(sites * h.element.size())
+            .map(|c| match h.element {
                 Element::F32 => c
                     .chunks_exact(4)
                     .map(|b| f32::from_le_bytes(b.try_into().expect("4 bytes")))
@@ -409,11 +383,11 @@ impl GridFile {
             })
             .collect();
         Ok(GridFile {
-            kind: header.kind,
-            dims: header.dims,
-            element: header.element,
-            bounds: header.bounds,
-            metadata: header.metadata,
+            kind: h.kind,
+            dims: h.dims,
+            element: h.element,
+            bounds: h.bounds,
+            metadata: c.metadata,
             channels,
         })
     }
@@ -437,75 +411,71 @@ fn bytemuck_f32(v: &[f32]) -> &[u8] {
     compile_error!("grid files assume a little-endian target");
 }
 
-/// `key=value` lines; '=' and line breaks in keys, and line breaks in values, become safe.
-fn metadata_text(meta: &[(String, String)]) -> String {
-    meta.iter()
-        .map(|(k, v)| format!("{}={}\n", k.replace(['=', '\n'], "_"), v.replace('\n', " ")))
-        .collect()
-}
-
-/// Opens a grid file and checks its header and metadata; the file is left at the payload and
-/// the CRC has consumed everything before it.
-fn open_grid(path: &Path) -> Result<(std::fs::File, GridHeader, crc32fast::Hasher), GridFileError> {
-    // The header says how long the file must be; the size is checked against it.
-    let (mut file, _) =
-        sylva_core::open_file(path, u64::MAX, "grid files").map_err(|e| match e {
-            sylva_core::InputError::Io { path, source } => GridFileError::Io { path, source },
-            e => GridFileError::Input(e),
-        })?;
-    let (header, crc) = read_header(path, &mut file)?;
-    Ok((file, header, crc))
-}
-
-/// Reads and checks the header and metadata, leaving `file` at the payload.
-fn read_header(
-    path: &Path,
-    file: &mut std::fs::File,
-) -> Result<(GridHeader, crc32fast::Hasher), GridFileError> {
-    let io = |source| GridFileError::Io {
-        path: path.into(),
-        source,
-    };
-    let found = file.metadata().map_err(io)?.len();
-    let mut h = [0u8; HEADER_LEN];
-    let got = read_up_to(file, &mut h).map_err(io)?;
-    if got >= 8 && &h[..8] != MAGIC {
-        return Err(GridFileError::Magic { path: path.into() });
-    }
-    if got < HEADER_LEN {
-        if got < 8 {
-            return Err(GridFileError::Magic { path: path.into() });
-        }
-        return Err(GridFileError::Truncated {
-            path: path.into(),
-            expected: HEADER_LEN as u64,
+/// The grid's fields of a container error.
+fn container_error(path: &Path, e: ContainerError) -> GridFileError {
+    let path = path.to_path_buf();
+    match e {
+        ContainerError::Io { path, source } => GridFileError::Io { path, source },
+        ContainerError::Input(e) => GridFileError::Input(e),
+        ContainerError::Magic { path, .. } => GridFileError::Magic { path },
+        ContainerError::Version { path, found, .. } => GridFileError::Version { path, found },
+        ContainerError::Truncated {
+            path,
+            expected,
             found,
-        });
+        } => GridFileError::Truncated {
+            path,
+            expected,
+            found,
+        },
+        ContainerError::Trailing { path, extra } => GridFileError::Trailing { path, extra },
+        ContainerError::Checksum {
+            path,
+            expected,
+            found,
+        } => GridFileError::Checksum {
+            path,
+            expected,
+            found,
+        },
+        ContainerError::Header { path, what } => GridFileError::Header { path, what },
+        ContainerError::Memory(source) => GridFileError::Memory { path, source },
     }
+}
+
+/// The grid's header at the start of a payload of `payload_len` bytes (`head` holds at least
+/// its first [`GRID_HEADER_LEN`] bytes when there are that many), checked against the length.
+struct GridFields {
+    kind: GridKind,
+    dims: Dims,
+    element: Element,
+    bounds: Bounds,
+}
+
+fn grid_header(path: &Path, head: &[u8], payload_len: u64) -> Result<GridFields, GridFileError> {
     let bad = |what: String| GridFileError::Header {
         path: path.into(),
         what,
     };
-    let version = u32_at(&h, 8);
-    if version != VERSION {
-        return Err(GridFileError::Version {
-            path: path.into(),
-            found: version,
-        });
+    if head.len() < GRID_HEADER_LEN {
+        return Err(bad(format!(
+            "a payload of {payload_len} bytes has no grid header ({GRID_HEADER_LEN} bytes)"
+        )));
     }
-    let kind = match u32_at(&h, 12) {
+    let u32_at = |at: usize| u32::from_le_bytes(head[at..at + 4].try_into().expect("4 bytes"));
+    let kind = match u32_at(0) {
         1 => GridKind::Density,
         2 => GridKind::Lighting,
         3 => GridKind::Basis,
         k => return Err(bad(format!("unknown grid kind {k}"))),
     };
-    let (nx, ny, nz) = (u32_at(&h, 16), u32_at(&h, 20), u32_at(&h, 24));
+    let (nx, ny, nz) = (u32_at(4), u32_at(8), u32_at(12));
     let dims =
         Dims::new(nx as usize, ny as usize, nz as usize).map_err(|source| GridFileError::Grid {
             path: path.into(),
             source,
         })?;
-    let channels = u32_at(&h, 28) as usize;
+    let channels = u32_at(16) as usize;
     if channels != kind.channel_names().len() {
         return Err(bad(format!(
             "a {} grid has {} channels, the header says {channels}",
@@ -513,110 +483,49 @@ fn read_header(
             kind.channel_names().len()
         )));
     }
-    let element = match u32_at(&h, 32) {
+    let element = match u32_at(20) {
         1 => Element::F32,
         2 => Element::F16,
         e => return Err(bad(format!("unknown element type {e}"))),
     };
-    let mut b = [0.0f32; 6];
-    for (i, v) in b.iter_mut().enumerate() {
-        *v = f32_at(&h, 36 + 4 * i);
-    }
+    let b: [f32; 6] = std::array::from_fn(|i| f32::from_bits(u32_at(24 + 4 * i)));
     if b.iter().any(|v| !v.is_finite()) || (0..3).any(|a| b[a] > b[a + 3]) {
         return Err(bad(format!("bounds {b:?} are not a valid box")));
     }
-    let bounds = Bounds {
-        min: [b[0], b[1], b[2]],
-        max: [b[3], b[4], b[5]],
-    };
-    let meta_len = u32_at(&h, 60) as usize;
-    if meta_len > MAX_METADATA {
-        return Err(bad(format!("metadata length {meta_len} is implausible")));
-    }
-    let payload_len = u64::from_le_bytes(h[64..72].try_into().expect("8 bytes"));
-    let want_payload = (channels * dims.sites() * element.size()) as u64;
-    if payload_len != want_payload {
+    let want = (GRID_HEADER_LEN + channels * dims.sites() * element.size()) as u64;
+    if payload_len != want {
         return Err(bad(format!(
-            "payload length {payload_len} does not match {dims} × {channels} channels × {} ({want_payload})",
+            "payload length {payload_len} does not match the grid header and {dims} × {channels} channels × {} ({want})",
             element.name()
         )));
     }
-    let expected = HEADER_LEN as u64 + meta_len as u64 + payload_len;
-    if found < expected {
-        return Err(GridFileError::Truncated {
-            path: path.into(),
-            expected,
-            found,
-        });
-    }
-    if found > expected {
-        return Err(GridFileError::Trailing {
-            path: path.into(),
-            extra: found - expected,
-        });
-    }
-    let mut meta = vec![0u8; meta_len];
-    file.read_exact(&mut meta).map_err(io)?;
-    let text = String::from_utf8(meta).map_err(|_| bad("metadata is not UTF-8".into()))?;
-    let metadata = text
-        .lines()
-        .filter_map(|l| l.split_once('='))
-        .map(|(k, v)| (k.to_string(), v.to_string()))
-        .collect::<Vec<_>>();
-    let mut crc = crc32fast::Hasher::new();
-    crc.update(&h[..72]);
-    crc.update(text.as_bytes());
-    Ok((
-        GridHeader {
-            kind,
-            dims,
-            element,
-            bounds,
-            metadata,
-            file_bytes: found,
-            checksum: u32_at(&h, 72),
-            metadata_bytes: meta_len,
+    Ok(GridFields {
+        kind,
+        dims,
+        element,
+        bounds: Bounds {
+            min: [b[0], b[1], b[2]],
+            max: [b[3], b[4], b[5]],
         },
-        crc,
-    ))
-}
-
-fn read_up_to(file: &mut std::fs::File, buf: &mut [u8]) -> std::io::Result<usize> {
-    let mut n = 0;
-    while n < buf.len() {
-        match file.read(&mut buf[n..])? {
-            0 => break,
-            k => n += k,
-        }
-    }
-    Ok(n)
+    })
 }
 
 /// Reads only the header and metadata (for `sylva lb info`); the checksum is verified too,
 /// which reads the payload once without keeping it.
 pub fn read_header_verified(path: &Path) -> Result<GridHeader, GridFileError> {
-    let (mut file, header, mut crc) = open_grid(path)?;
-    let io = |source| GridFileError::Io {
-        path: path.into(),
-        source,
-    };
-    let mut buf = vec![0u8; 1 << 20];
-    loop {
-        let n = file.read(&mut buf).map_err(io)?;
-        if n == 0 {
-            break;
-        }
-        crc.update(&buf[..n]);
-    }
-    let found = crc.finalize();
-    if found != header.checksum {
-        return Err(GridFileError::Checksum {
-            path: path.into(),
-            expected: header.checksum,
-            found,
-        });
-    }
-    Ok(header)
+    let c = read_container_head(path, MAGIC, VERSION, WHAT, GRID_HEADER_LEN)
+        .map_err(|e| container_error(path, e))?;
+    let h = grid_header(path, &c.head, c.payload_bytes)?;
+    Ok(GridHeader {
+        kind: h.kind,
+        dims: h.dims,
+        element: h.element,
+        bounds: h.bounds,
+        metadata: c.metadata,
+        file_bytes: c.file_bytes,
+        checksum: c.checksum,
+        metadata_bytes: c.metadata_bytes,
+    })
 }
 
 #[cfg(test)]
@@ -676,7 +585,7 @@ mod tests {
         sample().write(&p).unwrap();
         let bytes = std::fs::read(&p).unwrap();
 
-        for cut in [0, 5, 40, HEADER_LEN + 3, bytes.len() - 1] {
+        for cut in [0, 5, 30, 40, 32 + 3, bytes.len() - 1] {
             std::fs::write(&p, &bytes[..cut]).unwrap();
             let e = GridFile::read(&p).unwrap_err();
             assert!(
@@ -699,21 +608,45 @@ mod tests {
             GridFileError::Checksum { .. }
         ));
 
-        let mut bad_version = bytes.clone();
-        bad_version[8] = 9;
-        std::fs::write(&p, &bad_version).unwrap();
-        assert!(matches!(
-            GridFile::read(&p).unwrap_err(),
-            GridFileError::Version { found: 9, .. }
-        ));
+        // Another version (1: this format's own framing before the checked container).
+        for v in [1, 9] {
+            let mut other = bytes.clone();
+            other[8] = v;
+            std::fs::write(&p, &other).unwrap();
+            let e = GridFile::read(&p).unwrap_err();
+            assert!(
+                matches!(e, GridFileError::Version { found, .. } if found == v as u32),
+                "{e}"
+            );
+        }
 
+        // A grid header that passes the checksum but not its checks.
+        let payload_at = 32 + u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        let resealed = |b: &mut Vec<u8>| {
+            let mut crc = crc32fast::Hasher::new();
+            crc.update(&b[..24]);
+            crc.update(&b[32..]);
+            let sum = crc.finalize().to_le_bytes();
+            b[24..28].copy_from_slice(&sum);
+        };
         let mut huge = bytes.clone();
-        huge[16..20].copy_from_slice(&100_000u32.to_le_bytes());
+        huge[payload_at + 4..payload_at + 8].copy_from_slice(&100_000u32.to_le_bytes());
+        resealed(&mut huge);
         std::fs::write(&p, &huge).unwrap();
-        assert!(matches!(
-            GridFile::read(&p).unwrap_err(),
-            GridFileError::Grid { .. }
-        ));
+        let e = GridFile::read(&p).unwrap_err();
+        assert!(matches!(e, GridFileError::Grid { .. }), "{e}");
+        let mut kind = bytes.clone();
+        kind[payload_at] = 7;
+        resealed(&mut kind);
+        std::fs::write(&p, &kind).unwrap();
+        let e = read_header_verified(&p).unwrap_err();
+        assert!(e.to_string().contains("unknown grid kind 7"), "{e}");
+        let mut fewer = bytes.clone();
+        fewer[payload_at + 4] -= 1;
+        resealed(&mut fewer);
+        std::fs::write(&p, &fewer).unwrap();
+        let e = GridFile::read(&p).unwrap_err();
+        assert!(e.to_string().contains("does not match"), "{e}");
 
         std::fs::write(&p, b"P6\n12 12\n255\n").unwrap();
         assert!(matches!(

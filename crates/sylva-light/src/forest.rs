@@ -48,6 +48,8 @@ use std::collections::HashMap;
 use rayon::prelude::*;
 
 use glam::{Affine3A, Vec3};
+use serde::Serialize;
+use sylva_core::cache::{CacheKey, CacheKind};
 use sylva_geom::Aabb;
 use sylva_lb::lattice::{C, Q};
 use sylva_lb::light::{self, Environment};
@@ -318,6 +320,20 @@ fn sun_transmittance(
     Vec3::from_array(sum.map(|s| (s / weight) as f32))
 }
 
+/// The added foliage of a [`ShadedDensity`] (its fingerprint, part of the sun part's key).
+pub const NEIGHBOUR_SHADE: CacheKind = CacheKind {
+    name: "neighbour shade",
+    version: crate::lighting::CACHE_VERSION,
+};
+
+/// What the added foliage is made of: the sample lattice's size and, per sample point, the
+/// neighbours' optical depth of leaves and of wood per fine cell (f32).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub(crate) struct ShadeKey {
+    samples: [usize; 3],
+    depths: Vec<[f32; 2]>,
+}
+
 /// Per model, its density with the foliage of its instances' neighbours that reaches into
 /// their boxes added (`None`: none does, the model keeps its own density). The model's sun
 /// part is solved on it (docs/light.md, "Neighbours inside the box").
@@ -458,15 +474,13 @@ pub fn neighbour_shade(
             out.push(None);
             continue;
         }
-        let mut h = sylva_core::Fnv64::new();
-        h.str("sylva-render neighbour shade");
-        for n in n_s {
-            h.u64(n as u64);
-        }
-        for s in &samples {
-            h.f32(s[0] as f32);
-            h.f32(s[1] as f32);
-        }
+        let key = CacheKey::new(
+            NEIGHBOUR_SHADE,
+            &ShadeKey {
+                samples: n_s,
+                depths: samples.iter().map(|s| s.map(|v| v as f32)).collect(),
+            },
+        );
         // A fine site between sample points.
         let sample = |f: [usize; 3]| -> [f64; 2] {
             let g: [f32; 3] =
@@ -500,7 +514,7 @@ pub fn neighbour_shade(
         }
         out.push(Some(ShadedDensity {
             density,
-            key: h.finish(),
+            key,
             own_depth,
             added_depth,
         }));
@@ -628,6 +642,41 @@ impl ForestLight {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use sylva_core::cache::assert_each_field_changes_the_key;
+
+    #[test]
+    fn shade_key_changes_with_every_field() {
+        let base = ShadeKey {
+            samples: [3, 4, 5],
+            depths: vec![[0.5, 0.25]; 60],
+        };
+        let mut leaves = base.clone();
+        leaves.depths[59][0] = 0.5001;
+        let mut wood = base.clone();
+        wood.depths[0][1] = 0.0;
+        assert_each_field_changes_the_key(
+            NEIGHBOUR_SHADE,
+            &base,
+            &[
+                (
+                    "samples",
+                    ShadeKey {
+                        samples: [3, 5, 4],
+                        ..base.clone()
+                    },
+                ),
+                ("depths: leaves", leaves),
+                ("depths: wood", wood),
+                (
+                    "depths: count",
+                    ShadeKey {
+                        depths: vec![[0.5, 0.25]; 59],
+                        ..base.clone()
+                    },
+                ),
+            ],
+        );
+    }
     use sylva_lb::Bounds;
 
     /// A cube of uniform density `rho` over `[-1, 1]³` (shell empty), `n` sites per axis.

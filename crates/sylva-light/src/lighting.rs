@@ -22,10 +22,12 @@
 //!   of site centres). Points outside the grid clamp to the nearest site.
 //! * **Cache.** With a cache directory, the grid is stored as `<model>-<key>.sgrid` (a
 //!   lighting [`GridFile`], f32, CRC-checked, `sylva lb info` reads it): the physical light as
-//!   it is used, the paper's raw solver result. The key is a stable hash ([`Fnv64`]) over
-//!   everything the result depends on (see [`cache_key`]) and is stored in the file's metadata
-//!   too. An entry that cannot be read, or whose key, dimensions or bounds are not the expected
-//!   ones, is recomputed and replaced atomically; [`LightingSource::Recomputed`] says why.
+//!   it is used, the paper's raw solver result. The key ([`sylva_core::cache::CacheKey`]) is
+//!   derived from one struct of everything the result depends on (see [`cache_key`]) and is
+//!   stored in the file's metadata too. An entry that cannot be read, or whose key, dimensions
+//!   or bounds are not the expected ones, is recomputed and replaced atomically;
+//!   [`LightingSource::Recomputed`] says why. An entry that cannot be written is a warning
+//!   ([`LightingReport::cache_warning`]), not an error: the light was solved and is good.
 //! * **Sun.** The direction is rounded to 1e-5 per component (then renormalised) before it is
 //!   hashed *and* before it is solved with, so a cache entry is a function of its key alone.
 
@@ -34,15 +36,16 @@ use std::time::Instant;
 
 use glam::DVec3;
 pub use glam::Vec3;
+use serde::Serialize;
+use sylva_core::cache::{Cache, CacheKey, CacheKind, CacheOutcome, Lookup};
 use sylva_core::colour::luminance;
-use sylva_core::Fnv64;
 use sylva_geom::{is_opaque, LbSettings, MaterialKind, Model, Scene, Wrap, OPAQUE_ALPHA};
 use sylva_lb::light::{self, Environment, PlantOptics};
 use sylva_lb::relight::{Footprint, Placement};
 use sylva_lb::solver::{memory_needed, Boundary, Floor, SolveOptions, VolumeSource};
 use sylva_lb::{
-    Bounds, DensityGrid, Dims, Element, GridFile, GridFileError, GridKind, LightingGrid,
-    MediumParams, ParamError, Preset,
+    Bounds, DensityGrid, Dims, Element, GridFile, GridKind, LightingGrid, MediumParams, ParamError,
+    Preset,
 };
 use sylva_lb::{LbSolver, LbSolverError};
 use sylva_voxel::{
@@ -54,11 +57,22 @@ use thiserror::Error;
 /// Bump whenever the solver, the voxelizer or this module changes what a cache entry holds.
 /// 2: the solver backend's [`LbSolver::cache_tag`] is part of the key.
 /// 3: the physical light (docs/light.md): plant medium, sky and ground, uncollided sun removed.
-pub const CACHE_VERSION: u32 = 3;
+/// 4: keys derived from serialized key structs ([`sylva_core::cache`]); grid files in the
+/// checked container.
+pub const CACHE_VERSION: u32 = 4;
 /// Extension of cache entries.
 pub const CACHE_EXTENSION: &str = "sgrid";
-/// Metadata key holding the cache key (16 hex digits) in a cache entry.
-pub const KEY_METADATA: &str = "cache_key";
+pub use sylva_core::cache::KEY_METADATA;
+/// A model's lighting grid ([`cache_key`]).
+pub const MODEL_LIGHTING: CacheKind = CacheKind {
+    name: "model lighting",
+    version: CACHE_VERSION,
+};
+/// One part of a model's physical light ([`PartsPlan`]).
+pub const LIGHT_PART: CacheKind = CacheKind {
+    name: "physical light part",
+    version: CACHE_VERSION,
+};
 /// Sun direction components are rounded to multiples of this.
 pub const SUN_QUANTUM: f64 = 1e-5;
 
@@ -89,16 +103,6 @@ pub enum LightingError {
     /// A participating medium (cloud) whose grid cannot be lit (its dimensions).
     #[error("{0}")]
     MediumGrid(String),
-    #[error("cannot create the lighting cache directory {}: {source}", .dir.display())]
-    CacheDir {
-        dir: PathBuf,
-        source: std::io::Error,
-    },
-    #[error("cannot write the lighting cache entry {}: {source}", .path.display())]
-    CacheWrite {
-        path: PathBuf,
-        source: std::io::Error,
-    },
     #[error(transparent)]
     Relight(#[from] sylva_lb::relight::RelightError),
     #[error("global grid: {0}")]
@@ -507,6 +511,19 @@ pub struct LightingReport {
     /// The cache entry (read or written); `None` without a cache.
     pub path: Option<PathBuf>,
     pub dims: Dims,
+    /// Why the solved grid could not be cached (a read-only cache directory, a full disk):
+    /// the light is good, only not kept.
+    pub cache_warning: Option<String>,
+}
+
+impl From<CacheOutcome> for LightingSource {
+    fn from(o: CacheOutcome) -> LightingSource {
+        match o {
+            CacheOutcome::Hit => LightingSource::Cached,
+            CacheOutcome::Miss => LightingSource::Computed,
+            CacheOutcome::BadEntry(reason) => LightingSource::Recomputed { reason },
+        }
+    }
 }
 
 /// The physical light's [`Environment`] of `illum`, its sun direction quantised as the
@@ -670,127 +687,180 @@ pub fn cache_key(
     illum: &Illumination,
     opts: &LightingOptions,
     solver: &dyn LbSolver,
-) -> Result<u64, LightingError> {
+) -> Result<CacheKey, LightingError> {
     let (sun_q, sun) = quantise_sun(illum.sun_to)?;
     let plan = solve_plan(model, illum, sun, opts)?;
-    Ok(key_of(model, sun_q, opts, &plan, &solver.cache_tag()))
+    Ok(CacheKey::new(
+        MODEL_LIGHTING,
+        &ModelLightingKey::new(model, sun_q, opts, &plan, &solver.cache_tag()),
+    ))
 }
 
-fn key_of(
-    model: &Model,
+/// Everything a model's lighting grid depends on ([`cache_key`]).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub(crate) struct ModelLightingKey {
+    light: &'static str,
+    /// The solver backend's [`LbSolver::cache_tag`].
+    solver: String,
+    model: ModelMediumKey,
+    /// The sun direction rounded to [`SUN_QUANTUM`].
     sun: [i64; 3],
-    opts: &LightingOptions,
-    plan: &SolvePlan,
-    solver: &str,
-) -> u64 {
-    let (grid, m) = (opts.grid, &plan.medium);
-    let mut h = Fnv64::new();
-    h.str("sylva-render lighting");
-    h.u64(CACHE_VERSION as u64);
-    h.str(opts.light.name());
-    h.str(solver);
-    hash_model_medium(&mut h, model, grid, m, plan.occupancy);
-    // Sun and the boundaries (paper: the unit sun; physical: sun, sky and ground colours).
-    for c in sun {
-        h.u64(c as u64);
-    }
-    for b in &plan.boundaries {
-        for v in b.values {
-            h.u64(v.to_bits() as u64);
-        }
-    }
-    if let Some(env) = &plan.environment {
-        // The sun's first-collision source and the floor (the ground's light shadowed by
-        // the plant: the sun straight along its direction, the sky's uncollided light).
-        h.str("physical: first-collision sun source, floor");
-        for v in [env.sun_travel, env.sun_irradiance, env.sky_radiance] {
-            for c in v {
-                h.f64(c);
-            }
-        }
-        for c in env.ground_albedo.unwrap_or([-1.0; 3]) {
-            h.f64(c);
-        }
-        h.f64(light::step_optical_depth_factor());
-    }
-    // Solve schedule: the papers' 2 × longest edge, no tolerance.
-    h.str("papers:2N");
-    h.finish()
+    /// Per colour (paper: the unit sun; physical: the sky and ground colours).
+    boundaries: Vec<[f32; sylva_lb::lattice::Q]>,
+    /// The physical light's first-collision sun source and floor.
+    physical: Option<PhysicalKey>,
+    /// The solve schedule: the papers' 2 × longest edge, no tolerance.
+    schedule: &'static str,
 }
 
-/// Hashes what an LB result of `model` depends on besides the boundary: the grid file
-/// version, the mesh's geometry, the voxelizer's occupancy rule, sub-cells and opacity rule,
-/// per material its kind and (for leaves) the texture's size, wrap and opaque texels, the
-/// grid size and the medium's parameters (bit patterns, brown sites' included). Shared by
-/// the per-sun lighting cache and the basis cache.
-pub fn hash_model_medium(
-    h: &mut Fnv64,
-    model: &Model,
+/// The physical light's sources: the sun straight along its direction, the sky's and the
+/// ground's light (the floor is the ground shadowed by the plant).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub(crate) struct PhysicalKey {
+    sun_travel: [f64; 3],
+    sun_irradiance: [f64; 3],
+    sky_radiance: [f64; 3],
+    ground_albedo: Option<[f64; 3]>,
+    step_optical_depth_factor: f64,
+}
+
+/// The papers' schedule, as keys name it.
+const PAPERS_SCHEDULE: &str = "papers:2N";
+
+impl ModelLightingKey {
+    fn new(
+        model: &Model,
+        sun: [i64; 3],
+        opts: &LightingOptions,
+        plan: &SolvePlan,
+        solver: &str,
+    ) -> ModelLightingKey {
+        ModelLightingKey {
+            light: opts.light.name(),
+            solver: solver.to_string(),
+            model: ModelMediumKey::new(model, opts.grid, &plan.medium, plan.occupancy),
+            sun,
+            boundaries: plan.boundaries.iter().map(|b| b.values).collect(),
+            physical: plan.environment.as_ref().map(|env| PhysicalKey {
+                sun_travel: env.sun_travel,
+                sun_irradiance: env.sun_irradiance,
+                sky_radiance: env.sky_radiance,
+                ground_albedo: env.ground_albedo,
+                step_optical_depth_factor: light::step_optical_depth_factor(),
+            }),
+            schedule: PAPERS_SCHEDULE,
+        }
+    }
+}
+
+/// What an LB result of a model depends on besides the boundary: the grid file version, the
+/// mesh's geometry, the voxelizer's occupancy rule, sub-cells and opacity rule, per material
+/// its kind and (for leaves) the texture's size, wrap and opaque texels, the grid size and
+/// the medium's parameters (brown sites' included). Part of the per-sun lighting key, the
+/// basis key and the global grid's key.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ModelMediumKey {
+    grid_file_version: u32,
+    geometry: u64,
+    occupancy: &'static str,
+    sub_cells: usize,
+    opaque_alpha: u8,
+    alpha_test: bool,
+    materials: Vec<MaterialKey>,
     grid: usize,
-    m: &MediumParams,
-    occupancy: Occupancy,
-) {
-    h.u64(sylva_lb::grid_file::VERSION as u64);
-    h.u64(model.mesh.geometry_hash());
-    // Voxelization.
-    h.str(occupancy.name());
-    h.u64(SUB as u64);
-    h.u64(OPAQUE_ALPHA as u64);
-    h.u64(1); // alpha test on
-    h.u64(model.materials.len() as u64);
-    for mat in &model.materials {
-        match mat.kind {
-            MaterialKind::Wood => h.u64(1),
-            MaterialKind::Solid => h.u64(3),
-            MaterialKind::Leaf => {
-                h.u64(2);
-                match &mat.texture {
-                    None => h.u64(0),
-                    Some(t) => {
-                        h.u64(1);
-                        h.u64(t.width as u64);
-                        h.u64(t.height as u64);
-                        h.u64(match t.wrap {
-                            Wrap::Repeat => 1,
-                            Wrap::Clamp => 2,
-                        });
-                        // Only opacity matters to the voxelizer: one bit per texel.
-                        let mut bits = 0u8;
-                        for (i, p) in t.pixels.iter().enumerate() {
-                            bits = (bits << 1) | is_opaque(*p) as u8;
-                            if i % 8 == 7 {
-                                h.bytes(&[bits]);
-                                bits = 0;
-                            }
-                        }
-                        h.bytes(&[bits]);
-                    }
-                }
-            }
-        }
-    }
-    h.u64(grid as u64);
-    // Medium.
-    for c in 0..3 {
-        for p in [m.colours[c], m.brown_colour(c)] {
-            h.f64(p.sigma_a);
-            h.f64(p.sigma_s);
-            h.f64(p.g);
-        }
-    }
-    h.u64(m.zero_f0_on_green as u64);
-    h.u64(m.zero_f0_on_brown as u64);
-    h.f64(m.brown_threshold);
+    medium: MediumKey,
 }
 
-/// The cache entry of `model` under `key` in `dir`.
-pub fn cache_path(dir: &Path, model: &Model, key: u64) -> PathBuf {
-    entry_path(dir, &sylva_core::file_stem(&model.name, "model"), key)
+/// What the voxelizer reads of a material.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub(crate) enum MaterialKey {
+    Wood,
+    Leaf { texture: Option<TextureKey> },
+    Solid,
 }
 
-/// `<stem>-<key>.sgrid` in `dir`.
-fn entry_path(dir: &Path, stem: &str, key: u64) -> PathBuf {
-    dir.join(format!("{stem}-{key:016x}.{CACHE_EXTENSION}"))
+/// A leaf texture as the voxelizer sees it: only opacity matters, one bit per texel.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub(crate) struct TextureKey {
+    width: u32,
+    height: u32,
+    wrap: &'static str,
+    opaque: Vec<u8>,
+}
+
+/// A medium's parameters, brown sites' resolved.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct MediumKey {
+    /// Per colour: green `(σ_a, σ_s, g)`, brown `(σ_a, σ_s, g)`.
+    colours: [[[f64; 3]; 2]; 3],
+    zero_f0_on_green: bool,
+    zero_f0_on_brown: bool,
+    brown_threshold: f64,
+}
+
+impl MediumKey {
+    pub fn new(m: &MediumParams) -> MediumKey {
+        let p = |c: sylva_lb::ColourParams| [c.sigma_a, c.sigma_s, c.g];
+        MediumKey {
+            colours: std::array::from_fn(|c| [p(m.colours[c]), p(m.brown_colour(c))]),
+            zero_f0_on_green: m.zero_f0_on_green,
+            zero_f0_on_brown: m.zero_f0_on_brown,
+            brown_threshold: m.brown_threshold,
+        }
+    }
+}
+
+impl ModelMediumKey {
+    pub fn new(
+        model: &Model,
+        grid: usize,
+        m: &MediumParams,
+        occupancy: Occupancy,
+    ) -> ModelMediumKey {
+        let materials = model
+            .materials
+            .iter()
+            .map(|mat| match mat.kind {
+                MaterialKind::Wood => MaterialKey::Wood,
+                MaterialKind::Solid => MaterialKey::Solid,
+                MaterialKind::Leaf => MaterialKey::Leaf {
+                    texture: mat.texture.as_ref().map(|t| TextureKey {
+                        width: t.width,
+                        height: t.height,
+                        wrap: match t.wrap {
+                            Wrap::Repeat => "repeat",
+                            Wrap::Clamp => "clamp",
+                        },
+                        opaque: t
+                            .pixels
+                            .chunks(8)
+                            .map(|c| c.iter().fold(0u8, |b, p| (b << 1) | is_opaque(*p) as u8))
+                            .collect(),
+                    }),
+                },
+            })
+            .collect();
+        ModelMediumKey {
+            grid_file_version: sylva_lb::grid_file::VERSION,
+            geometry: model.mesh.geometry_hash(),
+            occupancy: occupancy.name(),
+            sub_cells: SUB,
+            opaque_alpha: OPAQUE_ALPHA,
+            alpha_test: true,
+            materials,
+            grid,
+            medium: MediumKey::new(m),
+        }
+    }
+}
+
+/// The cache entry of `model` under `key` in `cache`.
+pub fn cache_path(cache: &Cache, model: &Model, key: CacheKey) -> PathBuf {
+    cache.entry(
+        &sylva_core::file_stem(&model.name, "model"),
+        key,
+        CACHE_EXTENSION,
+    )
 }
 
 /// Lights `grid` as `plan` says on `solver`, forwarding progress: the solver's result, less
@@ -895,7 +965,12 @@ fn to_model_lighting(grid: &LightingGrid, plan: &SolvePlan, sun_to: DVec3) -> Mo
 }
 
 /// Reads and checks a cache entry; `Err` is the reason it is unusable, naming the file.
-fn read_entry(path: &Path, key: u64, dims: Dims, bounds: Bounds) -> Result<LightingGrid, String> {
+fn read_entry(
+    path: &Path,
+    key: CacheKey,
+    dims: Dims,
+    bounds: Bounds,
+) -> Result<LightingGrid, String> {
     let file = GridFile::read(path).map_err(|e| e.to_string())?;
     let shown = path.display();
     if file.kind != GridKind::Lighting {
@@ -904,20 +979,7 @@ fn read_entry(path: &Path, key: u64, dims: Dims, bounds: Bounds) -> Result<Light
             file.kind.name()
         ));
     }
-    let want = format!("{key:016x}");
-    match file.metadata_value(KEY_METADATA) {
-        Some(k) if k == want => {}
-        Some(k) => {
-            return Err(format!(
-                "{shown} is stale: its cache key is {k}, expected {want}"
-            ))
-        }
-        None => {
-            return Err(format!(
-                "{shown} has no cache key: not a lighting cache entry"
-            ))
-        }
-    }
+    key.check(path, file.metadata_value(KEY_METADATA))?;
     if file.dims != dims {
         return Err(format!(
             "{shown} holds a {} grid, the model needs {}",
@@ -944,15 +1006,21 @@ fn read_entry(path: &Path, key: u64, dims: Dims, bounds: Bounds) -> Result<Light
     Ok(grid)
 }
 
-/// What a model's cache entry holds.
-#[derive(Debug)]
-pub enum CacheLookup {
-    /// A valid entry: the grid as stored.
-    Hit(LightingGrid),
-    /// No cache, or no entry yet.
-    Miss,
-    /// An entry that cannot be used: the reason, naming the file.
-    Bad(String),
+/// What a model's cache entry holds: a valid entry's grid, no entry (or no cache), or the
+/// reason an entry cannot be used, naming the file.
+pub type CacheLookup = Lookup<LightingGrid>;
+
+/// Writes `grid` as a cache entry at `path` with `metadata` (the key first).
+fn write_entry(
+    grid: &LightingGrid,
+    path: &Path,
+    key: CacheKey,
+    mut metadata: Vec<(String, String)>,
+) -> Result<(), String> {
+    metadata.insert(0, key.metadata());
+    GridFile::from_lighting(grid, Element::F32, metadata)
+        .write(path)
+        .map_err(|e| e.to_string())
 }
 
 /// One model's LB lighting as separate steps, for whoever schedules the solves: the cache
@@ -964,19 +1032,19 @@ pub enum CacheLookup {
 pub struct LightingPlan<'a> {
     pub model: &'a Model,
     /// The cache key ([`cache_key`]).
-    pub key: u64,
+    pub key: CacheKey,
     placement: GridPlacement,
     solve: SolvePlan,
     /// The quantised unit sun direction.
     sun: DVec3,
     opts: LightingOptions,
-    /// The cache entry; `None` without a cache.
-    path: Option<PathBuf>,
+    /// The cache and the entry; `None` without a cache.
+    entry: Option<(Cache, PathBuf)>,
 }
 
 impl<'a> LightingPlan<'a> {
     /// The plan of lighting `model` under `illum` with `opts` on `solver` (its
-    /// [`LbSolver::cache_tag`] is part of the key). Creates the cache directory.
+    /// [`LbSolver::cache_tag`] is part of the key).
     pub fn new(
         model: &'a Model,
         illum: &Illumination,
@@ -985,18 +1053,16 @@ impl<'a> LightingPlan<'a> {
     ) -> Result<LightingPlan<'a>, LightingError> {
         let (sun_q, sun) = quantise_sun(illum.sun_to)?;
         let solve = solve_plan(model, illum, sun, opts)?;
-        let key = key_of(model, sun_q, opts, &solve, &solver.cache_tag());
+        let key = CacheKey::new(
+            MODEL_LIGHTING,
+            &ModelLightingKey::new(model, sun_q, opts, &solve, &solver.cache_tag()),
+        );
         let placement = placement_for(model, opts.grid)?;
-        let path = match &opts.cache_dir {
-            Some(dir) => {
-                std::fs::create_dir_all(dir).map_err(|source| LightingError::CacheDir {
-                    dir: dir.clone(),
-                    source,
-                })?;
-                Some(cache_path(dir, model, key))
-            }
-            None => None,
-        };
+        let entry = opts.cache_dir.as_ref().map(|dir| {
+            let cache = Cache::new(dir);
+            let path = cache_path(&cache, model, key);
+            (cache, path)
+        });
         Ok(LightingPlan {
             model,
             key,
@@ -1004,7 +1070,7 @@ impl<'a> LightingPlan<'a> {
             solve,
             sun,
             opts: opts.clone(),
-            path,
+            entry,
         })
     }
 
@@ -1015,24 +1081,17 @@ impl<'a> LightingPlan<'a> {
 
     /// The cache entry (read or to be written); `None` without a cache.
     pub fn cache_path(&self) -> Option<&Path> {
-        self.path.as_deref()
+        self.entry.as_ref().map(|(_, p)| p.as_path())
     }
 
     /// The cache entry, if there is a usable one.
     pub fn lookup(&self) -> CacheLookup {
-        let Some(path) = &self.path else {
-            return CacheLookup::Miss;
+        let Some((cache, path)) = &self.entry else {
+            return Lookup::Miss;
         };
-        match path.try_exists() {
-            Ok(false) => CacheLookup::Miss,
-            Ok(true) => {
-                match read_entry(path, self.key, self.placement.dims, self.placement.bounds()) {
-                    Ok(grid) => CacheLookup::Hit(grid),
-                    Err(reason) => CacheLookup::Bad(reason),
-                }
-            }
-            Err(e) => CacheLookup::Bad(format!("cannot read {}: {e}", path.display())),
-        }
+        cache.lookup(path, |p| {
+            read_entry(p, self.key, self.placement.dims, self.placement.bounds())
+        })
     }
 
     /// The colours a solve computes, each with the colour whose result it takes: a colour
@@ -1142,14 +1201,11 @@ impl<'a> LightingPlan<'a> {
     }
 
     /// Writes `grid` (solved on `solver`) as the cache entry, atomically; nothing without a
-    /// cache.
-    pub fn store(&self, grid: &LightingGrid, solver: &dyn LbSolver) -> Result<(), LightingError> {
-        let Some(path) = &self.path else {
-            return Ok(());
-        };
+    /// cache. Returns a warning, naming the file, when the entry could not be written.
+    pub fn store(&self, grid: &LightingGrid, solver: &dyn LbSolver) -> Option<String> {
+        let (cache, path) = self.entry.as_ref()?;
         let sun = self.sun;
         let metadata = vec![
-            (KEY_METADATA.to_string(), format!("{:016x}", self.key)),
             ("source".to_string(), self.model.name.clone()),
             ("light".to_string(), self.opts.light.name().to_string()),
             (
@@ -1170,15 +1226,7 @@ impl<'a> LightingPlan<'a> {
             ),
             ("solver".to_string(), solver.describe()),
         ];
-        GridFile::from_lighting(grid, Element::F32, metadata)
-            .write(path)
-            .map_err(|e| LightingError::CacheWrite {
-                path: path.clone(),
-                source: match e {
-                    GridFileError::Io { source, .. } => source,
-                    e => std::io::Error::other(e.to_string()),
-                },
-            })
+        cache.store(path, |p| write_entry(grid, p, self.key, metadata))
     }
 
     /// The stored grid as the renderer uses it (the paper light normalised so unobstructed
@@ -1188,59 +1236,50 @@ impl<'a> LightingPlan<'a> {
     }
 }
 
-/// One raw LB solve through the cache: `file_name` (a file stem and the key) in `cache_dir`
-/// when a valid entry holds it (key, dimensions and bounds checked), otherwise `solve()`d and,
-/// with a cache, stored atomically with `metadata` and the key. Returns the grid, where it
-/// came from and the entry's path.
+/// A lighting grid from [`cached_solve`].
+#[derive(Debug)]
+pub struct CachedGrid {
+    pub grid: LightingGrid,
+    pub source: LightingSource,
+    /// The cache entry (read or written); `None` without a cache.
+    pub path: Option<PathBuf>,
+    /// Why the solved grid could not be stored.
+    pub cache_warning: Option<String>,
+}
+
+/// One raw LB solve through the cache: `<stem>-<key>.sgrid` in `cache_dir` when a valid entry
+/// holds it (key, dimensions and bounds checked), otherwise `solve()`d and, with a cache,
+/// stored atomically with `metadata` and the key.
 pub(crate) fn cached_solve(
     cache_dir: Option<&Path>,
     stem: &str,
-    key: u64,
+    key: CacheKey,
     dims: Dims,
     bounds: Bounds,
     metadata: Vec<(String, String)>,
     solve: impl FnOnce() -> Result<LightingGrid, LightingError>,
-) -> Result<(LightingGrid, LightingSource, Option<PathBuf>), LightingError> {
-    let path = match cache_dir {
-        Some(dir) => {
-            std::fs::create_dir_all(dir).map_err(|source| LightingError::CacheDir {
-                dir: dir.to_path_buf(),
-                source,
-            })?;
-            Some(entry_path(dir, stem, key))
-        }
-        None => None,
+) -> Result<CachedGrid, LightingError> {
+    let Some(cache) = cache_dir.map(Cache::new) else {
+        return Ok(CachedGrid {
+            grid: solve()?,
+            source: LightingSource::Computed,
+            path: None,
+            cache_warning: None,
+        });
     };
-    let mut source = LightingSource::Computed;
-    if let Some(path) = &path {
-        match path.try_exists() {
-            Ok(false) => {}
-            Ok(true) => match read_entry(path, key, dims, bounds) {
-                Ok(grid) => return Ok((grid, LightingSource::Cached, Some(path.clone()))),
-                Err(reason) => source = LightingSource::Recomputed { reason },
-            },
-            Err(e) => {
-                source = LightingSource::Recomputed {
-                    reason: format!("cannot read {}: {e}", path.display()),
-                }
-            }
-        }
-    }
-    let grid = solve()?;
-    if let Some(path) = &path {
-        let mut metadata = metadata;
-        metadata.insert(0, (KEY_METADATA.to_string(), format!("{key:016x}")));
-        GridFile::from_lighting(&grid, Element::F32, metadata)
-            .write(path)
-            .map_err(|e| LightingError::CacheWrite {
-                path: path.clone(),
-                source: match e {
-                    GridFileError::Io { source, .. } => source,
-                    e => std::io::Error::other(e.to_string()),
-                },
-            })?;
-    }
-    Ok((grid, source, path))
+    let path = cache.entry(stem, key, CACHE_EXTENSION);
+    let got = cache.get_or_compute(
+        &path,
+        |p| read_entry(p, key, dims, bounds),
+        solve,
+        |grid, p| write_entry(grid, p, key, metadata),
+    )?;
+    Ok(CachedGrid {
+        grid: got.value,
+        source: got.outcome.into(),
+        path: Some(path),
+        cache_warning: got.write_warning,
+    })
 }
 
 /// One model's LB lighting under `illum` (model frame): from the cache when it holds a valid
@@ -1255,24 +1294,25 @@ pub fn model_lighting(
 ) -> Result<(ModelLighting, LightingReport), LightingError> {
     let t0 = Instant::now();
     let plan = LightingPlan::new(model, illum, opts, solver)?;
-    let report = |source| LightingReport {
+    let report = |source, cache_warning| LightingReport {
         source,
         seconds: t0.elapsed().as_secs_f64(),
         path: plan.cache_path().map(Path::to_path_buf),
         dims: plan.dims(),
+        cache_warning,
     };
     let source = match plan.lookup() {
-        CacheLookup::Hit(grid) => {
-            return Ok((plan.lighting(&grid), report(LightingSource::Cached)));
+        Lookup::Hit(grid) => {
+            return Ok((plan.lighting(&grid), report(LightingSource::Cached, None)));
         }
-        CacheLookup::Miss => LightingSource::Computed,
-        CacheLookup::Bad(reason) => LightingSource::Recomputed { reason },
+        Lookup::Miss => LightingSource::Computed,
+        Lookup::Bad(reason) => LightingSource::Recomputed { reason },
     };
     let density = plan.density()?;
     let grid = plan.solve(&density, solver, progress)?;
     drop(density);
-    plan.store(&grid, solver)?;
-    Ok((plan.lighting(&grid), report(source)))
+    let warning = plan.store(&grid, solver);
+    Ok((plan.lighting(&grid), report(source, warning)))
 }
 
 /// A model's physical light solved as its four parts ([`LightParts`]: the sun's, a unit sky's
@@ -1321,8 +1361,15 @@ pub fn model_lighting_parts_on(
     let mut grids = Vec::with_capacity(PARTS.len());
     let mut report_source = LightingSource::Cached;
     let mut path = None;
+    let mut cache_warning = None;
     for k in 0..PARTS.len() {
-        let (grid, source, p) = plan.cached(k, solver, || plan.solve(k, solver, progress))?;
+        let CachedGrid {
+            grid,
+            source,
+            path: p,
+            cache_warning: w,
+        } = plan.cached(k, solver, || plan.solve(k, solver, progress))?;
+        cache_warning = cache_warning.or(w);
         // Reported as one: a bad entry's reason first, else computed if any part was.
         report_source = match (report_source, source) {
             (r @ LightingSource::Recomputed { .. }, _) => r,
@@ -1342,6 +1389,7 @@ pub fn model_lighting_parts_on(
         seconds: t0.elapsed().as_secs_f64(),
         path,
         dims,
+        cache_warning,
     };
     Ok((lighting, report, own, medium))
 }
@@ -1352,8 +1400,8 @@ pub fn model_lighting_parts_on(
 pub struct ShadedDensity {
     /// The density the model's light parts are solved on.
     pub density: DensityGrid,
-    /// A hash of the added foliage, for the parts' cache keys.
-    pub key: u64,
+    /// A fingerprint of the added foliage, for the parts' cache keys.
+    pub key: CacheKey,
     /// Optical depth (`Σ -ln(1 - ρ)` over the interior sites) of the model's own foliage and
     /// of the neighbours' that was added.
     pub own_depth: f64,
@@ -1377,7 +1425,18 @@ pub struct PartsPlan<'a> {
     own: DensityGrid,
     /// The density the sun part is solved on, when the neighbours' foliage is added.
     shaded: Option<DensityGrid>,
-    keys: [u64; 4],
+    keys: [CacheKey; 4],
+}
+
+/// Everything one part of a model's physical light depends on.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub(crate) struct LightPartKey {
+    /// The model's lighting key ([`cache_key`]): the model, medium, sun, sky, ground, solver.
+    model: u64,
+    part: &'static str,
+    /// The added foliage's fingerprint ([`crate::forest::ShadedDensity::key`]), the sun
+    /// part's alone.
+    shade: Option<u64>,
 }
 
 impl<'a> PartsPlan<'a> {
@@ -1418,14 +1477,12 @@ impl<'a> PartsPlan<'a> {
             }
         }
         let keys = std::array::from_fn(|k| {
-            let mut h = Fnv64::new();
-            h.str("sylva-render physical light part");
-            h.u64(plan.key);
-            h.str(PARTS[k]);
-            if let (Some(s), 0) = (shade, k) {
-                h.u64(s.key);
-            }
-            h.finish()
+            let key = LightPartKey {
+                model: plan.key.value(),
+                part: PARTS[k],
+                shade: shade.filter(|_| k == 0).map(|s| s.key.value()),
+            };
+            CacheKey::new(LIGHT_PART, &key)
         });
         Ok(PartsPlan {
             model,
@@ -1444,7 +1501,7 @@ impl<'a> PartsPlan<'a> {
     }
 
     /// Part `k`'s cache key.
-    pub fn key(&self, k: usize) -> u64 {
+    pub fn key(&self, k: usize) -> CacheKey {
         self.keys[k]
     }
 
@@ -1542,7 +1599,7 @@ impl<'a> PartsPlan<'a> {
         k: usize,
         solver: &dyn LbSolver,
         solve: impl FnOnce() -> Result<LightingGrid, LightingError>,
-    ) -> Result<(LightingGrid, LightingSource, Option<PathBuf>), LightingError> {
+    ) -> Result<CachedGrid, LightingError> {
         let metadata = vec![
             ("source".to_string(), self.model.name.clone()),
             ("light".to_string(), format!("physical, {} part", PARTS[k])),
@@ -1567,7 +1624,11 @@ impl<'a> PartsPlan<'a> {
             return false;
         };
         let stem = sylva_core::file_stem(&self.model.name, "model");
-        let path = entry_path(dir, &format!("{stem}-{}", PARTS[k]), self.keys[k]);
+        let path = Cache::new(dir).entry(
+            &format!("{stem}-{}", PARTS[k]),
+            self.keys[k],
+            CACHE_EXTENSION,
+        );
         read_entry(
             &path,
             self.keys[k],
@@ -1641,9 +1702,112 @@ fn flip_lighting(grid: &LightingGrid) -> LightingGrid {
     }
 }
 
+/// A model and medium key with a textured leaf, wood and a solid, for the key tests (of this
+/// crate's keys and of keys that hold one, feature `test-fixtures`).
+#[cfg(any(test, feature = "test-fixtures"))]
+pub fn sample_model_medium_key() -> ModelMediumKey {
+    ModelMediumKey {
+        grid_file_version: sylva_lb::grid_file::VERSION,
+        geometry: 0x1234,
+        occupancy: Occupancy::Area.name(),
+        sub_cells: SUB,
+        opaque_alpha: OPAQUE_ALPHA,
+        alpha_test: true,
+        materials: vec![
+            MaterialKey::Leaf {
+                texture: Some(TextureKey {
+                    width: 4,
+                    height: 2,
+                    wrap: "clamp",
+                    opaque: vec![0b1010_0101],
+                }),
+            },
+            MaterialKey::Wood,
+        ],
+        grid: 16,
+        medium: MediumKey {
+            colours: [[[0.1, 0.2, 0.3], [0.4, 0.5, -1.0]]; 3],
+            zero_f0_on_green: true,
+            zero_f0_on_brown: true,
+            brown_threshold: 0.5,
+        },
+    }
+}
+
+/// Every field of [`sample_model_medium_key`] changed in turn, each sub-field of the
+/// materials and the medium included.
+#[cfg(any(test, feature = "test-fixtures"))]
+pub fn model_medium_variants() -> Vec<(String, ModelMediumKey)> {
+    let base = sample_model_medium_key;
+    let with = |f: &dyn Fn(&mut ModelMediumKey)| {
+        let mut k = base();
+        f(&mut k);
+        k
+    };
+    let texture = |f: &dyn Fn(&mut TextureKey)| {
+        with(&|k| {
+            if let MaterialKey::Leaf { texture: Some(t) } = &mut k.materials[0] {
+                f(t)
+            }
+        })
+    };
+    let mut v: Vec<(String, ModelMediumKey)> = vec![
+        (
+            "grid_file_version".into(),
+            with(&|k| k.grid_file_version += 1),
+        ),
+        ("geometry".into(), with(&|k| k.geometry += 1)),
+        (
+            "occupancy".into(),
+            with(&|k| k.occupancy = Occupancy::SubCells.name()),
+        ),
+        ("sub_cells".into(), with(&|k| k.sub_cells += 1)),
+        ("opaque_alpha".into(), with(&|k| k.opaque_alpha += 1)),
+        ("alpha_test".into(), with(&|k| k.alpha_test = false)),
+        (
+            "material kind".into(),
+            with(&|k| k.materials[1] = MaterialKey::Solid),
+        ),
+        ("material count".into(), with(&|k| k.materials.truncate(1))),
+        (
+            "leaf texture".into(),
+            with(&|k| k.materials[0] = MaterialKey::Leaf { texture: None }),
+        ),
+        ("texture width".into(), texture(&|t| t.width += 1)),
+        ("texture height".into(), texture(&|t| t.height += 1)),
+        ("texture wrap".into(), texture(&|t| t.wrap = "repeat")),
+        ("texture opacity".into(), texture(&|t| t.opaque[0] ^= 1)),
+        ("grid".into(), with(&|k| k.grid += 1)),
+        (
+            "zero_f0_on_green".into(),
+            with(&|k| k.medium.zero_f0_on_green = false),
+        ),
+        (
+            "zero_f0_on_brown".into(),
+            with(&|k| k.medium.zero_f0_on_brown = false),
+        ),
+        (
+            "brown_threshold".into(),
+            with(&|k| k.medium.brown_threshold = 0.6),
+        ),
+    ];
+    for c in 0..3 {
+        for (s, site) in ["green", "brown"].into_iter().enumerate() {
+            for (p, param) in ["sigma_a", "sigma_s", "g"].into_iter().enumerate() {
+                v.push((
+                    format!("medium colour {c} {site} {param}"),
+                    with(&|k| k.medium.colours[c][s][p] += 0.01),
+                ));
+            }
+        }
+    }
+    v
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use sylva_core::cache::assert_each_field_changes_the_key;
     use sylva_geom::{Material, Mesh};
     use sylva_lb::Bounds;
     use sylva_lb::CpuSolver;
@@ -1767,7 +1931,7 @@ mod tests {
         let key = cache_key(&m, &illum(sun()), &o, &CpuSolver).unwrap();
         assert_eq!(
             path.file_name().unwrap().to_str().unwrap(),
-            format!("test_plate_1-{key:016x}.sgrid")
+            format!("test_plate_1-{key}.sgrid")
         );
         assert_eq!(ra.dims, a.dims());
         assert!(calls > 0);
@@ -2002,6 +2166,200 @@ mod tests {
     }
 
     #[test]
+    fn model_medium_key_changes_with_every_field() {
+        let variants = model_medium_variants();
+        let named: Vec<(&str, ModelMediumKey)> = variants
+            .iter()
+            .map(|(n, k)| (n.as_str(), k.clone()))
+            .collect();
+        assert_each_field_changes_the_key(MODEL_LIGHTING, &sample_model_medium_key(), &named);
+    }
+
+    #[test]
+    fn model_lighting_key_changes_with_every_field() {
+        let physical = PhysicalKey {
+            sun_travel: [0.0, -1.0, 0.0],
+            sun_irradiance: [1.0; 3],
+            sky_radiance: [0.2; 3],
+            ground_albedo: Some([0.1; 3]),
+            step_optical_depth_factor: 1.0,
+        };
+        let base = ModelLightingKey {
+            light: Light::Physical.name(),
+            solver: "cpu".into(),
+            model: sample_model_medium_key(),
+            sun: [0, 100_000, 0],
+            boundaries: vec![[0.5; sylva_lb::lattice::Q]; 3],
+            physical: Some(physical.clone()),
+            schedule: PAPERS_SCHEDULE,
+        };
+        let with_physical = |f: &dyn Fn(&mut PhysicalKey)| {
+            let mut p = physical.clone();
+            f(&mut p);
+            ModelLightingKey {
+                physical: Some(p),
+                ..base.clone()
+            }
+        };
+        let mut boundary = base.boundaries.clone();
+        boundary[2][18] = 0.0;
+        let mut variants: Vec<(String, ModelLightingKey)> = vec![
+            (
+                "light".into(),
+                ModelLightingKey {
+                    light: Light::Paper.name(),
+                    ..base.clone()
+                },
+            ),
+            (
+                "solver".into(),
+                ModelLightingKey {
+                    solver: "gpu-f32".into(),
+                    ..base.clone()
+                },
+            ),
+            (
+                "sun".into(),
+                ModelLightingKey {
+                    sun: [1, 100_000, 0],
+                    ..base.clone()
+                },
+            ),
+            (
+                "boundaries".into(),
+                ModelLightingKey {
+                    boundaries: boundary,
+                    ..base.clone()
+                },
+            ),
+            (
+                "physical".into(),
+                ModelLightingKey {
+                    physical: None,
+                    ..base.clone()
+                },
+            ),
+            (
+                "schedule".into(),
+                ModelLightingKey {
+                    schedule: "papers:3N",
+                    ..base.clone()
+                },
+            ),
+            (
+                "sun_travel".into(),
+                with_physical(&|p| p.sun_travel[0] = 0.1),
+            ),
+            (
+                "sun_irradiance".into(),
+                with_physical(&|p| p.sun_irradiance[1] = 0.9),
+            ),
+            (
+                "sky_radiance".into(),
+                with_physical(&|p| p.sky_radiance[2] = 0.3),
+            ),
+            (
+                "ground_albedo".into(),
+                with_physical(&|p| p.ground_albedo = None),
+            ),
+            (
+                "ground_albedo value".into(),
+                with_physical(&|p| p.ground_albedo = Some([0.2; 3])),
+            ),
+            (
+                "step_optical_depth_factor".into(),
+                with_physical(&|p| p.step_optical_depth_factor = 0.5),
+            ),
+        ];
+        for (name, m) in model_medium_variants() {
+            variants.push((
+                format!("model: {name}"),
+                ModelLightingKey {
+                    model: m,
+                    ..base.clone()
+                },
+            ));
+        }
+        let named: Vec<(&str, ModelLightingKey)> = variants
+            .iter()
+            .map(|(n, k)| (n.as_str(), k.clone()))
+            .collect();
+        assert_each_field_changes_the_key(MODEL_LIGHTING, &base, &named);
+    }
+
+    #[test]
+    fn light_part_key_changes_with_every_field() {
+        let base = LightPartKey {
+            model: 7,
+            part: PARTS[0],
+            shade: Some(3),
+        };
+        assert_each_field_changes_the_key(
+            LIGHT_PART,
+            &base,
+            &[
+                (
+                    "model",
+                    LightPartKey {
+                        model: 8,
+                        ..base.clone()
+                    },
+                ),
+                (
+                    "part",
+                    LightPartKey {
+                        part: PARTS[1],
+                        ..base.clone()
+                    },
+                ),
+                (
+                    "shade",
+                    LightPartKey {
+                        shade: None,
+                        ..base.clone()
+                    },
+                ),
+                (
+                    "shade value",
+                    LightPartKey {
+                        shade: Some(4),
+                        ..base.clone()
+                    },
+                ),
+            ],
+        );
+        // The same inputs under another kind are another key.
+        assert_ne!(
+            CacheKey::new(LIGHT_PART, &base),
+            CacheKey::new(MODEL_LIGHTING, &base)
+        );
+    }
+
+    #[test]
+    fn parts_keys_follow_the_model_key_and_the_shade() {
+        let m = model(1.0);
+        let o = opts(None);
+        let own = model_density(&m, &illum(sun()), &o, &CpuSolver).unwrap().0;
+        let plan = PartsPlan::new(&m, &illum(sun()), &o, &CpuSolver, own.clone(), None).unwrap();
+        let keys: Vec<CacheKey> = (0..PARTS.len()).map(|k| plan.key(k)).collect();
+        for (i, a) in keys.iter().enumerate() {
+            assert!(keys[..i].iter().all(|b| b != a), "parts {i} shares a key");
+        }
+        let other_sun = illum(Vec3::new(0.3, 0.8, 0.25));
+        let moved = PartsPlan::new(&m, &other_sun, &o, &CpuSolver, own.clone(), None).unwrap();
+        assert!((0..PARTS.len()).all(|k| moved.key(k) != keys[k]));
+        let shade = ShadedDensity {
+            density: own.clone(),
+            key: CacheKey::new(crate::forest::NEIGHBOUR_SHADE, &1u8),
+            own_depth: 1.0,
+            added_depth: 0.5,
+        };
+        let shaded = PartsPlan::new(&m, &illum(sun()), &o, &CpuSolver, own, Some(&shade)).unwrap();
+        assert_ne!(shaded.key(0), keys[0], "the shade is the sun part's input");
+        assert!((1..PARTS.len()).all(|k| shaded.key(k) == keys[k]));
+    }
+
+    #[test]
     fn free_space_holds_the_sky_and_ground_light_alone() {
         // Physical light in free space: the sun's light is all uncollided and removed; what
         // stays is the open sky's and ground's light, 2 L_sky + 2 L_ground per colour.
@@ -2194,21 +2552,31 @@ mod tests {
     }
 
     #[test]
-    fn unwritable_cache_dir_is_an_error_naming_it() {
+    fn unwritable_cache_dir_is_a_warning_naming_it() {
+        // Issue 31: a cache that cannot be written must not fail a render after the solve.
         let dir = tempfile::tempdir().unwrap();
         let file = dir.path().join("not-a-dir");
         std::fs::write(&file, b"x").unwrap();
         let cache = file.join("cache");
-        let e = model_lighting(
+        let (l, r) = model_lighting(
             &model(1.0),
             &illum(sun()),
             &opts(Some(&cache)),
             &CpuSolver,
             &mut no_progress(),
         )
-        .unwrap_err();
-        assert!(matches!(e, LightingError::CacheDir { .. }), "{e:?}");
-        assert!(e.to_string().contains(&cache.display().to_string()), "{e}");
+        .unwrap();
+        let warning = r.cache_warning.expect("a warning");
+        assert!(warning.contains(&cache.display().to_string()), "{warning}");
+        let (free, _) = model_lighting(
+            &model(1.0),
+            &illum(sun()),
+            &opts(None),
+            &CpuSolver,
+            &mut no_progress(),
+        )
+        .unwrap();
+        assert_eq!(probe(&l), probe(&free), "the light is the uncached one");
     }
 
     #[test]

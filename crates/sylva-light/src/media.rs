@@ -486,7 +486,7 @@ impl Media {
 }
 
 /// The LB light of a medium: which boundary a solve used.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
 pub enum MediumBoundary {
     /// The sun, towards the (quantised) direction.
     Sun([i64; 3]),
@@ -494,35 +494,59 @@ pub enum MediumBoundary {
     Sky,
 }
 
-/// The cache key of a medium's LB solve: the density grid, the preset's coefficients, the
-/// boundary, the schedule and the solver (as [`crate::lighting::cache_key`] for models).
+/// A medium's LB light ([`medium_cache_key`]).
+pub const MEDIUM_LIGHTING: sylva_core::cache::CacheKind = sylva_core::cache::CacheKind {
+    name: "medium lighting",
+    version: crate::lighting::CACHE_VERSION,
+};
+
+/// Everything a medium's LB solve depends on: the solver, the density grid, the preset's
+/// coefficients, the boundary and the schedule. A medium has no wood: brown sites' parameters
+/// do not enter.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub(crate) struct MediumLightingKey {
+    solver: String,
+    grid_file_version: u32,
+    /// [`Medium::density_hash`]: the grid's sizes and densities.
+    density: u64,
+    /// Per colour `(σ_a, σ_s, g)`.
+    colours: [[f64; 3]; 3],
+    zero_f0_on_green: bool,
+    boundary: MediumBoundary,
+    schedule: &'static str,
+}
+
+impl MediumLightingKey {
+    fn new(
+        medium: &Medium,
+        params: &MediumParams,
+        boundary: MediumBoundary,
+        solver_tag: &str,
+    ) -> MediumLightingKey {
+        MediumLightingKey {
+            solver: solver_tag.to_string(),
+            grid_file_version: sylva_lb::grid_file::VERSION,
+            density: medium.density_hash(),
+            colours: params.colours.map(|c| [c.sigma_a, c.sigma_s, c.g]),
+            zero_f0_on_green: params.zero_f0_on_green,
+            boundary,
+            schedule: "papers:2N",
+        }
+    }
+}
+
+/// The cache key of a medium's LB solve ([`MediumLightingKey`]; as
+/// [`crate::lighting::cache_key`] for models).
 pub fn medium_cache_key(
     medium: &Medium,
     params: &MediumParams,
     boundary: MediumBoundary,
     solver_tag: &str,
-) -> u64 {
-    let mut h = sylva_core::Fnv64::new();
-    h.str("sylva-render medium lighting");
-    h.u64(crate::lighting::CACHE_VERSION as u64);
-    h.str(solver_tag);
-    h.u64(sylva_lb::grid_file::VERSION as u64);
-    h.u64(medium.density_hash());
-    for c in &params.colours {
-        h.f64(c.sigma_a);
-        h.f64(c.sigma_s);
-        h.f64(c.g);
-    }
-    h.u64(params.zero_f0_on_green as u64);
-    match boundary {
-        MediumBoundary::Sun(q) => {
-            h.str("sun");
-            q.iter().for_each(|&c| h.u64(c as u64));
-        }
-        MediumBoundary::Sky => h.str("sky"),
-    }
-    h.str("papers:2N");
-    h.finish()
+) -> sylva_core::cache::CacheKey {
+    sylva_core::cache::CacheKey::new(
+        MEDIUM_LIGHTING,
+        &MediumLightingKey::new(medium, params, boundary, solver_tag),
+    )
 }
 
 /// Where a medium's LB solves run and are cached.
@@ -594,36 +618,36 @@ pub fn prepare_medium(
                     ("solver".to_string(), lb.solver.describe()),
                 ];
                 let stem = format!("{}-{which}", sylva_core::file_stem(&medium.name, "medium"));
-                let (grid, source, path) =
-                    cached_solve(lb.cache_dir, &stem, key, dims, bounds, metadata, || {
-                        sylva_core::check_memory(
-                            &format!(
-                                "the LB lighting of medium '{}' on a {dims} grid",
-                                medium.name
-                            ),
-                            sylva_lb::solver::memory_needed(dims),
-                        )?;
-                        let density = DensityGrid {
-                            dims,
-                            bounds,
-                            density: medium.density.to_vec(),
-                            wood: vec![0.0; dims.sites()],
-                        };
-                        solve_medium(&density, &params, values, lb.solver, &mut |c, s, m| {
-                            progress(k, c, s, m)
-                        })
-                        .map_err(|source| LightingError::SolveMedium {
-                            medium: medium.name.clone(),
-                            source,
-                        })
-                    })?;
+                let got = cached_solve(lb.cache_dir, &stem, key, dims, bounds, metadata, || {
+                    sylva_core::check_memory(
+                        &format!(
+                            "the LB lighting of medium '{}' on a {dims} grid",
+                            medium.name
+                        ),
+                        sylva_lb::solver::memory_needed(dims),
+                    )?;
+                    let density = DensityGrid {
+                        dims,
+                        bounds,
+                        density: medium.density.to_vec(),
+                        wood: vec![0.0; dims.sites()],
+                    };
+                    solve_medium(&density, &params, values, lb.solver, &mut |c, s, m| {
+                        progress(k, c, s, m)
+                    })
+                    .map_err(|source| LightingError::SolveMedium {
+                        medium: medium.name.clone(),
+                        source,
+                    })
+                })?;
                 reports.push(LightingReport {
-                    source,
+                    source: got.source,
                     seconds: t0.elapsed().as_secs_f64(),
-                    path,
+                    path: got.path,
                     dims,
+                    cache_warning: got.cache_warning,
                 });
-                grids.push(grid);
+                grids.push(got.grid);
             }
             Some(grids)
         }
@@ -647,6 +671,83 @@ pub fn prepare_medium(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use sylva_core::cache::assert_each_field_changes_the_key;
+
+    #[test]
+    fn medium_lighting_key_changes_with_every_field() {
+        let base = MediumLightingKey {
+            solver: "cpu".into(),
+            grid_file_version: sylva_lb::grid_file::VERSION,
+            density: 0xabc,
+            colours: [[0.01, 0.2, 0.8]; 3],
+            zero_f0_on_green: true,
+            boundary: MediumBoundary::Sun([0, 100_000, 0]),
+            schedule: "papers:2N",
+        };
+        let mut variants: Vec<(String, MediumLightingKey)> = vec![
+            (
+                "solver".into(),
+                MediumLightingKey {
+                    solver: "gpu-f32".into(),
+                    ..base.clone()
+                },
+            ),
+            (
+                "grid_file_version".into(),
+                MediumLightingKey {
+                    grid_file_version: 1,
+                    ..base.clone()
+                },
+            ),
+            (
+                "density".into(),
+                MediumLightingKey {
+                    density: 0xabd,
+                    ..base.clone()
+                },
+            ),
+            (
+                "zero_f0_on_green".into(),
+                MediumLightingKey {
+                    zero_f0_on_green: false,
+                    ..base.clone()
+                },
+            ),
+            (
+                "boundary".into(),
+                MediumLightingKey {
+                    boundary: MediumBoundary::Sky,
+                    ..base.clone()
+                },
+            ),
+            (
+                "boundary sun".into(),
+                MediumLightingKey {
+                    boundary: MediumBoundary::Sun([1, 100_000, 0]),
+                    ..base.clone()
+                },
+            ),
+            (
+                "schedule".into(),
+                MediumLightingKey {
+                    schedule: "papers:3N",
+                    ..base.clone()
+                },
+            ),
+        ];
+        for c in 0..3 {
+            for p in 0..3 {
+                let mut k = base.clone();
+                k.colours[c][p] += 0.01;
+                variants.push((format!("colour {c} parameter {p}"), k));
+            }
+        }
+        let named: Vec<(&str, MediumLightingKey)> = variants
+            .iter()
+            .map(|(n, k)| (n.as_str(), k.clone()))
+            .collect();
+        assert_each_field_changes_the_key(MEDIUM_LIGHTING, &base, &named);
+    }
     use sylva_geom::Aabb;
     use sylva_lb::{Bounds, ColourParams, Dims, Preset};
 

@@ -154,6 +154,8 @@ pub fn solve_forest_parts(
             let values = r.f32s(3 * plan.dims().sites())?;
             r.end()?;
             let grid = plan.grid_from(values).map_err(|e| lighting_err(m, e))?;
+            // A part that cannot be stored is solved again by the one-process lighting that
+            // follows, which reports the cache's warning.
             plan.cached(k, lb.solver, || Ok(grid))
                 .map_err(|e| lighting_err(m, e))?;
         }

@@ -258,6 +258,7 @@ pub fn light_models(
     let mut lighting = Vec::with_capacity(plans.len());
     let mut solved: Vec<Option<LightingGrid>> = (0..plans.len()).map(|_| None).collect();
     let mut seconds = vec![0f64; plans.len()];
+    let mut cache_warnings: Vec<Option<String>> = vec![None; plans.len()];
     if let Some(outcome) = outcome {
         let mut colours: Vec<[Option<Vec<f32>>; 3]> =
             (0..plans.len()).map(|_| Default::default()).collect();
@@ -274,8 +275,7 @@ pub fn light_models(
                     .expect("every listed colour was solved")
             });
             let grid = plan.assemble(c);
-            plan.store(&grid, lb.solver)
-                .map_err(|source| lighting_error(plan, source))?;
+            cache_warnings[m] = plan.store(&grid, lb.solver);
             solved[m] = Some(grid);
         }
     }
@@ -306,6 +306,7 @@ pub fn light_models(
                     seconds: seconds[m] + t.elapsed().as_secs_f64(),
                     path: plan.cache_path().map(|p| p.to_path_buf()),
                     dims: plan.dims(),
+                    cache_warning: cache_warnings[m].take(),
                 };
                 progress.model_lit(plan.model, &report);
                 grid

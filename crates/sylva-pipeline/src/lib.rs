@@ -13,6 +13,8 @@
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
+use serde::Serialize;
+use sylva_core::cache::{Cache, CacheKey, CacheKind};
 use sylva_core::{MemoryError, Sun};
 use sylva_geom::{Camera, Model, Scene};
 use sylva_lb::{LbSolver, ParamError, Preset};
@@ -25,9 +27,9 @@ use sylva_lb::relight::{CompressTarget, RelightError};
 use sylva_light::forest::{neighbour_shade, ForestInstance, ForestLight};
 use sylva_light::indirect::{IndirectLight, ModelGridLight};
 use sylva_light::lighting::{
-    hash_model_medium, model_density, model_lighting, model_lighting_parts_on,
-    physical_environment, preset_medium, Illumination, Light, LightingError, LightingOptions,
-    LightingReport, LightingSource, ModelLighting, ShadedDensity, CACHE_VERSION, PAPER_OCCUPANCY,
+    model_density, model_lighting, model_lighting_parts_on, physical_environment, preset_medium,
+    Illumination, Light, LightingError, LightingOptions, LightingReport, LightingSource, MediumKey,
+    ModelLighting, ModelMediumKey, ShadedDensity, CACHE_VERSION, PAPER_OCCUPANCY,
 };
 use sylva_light::media::{prepare_medium, Media, MediumSolve};
 pub use sylva_light::progress::{Progress, Silent};
@@ -629,6 +631,7 @@ pub fn light_forest(
         seconds: t0.elapsed().as_secs_f64(),
         dims: forest.dims,
         path: None,
+        cache_warning: None,
     });
     Ok((lighting, cached, forest))
 }
@@ -1277,32 +1280,82 @@ pub fn finish_relighting(
     })
 }
 
-/// The cache key of a scene's global grid: its models (as their fine grids depend on them),
-/// grid size and medium, every instance's model and transform, and the coarse layout.
-pub fn global_key(scene: &Scene, lopts: &LightingOptions, gopts: &GlobalGridOptions) -> u64 {
-    let mut h = sylva_core::Fnv64::new();
-    h.str("sylva-render global grid");
-    h.u64(CACHE_VERSION as u64);
-    for (k, model) in scene.models.iter().enumerate() {
-        let preset = scene.model_preset(k);
-        match Preset::parse(preset).map(|p| p.params()) {
-            Ok(m) => hash_model_medium(&mut h, model, lopts.grid, &m, PAPER_OCCUPANCY),
-            Err(_) => h.str(preset),
+/// A scene's global grid ([`global_key`]).
+pub const GLOBAL_GRID: CacheKind = CacheKind {
+    name: "global grid",
+    version: CACHE_VERSION,
+};
+
+/// Everything a scene's global grid depends on: its models (as their fine grids depend on
+/// them: geometry, materials, grid size, medium), the coarse grid's own medium and size, and
+/// every instance's model and transform.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub(crate) struct GlobalGridKey {
+    models: Vec<GlobalModelKey>,
+    /// The coarse grid's medium: the scene's preset, its parameters when it names one.
+    preset: String,
+    medium: Option<MediumKey>,
+    sites: usize,
+    instances: Vec<InstanceKey>,
+}
+
+/// A model of the global grid: its fine grid's inputs, or the preset name that has none (the
+/// solve then fails with that name).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub(crate) enum GlobalModelKey {
+    Fine(Box<ModelMediumKey>),
+    UnknownPreset(String),
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub(crate) struct InstanceKey {
+    model: u32,
+    position: [f32; 3],
+    rotation_deg: f32,
+    scale: f32,
+}
+
+impl GlobalGridKey {
+    fn new(scene: &Scene, lopts: &LightingOptions, gopts: &GlobalGridOptions) -> GlobalGridKey {
+        let medium = |preset: &str| Preset::parse(preset).map(|p| p.params()).ok();
+        GlobalGridKey {
+            models: scene
+                .models
+                .iter()
+                .enumerate()
+                .map(|(k, model)| {
+                    let preset = scene.model_preset(k);
+                    match medium(preset) {
+                        Some(m) => GlobalModelKey::Fine(Box::new(ModelMediumKey::new(
+                            model,
+                            lopts.grid,
+                            &m,
+                            PAPER_OCCUPANCY,
+                        ))),
+                        None => GlobalModelKey::UnknownPreset(preset.to_string()),
+                    }
+                })
+                .collect(),
+            preset: lopts.preset.clone(),
+            medium: medium(&lopts.preset).map(|m| MediumKey::new(&m)),
+            sites: gopts.sites,
+            instances: scene
+                .instances
+                .iter()
+                .map(|i| InstanceKey {
+                    model: i.model,
+                    position: i.position.to_array(),
+                    rotation_deg: i.rotation_deg,
+                    scale: i.scale,
+                })
+                .collect(),
         }
     }
-    // The coarse grid's own medium.
-    h.str(&lopts.preset);
-    h.u64(gopts.sites as u64);
-    h.u64(scene.instances.len() as u64);
-    for i in &scene.instances {
-        h.u64(i.model as u64);
-        for v in i.position.to_array() {
-            h.u64(v.to_bits() as u64);
-        }
-        h.u64(i.rotation_deg.to_bits() as u64);
-        h.u64(i.scale.to_bits() as u64);
-    }
-    h.finish()
+}
+
+/// The cache key of a scene's global grid ([`GlobalGridKey`]).
+pub fn global_key(scene: &Scene, lopts: &LightingOptions, gopts: &GlobalGridOptions) -> CacheKey {
+    CacheKey::new(GLOBAL_GRID, &GlobalGridKey::new(scene, lopts, gopts))
 }
 
 /// The global grid from the cache, or solved (voxelizing the models whose density grids this
@@ -1314,33 +1367,53 @@ fn global_grid(
     bases: &mut [ModelBasis],
     progress: &dyn Progress,
 ) -> Result<GlobalLight, PipelineError> {
+    let t0 = std::time::Instant::now();
+    let key = global_key(scene, lopts, gopts);
+    let cache = lopts.cache_dir.as_ref().map(Cache::new);
+    let path = cache.as_ref().map(|c| {
+        c.entry(
+            &format!("{}-global", sylva_core::file_stem(&scene.name, "scene")),
+            key,
+            GLOBAL_EXTENSION,
+        )
+    });
+    let mut solve = || -> Result<GlobalLight, PipelineError> {
+        solve_global_grid(scene, lopts, gopts, bases, progress)
+    };
+    let (g, source, cache_warning) = match (&cache, &path) {
+        (Some(cache), Some(p)) => {
+            let got = cache.get_or_compute(
+                p,
+                |p| GlobalLight::read(p, key, scene.instances.len()),
+                solve,
+                |g, p| g.write(p, key),
+            )?;
+            (got.value, got.outcome.into(), got.write_warning)
+        }
+        _ => (solve()?, LightingSource::Computed, None),
+    };
+    progress.global_grid(&GlobalReport {
+        source,
+        seconds: t0.elapsed().as_secs_f64(),
+        dims: g.dims,
+        path,
+        cache_warning,
+    });
+    Ok(g)
+}
+
+/// Solves the global grid, voxelizing the models whose density grids this run did not make.
+fn solve_global_grid(
+    scene: &Scene,
+    lopts: &LightingOptions,
+    gopts: &GlobalGridOptions,
+    bases: &mut [ModelBasis],
+    progress: &dyn Progress,
+) -> Result<GlobalLight, PipelineError> {
     let err = |source| PipelineError::Global {
         scene: scene.name.clone(),
         source,
     };
-    let t0 = std::time::Instant::now();
-    let key = global_key(scene, lopts, gopts);
-    let path = lopts.cache_dir.as_ref().map(|d| {
-        d.join(format!(
-            "{}-global-{key:016x}.{GLOBAL_EXTENSION}",
-            sylva_core::file_stem(&scene.name, "scene")
-        ))
-    });
-    let mut source = LightingSource::Computed;
-    if let Some(p) = path.as_deref().filter(|p| p.exists()) {
-        match GlobalLight::read(p, key, scene.instances.len()) {
-            Ok(g) => {
-                progress.global_grid(&GlobalReport {
-                    source: LightingSource::Cached,
-                    seconds: t0.elapsed().as_secs_f64(),
-                    dims: g.dims,
-                    path: path.clone(),
-                });
-                return Ok(g);
-            }
-            Err(reason) => source = LightingSource::Recomputed { reason },
-        }
-    }
     for (k, (b, model)) in bases.iter_mut().zip(&scene.models).enumerate() {
         if b.density.is_none() {
             b.density = Some(
@@ -1364,17 +1437,7 @@ fn global_grid(
         progress.set(done as u64, total as u64)
     });
     progress.finish();
-    let g = g.map_err(err)?;
-    if let Some(p) = &path {
-        g.write(p, key).map_err(err)?;
-    }
-    progress.global_grid(&GlobalReport {
-        source,
-        seconds: t0.elapsed().as_secs_f64(),
-        dims: g.dims,
-        path,
-    });
-    Ok(g)
+    g.map_err(err)
 }
 
 /// One mode's image: linear HDR and tone-mapped 8-bit sRGB, pixel for pixel.
@@ -1479,4 +1542,103 @@ pub fn write_images(
     }
     set.commit()?;
     Ok(written)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use sylva_core::cache::assert_each_field_changes_the_key;
+    use sylva_light::lighting::{model_medium_variants, sample_model_medium_key};
+
+    #[test]
+    fn global_grid_key_changes_with_every_field() {
+        let instance = InstanceKey {
+            model: 0,
+            position: [1.0, 0.0, -2.0],
+            rotation_deg: 30.0,
+            scale: 1.0,
+        };
+        let base = GlobalGridKey {
+            models: vec![
+                GlobalModelKey::Fine(Box::new(sample_model_medium_key())),
+                GlobalModelKey::UnknownPreset("granite".into()),
+            ],
+            preset: "leaf".into(),
+            medium: Some(MediumKey::new(&Preset::Leaf.params())),
+            sites: 64,
+            instances: vec![instance.clone(); 2],
+        };
+        let instances = |f: &dyn Fn(&mut InstanceKey)| {
+            let mut i = instance.clone();
+            f(&mut i);
+            GlobalGridKey {
+                instances: vec![instance.clone(), i],
+                ..base.clone()
+            }
+        };
+        let mut variants: Vec<(String, GlobalGridKey)> = vec![
+            (
+                "preset".into(),
+                GlobalGridKey {
+                    preset: "dogrose".into(),
+                    ..base.clone()
+                },
+            ),
+            (
+                "medium".into(),
+                GlobalGridKey {
+                    medium: Some(MediumKey::new(&Preset::Dogrose.params())),
+                    ..base.clone()
+                },
+            ),
+            (
+                "sites".into(),
+                GlobalGridKey {
+                    sites: 65,
+                    ..base.clone()
+                },
+            ),
+            (
+                "unknown preset".into(),
+                GlobalGridKey {
+                    models: vec![
+                        base.models[0].clone(),
+                        GlobalModelKey::UnknownPreset("basalt".into()),
+                    ],
+                    ..base.clone()
+                },
+            ),
+            (
+                "instance count".into(),
+                GlobalGridKey {
+                    instances: vec![instance.clone()],
+                    ..base.clone()
+                },
+            ),
+            ("instance model".into(), instances(&|i| i.model = 1)),
+            (
+                "instance position".into(),
+                instances(&|i| i.position[1] = 0.5),
+            ),
+            (
+                "instance rotation".into(),
+                instances(&|i| i.rotation_deg = 31.0),
+            ),
+            ("instance scale".into(), instances(&|i| i.scale = 1.5)),
+        ];
+        for (name, m) in model_medium_variants() {
+            variants.push((
+                format!("model: {name}"),
+                GlobalGridKey {
+                    models: vec![GlobalModelKey::Fine(Box::new(m)), base.models[1].clone()],
+                    ..base.clone()
+                },
+            ));
+        }
+        let named: Vec<(&str, GlobalGridKey)> = variants
+            .iter()
+            .map(|(n, k)| (n.as_str(), k.clone()))
+            .collect();
+        assert_each_field_changes_the_key(GLOBAL_GRID, &base, &named);
+    }
 }

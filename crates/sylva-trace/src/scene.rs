@@ -691,13 +691,7 @@ impl SceneAccel {
             };
             let mut cand = [(0f32, 0u32); SORTED_INSTANCES];
             let n = self.entries(
-                candidates,
-                o,
-                inv_d,
-                ray.t_min,
-                ray.t_max,
-                &mut cand,
-                &mut enter,
+                candidates, o, inv_d, ray.t_min, ray.t_max, &mut cand, &mut enter,
             );
             for &(_, i) in &cand[..n] {
                 enter(i);

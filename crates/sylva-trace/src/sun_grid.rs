@@ -247,7 +247,8 @@ impl RayQuery for SunGridQuery<'_> {
         let (accel, cfg) = (&self.tracer.accel, self.tracer.traversal);
         for (r, b) in rays.iter().zip(blocked) {
             *b = if self.grid.serves(r.ray.dir) {
-                self.grid.any_hit(accel, &r.ray, r.from, cfg, stats, &mut cache)
+                self.grid
+                    .any_hit(accel, &r.ray, r.from, cfg, stats, &mut cache)
             } else {
                 accel.any_hit_from(&r.ray, r.from, cfg, stats, &mut cache)
             };

@@ -62,14 +62,8 @@ fn shadow_rays_through_the_grid_equal_the_kd_tree_and_brute_force() {
                     let want = accel.brute_any_hit(&ray);
                     let kd =
                         accel.any_hit_from(&ray, from, cfg, &mut st, &mut OccluderCache::new());
-                    let g = grid.any_hit(
-                        &accel,
-                        &ray,
-                        from,
-                        cfg,
-                        &mut st,
-                        &mut OccluderCache::new(),
-                    );
+                    let g =
+                        grid.any_hit(&accel, &ray, from, cfg, &mut st, &mut OccluderCache::new());
                     assert_eq!(kd, want, "{name} sun {s} ray {k}");
                     assert_eq!(g, want, "{name} sun {s} ray {k}");
                     blocked += g as usize;

@@ -267,9 +267,22 @@ impl FrameArgs {
 
 /// One line about an LB report, and whether it is a warning (to stderr).
 pub fn report_line(r: Report) -> (String, Option<String>) {
-    let warn = |s: &LightingSource| match s {
-        LightingSource::Recomputed { reason } => Some(format!("warning: {reason}; recomputed")),
-        _ => None,
+    // A bad entry recomputed, and an entry that could not be written (a read-only cache:
+    // the result is good, only not kept).
+    let warn = |s: &LightingSource, cache_warning: &Option<String>| {
+        let lines: Vec<String> = [
+            match s {
+                LightingSource::Recomputed { reason } => {
+                    Some(format!("warning: {reason}; recomputed"))
+                }
+                _ => None,
+            },
+            cache_warning.as_ref().map(|w| format!("warning: {w}")),
+        ]
+        .into_iter()
+        .flatten()
+        .collect();
+        (!lines.is_empty()).then(|| lines.join("\n"))
     };
     match r {
         Report::Lit(name, report) => {
@@ -286,6 +299,7 @@ pub fn report_line(r: Report) -> (String, Option<String>) {
                     report
                         .path
                         .as_ref()
+                        .filter(|_| report.cache_warning.is_none())
                         .map(|p| format!(", cached as {}", p.display()))
                         .unwrap_or_default()
                 ),
@@ -294,7 +308,7 @@ pub fn report_line(r: Report) -> (String, Option<String>) {
                     name, report.dims, report.seconds
                 ),
             };
-            (line, warn(&report.source))
+            (line, warn(&report.source, &report.cache_warning))
         }
         Report::Basis(model, report) => {
             let how = match &report.source {
@@ -315,12 +329,14 @@ pub fn report_line(r: Report) -> (String, Option<String>) {
                 sylva_core::format_bytes(report.raw_bytes),
                 sylva_core::format_bytes(report.compressed_bytes),
                 report.raw_bytes as f64 / report.compressed_bytes.max(1) as f64,
-                match (&report.source, &report.path) {
-                    (LightingSource::Cached, _) | (_, None) => String::new(),
-                    (_, Some(p)) => format!(", cached as {}", p.display()),
+                match (&report.source, &report.path, &report.cache_warning) {
+                    (LightingSource::Cached, _, _) | (_, None, _) | (_, _, Some(_)) => {
+                        String::new()
+                    }
+                    (_, Some(p), None) => format!(", cached as {}", p.display()),
                 }
             );
-            (line, warn(&report.source))
+            (line, warn(&report.source, &report.cache_warning))
         }
         Report::Global(report) => {
             let how = match &report.source {
@@ -333,7 +349,7 @@ pub fn report_line(r: Report) -> (String, Option<String>) {
                     "  global grid: {} {how} in {:.2} s",
                     report.dims, report.seconds
                 ),
-                warn(&report.source),
+                warn(&report.source, &report.cache_warning),
             )
         }
         Report::Shade(name, own, added) => (

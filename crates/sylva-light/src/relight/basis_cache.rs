@@ -14,7 +14,8 @@
 //!   reading, with the dimensions and bounds. With [`BasisCacheOptions::keep_raw`] the
 //!   uncompressed set is kept as well (`<model>-<key>.sbasis`, a kind-3 grid file, f32): what
 //!   compression error is measured against. A damaged or stale entry is reported, solved
-//!   again and replaced. Each entry records how long its solves took.
+//!   again and replaced; an entry that cannot be written is a warning
+//!   ([`BasisReport::cache_warning`]). Each entry records how long its solves took.
 //! * **Lookup only.** With no solver, [`model_basis`] only reads the cache, under the tag of
 //!   any backend (a basis solved on the GPU serves a CPU render), and returns `None` when
 //!   there is no valid entry: the render then solves for its sun as before.
@@ -22,19 +23,31 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use sylva_core::Fnv64;
+use serde::Serialize;
+use sylva_core::cache::{Cache, CacheKey, CacheKind};
 use sylva_geom::Model;
 use sylva_lb::relight::{
-    compress, solve_basis_jobs, BasisAssembly, BasisJob, BasisOptions, BasisProgress, BasisSet,
-    CompressTarget, CompressedBasis, Region, COMPRESSED_EXTENSION,
+    compress, solve_basis_jobs, Ambient, BasisAssembly, BasisJob, BasisOptions, BasisProgress,
+    BasisSet, CompressTarget, CompressedBasis, Region, COMPRESSED_EXTENSION,
 };
 use sylva_lb::solver::SolveOptions;
 use sylva_lb::{DensityGrid, Dims, Element, GridFile, LbSolver, MediumParams};
 use sylva_voxel::{placement_for, voxelize, VoxelizeOptions};
 
 use crate::lighting::{
-    hash_model_medium, preset_medium, LightingError, LightingOptions, LightingSource,
-    CACHE_VERSION, KEY_METADATA, PAPER_OCCUPANCY,
+    preset_medium, LightingError, LightingOptions, LightingSource, ModelMediumKey, CACHE_VERSION,
+    KEY_METADATA, PAPER_OCCUPANCY,
+};
+
+/// A model's uncompressed basis ([`basis_key`]).
+pub const BASIS_RAW: CacheKind = CacheKind {
+    name: "relighting basis",
+    version: CACHE_VERSION,
+};
+/// A model's compressed basis ([`compressed_key`]).
+pub const BASIS_COMPRESSED: CacheKind = CacheKind {
+    name: "compressed relighting basis",
+    version: CACHE_VERSION,
 };
 
 /// Extension of uncompressed basis cache entries.
@@ -98,6 +111,64 @@ pub struct BasisReport {
     /// Bytes of the uncompressed set (57 f32 per site) and of the compressed one.
     pub raw_bytes: u64,
     pub compressed_bytes: u64,
+    /// Why an entry could not be written (the basis is good, only not kept).
+    pub cache_warning: Option<String>,
+}
+
+/// Everything a model's uncompressed basis depends on: the solver backend's cache tag, the
+/// model and medium (on the paper's occupancy), the solve schedule and how `B_0` is made.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub(crate) struct BasisKey {
+    solver: String,
+    model: ModelMediumKey,
+    max_steps: usize,
+    tolerance: Option<f64>,
+    ambient: &'static str,
+}
+
+impl BasisKey {
+    fn new(
+        model: &Model,
+        grid: usize,
+        medium: &MediumParams,
+        options: &BasisOptions,
+        solver_tag: &str,
+    ) -> BasisKey {
+        BasisKey {
+            solver: solver_tag.to_string(),
+            model: ModelMediumKey::new(model, grid, medium, PAPER_OCCUPANCY),
+            max_steps: options.solve.max_steps,
+            tolerance: options.solve.tolerance,
+            ambient: match options.ambient {
+                Ambient::Sum => "sum",
+                Ambient::Solve => "solve",
+            },
+        }
+    }
+}
+
+/// Everything a compressed set depends on: the uncompressed basis and the target.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub(crate) struct CompressedKey {
+    /// The uncompressed basis's key ([`basis_key`]).
+    raw: u64,
+    codec: String,
+    precision: &'static str,
+    far_threshold: f64,
+    /// The region compression spends its bits on ([`region_of`]).
+    region: &'static str,
+}
+
+impl CompressedKey {
+    fn new(raw: CacheKey, target: &CompressTarget) -> CompressedKey {
+        CompressedKey {
+            raw: raw.value(),
+            codec: target.codec.name(),
+            precision: target.precision.name(),
+            far_threshold: target.far_threshold,
+            region: "near_medium(1).with_floor(2)",
+        }
+    }
 }
 
 /// The cache key of a model's uncompressed basis solved on a backend tagged `solver_tag`.
@@ -107,37 +178,21 @@ pub fn basis_key(
     medium: &MediumParams,
     options: &BasisOptions,
     solver_tag: &str,
-) -> u64 {
-    let mut h = Fnv64::new();
-    h.str("sylva-render relighting basis");
-    h.u64(CACHE_VERSION as u64);
-    h.str(solver_tag);
-    hash_model_medium(&mut h, model, grid, medium, PAPER_OCCUPANCY);
-    h.u64(options.solve.max_steps as u64);
-    h.f64(options.solve.tolerance.unwrap_or(0.0));
-    h.u64(options.ambient as u64);
-    h.finish()
+) -> CacheKey {
+    CacheKey::new(
+        BASIS_RAW,
+        &BasisKey::new(model, grid, medium, options, solver_tag),
+    )
 }
 
 /// The cache key of the compressed set made from the basis of key `raw` with `target`.
-pub fn compressed_key(raw: u64, target: &CompressTarget) -> u64 {
-    let mut h = Fnv64::new();
-    h.str("sylva-render compressed basis");
-    h.u64(raw);
-    h.str(&target.codec.name());
-    h.str(target.precision.name());
-    h.f64(target.far_threshold);
-    // The region compression spends its bits on (see `region_of`).
-    h.str("near_medium(1).with_floor(2)");
-    h.finish()
+pub fn compressed_key(raw: CacheKey, target: &CompressTarget) -> CacheKey {
+    CacheKey::new(BASIS_COMPRESSED, &CompressedKey::new(raw, target))
 }
 
 /// The cache entry of `model` under `key` with extension `ext`.
-pub fn basis_path(dir: &Path, model: &Model, key: u64, ext: &str) -> PathBuf {
-    dir.join(format!(
-        "{}-{key:016x}.{ext}",
-        sylva_core::file_stem(&model.name, "model")
-    ))
+pub fn basis_path(cache: &Cache, model: &Model, key: CacheKey, ext: &str) -> PathBuf {
+    cache.entry(&sylva_core::file_stem(&model.name, "model"), key, ext)
 }
 
 /// Where the renderer reads a model's light: in and next to the medium, and the lowest two
@@ -276,14 +331,14 @@ fn basis_setup(
 /// Reads the compressed entry at `path`; `Err` is why it is unusable, naming the file.
 fn read_compressed(
     path: &Path,
-    key: u64,
+    key: CacheKey,
     dims: Dims,
     bounds: sylva_lb::Bounds,
 ) -> Result<(CompressedBasis, Option<f64>, u64), String> {
     let (set, meta) = CompressedBasis::read(path).map_err(|e| e.to_string())?;
     let shown = path.display();
     let value = |k: &str| meta.iter().find(|(m, _)| m == k).map(|(_, v)| v.as_str());
-    check_key(&shown.to_string(), value(KEY_METADATA), key)?;
+    key.check(path, value(KEY_METADATA))?;
     if set.dims != dims || set.bounds != bounds {
         return Err(format!(
             "{shown} holds a {} grid over {:?}..{:?}, the model needs {dims} over {:?}..{:?}",
@@ -298,13 +353,13 @@ fn read_compressed(
 /// Reads the uncompressed entry at `path`; `Err` is why it is unusable, naming the file.
 fn read_raw(
     path: &Path,
-    key: u64,
+    key: CacheKey,
     dims: Dims,
     bounds: sylva_lb::Bounds,
 ) -> Result<(BasisSet, Option<f64>), String> {
     let file = GridFile::read(path).map_err(|e| e.to_string())?;
     let shown = path.display().to_string();
-    check_key(&shown, file.metadata_value(KEY_METADATA), key)?;
+    key.check(path, file.metadata_value(KEY_METADATA))?;
     let seconds = file
         .metadata_value(SOLVE_SECONDS_METADATA)
         .and_then(|v| v.parse().ok());
@@ -318,17 +373,6 @@ fn read_raw(
     Ok((set, seconds))
 }
 
-fn check_key(shown: &str, found: Option<&str>, key: u64) -> Result<(), String> {
-    let want = format!("{key:016x}");
-    match found {
-        Some(k) if k == want => Ok(()),
-        Some(k) => Err(format!(
-            "{shown} is stale: its cache key is {k}, expected {want}"
-        )),
-        None => Err(format!("{shown} has no cache key: not a basis cache entry")),
-    }
-}
-
 /// What the cache holds for a model's basis ([`lookup_basis`]).
 #[derive(Debug)]
 pub enum BasisLookup {
@@ -339,7 +383,7 @@ pub enum BasisLookup {
     Miss(LightingSource),
 }
 
-/// Looks `model`'s basis up in the cache of `opts` (creating the directory): under
+/// Looks `model`'s basis up in the cache of `opts`: under
 /// `solver`'s cache tag, or with no solver under the tag of any backend (a basis solved on
 /// the GPU serves a CPU render). A compressed entry missing beside a kept uncompressed one
 /// is compressed again and written (no solve). Without a cache, always a miss.
@@ -364,15 +408,12 @@ pub fn lookup_basis(
     let Some(dir) = &opts.cache_dir else {
         return Ok(BasisLookup::Miss(source));
     };
-    std::fs::create_dir_all(dir).map_err(|source| LightingError::CacheDir {
-        dir: dir.clone(),
-        source,
-    })?;
+    let cache = Cache::new(dir);
     for tag in &tags {
         let rkey = basis_key(model, opts.grid, &medium, &options, tag);
         let ckey = compressed_key(rkey, &opts.target);
-        let cpath = basis_path(dir, model, ckey, COMPRESSED_EXTENSION);
-        let rpath = basis_path(dir, model, rkey, RAW_EXTENSION);
+        let cpath = basis_path(&cache, model, ckey, COMPRESSED_EXTENSION);
+        let rpath = basis_path(&cache, model, rkey, RAW_EXTENSION);
         let raw = if opts.keep_raw {
             match rpath.try_exists() {
                 Ok(true) => match read_raw(&rpath, rkey, dims, bounds) {
@@ -419,6 +460,7 @@ pub fn lookup_basis(
                     dims,
                     raw_bytes: raw_bytes_of(dims),
                     compressed_bytes: c.bytes(),
+                    cache_warning: None,
                 };
                 let basis = ModelBasis {
                     compressed: c,
@@ -431,7 +473,9 @@ pub fn lookup_basis(
                 // The uncompressed set is there: compress it again (no solve).
                 let density = BasisPlan::new(model, opts.grid, &opts.preset)?.density;
                 let c = compress(&raw, &region_of(&density), &opts.target)?;
-                write_compressed(&c, &cpath, ckey, model, opts, seconds, solver)?;
+                let cache_warning = cache.store(&cpath, |p| {
+                    write_compressed(&c, p, ckey, model, opts, seconds, solver)
+                });
                 let report = BasisReport {
                     source: LightingSource::Cached,
                     seconds: t0.elapsed().as_secs_f64(),
@@ -440,6 +484,7 @@ pub fn lookup_basis(
                     dims,
                     raw_bytes: raw_bytes_of(dims),
                     compressed_bytes: c.bytes(),
+                    cache_warning,
                 };
                 let basis = ModelBasis {
                     compressed: c,
@@ -474,7 +519,9 @@ pub fn store_basis(
     let raw = assembly.finish()?;
     let compressed = compress(&raw, &region_of(&plan.density), &opts.target)?;
     let mut path = None;
+    let mut cache_warning = None;
     if let Some(dir) = &opts.cache_dir {
+        let cache = Cache::new(dir);
         let rkey = basis_key(
             model,
             opts.grid,
@@ -483,21 +530,23 @@ pub fn store_basis(
             &solver.cache_tag(),
         );
         let ckey = compressed_key(rkey, &opts.target);
-        let cpath = basis_path(dir, model, ckey, COMPRESSED_EXTENSION);
-        write_compressed(
-            &compressed,
-            &cpath,
-            ckey,
-            model,
-            opts,
-            Some(solve_seconds),
-            Some(solver),
-        )?;
+        let cpath = basis_path(&cache, model, ckey, COMPRESSED_EXTENSION);
+        cache_warning = cache.store(&cpath, |p| {
+            write_compressed(
+                &compressed,
+                p,
+                ckey,
+                model,
+                opts,
+                Some(solve_seconds),
+                Some(solver),
+            )
+        });
         if opts.keep_raw {
-            let rpath = basis_path(dir, model, rkey, RAW_EXTENSION);
+            let rpath = basis_path(&cache, model, rkey, RAW_EXTENSION);
             let mut file = raw.to_grid_file(Element::F32);
             file.metadata.extend([
-                (KEY_METADATA.to_string(), format!("{rkey:016x}")),
+                rkey.metadata(),
                 ("source".to_string(), model.name.clone()),
                 (
                     SOLVE_SECONDS_METADATA.to_string(),
@@ -509,10 +558,8 @@ pub fn store_basis(
                 &format!("writing {}", rpath.display()),
                 BasisSet::memory_needed(dims) * 2,
             )?;
-            file.write(&rpath).map_err(|e| LightingError::CacheWrite {
-                path: rpath.clone(),
-                source: std::io::Error::other(e.to_string()),
-            })?;
+            let warning = cache.store(&rpath, |p| file.write(p).map_err(|e| e.to_string()));
+            cache_warning = cache_warning.or(warning);
         }
         path = Some(cpath);
     }
@@ -524,6 +571,7 @@ pub fn store_basis(
         dims,
         raw_bytes: BasisSet::memory_needed(dims),
         compressed_bytes: compressed.bytes(),
+        cache_warning,
     };
     let basis = ModelBasis {
         compressed,
@@ -586,14 +634,14 @@ pub fn model_basis(
 fn write_compressed(
     c: &CompressedBasis,
     path: &Path,
-    key: u64,
+    key: CacheKey,
     model: &Model,
     opts: &BasisCacheOptions,
     solve_seconds: Option<f64>,
     solver: Option<&dyn LbSolver>,
-) -> Result<(), LightingError> {
+) -> Result<(), String> {
     let mut meta = vec![
-        (KEY_METADATA.to_string(), format!("{key:016x}")),
+        key.metadata(),
         ("source".to_string(), model.name.clone()),
         ("preset".to_string(), opts.preset.clone()),
         ("grid".to_string(), opts.grid.to_string()),
@@ -608,10 +656,130 @@ fn write_compressed(
     if let Some(s) = solver {
         meta.push(("solver".to_string(), s.describe()));
     }
-    c.write(path, &meta).map_err(|e| match e {
-        sylva_lb::relight::RelightError::Write { path, source } => {
-            LightingError::CacheWrite { path, source }
+    c.write(path, &meta).map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lighting::{model_medium_variants, sample_model_medium_key};
+    use sylva_core::cache::assert_each_field_changes_the_key;
+    use sylva_lb::relight::{Codec, Precision};
+
+    #[test]
+    fn basis_key_changes_with_every_field() {
+        let base = BasisKey {
+            solver: "cpu".into(),
+            model: sample_model_medium_key(),
+            max_steps: 64,
+            tolerance: None,
+            ambient: "sum",
+        };
+        let mut variants: Vec<(String, BasisKey)> = vec![
+            (
+                "solver".into(),
+                BasisKey {
+                    solver: "gpu-f16".into(),
+                    ..base.clone()
+                },
+            ),
+            (
+                "max_steps".into(),
+                BasisKey {
+                    max_steps: 65,
+                    ..base.clone()
+                },
+            ),
+            (
+                "tolerance".into(),
+                BasisKey {
+                    tolerance: Some(0.0),
+                    ..base.clone()
+                },
+            ),
+            (
+                "tolerance value".into(),
+                BasisKey {
+                    tolerance: Some(1e-6),
+                    ..base.clone()
+                },
+            ),
+            (
+                "ambient".into(),
+                BasisKey {
+                    ambient: "solve",
+                    ..base.clone()
+                },
+            ),
+        ];
+        for (name, m) in model_medium_variants() {
+            variants.push((
+                format!("model: {name}"),
+                BasisKey {
+                    model: m,
+                    ..base.clone()
+                },
+            ));
         }
-        e => e.into(),
-    })
+        let named: Vec<(&str, BasisKey)> = variants
+            .iter()
+            .map(|(n, k)| (n.as_str(), k.clone()))
+            .collect();
+        assert_each_field_changes_the_key(BASIS_RAW, &base, &named);
+    }
+
+    #[test]
+    fn compressed_key_changes_with_every_field() {
+        let raw = CacheKey::new(BASIS_RAW, &1u8);
+        let target = CompressTarget::recommended();
+        let base = CompressedKey::new(raw, &target);
+        assert_eq!(base.raw, raw.value());
+        let other_raw = CacheKey::new(BASIS_RAW, &2u8);
+        assert_each_field_changes_the_key(
+            BASIS_COMPRESSED,
+            &base,
+            &[
+                ("raw", CompressedKey::new(other_raw, &target)),
+                (
+                    "codec",
+                    CompressedKey::new(
+                        raw,
+                        &CompressTarget {
+                            codec: Codec::Pca { rank: 3 },
+                            ..target
+                        },
+                    ),
+                ),
+                (
+                    "precision",
+                    CompressedKey::new(
+                        raw,
+                        &CompressTarget {
+                            precision: Precision::F32,
+                            ..target
+                        },
+                    ),
+                ),
+                (
+                    "far_threshold",
+                    CompressedKey::new(
+                        raw,
+                        &CompressTarget {
+                            far_threshold: 0.5,
+                            ..target
+                        },
+                    ),
+                ),
+                (
+                    "region",
+                    CompressedKey {
+                        region: "near_medium(2)",
+                        ..base.clone()
+                    },
+                ),
+            ],
+        );
+        // The raw and compressed keys of the same inputs never meet.
+        assert_ne!(compressed_key(raw, &target), raw);
+    }
 }

@@ -42,6 +42,7 @@ use std::path::Path;
 
 use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
+use sylva_core::cache::CacheKey;
 use sylva_core::container::{read_container, write_container, ByteReader, ByteWriter};
 use sylva_geom::Aabb;
 use sylva_lb::lattice::{unit, C, Q};
@@ -563,39 +564,23 @@ impl GlobalLight {
             .collect()
     }
 
-    /// Writes the grid's answer as a cache entry (atomically; `key` in its metadata).
-    pub fn write(&self, path: &Path, key: u64) -> Result<(), LightingError> {
+    /// Writes the grid's answer as a cache entry (atomically; `key` in its metadata); `Err`
+    /// says why it could not.
+    pub fn write(&self, path: &Path, key: CacheKey) -> Result<(), String> {
         let meta = vec![
-            (
-                crate::lighting::KEY_METADATA.to_string(),
-                format!("{key:016x}"),
-            ),
+            key.metadata(),
             ("instances".to_string(), self.inflow.len().to_string()),
         ];
-        write_container(path, MAGIC, VERSION, &meta, &self.to_bytes()).map_err(|source| {
-            LightingError::CacheWrite {
-                path: path.into(),
-                source,
-            }
-        })
+        write_container(path, MAGIC, VERSION, &meta, &self.to_bytes()).map_err(|e| e.to_string())
     }
 
     /// Reads a cache entry for `instances` instances under `key`; `Err` is why it is
     /// unusable, naming the file.
-    pub fn read(path: &Path, key: u64, instances: usize) -> Result<GlobalLight, String> {
+    pub fn read(path: &Path, key: CacheKey, instances: usize) -> Result<GlobalLight, String> {
         let c = read_container(path, MAGIC, VERSION, "global grid cache entry")
             .map_err(|e| e.to_string())?;
         let shown = path.display();
-        let want = format!("{key:016x}");
-        match c.metadata_value(crate::lighting::KEY_METADATA) {
-            Some(k) if k == want => {}
-            Some(k) => {
-                return Err(format!(
-                    "{shown} is stale: its cache key is {k}, expected {want}"
-                ))
-            }
-            None => return Err(format!("{shown} has no cache key")),
-        }
+        key.check(path, c.metadata_value(crate::lighting::KEY_METADATA))?;
         GlobalLight::from_bytes(&c.payload, instances).map_err(|e| format!("{shown}: {e}"))
     }
 
@@ -661,4 +646,6 @@ pub struct GlobalReport {
     pub seconds: f64,
     pub dims: Dims,
     pub path: Option<std::path::PathBuf>,
+    /// Why the solved grid could not be cached (it is good, only not kept).
+    pub cache_warning: Option<String>,
 }
