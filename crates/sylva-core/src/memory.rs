@@ -80,6 +80,9 @@ mod tests {
             .unwrap();
         // Read at slightly different times: within 1 % of each other.
         let (expected, got) = (kib * 1024, available_memory_bytes());
-        assert!(got.abs_diff(expected) <= expected / 100, "{got} vs {expected}");
+        assert!(
+            got.abs_diff(expected) <= expected / 100,
+            "{got} vs {expected}"
+        );
     }
 }

@@ -16,7 +16,7 @@ use sylva_render::relight::{BasisReport, GlobalGridOptions, SunWeights};
 use sylva_render::{
     image_paths, load_scene, resolution, stage, tone_map_modes, write_images, BasisUse, LbPlan,
     Mode, PrepareOptions, PreparedScene, Progress, RelightPlan, ShadingParams, ShadowMethod,
-    Silent, StageClock, ToneMap,
+    Silent, ToneMap,
 };
 use sylva_spp::trees::system::{SppLight, SppSystem, SystemConfig};
 use sylva_trace::TraversalConfig;
@@ -672,7 +672,7 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
         // Named twice or an input: refused now, not after the render.
         sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&image_paths(o, &modes, a.hdr))?;
     }
-    let clock = StageClock::global();
+    let clock = super::stage_clock();
     clock.reset();
     let t_all = Instant::now();
     let spp = a.frame.light.as_deref() == Some("spp");
