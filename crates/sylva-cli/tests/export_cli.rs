@@ -137,3 +137,56 @@ fn export_refuses_bad_output_dir_and_unknown_format() {
     ]);
     assert!(!ok && err.contains("sun irradiance"), "{err}");
 }
+
+/// Issue 26: Ctrl-C during an export goes through sylva-core's one handler: the OBJ being
+/// written is removed, and the command says it was interrupted (it used to install a second
+/// SIGINT handler of its own, which replaced that one).
+#[cfg(unix)]
+#[test]
+fn ctrl_c_during_an_export_removes_the_partial_file_and_says_so() {
+    use std::process::{Command, Stdio};
+    use std::time::{Duration, Instant};
+    let dir = tempfile::tempdir().unwrap();
+    // Enough plants that scene.obj takes seconds to write.
+    let mut toml = String::from("[[models]]\nname = \"rose\"\nspecies = \"dogrose\"\n");
+    for i in 0..1000 {
+        let (x, z) = ((i % 32) as f32 * 3.0, (i / 32) as f32 * 3.0);
+        toml += &format!("\n[[instances]]\nmodel = \"rose\"\nposition = [{x}, 0.0, {z}]\n");
+    }
+    let scene = dir.path().join("many.toml");
+    fs::write(&scene, toml).unwrap();
+    let out = dir.path().join("obj");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .args(["export", scene.to_str().unwrap(), "-f", "obj", "-o"])
+        .arg(&out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let temporaries = || -> Vec<String> {
+        fs::read_dir(&out)
+            .map(|d| {
+                d.filter_map(|e| e.ok()?.file_name().into_string().ok())
+                    .filter(|n| n.ends_with(".tmp"))
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    let start = Instant::now();
+    while !temporaries().iter().any(|n| n.starts_with(".scene.obj.")) {
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the export ended first"
+        );
+        assert!(start.elapsed() < Duration::from_secs(120), "no scene.obj");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    // SAFETY: signalling the child this test started.
+    assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGINT) }, 0);
+    let output = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{err}");
+    assert!(err.contains("export interrupted (Ctrl-C)"), "{err}");
+    assert!(!out.join("scene.obj").exists());
+    assert_eq!(temporaries(), Vec::<String>::new());
+}

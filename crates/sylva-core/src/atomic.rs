@@ -5,10 +5,11 @@
 //! marks the process interrupted ([`crate::interrupt`]): the writers stop at their next write,
 //! and the temporaries are removed.
 
-use std::fs::{self, File};
+use std::fs;
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+use tempfile::{NamedTempFile, TempPath};
 use thiserror::Error;
 
 use crate::interrupt::{self, StagingGuard};
@@ -25,18 +26,17 @@ where
     F: FnOnce(&mut dyn Write) -> io::Result<()>,
 {
     crate::input::check_not_input(path).map_err(io::Error::other)?;
+    // Declared first, so dropped last: the temporary is gone before a signal may end the
+    // process again.
     let _staging = StagingGuard::new();
     let tmp = write_temporary(path, fill)?;
-    let result = interrupt::check().and_then(|()| fs::rename(&tmp, path));
-    if result.is_err() {
-        let _ = fs::remove_file(&tmp);
-    }
-    result
+    interrupt::check()?;
+    tmp.persist(path).map_err(|e| e.error)
 }
 
-/// Writes `fill`'s bytes to a new temporary file beside `path` and syncs it; removes it on
-/// any error, Ctrl-C included.
-fn write_temporary<F>(path: &Path, fill: F) -> io::Result<PathBuf>
+/// Writes `fill`'s bytes to a new temporary file beside `path` and syncs it. The temporary is
+/// removed when the returned path is dropped unpersisted, and on any error, Ctrl-C included.
+fn write_temporary<F>(path: &Path, fill: F) -> io::Result<TempPath>
 where
     F: FnOnce(&mut dyn Write) -> io::Result<()>,
 {
@@ -48,34 +48,22 @@ where
     let name = path
         .file_name()
         .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "path has no file name"))?;
-    // Unique per process and call so concurrent writers never share a temporary file.
-    static COUNTER: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-    let n = COUNTER.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let tmp = dir.join(format!(
-        ".{}.{}.{}.tmp",
-        name.to_string_lossy(),
-        std::process::id(),
-        n
-    ));
-    let result = (|| {
-        let file = File::create(&tmp)?;
-        let mut w = BufWriter::with_capacity(1 << 20, Interruptible(file));
-        fill(&mut w)?;
-        let file = w.into_inner().map_err(|e| e.into_error())?.0;
-        interrupt::check()?;
-        file.sync_all()
-    })();
-    match result {
-        Ok(()) => Ok(tmp),
-        Err(e) => {
-            let _ = fs::remove_file(&tmp);
-            Err(e)
-        }
-    }
+    let prefix = format!(".{}.", name.to_string_lossy());
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix).suffix(".tmp");
+    // The mode File::create gives (tempfile's default is 0600): outputs are ordinary files.
+    #[cfg(unix)]
+    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    let mut w = BufWriter::with_capacity(1 << 20, Interruptible(builder.tempfile_in(dir)?));
+    fill(&mut w)?;
+    let tmp = w.into_inner().map_err(|e| e.into_error())?.0;
+    interrupt::check()?;
+    tmp.as_file().sync_all()?;
+    Ok(tmp.into_temp_path())
 }
 
 /// A writer that fails once the process is interrupted, so long writes stop promptly.
-struct Interruptible(File);
+struct Interruptible(NamedTempFile);
 
 impl Write for Interruptible {
     fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
@@ -101,12 +89,15 @@ pub enum OutputError {
 /// The output files of one command: checked up front against each other and against the
 /// command's inputs, written one by one to temporary files, and renamed into place together
 /// by [`OutputSet::commit`]. Dropped without a commit (an error, Ctrl-C), it removes its
-/// temporaries and leaves every existing file as it was.
+/// temporaries (each [`TempPath`] removes its file when dropped) and leaves every existing
+/// file as it was.
 #[derive(Debug)]
 pub struct OutputSet {
     inputs: Vec<(PathBuf, PathBuf)>,
     planned: Vec<(PathBuf, PathBuf)>,
-    staged: Vec<(PathBuf, PathBuf)>,
+    /// Each temporary and the file it becomes. Before `_staging`: fields drop in order, so the
+    /// temporaries are gone before a signal may end the process again.
+    staged: Vec<(TempPath, PathBuf)>,
     _staging: Option<StagingGuard>,
 }
 
@@ -195,32 +186,19 @@ impl OutputSet {
         }
         let staged = std::mem::take(&mut self.staged);
         let mut done = Vec::with_capacity(staged.len());
-        let mut failed = None;
+        // After a failed rename the remaining temporaries are dropped, which removes them.
         for (tmp, path) in staged {
-            if failed.is_some() {
-                let _ = fs::remove_file(&tmp);
-                continue;
-            }
-            match fs::rename(&tmp, &path) {
+            match tmp.persist(&path) {
                 Ok(()) => done.push(path),
-                Err(source) => {
-                    let _ = fs::remove_file(&tmp);
-                    failed = Some(OutputError::Io { path, source });
+                Err(e) => {
+                    return Err(OutputError::Io {
+                        path,
+                        source: e.error,
+                    })
                 }
             }
         }
-        match failed {
-            Some(e) => Err(e),
-            None => Ok(done),
-        }
-    }
-}
-
-impl Drop for OutputSet {
-    fn drop(&mut self) {
-        for (tmp, _) in &self.staged {
-            let _ = fs::remove_file(tmp);
-        }
+        Ok(done)
     }
 }
 
@@ -238,6 +216,18 @@ mod tests {
         // No temporary files remain.
         let names: Vec<_> = fs::read_dir(p.parent().unwrap()).unwrap().collect();
         assert_eq!(names.len(), 1);
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn outputs_get_the_mode_of_an_ordinary_new_file() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let (plain, atomic) = (dir.path().join("plain"), dir.path().join("atomic"));
+        fs::write(&plain, b"x").unwrap();
+        atomic_write(&atomic, b"x").unwrap();
+        let mode = |p: &Path| fs::metadata(p).unwrap().permissions().mode();
+        assert_eq!(mode(&atomic), mode(&plain));
     }
 
     #[test]

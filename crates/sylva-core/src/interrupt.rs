@@ -1,8 +1,9 @@
-//! Ctrl-C without debris. [`install`] (called once by the `sylva` binary) catches SIGINT and
-//! SIGTERM. While no temporary file exists the signal ends the process at once, as if
-//! uncaught; while one does ([`StagingGuard`], held by the atomic writers and output sets),
-//! the handler only marks the process interrupted, the writers fail at their next write
-//! ([`check`]), the temporaries are removed, and the command ends with an error.
+//! Ctrl-C without debris: the process's one cancellation token. [`install`] (called once by
+//! the `sylva` binary) catches SIGINT and SIGTERM through `signal-hook`. While no temporary
+//! file exists the signal ends the process at once, as if uncaught; while one does
+//! ([`StagingGuard`], held by the atomic writers and output sets), the handler only marks the
+//! process interrupted, the writers fail at their next write ([`check`]), long loops that poll
+//! [`interrupted`] stop, the temporaries are removed, and the command ends with an error.
 
 use std::io;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -56,26 +57,23 @@ impl Drop for StagingGuard {
     }
 }
 
-#[cfg(unix)]
-extern "C" fn on_signal(sig: libc::c_int) {
-    INTERRUPTED.store(true, Ordering::SeqCst);
-    if STAGING.load(Ordering::SeqCst) == 0 {
-        // Nothing to clean up: end the process the way the signal would have.
-        // SAFETY: signal and raise are async-signal-safe.
-        unsafe {
-            libc::signal(sig, libc::SIG_DFL);
-            libc::raise(sig);
-        }
-    }
-}
-
-/// Catches SIGINT and SIGTERM as described above (a no-op off Unix).
+/// Catches SIGINT and SIGTERM as described above. Later calls do nothing.
 pub fn install() {
-    #[cfg(unix)]
-    // SAFETY: the handler only touches atomics and calls async-signal-safe functions.
-    unsafe {
-        let handler = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
-        libc::signal(libc::SIGINT, handler);
-        libc::signal(libc::SIGTERM, handler);
-    }
+    static INSTALLED: std::sync::Once = std::sync::Once::new();
+    INSTALLED.call_once(|| {
+        for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+            // SAFETY: the action only touches atomics and calls emulate_default_handler, all
+            // async-signal-safe. Failing to register leaves the signal's default (ending the
+            // process), which is safe too.
+            let _ = unsafe {
+                signal_hook::low_level::register(signal, move || {
+                    INTERRUPTED.store(true, Ordering::SeqCst);
+                    if STAGING.load(Ordering::SeqCst) == 0 {
+                        // Nothing to clean up: end the process the way the signal would have.
+                        let _ = signal_hook::low_level::emulate_default_handler(signal);
+                    }
+                })
+            };
+        }
+    });
 }

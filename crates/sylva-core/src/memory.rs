@@ -9,18 +9,15 @@ pub struct MemoryError {
     pub available: u64,
 }
 
-/// Memory this process may still use: `MemAvailable` from /proc/meminfo where it exists,
-/// otherwise a conservative 4 GiB.
+/// Memory this process may still use: the system's available memory (`MemAvailable` on
+/// Linux) as `sysinfo` reports it, or a conservative 4 GiB where it reports none.
 pub fn available_memory_bytes() -> u64 {
-    std::fs::read_to_string("/proc/meminfo")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("MemAvailable:"))
-                .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
-        })
-        .map(|kib| kib * 1024)
-        .unwrap_or(4 << 30)
+    let mut system = sysinfo::System::new();
+    system.refresh_memory_specifics(sysinfo::MemoryRefreshKind::nothing().with_ram());
+    match system.available_memory() {
+        0 => 4 << 30,
+        bytes => bytes,
+    }
 }
 
 /// Refuses an allocation of `needed` bytes that would not fit in available memory (keeping a
@@ -70,5 +67,22 @@ mod tests {
         let msg = e.to_string();
         assert!(msg.contains("a 100000³ grid needs"), "{msg}");
         assert!(check_memory("small", 1024).is_ok());
+    }
+
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn available_memory_is_meminfo_s_mem_available() {
+        let meminfo = std::fs::read_to_string("/proc/meminfo").unwrap();
+        let kib: u64 = meminfo
+            .lines()
+            .find_map(|l| l.strip_prefix("MemAvailable:"))
+            .and_then(|v| v.split_whitespace().next()?.parse().ok())
+            .unwrap();
+        // Read at slightly different times: within 1 % of each other.
+        let (expected, got) = (kib * 1024, available_memory_bytes());
+        assert!(
+            got.abs_diff(expected) <= expected / 100,
+            "{got} vs {expected}"
+        );
     }
 }

@@ -6,7 +6,7 @@
 //! parallel loops, and their seconds are busy time split per pass ([`crate::FrameTimings`]).
 
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use tracing::span::{Attributes, Id};
@@ -34,7 +34,8 @@ pub mod stage {
 #[derive(Debug, Default)]
 struct Totals(HashMap<&'static str, (f64, u64)>);
 
-/// Collects span durations by name. Clone it freely: clones share the totals.
+/// Collects span durations by name. Clone it freely: clones share the totals. A program
+/// installs it (`tracing_subscriber::registry().with(clock)`); this library only opens spans.
 #[derive(Debug, Clone, Default)]
 pub struct StageClock {
     totals: Arc<Mutex<Totals>>,
@@ -46,20 +47,6 @@ struct Opened(Instant);
 impl StageClock {
     pub fn new() -> StageClock {
         StageClock::default()
-    }
-
-    /// A clock installed as the process's global `tracing` subscriber (once; later calls
-    /// return the same clock). For programs: libraries only open spans.
-    pub fn global() -> &'static StageClock {
-        static CLOCK: OnceLock<StageClock> = OnceLock::new();
-        CLOCK.get_or_init(|| {
-            use tracing_subscriber::layer::SubscriberExt;
-            let clock = StageClock::new();
-            let subscriber = tracing_subscriber::registry().with(clock.clone());
-            // Fails only if another subscriber is installed; then nothing is timed.
-            let _ = tracing::subscriber::set_global_default(subscriber);
-            clock
-        })
     }
 
     /// Total seconds of the closed spans named `name` (0 when there were none).

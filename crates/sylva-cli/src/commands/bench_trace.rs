@@ -5,7 +5,7 @@ use anyhow::Result;
 use sylva_light::Silent;
 use sylva_mpi::model::TileCosts;
 use sylva_mpi::{Comm, DistributedFrame};
-use sylva_render::{stage, Frame, FrameTimings, StageClock};
+use sylva_render::{stage, Frame, FrameTimings};
 
 use super::bench_scene::{median, peak_rss_bytes};
 use super::render::{prepare, FrameArgs};
@@ -209,7 +209,7 @@ impl Measured {
 }
 
 pub fn run(a: BenchTraceArgs, comm: Option<&dyn Comm>) -> Result<()> {
-    let clock = StageClock::global();
+    let clock = super::stage_clock();
     clock.reset();
     let prepared = prepare(&a.frame, !a.no_lb, Some(4), 1, false, comm)?;
     let (accel_seconds, lb_seconds) = (

@@ -2,7 +2,6 @@
 //! check sylva against a path tracer (Mitsuba 3). See `docs/export.md`.
 
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use anyhow::Result;
@@ -48,34 +47,16 @@ pub struct ExportArgs {
     pub sun_irradiance: Option<f32>,
 }
 
-/// Set by Ctrl-C during an export: the writers stop at their next progress report, and the
-/// atomic writer removes the partial file (a 50 GB temporary OBJ would otherwise stay).
-static INTERRUPTED: AtomicBool = AtomicBool::new(false);
-
-#[cfg(unix)]
-extern "C" fn on_interrupt(_: libc::c_int) {
-    INTERRUPTED.store(true, Ordering::Relaxed);
-}
-
-fn catch_interrupt() {
-    #[cfg(unix)]
-    // SAFETY: the handler only stores to an atomic, which is async-signal-safe.
-    unsafe {
-        libc::signal(
-            libc::SIGINT,
-            on_interrupt as extern "C" fn(libc::c_int) as libc::sighandler_t,
-        );
-    }
-}
-
+/// False once Ctrl-C arrived (sylva-core's one handler, installed by `main`): the writers
+/// stop at their next progress report, and the atomic writer removes the partial file (a
+/// 50 GB temporary OBJ would otherwise stay).
 fn keep_going() -> bool {
-    !INTERRUPTED.load(Ordering::Relaxed)
+    !sylva_core::interrupt::interrupted()
 }
 
 pub fn run(args: ExportArgs) -> Result<()> {
     // Fail on a bad output directory before the (possibly long) scene build.
     export::prepare_dir(&args.output)?;
-    catch_interrupt();
     let t0 = Instant::now();
     let scene = sylva_scene::load(&args.scene)?;
     let triangles = scene.instanced_triangles();
@@ -93,7 +74,7 @@ pub fn run(args: ExportArgs) -> Result<()> {
             scene.media.iter().map(|m| format!("'{}'", m.name)).collect::<Vec<_>>().join(", ")
         );
     }
-    let written = match args.format {
+    let result = match args.format {
         Format::Obj => {
             if obj::is_large(triangles) {
                 let estimate = obj::estimate_size(&scene);
@@ -107,7 +88,7 @@ pub fn run(args: ExportArgs) -> Result<()> {
                 keep_going()
             });
             pb.finish_and_clear();
-            r?
+            r
         }
         Format::Mitsuba => {
             let mut opts = mitsuba::MitsubaOptions::for_scene(&scene);
@@ -124,8 +105,16 @@ pub fn run(args: ExportArgs) -> Result<()> {
                 keep_going()
             });
             pb.finish_and_clear();
-            r?
+            r
         }
+    };
+    let written = match result {
+        Err(_) if sylva_core::interrupt::interrupted() => anyhow::bail!(
+            "{}: export interrupted (Ctrl-C): the file being written was removed; files \
+             finished before it were kept",
+            args.output.display()
+        ),
+        r => r?,
     };
     println!(
         "wrote {} files, {}, {} triangles, to {} in {:.1} s",

@@ -18,7 +18,7 @@ use sylva_pipeline::{
     image_paths, load_scene, resolution, tone_map_modes, write_images, BasisUse, LbPlan,
     PrepareOptions, PreparedScene, RelightPlan, ShadowMethod,
 };
-use sylva_render::{stage, Mode, ShadingParams, StageClock, ToneMap};
+use sylva_render::{stage, Mode, ShadingParams, ToneMap};
 use sylva_spp::trees::system::{SppLight, SppSystem, SystemConfig};
 use sylva_trace::TraversalConfig;
 
@@ -689,7 +689,7 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
         // Named twice or an input: refused now, not after the render.
         sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&image_paths(o, &modes, a.hdr))?;
     }
-    let clock = StageClock::global();
+    let clock = super::stage_clock();
     clock.reset();
     let t_all = Instant::now();
     let spp = a.frame.light.as_deref() == Some("spp");

@@ -881,24 +881,9 @@ fn texture_transform(v: &serde_json::Value) -> Result<([f32; 6], Option<u32>), S
     Ok(([c * sx, s * sy, ox, -s * sx, c * sy, oy], set))
 }
 
-/// `%XX` escapes decoded; anything else as it is.
+/// `%XX` escapes decoded; anything else (a lone `%`, `%zz`) as it is.
 fn percent_decode(s: &str) -> Vec<u8> {
-    let b = s.as_bytes();
-    let mut out = Vec::with_capacity(b.len());
-    let mut i = 0;
-    while i < b.len() {
-        let hex = |c: u8| (c as char).to_digit(16);
-        if b[i] == b'%' && i + 2 < b.len() {
-            if let (Some(h), Some(l)) = (hex(b[i + 1]), hex(b[i + 2])) {
-                out.push((h * 16 + l) as u8);
-                i += 3;
-                continue;
-            }
-        }
-        out.push(b[i]);
-        i += 1;
-    }
-    out
+    percent_encoding::percent_decode_str(s).collect()
 }
 
 /// A URI short enough for an error message (data URIs can be megabytes).
