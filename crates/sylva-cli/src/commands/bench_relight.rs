@@ -18,7 +18,7 @@ use sylva_render::{Frame, Mode, ToneMap};
 
 use super::bench_scene::{median, peak_rss_bytes};
 use super::progress::bar;
-use super::render::{prepare_with, FrameArgs};
+use super::render::{prepare, FrameArgs, PrepareRequest, Say};
 use super::scene::emit;
 
 #[derive(clap::Args, Debug)]
@@ -52,7 +52,19 @@ fn display(tm: &ToneMap, hdr: &[[f32; 3]], stats: sylva_render::tonemap::ToneSta
 
 pub fn run(a: BenchRelightArgs) -> Result<()> {
     let t_prepare = Instant::now();
-    let p = prepare_with(&a.frame, true, Some(1), 1, false, None, true, true)?;
+    let p = prepare(
+        &a.frame,
+        PrepareRequest {
+            need_lb: true,
+            rays_per_pixel: Some(1),
+            output_images: 1,
+            say: Say::Stderr,
+            force_basis: true,
+            keep_raw: true,
+            ..PrepareRequest::default()
+        },
+        None,
+    )?;
     let prepare_seconds = t_prepare.elapsed().as_secs_f64();
     let mut prepared = p.scene;
     let (w, h) = (p.width, p.height);

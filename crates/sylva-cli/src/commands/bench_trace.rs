@@ -8,7 +8,7 @@ use sylva_mpi::{Comm, DistributedFrame};
 use sylva_render::{stage, Frame, FrameTimings, StageClock};
 
 use super::bench_scene::{median, peak_rss_bytes};
-use super::render::{prepare, FrameArgs};
+use super::render::{prepare, FrameArgs, PrepareRequest, Say};
 use super::scene::emit;
 
 #[derive(clap::Args, Debug)]
@@ -211,7 +211,17 @@ impl Measured {
 pub fn run(a: BenchTraceArgs, comm: Option<&dyn Comm>) -> Result<()> {
     let clock = StageClock::global();
     clock.reset();
-    let prepared = prepare(&a.frame, !a.no_lb, Some(4), 1, false, comm)?;
+    let prepared = prepare(
+        &a.frame,
+        PrepareRequest {
+            need_lb: !a.no_lb,
+            rays_per_pixel: Some(4),
+            output_images: 1,
+            say: Say::Stderr,
+            ..PrepareRequest::default()
+        },
+        comm,
+    )?;
     let (accel_seconds, lb_seconds) = (
         clock.seconds(stage::ACCEL_BUILD),
         clock.seconds(stage::LB_PRECOMPUTE),
