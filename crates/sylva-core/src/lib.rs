@@ -26,6 +26,7 @@ mod hash;
 mod input;
 pub mod interrupt;
 pub mod limits;
+pub mod measure;
 mod memory;
 mod names;
 mod rng;
