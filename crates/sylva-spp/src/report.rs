@@ -285,37 +285,6 @@ pub fn table2_text(rows: &[Table2Row]) -> String {
     s
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn thickness_accepts_numbers_and_infinity_and_rejects_junk() {
-        assert_eq!(parse_thickness("2.5").unwrap(), 2.5);
-        assert!(parse_thickness("inf").unwrap().is_infinite());
-        assert!(parse_thickness("thick").is_err());
-    }
-
-    #[test]
-    fn table2_json_is_written_atomically_with_inf_thickness() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("t2.json");
-        run(SppArgs {
-            cmd: SppCommand::Table2(TableArgs {
-                json: true,
-                out: Some(path.clone()),
-            }),
-        })
-        .unwrap();
-        let rows: Vec<serde_json::Value> =
-            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
-        assert_eq!(rows.len(), 24);
-        assert_eq!(rows[0]["thickness"], "inf");
-        let simplified = rows[0]["simplified"].as_f64().unwrap();
-        assert!(simplified > 0.0 && simplified < 0.1);
-    }
-}
-
 /// Photons of `spp trees` by default: ten per leaf mesh (a quad, two triangles) of the
 /// scene's instances, at least two million.
 pub fn default_photons(scene: &sylva_geom::Scene) -> u64 {
@@ -435,4 +404,39 @@ pub fn tree_text(r: &TreeReport, categories: bool) -> String {
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slab_report_has_a_row_per_depth_and_direction_and_names_infinity() {
+        let slab = Slab::with_incidence_deg(1.0, 0.9, 0.0, f64::INFINITY, 0.0).unwrap();
+        let down = Direction::new(1.0, 0.0).unwrap();
+        let up = Direction::new(-0.5, 0.0).unwrap();
+        let q = SlabQuery {
+            incidence_deg: 0.0,
+            streams: 8,
+            depths: vec![0.0, 1.0, 2.0],
+            directions: vec![(0.0, 0.0, down), (120.0, 0.0, up)],
+            photons: None,
+            seed: 1,
+            convergence: true,
+        };
+        let r = slab_report(slab, &q).unwrap();
+        assert_eq!(r.radiance.len(), 6);
+        assert_eq!(r.convergence.len(), 6);
+        assert_eq!(
+            r.direct_transmittance, 0.0,
+            "a half-space lets no beam through"
+        );
+        assert!(r.reflectance_full > 0.0 && r.reflectance_full < 1.0);
+        let json = serde_json::to_value(&r).unwrap();
+        assert_eq!(json["thickness"], "inf");
+        assert!(slab_text(&r).contains("thickness inf"));
+        // A depth outside the slab is refused, not reported.
+        let thin = Slab::with_incidence_deg(1.0, 0.9, 0.0, 1.0, 0.0).unwrap();
+        assert!(slab_report(thin, &q).is_err());
+    }
 }

@@ -6,7 +6,7 @@ use anyhow::Result;
 use sylva_light::Silent;
 use sylva_mpi::model::TileCosts;
 use sylva_mpi::Comm;
-use sylva_pipeline::bench::{self, RankSplit, ScalingModel, TimedFrame, TraceBench};
+use sylva_pipeline::bench::{self, RankSplit, ScalingModel, TimedFrame, TraceBench, TraceRun};
 use sylva_render::{stage, StageClock};
 
 use super::render::{prepare, FrameArgs, PrepareRequest, Say};
@@ -50,10 +50,13 @@ pub fn run(a: BenchTraceArgs, comm: Option<&dyn Comm>) -> Result<()> {
     let clock = StageClock::global();
     clock.reset();
     let prepared = prepare(&a.frame, a.request(), comm)?;
-    let stages = (
-        clock.seconds(stage::ACCEL_BUILD),
-        clock.seconds(stage::LB_PRECOMPUTE),
-    );
+    let run = TraceRun {
+        runs: a.runs,
+        mpi_ranks: comm.map(|c| c.size()),
+        lb: !a.no_lb,
+        accel_build_seconds: clock.seconds(stage::ACCEL_BUILD),
+        lb_seconds: clock.seconds(stage::LB_PRECOMPUTE),
+    };
     let p = &prepared.scene;
     let camera = p.camera(prepared.width, prepared.height);
     // One frame: alone, or across the ranks (`None` on ranks other than 0).
@@ -104,16 +107,7 @@ pub fn run(a: BenchTraceArgs, comm: Option<&dyn Comm>) -> Result<()> {
         }
         false => None,
     };
-    let report = TraceBench::new(
-        p,
-        (prepared.width, prepared.height),
-        measures,
-        a.runs,
-        comm.map(|c| c.size()),
-        !a.no_lb,
-        stages,
-        scaling,
-    );
+    let report = TraceBench::new(p, (prepared.width, prepared.height), measures, run, scaling);
     if a.json {
         return emit(&format!("{}\n", super::bench::pretty_json(&report)?));
     }

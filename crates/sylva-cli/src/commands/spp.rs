@@ -173,3 +173,34 @@ fn slab(a: SlabArgs) -> Result<()> {
     };
     emit(&text, a.out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thickness_accepts_numbers_and_infinity_and_rejects_junk() {
+        assert_eq!(parse_thickness("2.5").unwrap(), 2.5);
+        assert!(parse_thickness("inf").unwrap().is_infinite());
+        assert!(parse_thickness("thick").is_err());
+    }
+
+    #[test]
+    fn table2_json_is_written_atomically_with_inf_thickness() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t2.json");
+        run(SppArgs {
+            cmd: SppCommand::Table2(TableArgs {
+                json: true,
+                out: Some(path.clone()),
+            }),
+        })
+        .unwrap();
+        let rows: Vec<serde_json::Value> =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        assert_eq!(rows.len(), 24);
+        assert_eq!(rows[0]["thickness"], "inf");
+        let simplified = rows[0]["simplified"].as_f64().unwrap();
+        assert!(simplified > 0.0 && simplified < 0.1);
+    }
+}

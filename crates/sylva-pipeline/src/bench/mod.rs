@@ -9,7 +9,7 @@ pub use relight::{relight, RelightBench, RelightBenchPlan};
 pub use spp::{spp, PaperScene, SppBench};
 pub use trace::{
     measure_frames, tile_times, FrameMeasure, RankSplit, ScalingModel, ScalingRow, SplitSummary,
-    TileTimes, TimedFrame, TraceBench, TraceMemory,
+    TileTimes, TimedFrame, TraceBench, TraceMemory, TraceRun,
 };
 
 use sylva_spp::trees::TreeError;

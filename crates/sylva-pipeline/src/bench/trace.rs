@@ -334,18 +334,27 @@ pub struct TraceBench {
     pub mpi: bool,
 }
 
+/// How a trace benchmark ran, beside what it measured.
+#[derive(Debug, Clone, Copy)]
+pub struct TraceRun {
+    /// Timed frames per setting.
+    pub runs: u32,
+    /// The ranks, under MPI.
+    pub mpi_ranks: Option<usize>,
+    /// Whether the scene has LB light.
+    pub lb: bool,
+    /// The pipeline's stage seconds: acceleration build and LB lighting.
+    pub accel_build_seconds: f64,
+    pub lb_seconds: f64,
+}
+
 impl TraceBench {
-    /// The report of `p`'s two measures; `mpi_ranks`: the ranks under MPI; `lb`: whether the scene has LB light; the stage
-    /// seconds come from the pipeline's clock.
-    #[allow(clippy::too_many_arguments)]
+    /// The report of `p`'s two measures at `width × height`.
     pub fn new(
         p: &PreparedScene,
         (width, height): (u32, u32),
         [rpp1, rpp4]: [FrameMeasure; 2],
-        runs: u32,
-        mpi_ranks: Option<usize>,
-        lb: bool,
-        (accel_build_seconds, lb_seconds): (f64, f64),
+        run: TraceRun,
         tile_costs: Option<ScalingModel>,
     ) -> TraceBench {
         let mem = p.tracer.cpu().accel.memory();
@@ -358,8 +367,8 @@ impl TraceBench {
             width,
             height,
             threads: rayon::current_num_threads(),
-            ranks: mpi_ranks.unwrap_or(1),
-            runs,
+            ranks: run.mpi_ranks.unwrap_or(1),
+            runs: run.runs,
             stack_size: p.tracer.cpu().traversal.stack_size,
             device: p.tracer.device(),
             adapter: p.tracer.adapter(),
@@ -368,9 +377,9 @@ impl TraceBench {
             gpu_shading: gpu.map(|_| frame.is_some()),
             gpu_shading_bytes: gpu.and(frame).map(|f| f.device_bytes()),
             cpu_rendered_pixels: gpu.and(frame).map(|f| f.cpu_pixels()),
-            lb,
-            accel_build_seconds,
-            lb_seconds,
+            lb: run.lb,
+            accel_build_seconds: run.accel_build_seconds,
+            lb_seconds: run.lb_seconds,
             lb_models_cached: p.lb_models_cached,
             tile_costs,
             memory: TraceMemory {
@@ -384,7 +393,7 @@ impl TraceBench {
                 peak_rss_bytes: peak_rss_bytes(),
             },
             tracer: p.tracer.describe(),
-            mpi: mpi_ranks.is_some(),
+            mpi: run.mpi_ranks.is_some(),
         }
     }
 }
