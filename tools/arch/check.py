@@ -34,7 +34,7 @@ ALLOWED = {
     "sylva-mpi": {"sylva-core"},
     "sylva-pipeline": {"sylva-core", "sylva-geom", "sylva-grid", "sylva-lb", "sylva-voxel",
                        "sylva-scene", "sylva-trace", "sylva-trace-gpu", "sylva-wgpu",
-                       "sylva-light", "sylva-render", "sylva-mpi"},
+                       "sylva-light", "sylva-render", "sylva-spp", "sylva-mpi"},
     "sylva-fuzz": {"sylva-core", "sylva-geom", "sylva-grid", "sylva-grow", "sylva-io",
                    "sylva-lb", "sylva-scene"},
     "sylva-testkit": None,  # dev-only: anything

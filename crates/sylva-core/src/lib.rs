@@ -32,6 +32,7 @@ mod input;
 pub mod interrupt;
 pub mod jobs;
 pub mod limits;
+pub mod measure;
 mod memory;
 mod names;
 mod rng;

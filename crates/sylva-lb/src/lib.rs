@@ -14,6 +14,7 @@
 pub mod alloc;
 pub mod backend;
 pub mod bandwidth;
+pub mod bench;
 pub mod collision;
 pub mod kernel;
 /// The lattice, the grids and their file format live in `sylva-grid` (the voxelizer writes

@@ -10,6 +10,8 @@
 //! [`PreparedScene::set_sun`] moves the sun with no LB solve. Shadow rays go through the
 //! top-level kd-tree or the sun-aligned grid ([`ShadowMethod`]).
 
+pub mod bench;
+
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;

@@ -10,6 +10,7 @@
 //! * [`model_source`]: a model named on the command line (species name or model file), or
 //!   one model of a scene.
 
+pub mod bench;
 pub mod builtin_scenes;
 pub mod layout;
 pub mod model_source;

@@ -30,6 +30,7 @@ pub mod full;
 pub mod monte_carlo;
 pub mod phase;
 pub mod quadrature;
+pub mod report;
 pub mod slab;
 pub mod spp;
 pub mod tables;

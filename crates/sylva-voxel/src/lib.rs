@@ -24,6 +24,7 @@
 //!   the result is independent of the order triangles are processed in and of the thread count.
 
 mod area;
+pub mod bench;
 
 pub use area::{plant_area, AreaGrid};
 

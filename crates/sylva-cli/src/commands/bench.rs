@@ -3,7 +3,8 @@
 use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
 use serde::Serialize;
-use sylva_lb::{Boundary, DensityGrid, Dims, LbBenchmark, Preset, SolveOptions, StopReason};
+use sylva_lb::bench::{self, BenchMedium};
+use sylva_lb::{Boundary, DensityGrid, Dims, Preset, SolveOptions};
 
 use super::progress::bar;
 
@@ -81,26 +82,6 @@ struct BenchLbArgs {
     precision: super::device::PrecisionArg,
 }
 
-#[derive(Serialize)]
-struct LbBench {
-    grid: String,
-    steps: usize,
-    seconds: f64,
-    mlups: f64,
-    bytes_per_update: usize,
-    effective_gbs: f64,
-    copy_gbs: f64,
-    ratio: f64,
-    threads: usize,
-    kernel: String,
-    runs: Vec<f64>,
-    /// "cpu" or "gpu".
-    device: &'static str,
-    /// The GPU adapter's name (absent on the CPU).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    adapter: Option<String>,
-}
-
 pub fn run(args: BenchArgs, comm: Option<&dyn sylva_mpi::Comm>) -> Result<()> {
     match args.command {
         BenchCommand::Lb(a) => bench_lb(a),
@@ -119,110 +100,22 @@ fn bench_lb(a: BenchLbArgs) -> Result<()> {
     if a.tolerance.is_some() {
         bail!("--tolerance applies to --medium cloud (dense and empty runs take a fixed --steps)");
     }
-    let grid_arg = a.grid.as_deref().unwrap_or("128");
-    let dims = match Dims::parse(grid_arg) {
-        Some(d) => d?,
-        None => bail!("--grid '{grid_arg}': expected N or NXxNYxNZ"),
-    };
+    let dims = parse_grid(a.grid.as_deref().unwrap_or("128"))?;
     let steps = a.steps.unwrap_or(256);
     if steps == 0 || a.repeats == 0 {
         bail!("--steps and --repeats must be at least 1");
     }
-    // The grid and the solver's state, checked before either is allocated.
-    sylva_lb::solver::check_solve_memory(dims)?;
-    // A dense cloud-like medium: every site runs the full collision.
-    let mut grid = DensityGrid::empty(dims);
-    if a.medium == "dense" {
-        grid.density.fill(1.0);
-    }
-    let medium = Preset::Cloud.params();
-    let boundary = Boundary::sun([0.3, -0.9, 0.3], 1.0);
-    let backend = super::device::open_solver(a.device, a.precision)?;
-    let pb = if a.json {
-        indicatif::ProgressBar::hidden()
-    } else {
-        bar((steps * a.repeats) as u64, "bench lb")
+    let medium = match a.medium.as_str() {
+        "empty" => BenchMedium::Empty,
+        _ => BenchMedium::Dense,
     };
-    let LbBenchmark {
-        runs,
-        kernel,
-        bytes_per_update,
-        copy_gbs,
-    } = backend.benchmark(&grid, &medium, boundary, steps, a.repeats, &mut |s| {
+    let backend = super::device::open_solver(a.device, a.precision)?;
+    let pb = bench_bar(a.json, steps * a.repeats, "bench lb");
+    let b = bench::dense(backend.as_ref(), dims, medium, steps, a.repeats, &mut |s| {
         pb.set_position(s as u64)
     })?;
     pb.finish_and_clear();
-    let mut sorted = runs.clone();
-    sorted.sort_by(f64::total_cmp);
-    let seconds = sorted[sorted.len() / 2];
-    let mlups = dims.sites() as f64 * steps as f64 / seconds / 1e6;
-    let effective_gbs = mlups * 1e6 * bytes_per_update as f64 / 1e9;
-    let b = LbBench {
-        grid: dims.to_string().replace('×', "x"),
-        steps,
-        seconds,
-        mlups,
-        bytes_per_update,
-        effective_gbs,
-        copy_gbs,
-        ratio: effective_gbs / copy_gbs,
-        threads: rayon::current_num_threads(),
-        kernel,
-        runs,
-        device: backend.device(),
-        adapter: backend.adapter(),
-    };
-    if a.json {
-        println!("{}", serde_json::to_string(&b)?);
-    } else {
-        println!(
-            "LB solver, {} grid, {} steps, one colour, {}",
-            b.grid,
-            b.steps,
-            backend.describe()
-        );
-        println!("  runs (s):        {}", format_runs(&b.runs));
-        println!("  median:          {:.3} s", b.seconds);
-        println!("  MLUPS:           {:.1}", b.mlups);
-        println!("  bytes/update:    {}", b.bytes_per_update);
-        println!("  effective:       {:.2} GB/s", b.effective_gbs);
-        println!(
-            "  copy bandwidth:  {:.2} GB/s (read + write, same run{})",
-            b.copy_gbs,
-            if b.device == "gpu" {
-                ", GPU buffer copies"
-            } else {
-                ""
-            }
-        );
-        println!("  ratio:           {:.2}", b.ratio);
-    }
-    Ok(())
-}
-
-#[derive(Serialize)]
-struct CloudBench {
-    grid: String,
-    /// Sites with density.
-    occupied: usize,
-    /// Steps each run took (the same for every run).
-    steps: usize,
-    /// `step limit` or `converged`.
-    stop: String,
-    tolerance: Option<f64>,
-    /// Median seconds of the whole solve (all colours).
-    seconds: f64,
-    /// Site updates per second of the solved colours, millions.
-    mlups: f64,
-    /// Colours solved (equal colours are solved once).
-    solves: usize,
-    runs: Vec<f64>,
-    threads: usize,
-    device: &'static str,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    adapter: Option<String>,
-    /// The goal of the issue (002 Table 3: 100 s on a 4-thread i7, 6 s on a GTX 480).
-    goal_seconds: f64,
+    print_report(&b, a.json)
 }
 
 /// The built-in cloud's LB solve, as `sylva render cloud` runs it.
@@ -235,10 +128,7 @@ fn bench_cloud(a: BenchLbArgs) -> Result<()> {
         .expect("the built-in cloud scene has a medium");
     let sylva_scene::scene::MediumGenerator::Cumulus(params) = &mut medium.generator;
     if let Some(g) = &a.grid {
-        let dims = match Dims::parse(g) {
-            Some(d) => d?,
-            None => bail!("--grid '{g}': expected N or NXxNYxNZ"),
-        };
+        let dims = parse_grid(g)?;
         *params =
             sylva_grow::cloud::CumulusParams::for_grid([dims.nx, dims.ny, dims.nz], params.seed);
     }
@@ -266,94 +156,49 @@ fn bench_cloud(a: BenchLbArgs) -> Result<()> {
         vec![0.0; dims.sites()],
     )?;
     let preset = Preset::parse(&m.preset)?.params();
-    let travel = desc.sun.travel().to_array();
-    let boundary = Boundary::sun(travel, 1.0);
+    let boundary = Boundary::sun(desc.sun.travel().to_array(), 1.0);
     let backend = super::device::open_solver(a.device, a.precision)?;
-    let pb = if a.json {
+    let pb = bench_bar(a.json, opts.max_steps * a.repeats, "bench cloud");
+    let b = bench::solve(
+        backend.as_ref(),
+        &grid,
+        &preset,
+        boundary,
+        &opts,
+        a.repeats,
+        &mut |s| pb.set_position(s as u64),
+    )?;
+    pb.finish_and_clear();
+    print_report(&b, a.json)
+}
+
+fn parse_grid(g: &str) -> Result<Dims> {
+    match Dims::parse(g) {
+        Some(d) => Ok(d?),
+        None => bail!("--grid '{g}': expected N or NXxNYxNZ"),
+    }
+}
+
+/// A bar of `len` steps, hidden when stdout is for JSON.
+pub fn bench_bar(json: bool, len: usize, what: &str) -> indicatif::ProgressBar {
+    if json {
         indicatif::ProgressBar::hidden()
     } else {
-        bar((opts.max_steps * a.repeats) as u64, "bench cloud")
-    };
-    let mut runs = Vec::with_capacity(a.repeats);
-    let mut last = None;
-    for r in 0..a.repeats {
-        let t0 = std::time::Instant::now();
-        let (_, reports) =
-            backend.solve_lighting(&grid, &preset, boundary, &opts, &mut |_, s, _| {
-                pb.set_position((r * opts.max_steps + s) as u64)
-            })?;
-        runs.push(t0.elapsed().as_secs_f64());
-        last = Some(reports);
+        bar(len as u64, what)
     }
-    pb.finish_and_clear();
-    let reports = last.expect("at least one run");
-    let mut sorted = runs.clone();
-    sorted.sort_by(f64::total_cmp);
-    let seconds = sorted[sorted.len() / 2];
-    // Colours with equal parameters are copied, not solved.
-    let solves = (0..3)
-        .filter(|&c| (0..c).all(|p| preset.colours[p] != preset.colours[c]))
-        .count();
-    let steps = reports[0].steps;
-    let (_, occupied) = m.occupancy();
-    let b = CloudBench {
-        grid: dims.to_string().replace('×', "x"),
-        occupied,
-        steps,
-        stop: match reports[0].stop {
-            StopReason::StepLimit => "step limit".into(),
-            StopReason::Converged => "converged".into(),
-        },
-        tolerance: opts.tolerance,
-        seconds,
-        mlups: (solves * dims.sites() * steps) as f64 / seconds / 1e6,
-        solves,
-        runs,
-        threads: rayon::current_num_threads(),
-        device: backend.device(),
-        adapter: backend.adapter(),
-        goal_seconds: 16.0,
-    };
-    if a.json {
-        println!("{}", serde_json::to_string(&b)?);
+}
+
+/// A report on stdout: one line of JSON (`json`) or its text.
+pub fn print_report<R: Serialize + std::fmt::Display>(r: &R, json: bool) -> Result<()> {
+    if json {
+        println!("{}", serde_json::to_string(r)?);
     } else {
-        println!(
-            "LB solve of the built-in cloud, {} grid ({} occupied sites), {}",
-            b.grid,
-            b.occupied,
-            backend.describe()
-        );
-        println!(
-            "  steps:           {} ({}{})",
-            b.steps,
-            b.stop,
-            b.tolerance
-                .map(|t| format!(", tolerance {t:e}"))
-                .unwrap_or_default()
-        );
-        println!("  runs (s):        {}", format_runs(&b.runs));
-        println!(
-            "  median:          {:.3} s ({} colour solve(s))",
-            b.seconds, b.solves
-        );
-        println!("  MLUPS:           {:.1}", b.mlups);
-        println!(
-            "  goal:            ≤ {} s on 2 cores: {}",
-            b.goal_seconds,
-            if b.seconds <= b.goal_seconds {
-                "met"
-            } else {
-                "missed"
-            }
-        );
+        print!("{r}");
     }
     Ok(())
 }
 
-/// Run times in seconds, three decimals, space-separated.
-pub fn format_runs(runs: &[f64]) -> String {
-    runs.iter()
-        .map(|t| format!("{t:.3}"))
-        .collect::<Vec<_>>()
-        .join(" ")
+/// `r` as pretty JSON, keys sorted (as `serde_json::json!` objects print them).
+pub fn pretty_json<R: Serialize>(r: &R) -> Result<String> {
+    Ok(serde_json::to_string_pretty(&serde_json::to_value(r)?)?)
 }

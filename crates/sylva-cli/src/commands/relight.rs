@@ -18,7 +18,7 @@ use sylva_render::tonemap::srgb8;
 use sylva_render::{mean_luminance, Mode, ToneMap};
 
 use super::progress::bar;
-use super::render::{prepare_with, FrameArgs};
+use super::render::{prepare, FrameArgs, PrepareRequest};
 
 #[derive(Args, Debug)]
 pub struct RelightArgs {
@@ -75,7 +75,17 @@ pub fn run(a: RelightArgs, comm: Option<&dyn Comm>) -> Result<()> {
         white: a.white,
     };
     tm.validate().map_err(anyhow::Error::msg)?;
-    let p = prepare_with(&a.frame, true, a.rpp, 1, true, comm, true, false)?;
+    let p = prepare(
+        &a.frame,
+        PrepareRequest {
+            need_lb: true,
+            rays_per_pixel: a.rpp,
+            output_images: 1,
+            force_basis: true,
+            ..PrepareRequest::default()
+        },
+        comm,
+    )?;
     let mut prepared = p.scene;
     let rpp = a.rpp.unwrap_or(prepared.scene.camera.rays_per_pixel);
     let camera = prepared.camera(p.width, p.height);

@@ -387,6 +387,10 @@ pub struct RenderArgs {
     /// Reinhard white point in scaled luminance (default: the image's brightest pixel).
     #[arg(long)]
     pub white: Option<f32>,
+    /// Physical light: also print every instance's forest-grid weights (sun, sky through the
+    /// top and the sides, ground, each over its value in the open), one line per instance.
+    #[arg(long)]
+    pub forest_weights: bool,
 }
 
 /// A scene prepared for the frames `a` asks for, and the image size.
@@ -398,49 +402,52 @@ pub struct Prepared {
     pub basis: Vec<BasisReport>,
 }
 
+/// Where `prepare` prints what it does: stdout, or stderr when stdout is for JSON.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Say {
+    #[default]
+    Stdout,
+    Stderr,
+}
+
+/// What a command asks of [`prepare`] besides the frame options, built from its arguments.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct PrepareRequest {
+    /// Light the models with the LB (else the local light only: no LB work).
+    pub need_lb: bool,
+    /// The most rays per pixel a frame will use (default: the scene camera's); the frame's
+    /// memory is checked for it before any LB or kd-tree work.
+    pub rays_per_pixel: Option<u32>,
+    /// Images written per frame (their memory is checked too).
+    pub output_images: usize,
+    pub say: Say,
+    /// Base solutions whatever `--basis` says: the commands that relight, under the paper
+    /// light.
+    pub force_basis: bool,
+    /// Keep the uncompressed base solutions beside the compressed ones.
+    pub keep_raw: bool,
+    /// Print the forest grid's weights of every instance (`render --forest-weights`).
+    pub instance_weights: bool,
+}
+
 /// Loads the scene, lights every model (from the cache when it can) and builds its
-/// kd-trees, printing what it does (to stdout, or stderr when stdout is for JSON).
-/// `rays_per_pixel`: the most a frame will use (default: the scene camera's); the frame's
-/// memory is checked for it before any LB or kd-tree work. Under MPI (`comm`) the models'
+/// kd-trees, printing what it does (where `req.say` says). Under MPI (`comm`) the models'
 /// LB colours, or their base solutions, are solved across the ranks and only rank 0 prints.
-pub fn prepare(
-    a: &FrameArgs,
-    need_lb: bool,
-    rays_per_pixel: Option<u32>,
-    output_images: usize,
-    to_stdout: bool,
-    comm: Option<&dyn Comm>,
-) -> Result<Prepared> {
-    prepare_with(
-        a,
+pub fn prepare(a: &FrameArgs, req: PrepareRequest, comm: Option<&dyn Comm>) -> Result<Prepared> {
+    let PrepareRequest {
         need_lb,
         rays_per_pixel,
         output_images,
-        to_stdout,
-        comm,
-        false,
-        false,
-    )
-}
-
-/// [`prepare`], with base solutions whatever `--basis` says (`force_basis`: the commands that
-/// relight, under the paper light) and the uncompressed bases kept (`keep_raw`).
-#[allow(clippy::too_many_arguments)]
-pub fn prepare_with(
-    a: &FrameArgs,
-    need_lb: bool,
-    rays_per_pixel: Option<u32>,
-    output_images: usize,
-    to_stdout: bool,
-    comm: Option<&dyn Comm>,
-    force_basis: bool,
-    keep_raw: bool,
-) -> Result<Prepared> {
+        say: to,
+        force_basis,
+        keep_raw,
+        instance_weights,
+    } = req;
     let root = comm.is_none_or(|c| c.rank() == 0);
     // Machine-readable runs keep stdout for their JSON.
     let say = |s: String| {
         if !root {
-        } else if to_stdout {
+        } else if to == Say::Stdout {
             println!("{s}")
         } else {
             eprintln!("{s}")
@@ -635,7 +642,7 @@ pub fn prepare_with(
             range(|w| w.sky),
             range(|w| w.ground)
         ));
-        if std::env::var_os("SYLVA_FOREST_WEIGHTS").is_some() {
+        if instance_weights {
             for (i, w) in f.weights.iter().enumerate() {
                 say(format!(
                     "  instance {i}: sun {:.3} sky top {:.3} sides {:.3} ground {:.3}",
@@ -698,10 +705,13 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
     }
     let p = prepare(
         &a.frame,
-        !spp && modes.iter().any(|m| m.needs_lb()),
-        a.rpp,
-        modes.len(),
-        true,
+        PrepareRequest {
+            need_lb: !spp && modes.iter().any(|m| m.needs_lb()),
+            rays_per_pixel: a.rpp,
+            output_images: modes.len(),
+            instance_weights: a.forest_weights,
+            ..PrepareRequest::default()
+        },
         comm,
     )?;
     let prepared = &p.scene;

@@ -3,12 +3,10 @@
 //! (`spp trees`, in `spp_trees.rs`).
 
 use anyhow::{bail, Context, Result};
-use serde::Serialize;
-use std::fmt::Write as _;
 use std::path::PathBuf;
-use sylva_spp::monte_carlo::{simulate, McConfig, McResult};
-use sylva_spp::tables::{self, RmsProtocol, Table1Row, Table2Row};
-use sylva_spp::{Direction, FullModel, Slab, SppModel};
+use sylva_spp::report::{slab_report, slab_text, table1_text, table2_text, SlabQuery};
+use sylva_spp::tables::{self, RmsProtocol};
+use sylva_spp::{Direction, Slab};
 
 #[derive(clap::Args)]
 pub struct SppArgs {
@@ -134,57 +132,9 @@ fn parse_thickness(s: &str) -> Result<f64> {
     }
 }
 
-#[derive(Serialize)]
-struct RadianceRow {
-    depth: f64,
-    polar_deg: f64,
-    azimuth_deg: f64,
-    mu: f64,
-    full: f64,
-    simplified: f64,
-    refined: f64,
-}
-
-#[derive(Serialize)]
-struct ConvergenceRow {
-    streams: usize,
-    reflectance: f64,
-    diffuse_transmittance: f64,
-}
-
-#[derive(Serialize)]
-struct SlabReport {
-    sigma_t: f64,
-    albedo: f64,
-    g: f64,
-    #[serde(serialize_with = "thickness_json")]
-    thickness: f64,
-    incidence_deg: f64,
-    streams: usize,
-    reflectance_full: f64,
-    reflectance_simplified: f64,
-    diffuse_transmittance_full: f64,
-    diffuse_transmittance_simplified: f64,
-    direct_transmittance: f64,
-    monte_carlo: Option<McResult>,
-    convergence: Vec<ConvergenceRow>,
-    radiance: Vec<RadianceRow>,
-}
-
-fn thickness_json<S: serde::Serializer>(w: &f64, s: S) -> std::result::Result<S::Ok, S::Error> {
-    if w.is_infinite() {
-        s.serialize_str("inf")
-    } else {
-        s.serialize_f64(*w)
-    }
-}
-
 fn slab(a: SlabArgs) -> Result<()> {
     let thickness = parse_thickness(&a.thickness)?;
     let slab = Slab::with_incidence_deg(a.sigma_t, a.albedo, a.g, thickness, a.incidence)?;
-    for &z in &a.depths {
-        slab.check_depth(z)?;
-    }
     let mut directions = Vec::new();
     for &polar in &a.angles {
         if !(0.0..=180.0).contains(&polar) {
@@ -204,212 +154,24 @@ fn slab(a: SlabArgs) -> Result<()> {
             ));
         }
     }
-    let full = FullModel::with_streams(slab, a.streams)?;
-    let spp = SppModel::new(slab)?;
-    let mut radiance = Vec::new();
-    for &z in &a.depths {
-        for &(polar, azimuth, dir) in &directions {
-            radiance.push(RadianceRow {
-                depth: z,
-                polar_deg: polar,
-                azimuth_deg: azimuth,
-                mu: dir.mu,
-                full: full.radiance(z, dir)?,
-                simplified: spp.radiance(z, dir)?,
-                refined: spp.refined_radiance(z, dir)?,
-            });
-        }
-    }
-    let monte_carlo = match a.photons {
-        Some(n) => Some(simulate(&slab, &McConfig::new(n, a.seed))?),
-        None => None,
-    };
-    let mut convergence = Vec::new();
-    if a.convergence {
-        for n in [2, 4, 8, 16, 32, 64] {
-            let m = FullModel::with_streams(slab, n)?;
-            convergence.push(ConvergenceRow {
-                streams: n,
-                reflectance: m.reflectance(),
-                diffuse_transmittance: m.diffuse_transmittance(),
-            });
-        }
-    }
-    let report = SlabReport {
-        sigma_t: slab.sigma_t,
-        albedo: slab.albedo,
-        g: slab.g,
-        thickness,
-        incidence_deg: a.incidence,
-        streams: a.streams,
-        reflectance_full: full.reflectance(),
-        reflectance_simplified: spp.reflectance(),
-        diffuse_transmittance_full: full.diffuse_transmittance(),
-        diffuse_transmittance_simplified: spp.diffuse_transmittance(),
-        direct_transmittance: if thickness.is_infinite() {
-            0.0
-        } else {
-            slab.direct(thickness)
+    let report = slab_report(
+        slab,
+        &SlabQuery {
+            incidence_deg: a.incidence,
+            streams: a.streams,
+            depths: a.depths,
+            directions,
+            photons: a.photons,
+            seed: a.seed,
+            convergence: a.convergence,
         },
-        monte_carlo,
-        convergence,
-        radiance,
-    };
+    )?;
     let text = if a.json {
         serde_json::to_string_pretty(&report)? + "\n"
     } else {
         slab_text(&report)
     };
     emit(&text, a.out)
-}
-
-fn slab_text(r: &SlabReport) -> String {
-    let mut s = String::new();
-    let w = if r.thickness.is_infinite() {
-        "inf".to_string()
-    } else {
-        format!("{}", r.thickness)
-    };
-    let _ = writeln!(
-        s,
-        "slab: sigma_t {} albedo {} g {} thickness {} incidence {}°  ({} directions per hemisphere)",
-        r.sigma_t, r.albedo, r.g, w, r.incidence_deg, r.streams
-    );
-    let _ = writeln!(
-        s,
-        "fluxes per unit incident flux:      full      simplified"
-    );
-    let _ = writeln!(
-        s,
-        "  diffuse reflectance            {:9.6}  {:9.6}",
-        r.reflectance_full, r.reflectance_simplified
-    );
-    let _ = writeln!(
-        s,
-        "  diffuse transmittance          {:9.6}  {:9.6}",
-        r.diffuse_transmittance_full, r.diffuse_transmittance_simplified
-    );
-    let _ = writeln!(
-        s,
-        "  direct transmittance           {:9.6}",
-        r.direct_transmittance
-    );
-    if let Some(mc) = &r.monte_carlo {
-        let _ = writeln!(
-            s,
-            "Monte Carlo ({} photons): reflectance {:.6} ± {:.6}, diffuse transmittance {:.6} ± {:.6}, direct {:.6} ± {:.6}",
-            mc.photons,
-            mc.reflectance.mean,
-            mc.reflectance.std_error,
-            mc.diffuse_transmittance.mean,
-            mc.diffuse_transmittance.std_error,
-            mc.direct_transmittance.mean,
-            mc.direct_transmittance.std_error
-        );
-    }
-    if !r.convergence.is_empty() {
-        let _ = writeln!(s, "full model vs directions per hemisphere:");
-        for c in &r.convergence {
-            let _ = writeln!(
-                s,
-                "  {:3}  R {:.8}  T {:.8}",
-                c.streams, c.reflectance, c.diffuse_transmittance
-            );
-        }
-    }
-    let _ = writeln!(
-        s,
-        "diffuse radiance I(z, s) per unit incident flux (the unscattered beam excluded):"
-    );
-    let _ = writeln!(
-        s,
-        "  depth  polar°  azim°        full  simplified     refined"
-    );
-    for row in &r.radiance {
-        let _ = writeln!(
-            s,
-            "  {:5.2}  {:6.1}  {:5.1}  {:10.6}  {:10.6}  {:10.6}",
-            row.depth,
-            row.polar_deg,
-            row.azimuth_deg,
-            tidy(row.full),
-            tidy(row.simplified),
-            tidy(row.refined)
-        );
-    }
-    s
-}
-
-/// Shows rounding residues of exact zeros (a boundary condition, ±1e-17) as 0.
-fn tidy(x: f64) -> f64 {
-    if x.abs() < 1e-15 {
-        0.0
-    } else {
-        x
-    }
-}
-
-fn pct(x: f64) -> String {
-    format!("{:5.2}", 100.0 * x)
-}
-
-fn pct_opt(x: Option<f64>) -> String {
-    x.map_or_else(|| "    -".to_string(), |v| format!("{:5.1}", 100.0 * v))
-}
-
-fn albedo_label(a: Option<f64>) -> String {
-    a.map_or_else(|| "total".to_string(), |v| format!("{v}"))
-}
-
-const TABLE_NOTE: &str = "RMS of the diffuse-radiance difference against the full model, per unit incident flux, in percent;\n\
-averaged over incidence 0-60° (step 15°), depths 0..min(w, 10) step 0.5, and the whole sphere of directions.\n";
-
-fn table1_text(rows: &[Table1Row]) -> String {
-    let mut s = String::from(
-        "003 Table 1 (w = 10/σt): simplified (S.) and refined (R.) SPP vs the full model\n",
-    );
-    s += TABLE_NOTE;
-    let _ = writeln!(
-        s,
-        "     g  albedo    S. ours  S. paper    R. ours  R. paper"
-    );
-    for r in rows {
-        let _ = writeln!(
-            s,
-            "  {:4.1}  {:>6}    {}     {}      {}     {}",
-            r.g,
-            albedo_label(r.albedo),
-            pct(r.simplified),
-            pct_opt(r.paper_simplified),
-            pct(r.refined),
-            pct_opt(r.paper_refined)
-        );
-    }
-    s
-}
-
-fn table2_text(rows: &[Table2Row]) -> String {
-    let mut s = String::from("003 Table 2 (g = 0): SPP vs the full model by thickness (σt = 1)\n");
-    s += TABLE_NOTE;
-    s += "The paper prints one value per cell; it matches the simplified model's error.\n";
-    let _ = writeln!(s, "      w  albedo    S. ours  paper    R. ours");
-    for r in rows {
-        let w = if r.thickness.is_infinite() {
-            "inf".to_string()
-        } else {
-            format!("{}", r.thickness)
-        };
-        let _ = writeln!(
-            s,
-            "  {:>5}  {:>6}    {}  {}      {}",
-            w,
-            albedo_label(r.albedo),
-            pct(r.simplified),
-            pct_opt(r.paper_simplified),
-            pct(r.refined)
-        );
-    }
-    s
 }
 
 #[cfg(test)]

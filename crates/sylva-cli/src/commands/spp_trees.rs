@@ -3,9 +3,8 @@
 //! lighting, compared by eq. 30.
 
 use anyhow::{Context, Result};
-use std::fmt::Write as _;
 use std::path::PathBuf;
-use sylva_spp::trees::experiment::{self, ExperimentConfig, LbPlan, TreeReport};
+use sylva_spp::trees::experiment::{self, ExperimentConfig, LbPlan};
 use sylva_spp::trees::opacity_map::MapResolution;
 use sylva_spp::trees::system::SystemConfig;
 
@@ -87,22 +86,9 @@ pub fn run(a: TreesArgs) -> Result<()> {
         base.name = format!("{}-horizontal-leaves", base.name);
     }
     let scene = experiment::repeated(&base, a.repeat, a.spacing)?;
-    let leaf_meshes_hint: u64 = scene
-        .instances
-        .iter()
-        .map(|i| {
-            let m = &scene.models[i.model as usize];
-            // Leaf quads are two triangles.
-            (m.mesh.material_ids.iter().filter(|&&id| {
-                m.materials
-                    .get(id as usize)
-                    .is_some_and(|mat| mat.is_leaf())
-            }))
-            .count() as u64
-                / 2
-        })
-        .sum();
-    let photons = a.photons.unwrap_or((10 * leaf_meshes_hint).max(2_000_000));
+    let photons = a
+        .photons
+        .unwrap_or_else(|| sylva_spp::report::default_photons(&scene));
     let solver = if a.no_lb {
         None
     } else {
@@ -137,7 +123,7 @@ pub fn run(a: TreesArgs) -> Result<()> {
     let text = if a.json {
         serde_json::to_string_pretty(&report)? + "\n"
     } else {
-        report_text(&report, a.categories)
+        sylva_spp::report::tree_text(&report, a.categories)
     };
     super::spp::emit(&text, a.out)
 }
@@ -158,101 +144,4 @@ pub fn load_scene_or_species(name: &str) -> Result<sylva_geom::Scene> {
         }
         other => Ok(other?),
     }
-}
-
-fn pct(x: f64) -> String {
-    format!("{:6.1}", 100.0 * x)
-}
-
-fn report_text(r: &TreeReport, categories: bool) -> String {
-    let mut s = String::new();
-    let _ = writeln!(
-        s,
-        "003 Table 3 on scene {}: {} instance(s), {} prototype(s), albedo {}, light travelling ({:.3}, {:.3}, {:.3})",
-        r.scene, r.instances, r.prototypes, r.albedo, r.light[0], r.light[1], r.light[2]
-    );
-    let _ = writeln!(
-        s,
-        "  leaf meshes {} ({} compared, {} met by no light ray); mean depth {:.2}, thickness {:.2} surfaces, |n·s0| {:.2}; {} light rays {:.3} apart; {} directions, {} grid cells",
-        r.leaf_meshes, r.compared_meshes, r.unmet_meshes, r.mean_depth, r.mean_thickness, r.mean_cos_light, r.depth_rays, r.ray_spacing, r.sample_directions, r.grid_cells
-    );
-    let b = &r.balance;
-    let _ = writeln!(
-        s,
-        "  Monte Carlo: {} photons (seed {}); escaped {:.4}, absorbed by leaves {:.4}, by wood {:.4}, unfinished {:.1e}; {:.2} leaf and {:.2} wood interactions per photon",
-        b.photons, r.seed, b.escaped, b.absorbed_leaves, b.absorbed_wood, b.unfinished, b.leaf_hits_per_photon, b.wood_hits_per_photon
-    );
-    let e = &r.errors;
-    let _ = writeln!(s, "eq. 30 RMS error against the Monte Carlo, percent:");
-    let _ = writeln!(s, "             SPPG     SPP      SS      LB");
-    let _ = writeln!(
-        s,
-        "  sylva     {}  {}  {}  {}",
-        pct(e.sppg),
-        pct(e.spp),
-        pct(e.ss),
-        e.lb.map_or("     -".into(), pct)
-    );
-    if let Some(p) = &r.paper {
-        let _ = writeln!(
-            s,
-            "  paper     {}  {}  {}       -   ({})",
-            pct(p.sppg),
-            pct(p.spp),
-            pct(p.ss),
-            p.configuration
-        );
-    }
-    let _ = writeln!(
-        s,
-        "  (Monte Carlo noise in these numbers: about {:.1} %; {} depth-thickness bins of >= {} meshes, {} meshes)",
-        100.0 * e.mc_noise, r.categories_used, experiment::MIN_CATEGORY_MESHES, r.meshes_in_categories
-    );
-    let _ = writeln!(
-        s,
-        "  SPPG / SPP with eq. 19's totals read as radiance integrals (half the diffuse light): {} / {}",
-        pct(e.sppg_radiance_reading),
-        pct(e.spp_radiance_reading)
-    );
-    let m = &r.means;
-    let _ = writeln!(
-        s,
-        "mean two-sided irradiance per unit beam irradiance (area-weighted): MC {:.4} (direct {:.4}), SPPG {:.4}, SPP {:.4}, SS {:.4}{}; mean G {:.3}",
-        m.mc,
-        m.mc_direct,
-        m.sppg,
-        m.spp,
-        m.ss,
-        m.lb.map_or(String::new(), |v| format!(", LB {v:.4}")),
-        m.g
-    );
-    let t = &r.timings;
-    let _ = writeln!(
-        s,
-        "seconds: kd-trees {:.2}, meshes {:.2}, eq. 29 counts {:.2}, maps {:.2} + grids {:.2} + light maps {:.2} + G {:.2} + sky {:.3}, photons {:.2}, LB {:.2}; total {:.2}",
-        t.accel, t.meshes, t.depth_counts, t.system.sample_maps, t.system.grid_depths, t.system.light_maps, t.system.light_grid, t.system.sky, t.photons, t.lb, t.total
-    );
-    if categories {
-        let _ = writeln!(
-            s,
-            "   d    w  meshes        MC    direct      SPPG       SPP        SS        LB      G"
-        );
-        for c in &r.categories {
-            let _ = writeln!(
-                s,
-                "{:4} {:4} {:7} {:9.4} {:9.4} {:9.4} {:9.4} {:9.4} {:>9} {:6.3}",
-                c.depth,
-                c.thickness,
-                c.meshes,
-                c.mc,
-                c.mc_direct,
-                c.sppg,
-                c.spp,
-                c.ss,
-                c.lb.map_or("-".into(), |v| format!("{v:.4}")),
-                c.g
-            );
-        }
-    }
-    s
 }

@@ -1,0 +1,329 @@
+//! `sylva bench relight`: 004 Table 1 on this machine. The frame time over a sequence of suns
+//! (relighting every instance and rendering, shadow rays through the top-level kd-tree and
+//! through the sun-aligned grid, alternated), against the static frame of paper 000 (one LB
+//! grid per model, solved for one sun) measured in the same run; the base solutions' solve
+//! time; the compressed bytes; and the image RMSE between frames relit from the compressed
+//! and from the uncompressed bases.
+
+use std::fmt;
+use std::time::Instant;
+
+use serde::Serialize;
+use sylva_core::colour::linear_to_srgb;
+use sylva_core::format_bytes;
+use sylva_core::measure::{median, peak_rss_bytes};
+use sylva_lb::relight::{BasisSet, BasisWeights, RelightError};
+use sylva_light::lighting::{LightingSource, ModelLighting};
+use sylva_light::relight::{sun_path, BasisReport, StoredBasis};
+use sylva_light::ModelGridLight;
+use sylva_render::{Frame, Mode, ToneMap};
+
+use crate::{PipelineError, PreparedScene, ShadowMethod, Silent};
+
+/// What to measure.
+#[derive(Debug, Clone, Copy)]
+pub struct RelightBenchPlan {
+    /// Sun positions over 90° about the zenith (004 Table 1: 24).
+    pub suns: usize,
+    /// Timed passes over the sequence per shadow method (after one untimed pass).
+    pub runs: u32,
+    /// The shadow method whose frame time is `frame_seconds` and whose frames the RMSE
+    /// compares.
+    pub shadows: ShadowMethod,
+    /// The frame's width and height.
+    pub size: (u32, u32),
+    /// Seed of the sub-pixel jitter.
+    pub seed: u64,
+}
+
+impl RelightBenchPlan {
+    /// Frames [`relight`] renders (for a progress bar).
+    pub fn frames(&self) -> u64 {
+        let suns = self.suns as u64;
+        1 + (self.runs as u64 + 1) * (1 + 2 * suns) + 2 * suns
+    }
+}
+
+/// `sylva bench relight`'s report.
+#[derive(Debug, Clone, Serialize)]
+pub struct RelightBench {
+    pub scene: String,
+    pub width: u32,
+    pub height: u32,
+    pub rays_per_pixel: u32,
+    pub suns: usize,
+    pub runs: u32,
+    pub threads: usize,
+    pub sun_weights: &'static str,
+    pub global_grid: Option<String>,
+    pub shadows: &'static str,
+    /// Mean over the suns of the per-sun medians, with the chosen shadows.
+    pub frame_seconds: f64,
+    pub frame_seconds_kd: f64,
+    pub frame_seconds_grid: f64,
+    /// Median of the paired grid/kd frame times.
+    pub grid_over_kd: f64,
+    /// Relighting alone (moving the sun), median.
+    pub relight_seconds: f64,
+    pub static_frame_seconds: f64,
+    pub ratio_to_static: f64,
+    /// The base solutions' solve time (measured now, or recorded when cached).
+    pub basis_seconds: Option<f64>,
+    pub basis_seconds_per_model: Vec<Option<f64>>,
+    pub basis_cached: bool,
+    pub compressed_bytes: u64,
+    pub raw_bytes: u64,
+    /// The base solutions' compression (`--codec`).
+    pub codec: String,
+    pub rmse: f64,
+    pub rmse_space: &'static str,
+    pub rmse_linear: f64,
+    pub mean_linear: f64,
+    /// Loading, lighting and building the scene, before any of the above.
+    pub prepare_seconds: f64,
+    pub peak_rss_bytes: Option<u64>,
+    pub device: &'static str,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub adapter: Option<String>,
+    /// On a GPU the relit frame is one kernel (rays, shadow rays, the per-instance base
+    /// combinations); shadow rays go through the kd-trees there, so both methods agree.
+    pub gpu_shading: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gpu_shading_bytes: Option<u64>,
+}
+
+/// Mean over suns of the per-sun medians.
+fn mean_of_medians(times: &[Vec<f64>]) -> f64 {
+    times.iter().map(|t| median(t.clone())).sum::<f64>() / times.len().max(1) as f64
+}
+
+/// Tone-mapped sRGB values in [0, 1] of `hdr`, exposed with `stats`.
+fn display(tm: &ToneMap, hdr: &[[f32; 3]], stats: sylva_render::tonemap::ToneStats) -> Vec<f32> {
+    tm.apply_with(hdr, stats)
+        .into_iter()
+        .flat_map(|p| p.map(|c| linear_to_srgb(c.clamp(0.0, 1.0))))
+        .collect()
+}
+
+/// Measures relighting on `prepared`, prepared with base solutions, the uncompressed ones
+/// kept (`basis`: what their preparation reported, per model), at 1 ray per pixel; `tick`
+/// follows every frame. The report's `codec` and `prepare_seconds` are the caller's to fill
+/// in (empty and 0 here).
+pub fn relight(
+    prepared: &mut PreparedScene,
+    basis: &[BasisReport],
+    plan: RelightBenchPlan,
+    tick: &dyn Fn(),
+) -> Result<RelightBench, PipelineError> {
+    let (w, h) = plan.size;
+    let camera = prepared.camera(w, h);
+    let settings = prepared.settings(camera, 1, plan.seed);
+    let suns = sun_path(plan.suns, prepared.scene.sun.azimuth_deg());
+    let relit = prepared.relit.as_ref().ok_or(PipelineError::NeedsBasis)?;
+    let sun_weights = relit.illumination().sun;
+    let global = relit.global().map(|g| g.dims.to_string());
+
+    let mut compressed_bytes = 0u64;
+    let mut raw_bytes = 0u64;
+    for m in 0..prepared.scene.models.len() {
+        if let Some(StoredBasis::Compressed(c)) = relit.model(m) {
+            compressed_bytes += c.bytes();
+            raw_bytes += BasisSet::memory_needed(c.dims);
+        }
+    }
+    let basis_per_model: Vec<Option<f64>> = basis.iter().map(|r| r.solve_seconds).collect();
+    let basis_seconds: Option<f64> = basis_per_model.iter().copied().sum();
+    let basis_cached = basis.iter().all(|r| r.source == LightingSource::Cached);
+
+    // The static frame of paper 000: one grid per model for the scene's sun taken as the
+    // model's own (exactly the direct solve's light: the exact combination of the
+    // uncompressed bases), kd-tree shadows. Median of the runs after a warm-up.
+    prepared.use_uncompressed(true)?;
+    let to_sun = prepared.to_sun;
+    let static_light = {
+        let r = prepared.relit.as_ref().ok_or(PipelineError::NeedsBasis)?;
+        let grids: Vec<Option<ModelLighting>> = (0..prepared.scene.models.len())
+            .map(|m| match r.model(m) {
+                Some(StoredBasis::Full(b)) => {
+                    let t = -to_sun;
+                    let w = BasisWeights::exact([t.x as f64, t.y as f64, t.z as f64])?;
+                    Ok(Some(ModelLighting::from_normalised(&b.relight(&w)?)))
+                }
+                _ => Ok(None),
+            })
+            .collect::<Result<_, RelightError>>()?;
+        ModelGridLight::new(
+            grids,
+            &prepared.scene.models,
+            prepared.tracer.cpu().accel.instances(),
+        )
+    };
+    prepared.use_uncompressed(false)?;
+    // Rendered at the scene's sun (the one its grids were made for), kd-tree shadows.
+    let static_frame = |p: &PreparedScene| -> Result<Frame, PipelineError> {
+        Ok(p.renderer_with(&static_light).render(&settings, &|_| {})?)
+    };
+    static_frame(prepared)?;
+    tick();
+    let mut static_runs = Vec::new();
+
+    // Relit frames: per sun both shadow methods back to back (their order alternating), so
+    // a pair sees the same load; the static frame once per pass.
+    let methods = [ShadowMethod::KdTree, ShadowMethod::SunGrid];
+    let mut times = vec![vec![Vec::new(); suns.len()]; 2];
+    let mut relight_times = vec![Vec::new(); 2];
+    let mut pair_ratios = Vec::new();
+    for run in 0..=plan.runs {
+        prepared.set_sun(to_sun)?;
+        let t = Instant::now();
+        static_frame(prepared)?;
+        if run > 0 {
+            static_runs.push(t.elapsed().as_secs_f64());
+        }
+        tick();
+        for (k, &sun) in suns.iter().enumerate() {
+            let mut pair = [0.0; 2];
+            for i in 0..2 {
+                let mi = (i + k + run as usize) % 2;
+                prepared.set_shadows(methods[mi]);
+                let t0 = Instant::now();
+                prepared.set_sun(sun)?;
+                let t1 = Instant::now();
+                prepared.render(&settings, &Silent)?;
+                pair[mi] = t0.elapsed().as_secs_f64();
+                if run > 0 {
+                    times[mi][k].push(pair[mi]);
+                    relight_times[mi].push((t1 - t0).as_secs_f64());
+                }
+                tick();
+            }
+            if run > 0 {
+                pair_ratios.push(pair[1] / pair[0]);
+            }
+        }
+    }
+    let frame_kd = mean_of_medians(&times[0]);
+    let frame_grid = mean_of_medians(&times[1]);
+    let static_seconds = median(static_runs);
+    let frame_seconds = if plan.shadows == ShadowMethod::KdTree {
+        frame_kd
+    } else {
+        frame_grid
+    };
+    let relight_seconds = median(relight_times.concat());
+
+    // Image RMSE, compressed against uncompressed bases, over the sequence: tone-mapped
+    // sRGB in [0, 1] with the uncompressed frame's exposure (and linear, for reference).
+    prepared.set_shadows(plan.shadows);
+    let tm = ToneMap::default();
+    let (mut sq, mut sq_linear, mut n) = (0.0f64, 0.0f64, 0usize);
+    let mut mean_linear = 0.0f64;
+    // All compressed frames, then all uncompressed ones: switching the fields is cheap on
+    // the CPU but re-uploads them to a GPU.
+    let mut compressed = Vec::with_capacity(suns.len());
+    for &sun in &suns {
+        prepared.set_sun(sun)?;
+        compressed.push(prepared.render(&settings, &Silent)?.compose(Mode::Full));
+        tick();
+    }
+    prepared.use_uncompressed(true)?;
+    for (&sun, small) in suns.iter().zip(compressed) {
+        prepared.set_sun(sun)?;
+        let full = prepared.render(&settings, &Silent)?.compose(Mode::Full);
+        let stats = tm.measure(&full);
+        let (x, y) = (display(&tm, &small, stats), display(&tm, &full, stats));
+        for (u, v) in x.iter().zip(&y) {
+            sq += ((u - v) as f64).powi(2);
+        }
+        for (u, v) in small.iter().flatten().zip(full.iter().flatten()) {
+            sq_linear += ((u - v) as f64).powi(2);
+            mean_linear += *v as f64;
+        }
+        n += x.len();
+        tick();
+    }
+    prepared.use_uncompressed(false)?;
+
+    Ok(RelightBench {
+        scene: prepared.scene.name.clone(),
+        width: w,
+        height: h,
+        rays_per_pixel: 1,
+        suns: suns.len(),
+        runs: plan.runs,
+        threads: rayon::current_num_threads(),
+        sun_weights: sun_weights.name(),
+        global_grid: global,
+        shadows: plan.shadows.name(),
+        frame_seconds,
+        frame_seconds_kd: frame_kd,
+        frame_seconds_grid: frame_grid,
+        grid_over_kd: median(pair_ratios),
+        relight_seconds,
+        static_frame_seconds: static_seconds,
+        ratio_to_static: frame_seconds / static_seconds,
+        basis_seconds,
+        basis_seconds_per_model: basis_per_model,
+        basis_cached,
+        compressed_bytes,
+        raw_bytes,
+        codec: String::new(),
+        rmse: (sq / n as f64).sqrt(),
+        rmse_space: "tone-mapped sRGB in [0, 1], the uncompressed frame's exposure",
+        rmse_linear: (sq_linear / n as f64).sqrt(),
+        mean_linear: mean_linear / n as f64,
+        prepare_seconds: 0.0,
+        peak_rss_bytes: peak_rss_bytes(),
+        device: prepared.tracer.device(),
+        adapter: prepared.tracer.adapter(),
+        gpu_shading: prepared.gpu_frame.is_some(),
+        gpu_shading_bytes: prepared.gpu_frame.as_ref().map(|f| f.device_bytes()),
+    })
+}
+
+impl fmt::Display for RelightBench {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "{} at {}x{}, 1 ray/pixel, {} threads; {} suns over 90° about the zenith, {} weights, global grid {}; medians of {} runs per sun",
+            self.scene,
+            self.width,
+            self.height,
+            self.threads,
+            self.suns,
+            self.sun_weights,
+            self.global_grid.as_deref().unwrap_or("off"),
+            self.runs
+        )?;
+        writeln!(
+            f,
+            "relit frame (mean over the suns): {:.3} s with kd-tree shadows, {:.3} s with the sun grid (median of paired grid/kd {:.3}; relighting itself {:.4} s)",
+            self.frame_seconds_kd, self.frame_seconds_grid, self.grid_over_kd, self.relight_seconds
+        )?;
+        writeln!(
+            f,
+            "static frame (paper 000, same run): {:.3} s; relit/static {:.2}",
+            self.static_frame_seconds, self.ratio_to_static
+        )?;
+        writeln!(
+            f,
+            "base solutions: {} ({}); compressed {} of {} ({:.1}×)",
+            self.basis_seconds
+                .map(|s| format!("{s:.1} s of solves"))
+                .unwrap_or_else(|| "solve time not recorded".into()),
+            if self.basis_cached {
+                "recorded in the cache"
+            } else {
+                "solved now"
+            },
+            format_bytes(self.compressed_bytes),
+            format_bytes(self.raw_bytes),
+            self.raw_bytes as f64 / self.compressed_bytes.max(1) as f64
+        )?;
+        writeln!(
+            f,
+            "image RMSE compressed vs uncompressed: {:.5} (tone-mapped sRGB, [0, 1]); linear {:.5} (mean {:.4})",
+            self.rmse, self.rmse_linear, self.mean_linear
+        )
+    }
+}
