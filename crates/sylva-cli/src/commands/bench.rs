@@ -2,11 +2,10 @@
 
 use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
-use serde::Serialize;
 use sylva_lb::bench::{self, BenchMedium};
 use sylva_lb::{Boundary, DensityGrid, Dims, Preset, SolveOptions};
 
-use super::progress::bar;
+use super::output::{bench_bar, print_report};
 
 #[derive(Args)]
 pub struct BenchArgs {
@@ -177,28 +176,4 @@ fn parse_grid(g: &str) -> Result<Dims> {
         Some(d) => Ok(d?),
         None => bail!("--grid '{g}': expected N or NXxNYxNZ"),
     }
-}
-
-/// A bar of `len` steps, hidden when stdout is for JSON.
-pub fn bench_bar(json: bool, len: usize, what: &str) -> indicatif::ProgressBar {
-    if json {
-        indicatif::ProgressBar::hidden()
-    } else {
-        bar(len as u64, what)
-    }
-}
-
-/// A report on stdout: one line of JSON (`json`) or its text.
-pub fn print_report<R: Serialize + std::fmt::Display>(r: &R, json: bool) -> Result<()> {
-    if json {
-        println!("{}", serde_json::to_string(r)?);
-    } else {
-        print!("{r}");
-    }
-    Ok(())
-}
-
-/// `r` as pretty JSON, keys sorted (as `serde_json::json!` objects print them).
-pub fn pretty_json<R: Serialize>(r: &R) -> Result<String> {
-    Ok(serde_json::to_string_pretty(&serde_json::to_value(r)?)?)
 }

@@ -7,9 +7,9 @@ use std::time::Instant;
 use anyhow::Result;
 use sylva_pipeline::bench::{self, RelightBenchPlan};
 
-use super::bench::bench_bar;
+use super::output::bench_bar;
+use super::output::emit;
 use super::render::{prepare, FrameArgs, PrepareRequest, Say};
-use super::scene::emit;
 
 #[derive(clap::Args, Debug)]
 pub struct BenchRelightArgs {
@@ -59,7 +59,7 @@ pub fn run(a: BenchRelightArgs) -> Result<()> {
     report.codec = a.frame.codec.clone();
     report.prepare_seconds = prepare_seconds;
     if a.json {
-        return emit(&format!("{}\n", super::bench::pretty_json(&report)?));
+        return emit(&format!("{}\n", super::output::pretty_json(&report)?));
     }
     emit(&report.to_string())
 }

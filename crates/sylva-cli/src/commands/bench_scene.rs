@@ -1,6 +1,6 @@
 //! `sylva bench scene`: times generating each built-in species and building a scene.
 
-use super::scene::emit;
+use super::output::emit;
 
 #[derive(clap::Args)]
 pub struct BenchSceneArgs {
@@ -18,7 +18,7 @@ pub struct BenchSceneArgs {
 pub fn run(args: BenchSceneArgs) -> anyhow::Result<()> {
     let b = sylva_scene::bench::scene_build(&args.scene, args.runs)?;
     if args.json {
-        return emit(&format!("{}\n", super::bench::pretty_json(&b)?));
+        return emit(&format!("{}\n", super::output::pretty_json(&b)?));
     }
     emit(&b.to_string())
 }

@@ -43,5 +43,5 @@ pub fn run(a: BenchSppArgs) -> Result<()> {
         ..SystemConfig::default()
     };
     let b = sylva_pipeline::bench::spp(scene, config, (a.width, a.height), a.runs)?;
-    super::bench::print_report(&b, a.json)
+    super::output::print_report(&b, a.json)
 }

@@ -9,8 +9,8 @@ use sylva_mpi::Comm;
 use sylva_pipeline::bench::{self, RankSplit, ScalingModel, TimedFrame, TraceBench, TraceRun};
 use sylva_render::stage;
 
+use super::output::emit;
 use super::render::{prepare, FrameArgs, PrepareRequest, Say};
-use super::scene::emit;
 
 #[derive(clap::Args, Debug)]
 pub struct BenchTraceArgs {
@@ -109,7 +109,7 @@ pub fn run(a: BenchTraceArgs, comm: Option<&dyn Comm>) -> Result<()> {
     };
     let report = TraceBench::new(p, (prepared.width, prepared.height), measures, run, scaling);
     if a.json {
-        return emit(&format!("{}\n", super::bench::pretty_json(&report)?));
+        return emit(&format!("{}\n", super::output::pretty_json(&report)?));
     }
     emit(&report.to_string())
 }

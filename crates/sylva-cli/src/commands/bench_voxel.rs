@@ -5,7 +5,7 @@ use std::time::Instant;
 use anyhow::{bail, Result};
 use sylva_voxel::{VoxelizeOptions, DEFAULT_GRID};
 
-use super::bench::{bench_bar, print_report};
+use super::output::{bench_bar, print_report};
 
 #[derive(clap::Args)]
 pub struct BenchVoxelArgs {

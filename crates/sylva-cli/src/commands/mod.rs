@@ -45,6 +45,7 @@ pub mod bench_voxel;
 pub mod device;
 pub mod export;
 pub mod lb;
+pub mod output;
 pub mod progress;
 pub mod relight;
 pub mod render;

@@ -1,5 +1,6 @@
 //! `sylva scene info|list`: what a scene holds.
 
+use super::output::emit;
 use anyhow::Context;
 use sylva_scene::builtin_scenes;
 use sylva_scene::{SceneDesc, SceneStats};
@@ -49,17 +50,6 @@ macro_rules! outs {
     };
 }
 pub(crate) use outs;
-
-/// Writes `text` to stdout; a closed pipe (`sylva ... | head`) ends the output quietly
-/// instead of panicking.
-pub fn emit(text: &str) -> anyhow::Result<()> {
-    use std::io::Write;
-    let mut out = std::io::stdout().lock();
-    match out.write_all(text.as_bytes()).and_then(|_| out.flush()) {
-        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
-        r => Ok(r?),
-    }
-}
 
 /// `1234567` → `"1,234,567"`.
 pub fn thousands(n: u64) -> String {

@@ -1,6 +1,7 @@
 //! `sylva species list|show`: the built-in species and Arbaro files.
 
-use super::scene::{emit, outln, outs, thousands};
+use super::output::emit;
+use super::scene::{outln, outs, thousands};
 use anyhow::Context;
 use std::path::Path;
 use sylva_grow::species::BUILTIN_NAMES;

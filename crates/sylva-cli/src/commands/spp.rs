@@ -2,6 +2,7 @@
 //! simplified and refined models, 003 Tables 1 and 2 recomputed, and Table 3 on trees
 //! (`spp trees`, in `spp_trees.rs`).
 
+use super::output::emit_to;
 use anyhow::{bail, Context, Result};
 use std::path::PathBuf;
 use sylva_spp::report::{slab_report, slab_text, table1_text, table2_text, SlabQuery};
@@ -98,7 +99,7 @@ pub fn run(args: SppArgs) -> Result<()> {
             } else {
                 table1_text(&rows)
             };
-            emit(&text, a.out)
+            emit_to(&text, a.out)
         }
         SppCommand::Table2(a) => {
             let rows = tables::table2(&RmsProtocol::paper()).context("computing Table 2")?;
@@ -107,18 +108,7 @@ pub fn run(args: SppArgs) -> Result<()> {
             } else {
                 table2_text(&rows)
             };
-            emit(&text, a.out)
-        }
-    }
-}
-
-pub fn emit(text: &str, out: Option<PathBuf>) -> Result<()> {
-    match out {
-        Some(path) => sylva_core::atomic_write(&path, text.as_bytes())
-            .with_context(|| format!("writing {}", path.display())),
-        None => {
-            print!("{text}");
-            Ok(())
+            emit_to(&text, a.out)
         }
     }
 }
@@ -171,7 +161,7 @@ fn slab(a: SlabArgs) -> Result<()> {
     } else {
         slab_text(&report)
     };
-    emit(&text, a.out)
+    emit_to(&text, a.out)
 }
 
 #[cfg(test)]

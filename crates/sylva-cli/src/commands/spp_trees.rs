@@ -125,7 +125,7 @@ pub fn run(a: TreesArgs) -> Result<()> {
     } else {
         sylva_spp::report::tree_text(&report, a.categories)
     };
-    super::spp::emit(&text, a.out)
+    super::output::emit_to(&text, a.out)
 }
 
 /// A scene by file or built-in name, or else one tree of a built-in species.
