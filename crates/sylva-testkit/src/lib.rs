@@ -133,15 +133,27 @@ mod tests {
     fn a_required_back_end_that_is_missing_fails_the_test() {
         // The variables are process-wide: set and read them in this one test only.
         std::env::set_var(Need::Mpi.variable(), "1");
-        let required = std::panic::catch_unwind(|| missing(Need::Mpi, "a pretend missing mpirun (this line is expected)"));
+        let required = std::panic::catch_unwind(|| {
+            missing(
+                Need::Mpi,
+                "a pretend missing mpirun (this line is expected)",
+            )
+        });
         std::env::set_var(Need::Mpi.variable(), "0");
-        let optional = std::panic::catch_unwind(|| missing(Need::Mpi, "a pretend missing mpirun (this line is expected)"));
+        let optional = std::panic::catch_unwind(|| {
+            missing(
+                Need::Mpi,
+                "a pretend missing mpirun (this line is expected)",
+            )
+        });
         std::env::remove_var(Need::Mpi.variable());
         let message = required.expect_err("required and missing must panic");
         let message = message
             .downcast_ref::<String>()
             .expect("a formatted message");
-        assert!(message.contains("SYLVA_REQUIRE_MPI") && message.contains("a pretend missing mpirun"));
+        assert!(
+            message.contains("SYLVA_REQUIRE_MPI") && message.contains("a pretend missing mpirun")
+        );
         assert!(optional.is_ok(), "SYLVA_REQUIRE_MPI=0 skips");
     }
 
