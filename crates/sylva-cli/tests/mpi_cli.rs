@@ -1,7 +1,8 @@
 //! `mpirun -np N sylva render|basis|bench trace` (built with `--features mpi`; CI runs these
 //! with 2 and 3 ranks): the image, the LB cache and the relighting bases are those of one
 //! process, bit for bit; a rank that fails ends the whole job with its message instead of
-//! leaving the others waiting.
+//! leaving the others waiting. Without `mpirun` they say SKIPPED, or fail under
+//! `SYLVA_REQUIRE_MPI=1` (as in CI).
 #![cfg(feature = "mpi")]
 
 mod common;
@@ -11,6 +12,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use common::sylva;
+use sylva_testkit::{basis_cache_entries, files_by_name};
 
 const SCENE: &str = r#"
 name = "roses"
@@ -94,20 +96,6 @@ fn write_scene(dir: &Path) -> String {
     p.to_str().unwrap().to_string()
 }
 
-/// Cache entries by file name and bytes.
-fn entries(dir: &Path) -> Vec<(String, Vec<u8>)> {
-    let mut v: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| {
-            let e = e.unwrap();
-            let name = e.file_name().to_string_lossy().into_owned();
-            (name, std::fs::read(e.path()).unwrap())
-        })
-        .collect();
-    v.sort();
-    v
-}
-
 fn render_args<'a>(scene: &'a str, out: &'a str, cache: &'a str) -> Vec<&'a str> {
     vec![
         "render",
@@ -130,6 +118,9 @@ fn render_args<'a>(scene: &'a str, out: &'a str, cache: &'a str) -> Vec<&'a str>
 
 #[test]
 fn mpi_render_and_lb_are_bit_identical_to_one_process() {
+    if !sylva_testkit::require_mpirun() {
+        return;
+    }
     let dir = tempfile::tempdir().unwrap();
     let scene = write_scene(dir.path());
     let d = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
@@ -167,7 +158,7 @@ fn mpi_render_and_lb_are_bit_identical_to_one_process() {
             );
             // The LB colours were solved across ranks; the cache holds what one process
             // writes.
-            assert!(entries(Path::new(&cache)) == entries(Path::new(&one_cache)));
+            assert!(files_by_name(Path::new(&cache)) == files_by_name(Path::new(&one_cache)));
         }
     }
 }
@@ -190,57 +181,18 @@ fn basis_args<'a>(scene: &'a str, cache: &'a str) -> Vec<&'a str> {
     ]
 }
 
-/// A decoded cache entry: file name, metadata, contents.
-type Entry = (String, Vec<(String, String)>, Vec<u8>);
-
-/// Basis cache entries by file name, decoded: the metadata but the solve time (measured, so
-/// it differs from run to run) and the contents bit for bit (compressed sets as they are sent
-/// between ranks, the uncompressed sets' channels, the global grid's file as it is).
-fn basis_entries(dir: &Path) -> Vec<Entry> {
-    use sylva_lb::relight::CompressedBasis;
-    let measured = |meta: Vec<(String, String)>| -> Vec<(String, String)> {
-        meta.into_iter()
-            .filter(|(k, _)| k != "solve_seconds")
-            .collect()
-    };
-    let mut v: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| {
-            let path = e.unwrap().path();
-            let name = path.file_name().unwrap().to_string_lossy().into_owned();
-            let (meta, bytes) = match path.extension().and_then(|e| e.to_str()) {
-                Some("scbasis") => {
-                    let (set, meta) = CompressedBasis::read(&path).unwrap();
-                    (measured(meta), set.to_bytes())
-                }
-                Some("sbasis") => {
-                    let file = sylva_lb::GridFile::read(&path).unwrap();
-                    let bits = file
-                        .channels
-                        .iter()
-                        .flatten()
-                        .flat_map(|v| v.to_bits().to_le_bytes())
-                        .collect();
-                    (measured(file.metadata), bits)
-                }
-                _ => (Vec::new(), std::fs::read(&path).unwrap()),
-            };
-            (name, meta, bytes)
-        })
-        .collect();
-    v.sort();
-    v
-}
-
 #[test]
 fn mpi_basis_is_bit_identical_to_one_process() {
+    if !sylva_testkit::require_mpirun() {
+        return;
+    }
     let dir = tempfile::tempdir().unwrap();
     let scene = write_scene(dir.path());
     let d = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
     let one_cache = d("one-cache");
     let (ok, out, err) = sylva(&basis_args(&scene, &one_cache));
     assert!(ok, "{out}\n{err}");
-    let want = basis_entries(Path::new(&one_cache));
+    let want = basis_cache_entries(Path::new(&one_cache));
     let names: Vec<&str> = want.iter().map(|e| e.0.as_str()).collect();
     // Per model a compressed and an uncompressed set, and the scene's global grid.
     assert_eq!(want.len(), 5, "{names:?}");
@@ -272,7 +224,7 @@ fn mpi_basis_is_bit_identical_to_one_process() {
             // The solves ran across the ranks; rank 0 assembled and stored what one process
             // stores, and the same global grid.
             assert!(
-                basis_entries(Path::new(&cache)) == want,
+                basis_cache_entries(Path::new(&cache)) == want,
                 "np {np} pass {pass}: the cache differs from one process's"
             );
         }
@@ -291,11 +243,14 @@ fn mpi_basis_is_bit_identical_to_one_process() {
         err.contains("rank 2: failure injected by SYLVA_MPI_FAIL_RANK"),
         "{err}"
     );
-    assert!(!Path::new(&cache).exists() || basis_entries(Path::new(&cache)).is_empty());
+    assert!(!Path::new(&cache).exists() || basis_cache_entries(Path::new(&cache)).is_empty());
 }
 
 #[test]
 fn mpi_render_solves_missing_bases_across_ranks() {
+    if !sylva_testkit::require_mpirun() {
+        return;
+    }
     let dir = tempfile::tempdir().unwrap();
     let scene = write_scene(dir.path());
     let d = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
@@ -323,7 +278,7 @@ fn mpi_render_solves_missing_bases_across_ranks() {
     assert!(ok, "{out}\n{err}");
     assert!(out.contains("relit from base solutions"), "{out}");
     let want_exr = std::fs::read(d("one.exr")).unwrap();
-    let want_cache = basis_entries(Path::new(&one_cache));
+    let want_cache = basis_cache_entries(Path::new(&one_cache));
 
     let (png, cache) = (d("np2.png"), d("np2-cache"));
     let a = args(&png, &cache);
@@ -344,11 +299,14 @@ fn mpi_render_solves_missing_bases_across_ranks() {
         std::fs::read(d("np2.exr")).unwrap() == want_exr,
         "the linear image differs"
     );
-    assert!(basis_entries(Path::new(&cache)) == want_cache);
+    assert!(basis_cache_entries(Path::new(&cache)) == want_cache);
 }
 
 #[test]
 fn mpi_bench_trace_reports_per_rank_seconds() {
+    if !sylva_testkit::require_mpirun() {
+        return;
+    }
     let dir = tempfile::tempdir().unwrap();
     let scene = write_scene(dir.path());
     let args = [
@@ -385,6 +343,9 @@ fn mpi_bench_trace_reports_per_rank_seconds() {
 
 #[test]
 fn a_failing_rank_ends_the_job_with_its_message() {
+    if !sylva_testkit::require_mpirun() {
+        return;
+    }
     let dir = tempfile::tempdir().unwrap();
     let scene = write_scene(dir.path());
     let png = dir.path().join("x.png");
@@ -420,6 +381,9 @@ fn a_failing_rank_ends_the_job_with_its_message() {
 
 #[test]
 fn mpi_relight_frames_are_the_one_process_frames() {
+    if !sylva_testkit::require_mpirun() {
+        return;
+    }
     let dir = tempfile::tempdir().unwrap();
     let scene = write_scene(dir.path());
     let d = |name: &str| dir.path().join(name).to_str().unwrap().to_string();

@@ -26,19 +26,30 @@ pub const TARGETS: &[(&str, Target)] = &[
 /// Separates the OBJ text from the MTL text in an `obj_mtl` input.
 pub const MTL_SEPARATOR: &[u8] = b"\n#--- m.mtl ---\n";
 
+/// A scratch folder, removed when its thread ends (a test's thread; a libFuzzer process exits
+/// without that, and `tools/fuzz/run` removes its folders).
+struct ScratchDir(PathBuf);
+
+impl Drop for ScratchDir {
+    fn drop(&mut self) {
+        // Scratch: nothing to report if it is gone already.
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
 /// A folder of this thread for the files the file-based parsers read (per thread: the corpus
 /// tests run in parallel in one process).
 fn scratch() -> PathBuf {
     static NEXT: AtomicUsize = AtomicUsize::new(0);
     thread_local! {
-        static DIR: PathBuf = {
+        static DIR: ScratchDir = {
             let n = NEXT.fetch_add(1, Ordering::Relaxed);
             let d = std::env::temp_dir().join(format!("sylva-fuzz-{}-{n}", std::process::id()));
             std::fs::create_dir_all(&d).expect("scratch folder");
-            d
+            ScratchDir(d)
         };
     }
-    DIR.with(|d| d.clone())
+    DIR.with(|d| d.0.clone())
 }
 
 /// Writes `bytes` to `name` in the scratch folder (plain write: it is scratch, not output).

@@ -147,8 +147,6 @@ mod tests {
         for k in 0..3 {
             assert!((t[k] - c[k] * FOREST_LEAF_TRANSMISSION[k]).abs() < 1e-7);
         }
-        // Table 1's ratios: red and blue below 1, green above.
-        assert!((FOREST_LEAF_TRANSMISSION[1] - 1.2).abs() < 1e-6);
         assert_eq!(Optics::OPAQUE.transmittance(c), [0.0; 3]);
         assert!(Optics::OPAQUE.validate("bark").is_ok());
         let bad = Optics {
@@ -156,6 +154,27 @@ mod tests {
             transmit: [0.0; 3],
         };
         assert!(bad.validate("leaf x").unwrap_err().contains("leaf x"));
+    }
+
+    #[test]
+    fn forest_leaf_optics_and_the_leaf_preset_describe_one_leaf() {
+        // The surface's T / R per colour and the LB leaf medium's asymmetry come from the same
+        // measurements (000 Table 1's fs and bs): g = (T - R) / (T + R) (000 eq. 10), here to
+        // the three digits the table prints, the preset's values.
+        let o = Optics::FOREST_LEAF;
+        let preset = crate::params::Preset::Leaf.params();
+        for c in 0..3 {
+            let (t, r) = (o.transmit[c] as f64, o.reflect[c] as f64);
+            let g = (t - r) / (t + r);
+            let want = preset.colours[c].g;
+            assert!(
+                (g - want).abs() < 5e-4,
+                "colour {c}: g {g} vs the preset's {want}"
+            );
+        }
+        // Knapp & Carter's leaves pass more green light than they reflect, less red and blue.
+        assert!(o.transmit[1] > o.reflect[1]);
+        assert!(o.transmit[0] < o.reflect[0] && o.transmit[2] < o.reflect[2]);
     }
 
     #[test]

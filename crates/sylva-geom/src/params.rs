@@ -298,9 +298,12 @@ mod tests {
             Preset::parse("fog"),
             Err(ParamError::UnknownPreset("fog".into()))
         );
-        let d = Preset::Dogrose.params();
-        assert_eq!(d.colours[2].g, -0.75);
-        assert!((d.colours[1].sigma_s - 0.909).abs() < 1e-12);
+        // 000 §3: a plant medium scatters all it does not absorb, σ_s = 1 - σ_a.
+        for p in [Preset::Leaf, Preset::Dogrose] {
+            for c in p.params().colours {
+                assert!((c.sigma_a + c.sigma_s - 1.0).abs() < 1e-12, "{p:?}: {c:?}");
+            }
+        }
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! step counts and stop rules, results within 1e-5 relative in f32.
 //!
 //! These run on whatever adapter there is, software ones (lavapipe, as in CI) included.
-//! Where no adapter exists at all they print why and pass.
+//! Where no adapter exists at all they say SKIPPED (fail under `SYLVA_REQUIRE_GPU=1`, as in CI).
 
 use sylva_lb::lattice::Q;
 use sylva_lb::{
@@ -13,23 +13,10 @@ use sylva_lb_gpu::{
     select_solver, solve_lighting_gpu, AdapterChoice, ContextOptions, Device, GpuContext, GpuError,
     GpuLattice, GpuSolver, LbGpuError, Precision,
 };
-
-fn context_with(opts: ContextOptions) -> Option<GpuContext> {
-    match GpuContext::new(&opts) {
-        Ok(ctx) => {
-            eprintln!("GPU tests on {}", ctx.describe());
-            Some(ctx)
-        }
-        Err(e @ GpuError::NoAdapter { .. }) => {
-            eprintln!("skipping GPU test: {e}");
-            None
-        }
-        Err(e) => panic!("opening the GPU failed: {e}"),
-    }
-}
+use sylva_testkit::gpu_context;
 
 fn context() -> Option<GpuContext> {
-    context_with(ContextOptions::new(AdapterChoice::Any))
+    gpu_context(&ContextOptions::new(AdapterChoice::Any))
 }
 
 /// A deterministic medium with empty, green and brown sites in a non-cubic grid.
@@ -390,7 +377,7 @@ fn a_state_split_over_many_bindings_gives_the_same_result() {
     let direction = (dims.sites() as u64).div_ceil(128) * 128 * 4;
     let mut opts = ContextOptions::new(AdapterChoice::Any);
     opts.max_binding_bytes = Some(2 * direction);
-    let split = context_with(opts).expect("the same adapter again");
+    let split = gpu_context(&opts).expect("the same adapter again");
     assert_eq!(
         split.limits().max_storage_buffer_binding_size,
         2 * direction
@@ -428,7 +415,7 @@ fn a_state_split_over_many_bindings_gives_the_same_result() {
     // One direction per binding: 19 parts, 40 storage buffers per stage, where allowed.
     let mut opts = ContextOptions::new(AdapterChoice::Any);
     opts.max_binding_bytes = Some(direction);
-    let single = context_with(opts).expect("the same adapter again");
+    let single = gpu_context(&opts).expect("the same adapter again");
     match GpuLattice::new(&single, &grid, &medium, 0, sun(), Precision::F32) {
         Ok(lat) => assert_eq!(lat.parts(), Q),
         Err(LbGpuError::TooLarge(msg)) => {
@@ -439,7 +426,7 @@ fn a_state_split_over_many_bindings_gives_the_same_result() {
     // Less than one direction per binding cannot work: a clear error, not a panic.
     let mut opts = ContextOptions::new(AdapterChoice::Any);
     opts.max_binding_bytes = Some(direction / 2);
-    let tiny = context_with(opts).expect("the same adapter again");
+    let tiny = gpu_context(&opts).expect("the same adapter again");
     match GpuLattice::new(&tiny, &grid, &medium, 0, sun(), Precision::F32) {
         Err(LbGpuError::TooLarge(msg)) => assert!(msg.contains("per storage binding"), "{msg}"),
         Err(e) => panic!("{e}"),
@@ -491,12 +478,10 @@ fn f16_storage_stays_within_its_documented_error() {
     if !ctx.supports_f16() {
         // A clear refusal, not a silent fallback to f32.
         match GpuLattice::new(&ctx, &grid, &medium, 0, sun(), Precision::F16) {
-            Err(LbGpuError::F16Unsupported(_)) => {
-                eprintln!(
-                    "skipping f16 measurement: {} lacks SHADER_F16",
-                    ctx.describe()
-                )
-            }
+            Err(LbGpuError::F16Unsupported(_)) => sylva_testkit::skipped(&format!(
+                "the f16 error measurement: {} lacks SHADER_F16 (the refusal was checked)",
+                ctx.describe()
+            )),
             Err(e) => panic!("{e}"),
             Ok(_) => panic!("f16 accepted without SHADER_F16"),
         }

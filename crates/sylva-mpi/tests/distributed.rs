@@ -17,6 +17,7 @@ use sylva_pipeline::{
     forest_densities, lighting_options, load_scene, LbPlan, PrepareOptions, PreparedScene,
 };
 use sylva_render::{Frame, Region, RenderSettings};
+use sylva_testkit::files_by_name;
 
 const SCENE: &str = r#"
 name = "two roses"
@@ -102,22 +103,6 @@ fn settings(p: &PreparedScene) -> Vec<RenderSettings> {
     ]
 }
 
-/// Cache entries by file name and bytes.
-fn entries(dir: &Path) -> Vec<(String, Vec<u8>)> {
-    let mut v: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| {
-            let e = e.unwrap();
-            (
-                e.file_name().to_string_lossy().into_owned(),
-                std::fs::read(e.path()).unwrap(),
-            )
-        })
-        .collect();
-    v.sort();
-    v
-}
-
 /// On every rank: light the models across the ranks, render `settings` across them; rank 0
 /// returns the frames and the count of models from the cache.
 fn distributed(comm: &LocalComm, scene: Scene, cache: &Path) -> Option<(Vec<Frame>, usize)> {
@@ -184,7 +169,11 @@ fn distributed_lighting_and_frames_are_the_one_process_ones() {
                 assert_eq!(f.stats.rays, w.stats.rays);
             }
             // Rank 0 wrote the cache entries one process writes, byte for byte.
-            assert_eq!(entries(&cache), entries(&one_cache), "{ranks} ranks");
+            assert_eq!(
+                files_by_name(&cache),
+                files_by_name(&one_cache),
+                "{ranks} ranks"
+            );
         }
     }
 }
@@ -343,7 +332,7 @@ fn forest_parts_solved_across_ranks_are_the_one_process_entries() {
     let one = PreparedScene::new(scene.clone(), &forest_options(&one_cache), &Silent).unwrap();
     assert!(one.forest.is_some());
     let parts = 4 * scene.models.len();
-    assert_eq!(entries(&one_cache).len(), parts);
+    assert_eq!(files_by_name(&one_cache).len(), parts);
     for ranks in [2, 3] {
         let cache = dir.path().join(format!("forest{ranks}"));
         for pass in 0..2 {
@@ -367,7 +356,11 @@ fn forest_parts_solved_across_ranks_are_the_one_process_entries() {
             let want = if pass == 0 { parts } else { 0 };
             assert_eq!(solved, vec![want; ranks], "{ranks} ranks, pass {pass}");
             // Rank 0 stored the entries one process stores, byte for byte.
-            assert_eq!(entries(&cache), entries(&one_cache), "{ranks} ranks");
+            assert_eq!(
+                files_by_name(&cache),
+                files_by_name(&one_cache),
+                "{ranks} ranks"
+            );
         }
         // Prepared from that cache, the light is the one process's.
         let p = PreparedScene::new(scene.clone(), &forest_options(&cache), &Silent).unwrap();

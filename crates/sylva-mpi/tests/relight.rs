@@ -7,13 +7,13 @@
 use std::path::Path;
 
 use sylva_geom::Scene;
-use sylva_lb::relight::CompressedBasis;
-use sylva_lb::{CpuSolver, GridFile};
+use sylva_lb::CpuSolver;
 use sylva_light::relight::{GlobalGridOptions, StoredBasis};
 use sylva_light::{Light, Silent};
 use sylva_mpi::relight::basis_jobs;
 use sylva_mpi::{precompute_relighting, Comm, LocalComm};
 use sylva_pipeline::{load_scene, relight_options, BasisUse, LbPlan, RelightPlan, Relighting};
+use sylva_testkit::basis_cache_entries;
 
 const SCENE: &str = r#"
 name = "two roses"
@@ -114,47 +114,6 @@ fn assert_same(got: &Relighting, want: &Relighting, what: &str) {
     assert!(got.global == want.global, "{what}: the global grid differs");
 }
 
-/// A decoded cache entry: file name, metadata, contents.
-type Entry = (String, Vec<(String, String)>, Vec<u8>);
-
-/// Cache entries by file name, decoded: the metadata (but the solve time, which is
-/// measured) and the contents as bytes, bit for bit (compressed sets as they are sent between
-/// ranks, uncompressed ones' channels, the global grid's file).
-fn entries(dir: &Path) -> Vec<Entry> {
-    let measured = |meta: Vec<(String, String)>| -> Vec<(String, String)> {
-        meta.into_iter()
-            .filter(|(k, _)| k != "solve_seconds")
-            .collect()
-    };
-    let mut v: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| {
-            let path = e.unwrap().path();
-            let name = path.file_name().unwrap().to_string_lossy().into_owned();
-            let (meta, bytes) = match path.extension().and_then(|e| e.to_str()) {
-                Some("scbasis") => {
-                    let (set, meta) = CompressedBasis::read(&path).unwrap();
-                    (measured(meta), set.to_bytes())
-                }
-                Some("sbasis") => {
-                    let file = GridFile::read(&path).unwrap();
-                    let bits = file
-                        .channels
-                        .iter()
-                        .flatten()
-                        .flat_map(|v| v.to_bits().to_le_bytes())
-                        .collect();
-                    (measured(file.metadata), bits)
-                }
-                _ => (Vec::new(), std::fs::read(&path).unwrap()),
-            };
-            (name, meta, bytes)
-        })
-        .collect();
-    v.sort();
-    v
-}
-
 #[test]
 fn distributed_bases_are_the_one_process_ones() {
     let (dir, scene) = scene();
@@ -165,7 +124,7 @@ fn distributed_bases_are_the_one_process_ones() {
             .unwrap()
             .expect("solved");
     assert_eq!(want.cached, 0);
-    let want_entries = entries(&one_cache);
+    let want_entries = basis_cache_entries(&one_cache);
     // Per model a compressed and an uncompressed entry, and the global grid.
     assert_eq!(
         want_entries.len(),
@@ -187,7 +146,7 @@ fn distributed_bases_are_the_one_process_ones() {
             }
             // Rank 0 wrote what one process writes.
             assert!(
-                entries(&cache) == want_entries,
+                basis_cache_entries(&cache) == want_entries,
                 "{what}: cache entries differ"
             );
         }
@@ -207,7 +166,7 @@ fn a_cached_only_plan_falls_back_on_every_rank_or_shares_the_cache() {
     // Nothing cached: every rank falls back (to the per-sun light), none solves.
     let got = on_ranks(3, &scene, Some(&cache), &cached_only, true);
     assert!(got.iter().all(Option::is_none));
-    assert!(!cache.exists() || entries(&cache).is_empty());
+    assert!(!cache.exists() || basis_cache_entries(&cache).is_empty());
 
     // Cached (by one process): every rank gets the sets rank 0 read.
     let want = sylva_pipeline::precompute_relighting(

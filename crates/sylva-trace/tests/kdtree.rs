@@ -1,13 +1,11 @@
 //! The kd-trees against brute force: random triangle soups, a generated tree, instanced
 //! scenes; short stacks against the unbounded stack; restarts; determinism.
 
-mod common;
-
-use common::*;
 use glam::Vec3;
 use std::sync::OnceLock;
 use sylva_geom::{Instance, Model};
 use sylva_grow::Species;
+use sylva_testkit::scenes::*;
 use sylva_trace::{Hit, ModelAccel, Ray, SceneAccel, TraceStats, TraversalConfig};
 
 fn red_maple() -> &'static Model {

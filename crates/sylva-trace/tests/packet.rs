@@ -4,12 +4,10 @@
 //! signs, split into groups), partial masks, short stacks that restart, and crowded
 //! top-level leaves.
 
-mod common;
-
-use common::*;
 use glam::Vec3;
 use sylva_geom::Instance;
 use sylva_grow::Species;
+use sylva_testkit::scenes::*;
 use sylva_trace::{
     Hit, KdTracer, Ray, RayQuery, SceneAccel, ShadowRay, TraceStats, TraversalConfig, PACKET,
 };

@@ -1,10 +1,8 @@
 //! Ray/box and ray/triangle edge cases, the alpha rule, the camera, transforms, bad input.
 
-mod common;
-
-use common::*;
 use glam::{Vec2, Vec3};
 use sylva_geom::{Aabb, Camera, Instance, Mesh, Model, Texture, Wrap};
+use sylva_testkit::scenes::*;
 use sylva_trace::ray::intersect_triangle_vertices;
 use sylva_trace::{
     ray::inverse_dir, ray_box, AlphaMask, Hit, ModelAccel, PinholeCamera, Ray, SceneAccel,

@@ -1,10 +1,8 @@
 //! The sun-aligned grid (004 §4.1) answers shadow rays exactly as the top-level kd-tree does.
 
-mod common;
-
-use common::*;
 use glam::Vec3;
 use sylva_geom::Instance;
+use sylva_testkit::scenes::*;
 use sylva_trace::{
     KdTracer, OccluderCache, RayQuery, SceneAccel, ShadowRay, SunGrid, SunGridQuery, TraceStats,
     TraversalConfig,

@@ -3,7 +3,7 @@
 //! frames compared pixel by pixel. On a software adapter (lavapipe, as in CI) the GPU's hits
 //! are the CPU's bit for bit, so GPU rays with CPU shading give the CPU's frame exactly, and
 //! GPU shading differs only by `pow` (WGSL's exp2/log2 form against libm's powf) in the
-//! specular term. Without any adapter the tests print why and pass.
+//! specular term. Without any adapter the tests say SKIPPED (fail under `SYLVA_REQUIRE_GPU=1`).
 
 use std::path::Path;
 
@@ -14,7 +14,7 @@ use sylva_pipeline::{
     load_scene, tone_map_modes, BasisUse, LbPlan, PrepareOptions, PreparedScene, RelightPlan,
 };
 use sylva_render::{Frame, Mode, Radiance, Region, ToneMap};
-use sylva_wgpu::{AdapterChoice, ContextOptions, GpuContext, GpuError};
+use sylva_wgpu::{AdapterChoice, ContextOptions, GpuContext};
 
 const SCENE: &str = r#"
 name = "roses"
@@ -53,17 +53,7 @@ grid = 16
 "#;
 
 fn context() -> Option<GpuContext> {
-    match GpuContext::new(&ContextOptions::new(AdapterChoice::Any)) {
-        Ok(ctx) => {
-            eprintln!("GPU render tests on {}", ctx.describe());
-            Some(ctx)
-        }
-        Err(e @ GpuError::NoAdapter { .. }) => {
-            eprintln!("skipping GPU test: {e}");
-            None
-        }
-        Err(e) => panic!("opening the GPU failed: {e}"),
-    }
+    sylva_testkit::gpu_context(&ContextOptions::new(AdapterChoice::Any))
 }
 
 /// The scene prepared with the CPU's LB lighting, rays on `gpu` (or the CPU), shaded on the

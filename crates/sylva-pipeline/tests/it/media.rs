@@ -17,15 +17,9 @@ use sylva_render::shade::shade_materials;
 use sylva_render::{RenderSettings, Renderer, ShadingParams};
 use sylva_trace::{KdTracer, PinholeCamera, SceneAccel, TraversalConfig};
 
-const BOARD_OBJ: &str = "mtllib board.mtl\n\
-v -1 2 -1\nv 1 2 -1\nv 1 2 1\nv -1 2 1\n\
-usemtl board\nf 1 3 2\nf 1 4 3\n";
-const BOARD_MTL: &str = "newmtl board\nKd 0.5 0.4 0.3\n";
-
 /// A board at y = 2 over a ground plane, seen from above at an angle, sun from +x.
 fn board_scene(dir: &Path) -> Scene {
-    fs::write(dir.join("board.obj"), BOARD_OBJ).unwrap();
-    fs::write(dir.join("board.mtl"), BOARD_MTL).unwrap();
+    sylva_testkit::write_board(dir);
     let toml = r#"
 [[models]]
 name = "board"

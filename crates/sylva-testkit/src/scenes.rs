@@ -1,5 +1,4 @@
-//! Scenes and rays shared by the tracer's tests.
-#![allow(dead_code)]
+//! Scenes and rays for the tracers' tests (the CPU tracer's, and the GPU tracer's against it).
 
 use glam::Vec3;
 use std::sync::Arc;
@@ -7,14 +6,17 @@ use sylva_core::SplitMix64;
 use sylva_geom::{Instance, Material, MaterialKind, Mesh, Model, Texture, Wrap};
 use sylva_trace::{Ray, SceneAccel};
 
+/// The tests' random numbers, from `seed`.
 pub fn rng(seed: u64) -> SplitMix64 {
     SplitMix64::new(seed)
 }
 
+/// Uniform in [lo, hi).
 pub fn uniform(r: &mut SplitMix64, lo: f32, hi: f32) -> f32 {
     lo + (hi - lo) * r.next_f64() as f32
 }
 
+/// A random unit vector.
 pub fn unit(r: &mut SplitMix64) -> Vec3 {
     loop {
         let v = Vec3::new(
@@ -29,6 +31,7 @@ pub fn unit(r: &mut SplitMix64) -> Vec3 {
     }
 }
 
+/// Opaque bark.
 pub fn wood() -> Material {
     Material {
         name: "wood".into(),
@@ -85,6 +88,7 @@ pub fn checker_texture(n: u32) -> Texture {
     })
 }
 
+/// A two-sided forest leaf cut out by `tex`'s alpha.
 pub fn leaf_material(tex: Texture) -> Material {
     Material {
         name: "leaf".into(),
