@@ -9,6 +9,37 @@
 //! base solutions and scaled by the coarse global grid ([`RelitLight`], paper 004); then
 //! [`PreparedScene::set_sun`] moves the sun with no LB solve. Shadow rays go through the
 //! top-level kd-tree or the sun-aligned grid ([`ShadowMethod`]).
+//!
+//! From a scene name to a PNG (docs/render.md, "The pipeline as a library"; compiled as a
+//! doc-test, so it stays true):
+//!
+//! ```no_run
+//! use std::path::Path;
+//! use sylva_lb::CpuSolver;
+//! use sylva_light::{Light, Silent};
+//! use sylva_pipeline::{
+//!     load_scene, tone_map_modes, write_images, LbPlan, PrepareOptions, PreparedScene,
+//! };
+//! use sylva_render::{Mode, ToneMap};
+//!
+//! let scene = load_scene("catalpa", None)?; // span "scene build"
+//! let opts = PrepareOptions {
+//!     lb: Some(LbPlan {
+//!         solver: &CpuSolver, // or sylva_lb_gpu::select_solver(..)'s GPU solver
+//!         grid: None,         // the scene's [lb] grid
+//!         cache_dir: Some(Path::new("cache")),
+//!         light: Light::Physical,
+//!     }),
+//!     largest_frame: Some((512, 512, 1)), // memory checked before any work
+//!     ..PrepareOptions::default()
+//! };
+//! let prepared = PreparedScene::new(scene, &opts, &Silent)?; // LB light + kd-trees
+//! let camera = prepared.camera(512, 512); // or any Camera
+//! let frame = prepared.render(&prepared.settings(camera, 1, 1), &Silent)?;
+//! let images = tone_map_modes(&frame, &[Mode::Full], &ToneMap::default());
+//! write_images(Path::new("out.png"), frame.width, frame.height, &images, false)?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 pub mod bench;
 
