@@ -437,7 +437,7 @@ fn media_say_why_they_are_shaded_on_the_cpu() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("cloudy.toml");
     let cloud = "\n[[media]]\nname = \"puff\"\ngenerator = \"cumulus\"\ngrid = [16, 16, 16]\n\
-                 size = 3.0\nposition = [0.0, 1.5, 1.0]\n";
+                 size = 940.0\nposition = [10.0, 0.0, 300.0]\n";
     let text = SCENE.replace("[ground]", &format!("{cloud}\n[ground]"));
     std::fs::write(&path, text).unwrap();
     let prepare = |gpu: Option<&GpuContext>| {
