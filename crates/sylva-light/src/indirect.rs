@@ -10,6 +10,8 @@ use glam::{Affine3A, Vec2, Vec3};
 use sylva_geom::{Aabb, Model};
 use sylva_trace::TraceInstance;
 
+use crate::device::{DeviceGround, DeviceKind, DeviceLight, NoDevice, PackedLight, SunWords};
+use crate::device::{Packer, LIGHT_HEADER, NONE};
 use crate::lighting::{ModelLighting, PartWeights};
 
 /// Indirect light sources for shading. Implementations are read from many threads at once.
@@ -30,6 +32,10 @@ pub trait IndirectLight: Sync {
     fn gatherable(&self) -> bool {
         false
     }
+
+    /// The light's device side (what the GPU frame kernel reads: [`crate::device`]), or why
+    /// it has none (its frames are shaded on the CPU).
+    fn device(&self) -> Result<&dyn DeviceLight, NoDevice>;
 }
 
 /// No indirect light: plants get none, the ground sees the whole sky.
@@ -46,6 +52,36 @@ impl IndirectLight for NoIndirectLight {
     }
 
     fn memory_bytes(&self) -> u64 {
+        0
+    }
+
+    fn device(&self) -> Result<&dyn DeviceLight, NoDevice> {
+        Ok(self)
+    }
+}
+
+/// No records, no ground index: the kernel finds no LB light anywhere.
+impl DeviceLight for NoIndirectLight {
+    fn kind(&self) -> DeviceKind {
+        DeviceKind::Grids
+    }
+
+    fn pool_words(&self) -> u64 {
+        0
+    }
+
+    fn pack(&self, _: &mut Vec<u32>) -> PackedLight {
+        PackedLight::default()
+    }
+
+    fn sun_words(&self) -> SunWords {
+        SunWords {
+            words: Vec::new(),
+            free_space: 1.0,
+        }
+    }
+
+    fn sun_capacity(&self) -> usize {
         0
     }
 }
@@ -103,24 +139,9 @@ impl ModelGridLight {
         }
     }
 
-    /// The per-instance weights, when the forest grid set them.
-    pub fn instance_weights(&self) -> Option<&[PartWeights]> {
-        self.weights.as_deref()
-    }
-
     /// Model `m`'s grid.
     pub fn model(&self, m: usize) -> Option<&ModelLighting> {
         self.lighting.get(m).and_then(Option::as_ref)
-    }
-
-    /// Model `m`'s bounds in model space (where its grid ends on the ground).
-    pub fn model_bounds(&self, m: usize) -> Aabb {
-        self.model_bounds[m]
-    }
-
-    /// The ground index (for the GPU frame); `None` when there is none.
-    pub fn ground_index(&self) -> Option<&GroundIndex> {
-        (!self.ground_index.cells.is_empty()).then_some(&self.ground_index)
     }
 }
 
@@ -160,6 +181,80 @@ impl IndirectLight for ModelGridLight {
             .iter()
             .flatten()
             .any(ModelLighting::is_physical)
+    }
+
+    fn device(&self) -> Result<&dyn DeviceLight, NoDevice> {
+        Ok(self)
+    }
+}
+
+/// The grids as [`ModelGridLight::plant`] and [`ModelGridLight::ground_sky`] read them
+/// (shade.wgsl: `lighting_sample`, `parts_sample`, `instance_ground_sky`): the instances'
+/// part weights when the forest grid set them, per model its record
+/// ([`ModelLighting::pack`]), the ground index.
+impl DeviceLight for ModelGridLight {
+    fn kind(&self) -> DeviceKind {
+        DeviceKind::Grids
+    }
+
+    fn pool_words(&self) -> u64 {
+        let weighed = self.weights.is_some();
+        let grids: u64 = self
+            .lighting
+            .iter()
+            .flatten()
+            .map(|g| {
+                // The parts (12 words per site) when the forest grid weighs them.
+                let parts = if weighed && g.parts().is_some() {
+                    12
+                } else {
+                    0
+                };
+                (3 + parts) * g.dims().sites() as u64 + LIGHT_HEADER as u64
+            })
+            .sum();
+        let weights = self.weights.as_ref().map_or(0, |w| 12 * w.len() as u64);
+        grids + weights + self.ground_index.words()
+    }
+
+    fn pack(&self, pool: &mut Vec<u32>) -> PackedLight {
+        let mut p = Packer::new(pool);
+        // Per instance, the forest grid's weights of its model's light parts (12 words:
+        // sun, sky through the top, through the sides, ground; RGB each).
+        let mut weights_at = NONE;
+        if let Some(w) = &self.weights {
+            weights_at = p.at();
+            for w in w {
+                for v in [w.sun, w.sky_top, w.sky, w.ground] {
+                    p.v3(v);
+                }
+            }
+        }
+        let records = self
+            .lighting
+            .iter()
+            .zip(&self.model_bounds)
+            .map(|(l, &bounds)| {
+                l.as_ref()
+                    .map_or(NONE, |l| l.pack(&mut p, bounds, weights_at))
+            })
+            .collect();
+        PackedLight {
+            records,
+            ground: self.ground_index.pack(pool),
+        }
+    }
+
+    /// Nothing per sun: the grids were solved for it.
+    fn sun_words(&self) -> SunWords {
+        SunWords {
+            words: Vec::new(),
+            free_space: 1.0,
+        }
+    }
+
+    fn sun_capacity(&self) -> usize {
+        0
     }
 }
 
@@ -209,17 +304,16 @@ pub(crate) fn ground_shade(
 }
 
 /// A uniform grid over the ground (x, z) listing the instances whose world box covers each
-/// cell: the ground's LB lookup visits a handful of trees, not all of them. Its fields are
-/// public for the GPU frame, which uploads them as they are.
+/// cell: the ground's LB lookup visits a handful of trees, not all of them.
 #[derive(Debug, Default)]
-pub struct GroundIndex {
-    pub origin: Vec2,
-    pub end: Vec2,
-    pub inv_cell: f32,
-    pub nx: usize,
-    pub nz: usize,
+pub(crate) struct GroundIndex {
+    origin: Vec2,
+    end: Vec2,
+    inv_cell: f32,
+    nx: usize,
+    nz: usize,
     /// Per cell, row by row in z, the instances whose box covers it.
-    pub cells: Vec<Vec<u32>>,
+    cells: Vec<Vec<u32>>,
 }
 
 impl GroundIndex {
@@ -266,6 +360,42 @@ impl GroundIndex {
         index
     }
 
+    /// Words [`GroundIndex::pack`] appends.
+    pub(crate) fn words(&self) -> u64 {
+        if self.cells.is_empty() {
+            return 0;
+        }
+        (self.cells.len() + 1 + self.cells.iter().map(Vec::len).sum::<usize>()) as u64
+    }
+
+    /// Appends the index as shade.wgsl's `ground_sky` reads it: per cell where its list of
+    /// instances starts (one more word: where the last ends), then the lists. `None` (nothing
+    /// appended) when there is no index.
+    pub(crate) fn pack(&self, pool: &mut Vec<u32>) -> Option<DeviceGround> {
+        if self.cells.is_empty() {
+            return None;
+        }
+        let starts = pool.len() as u32;
+        let lists = starts + self.cells.len() as u32 + 1;
+        let mut first = 0u32;
+        for c in &self.cells {
+            pool.push(first);
+            first += c.len() as u32;
+        }
+        pool.push(first);
+        for c in &self.cells {
+            pool.extend_from_slice(c);
+        }
+        Some(DeviceGround {
+            starts,
+            lists,
+            nx: self.nx as u32,
+            nz: self.nz as u32,
+            bounds: [self.origin.x, self.origin.y, self.end.x, self.end.y],
+            inv_cell: self.inv_cell,
+        })
+    }
+
     fn cell_of(&self, x: f32, z: f32) -> (usize, usize) {
         let c = |v: f32, o: f32, n: usize| {
             (((v - o) * self.inv_cell).floor().max(0.0) as usize).min(n - 1)
@@ -274,7 +404,7 @@ impl GroundIndex {
     }
 
     /// Instances whose box may cover ground point `p` (a superset).
-    fn at(&self, p: Vec3) -> &[u32] {
+    pub(crate) fn at(&self, p: Vec3) -> &[u32] {
         if self.cells.is_empty() {
             return &[];
         }

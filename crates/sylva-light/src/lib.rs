@@ -11,6 +11,8 @@
 //!   global grid, and [`RelitLight`], which moves the sun without an LB solve.
 //! * [`indirect`]: [`IndirectLight`], the light scattered in the canopy as shading reads it
 //!   (the seam between light and renderer), and [`ModelGridLight`], one LB grid per model.
+//! * [`device`]: the seam's device side ([`DeviceLight`]): each light packs what the GPU
+//!   frame kernel reads of it, beside its CPU lookup, or says why it has none ([`NoDevice`]).
 //! * [`media`]: participating media (clouds): their LB light and the volume that carries it
 //!   with the density, which the renderer integrates along rays ([`Media`]).
 //! * [`progress`]: what the long stages report ([`Progress`]).
@@ -18,6 +20,7 @@
 //! May import the leaf crates (core, geom, grid, lb, voxel) and `sylva-trace` for the
 //! instance placements; never the renderer, the scene files or the pipeline.
 
+pub mod device;
 pub mod forest;
 pub mod indirect;
 pub mod lighting;
@@ -25,6 +28,7 @@ pub mod media;
 pub mod progress;
 pub mod relight;
 
+pub use device::{DeviceLight, NoDevice};
 pub use indirect::{IndirectLight, ModelGridLight, NoIndirectLight};
 pub use lighting::{Illumination, Light};
 pub use media::{Media, MediumVolume, Segment};

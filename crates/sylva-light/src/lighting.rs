@@ -39,7 +39,7 @@ pub use glam::Vec3;
 use serde::Serialize;
 use sylva_core::cache::{Cache, CacheKey, CacheKind, CacheOutcome, Lookup};
 use sylva_core::colour::luminance;
-use sylva_geom::{is_opaque, LbSettings, MaterialKind, Model, Scene, Wrap, OPAQUE_ALPHA};
+use sylva_geom::{is_opaque, Aabb, LbSettings, MaterialKind, Model, Scene, Wrap, OPAQUE_ALPHA};
 use sylva_lb::light::{self, Environment, PlantOptics};
 use sylva_lb::relight::{Footprint, Placement};
 use sylva_lb::solver::{memory_needed, Boundary, Floor, SolveOptions, VolumeSource};
@@ -53,6 +53,8 @@ use sylva_voxel::{
     DEFAULT_GRID, SUB,
 };
 use thiserror::Error;
+
+use crate::device::{Packer, LIGHT_OPEN, LIGHT_PARTS, NONE};
 
 /// Bump whenever the solver, the voxelizer or this module changes what a cache entry holds.
 /// 2: the solver backend's [`LbSolver::cache_tag`] is part of the key.
@@ -274,11 +276,6 @@ pub struct LightParts {
 }
 
 impl LightParts {
-    /// Per site (site order), the four parts' RGB (for the GPU frame).
-    pub fn values(&self) -> &[[[f32; 3]; 4]] {
-        &self.values
-    }
-
     /// `w.sun ⊙ S + w.sky_top ⊙ D_top + w.sky ⊙ D_side + w.ground ⊙ G` of one site's parts.
     #[inline]
     pub fn combine(v: &[[f32; 3]; 4], w: &PartWeights) -> Vec3 {
@@ -325,7 +322,7 @@ impl ModelLighting {
     /// A physical grid from its four parts ([`LightParts`]: sun, unit sky through the top,
     /// unit sky through the sides, unit ground), lit by `env`: the values are the parts under
     /// the free weights.
-    fn physical_parts(parts: [&LightingGrid; 4], env: &Environment) -> ModelLighting {
+    pub(crate) fn physical_parts(parts: [&LightingGrid; 4], env: &Environment) -> ModelLighting {
         let f = |v: [f64; 3]| Vec3::from_array(v.map(|x| x as f32));
         let free = PartWeights {
             sun: Vec3::ONE,
@@ -395,12 +392,6 @@ impl ModelLighting {
         }
     }
 
-    /// The physical light's free field, open sky and open bottom per colour (what
-    /// [`ModelLighting::ground_sky`] measures against); `None` for the paper light.
-    pub fn open_field(&self) -> Option<(Vec3, Vec3)> {
-        self.open.map(|o| (o.sky, o.bottom))
-    }
-
     /// Whether this is the physical light (LB units, direct sun removed).
     pub fn is_physical(&self) -> bool {
         self.open.is_some()
@@ -467,17 +458,40 @@ impl ModelLighting {
             + std::mem::size_of::<Self>()) as u64
     }
 
-    /// What the GPU frame uploads: dims, origin, sites per unit, last site per axis, and the
-    /// values (RGB per site, site order `(x * ny + y) * nz + z`).
-    pub fn raw(&self) -> (Dims, Vec3, Vec3, Vec3, &[[f32; 3]]) {
-        let d = self.dims;
-        (
-            d,
-            Vec3::from_array(self.placement.origin()),
-            Vec3::from_array(self.placement.inv_cell()),
-            Vec3::new((d.nx - 1) as f32, (d.ny - 1) as f32, (d.nz - 1) as f32),
-            &self.values,
-        )
+    /// Appends this grid's record as shade.wgsl reads it ([`crate::device`]): the header
+    /// (its free field when physical), the RGB values per site (site order
+    /// `(x * ny + y) * nz + z`), then, when the forest grid weighs the instances' parts
+    /// (`weights_at`: where their weights are, [`NONE`]: not weighed), the four parts' RGB per
+    /// site (shade.wgsl: `parts_sample`). `bounds`: the model's. Returns where it starts.
+    pub(crate) fn pack(&self, p: &mut Packer, bounds: Aabb, weights_at: u32) -> u32 {
+        // The header's last 9 words (from LIGHT_OPEN): the free field (1, open sky, open
+        // bottom), then where the parts and the instances' weights are.
+        let mut extra = [0u32; 9];
+        if let Some(open) = self.open {
+            extra[0] = 1;
+            extra[1..4].copy_from_slice(&open.sky.to_array().map(f32::to_bits));
+            extra[4..7].copy_from_slice(&open.bottom.to_array().map(f32::to_bits));
+        }
+        extra[LIGHT_PARTS - LIGHT_OPEN] = NONE;
+        let start = p.light_header(
+            self.dims,
+            (
+                Vec3::from_array(self.placement.origin()),
+                Vec3::from_array(self.placement.inv_cell()),
+            ),
+            bounds,
+            extra,
+        );
+        p.words
+            .extend(self.values.iter().flatten().map(|v| v.to_bits()));
+        if let (Some(parts), true) = (&self.parts, weights_at != NONE) {
+            let at = p.at();
+            p.set(start + LIGHT_PARTS as u32, at);
+            p.set(start + LIGHT_PARTS as u32 + 1, weights_at);
+            p.words
+                .extend(parts.values.iter().flatten().flatten().map(|v| v.to_bits()));
+        }
+        start
     }
 
     /// The light at site `(x, y, z)`.

@@ -32,6 +32,8 @@ use rayon::prelude::*;
 use sylva_geom::Medium;
 use sylva_lb::{LightingGrid, MediumParams};
 
+use crate::device::NoDevice;
+
 /// Marching step in cells.
 pub const STEP_CELLS: f32 = 0.5;
 /// Edge of the empty-space blocks, in cells.
@@ -452,6 +454,19 @@ pub struct Media {
 impl Media {
     pub fn is_empty(&self) -> bool {
         self.volumes.is_empty()
+    }
+
+    /// Whether the GPU frame kernel can draw these media: only when there are none (the
+    /// volume tracer, [`Media::integrate`], runs on the CPU; `shade.wgsl` has none).
+    pub fn device(&self) -> Result<(), NoDevice> {
+        if self.is_empty() {
+            Ok(())
+        } else {
+            Err(NoDevice(
+                "the scene has media (clouds), which the CPU's volume tracer draws; the GPU \
+                 traces the rays",
+            ))
+        }
     }
 
     /// The media along the ray up to `t_max`, front to back (overlapping boxes are composited

@@ -71,7 +71,7 @@ use sylva_light::relight::{
     GlobalReport, ModelBasis, RelitIllumination, RelitLight, StoredBasis, SunWeights,
     GLOBAL_EXTENSION,
 };
-use sylva_render::gpu_frame::{FrameError, FrameLight, GpuFrame};
+use sylva_render::gpu_frame::{FrameError, GpuFrame};
 use sylva_render::output::{encode_exr, encode_png, OutputError};
 use sylva_render::render::{
     memory_needed, output_memory_needed, tile_count, Frame, Mode, RenderError, RenderSettings,
@@ -921,26 +921,22 @@ impl PreparedScene {
             }
             None => (None, Vec::new()),
         };
-        // shade.wgsl mirrors the CPU's shading for both lights, with per-sun grids or relit
-        // base solutions. It has no volume tracer: scenes with media shade on the CPU (the
-        // GPU still answers their ray queries).
+        // The frame kernel shades with the light's device side; the media and a light without
+        // one say why they cannot be shaded there (the GPU still answers their ray queries).
         let gpu_on = tracer.gpu().is_some() && opts.shade_on_gpu;
-        let gpu_shading_note = if gpu_on && !media.is_empty() {
-            Some(
-                "the scene has media (clouds), which the CPU's volume tracer draws; the GPU \
-                 traces the rays",
-            )
-        } else {
-            None
+        let indirect: &dyn IndirectLight = match &relit {
+            Some(r) => r,
+            None => &light,
         };
-        let gpu_frame = match tracer.gpu() {
-            Some(t) if gpu_on && gpu_shading_note.is_none() => {
+        let device = media.device().and_then(|()| indirect.device());
+        let gpu_shading_note = match &device {
+            Err(why) if gpu_on => Some(why.0),
+            _ => None,
+        };
+        let gpu_frame = match (tracer.gpu(), device) {
+            (Some(t), Ok(device)) if gpu_on => {
                 let _span = tracing::info_span!(stage::ACCEL_BUILD).entered();
-                let frame_light = match &relit {
-                    Some(r) => FrameLight::Relit(r),
-                    None => FrameLight::Grids(&light),
-                };
-                Some(GpuFrame::new(t, &scene, &materials, frame_light)?)
+                Some(GpuFrame::new(t, &scene, &materials, device)?)
             }
             _ => None,
         };
@@ -995,7 +991,7 @@ impl PreparedScene {
                 };
                 r.relight(ill)?;
                 if let Some(f) = &self.gpu_frame {
-                    f.relight(r)?;
+                    f.relight(&*r)?;
                 }
             }
             None if (0..self.scene.models.len()).any(|m| self.light.model(m).is_some()) => {
@@ -1013,7 +1009,7 @@ impl PreparedScene {
         let r = self.relit.as_mut().ok_or(PipelineError::NeedsBasis)?;
         r.relight(RelitIllumination::new(self.to_sun, sun, ambient))?;
         if let Some(f) = &self.gpu_frame {
-            f.relight(r)?;
+            f.relight(&*r)?;
         }
         Ok(())
     }
@@ -1032,7 +1028,8 @@ impl PreparedScene {
         }
     }
 
-    /// Why frames traced on a GPU are shaded on the CPU, when they are (relit light).
+    /// Why frames traced on a GPU are shaded on the CPU, when they are: what the media or the
+    /// indirect light answer for their device side ([`IndirectLight::device`]).
     pub fn gpu_shading_note(&self) -> Option<&'static str> {
         self.gpu_shading_note
     }
@@ -1075,12 +1072,7 @@ impl PreparedScene {
             return Ok(());
         };
         self.gpu_frame = None;
-        self.gpu_frame = Some(GpuFrame::new(
-            t,
-            &self.scene,
-            &self.materials,
-            FrameLight::Relit(r),
-        )?);
+        self.gpu_frame = Some(GpuFrame::new(t, &self.scene, &self.materials, r)?);
         Ok(())
     }
 

@@ -7,8 +7,11 @@
 //! The kernel makes the camera rays as the CPU renderer's `sample_ray` does (the same
 //! arithmetic; jittered sub-pixel offsets, drawn from a 64-bit generator, come from the
 //! host), and the host uploads the shading data once: per model its mesh indices, vertex
-//! normals and texture coordinates, material ids, materials with their linear textures, its
-//! LB grid (today's [`ModelGridLight`]); the instances' world transforms; the ground index.
+//! normals and texture coordinates, material ids, materials with their linear textures; the
+//! instances' world transforms; then the LB light as the light packs itself (its records per
+//! model, the ground index: [`DeviceLight`], which names no light type here), and the light's
+//! per-sun words in a buffer of their own, rewritten when the sun moves
+//! ([`GpuFrame::relight`]).
 //! A pixel whose rays the kernel hands back (a ray lying in a kd-tree split plane) is
 //! rendered by the CPU renderer, so every pixel is what the CPU would make of it.
 
@@ -18,9 +21,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use rayon::prelude::*;
-use sylva_geom::{Aabb, Scene, Wrap};
-use sylva_lb::relight::{BasisSet, HaarCoefs, Placement, StoredFields};
-use sylva_lb::Dims;
+use sylva_geom::{Scene, Wrap};
 use sylva_trace::{PinholeCamera, TraceStats};
 use sylva_trace_gpu::split::{storage_entry, uniform_entry, SplitArray};
 use sylva_trace_gpu::{GpuTracer, TraceGpuError, SCENE_GROUP};
@@ -29,14 +30,11 @@ use sylva_wgpu::{wgpu, GpuContext, GpuError, PassTimer};
 use crate::render::{sample_offset, Frame, FrameTimings, RenderError, RenderSettings, Renderer};
 use crate::shade::{Radiance, ShadeMaterial};
 use sylva_lb::light::SHEET_RADIANCE_PER_FLUENCE;
-use sylva_light::indirect::{GroundIndex, ModelGridLight};
+use sylva_light::device::{DeviceLight, NONE};
 use sylva_light::lighting::Light;
-use sylva_light::relight::{RelitLight, StoredBasis};
 
 /// The kernel and the shading functions it calls (after the scene's WGSL).
 const SHADE_WGSL: &str = include_str!("shade.wgsl");
-/// "No such entry" in the pool's records.
-const NONE: u32 = u32::MAX;
 /// Samples in flight at once, as the CPU renderer's bands.
 const BAND_SAMPLES: usize = 1 << 21;
 /// Bytes per uploaded sample offset (jittered sampling only), per pixel's radiance (four
@@ -106,64 +104,8 @@ struct Pool {
     params: ShadeParams,
 }
 
-/// The LB light a GPU frame shades with.
-#[derive(Clone, Copy)]
-pub enum FrameLight<'a> {
-    /// One grid per model, solved for the sun (paper or physical light).
-    Grids(&'a ModelGridLight),
-    /// Base solutions combined per instance for the current sun (paper 004): the stored
-    /// fields on the device as the CPU holds them (Haar blocks stay compressed), each
-    /// instance's combination rewritten when the sun moves ([`GpuFrame::relight`]).
-    Relit(&'a RelitLight),
-}
-
-impl FrameLight<'_> {
-    fn ground_index(&self) -> Option<&GroundIndex> {
-        match self {
-            FrameLight::Grids(l) => l.ground_index(),
-            FrameLight::Relit(l) => l.ground_index(),
-        }
-    }
-
-    /// Words of LB light on the device (at most): grids' RGB values, or the stored fields.
-    fn words(&self, scene: &Scene) -> u64 {
-        (0..scene.models.len())
-            .map(|m| match self {
-                FrameLight::Grids(l) => l.model(m).map_or(0, |g| {
-                    // The parts (12 words per site) when the forest grid weighs them.
-                    let parts = match (g.parts(), l.instance_weights()) {
-                        (Some(_), Some(_)) => 12,
-                        _ => 0,
-                    };
-                    (3 + parts) * g.dims().sites() as u64 + LIGHT_HEADER as u64
-                }),
-                FrameLight::Relit(l) => l.model(m).map_or(0, |b| {
-                    let stored = match b {
-                        StoredBasis::Full(set) => BasisSet::memory_needed(set.dims),
-                        // f16 values are widened to f32: at most 4 × what is stored.
-                        StoredBasis::Compressed(c) => 4 * c.bytes(),
-                    };
-                    stored / 4 + LIGHT_HEADER as u64
-                }),
-            })
-            .sum()
-    }
-}
-
-/// Words of an LB light record's header (shade.wgsl: LIGHT_OPEN, RELIT_KIND and what
-/// follows them).
-const LIGHT_HEADER: u32 = 28;
-/// Where a relit record's kind (0 fields, 1 Haar split, 2 Haar packed) sits in its header.
-const RELIT_KIND: usize = 19;
-/// Where a grid record's parts (their offset, NONE: none) and the instances' weights of them
-/// sit in its header (shade.wgsl: LIGHT_PARTS).
-const LIGHT_PARTS: usize = 26;
 /// Words of a material record (shade.wgsl: MATERIAL_WORDS).
 const MATERIAL_WORDS: usize = 16;
-/// Words of an instance's entry in the relit words (first term, count, constant, padding)
-/// and of one term (field, weight per colour).
-const RELIT_ENTRY: usize = 8;
-const RELIT_TERM: usize = 4;
 
 impl Pool {
     fn at(&self) -> u32 {
@@ -180,110 +122,10 @@ impl Pool {
         self.f(v.z);
     }
 
-    /// An LB light record's header (LIGHT_HEADER words): dims, where its values start,
-    /// placement, model bounds, then `extra` (free field, or the site count).
-    fn light_header(
-        &mut self,
-        dims: Dims,
-        placement: (Vec3, Vec3, Vec3),
-        bounds: Aabb,
-        extra: [u32; 9],
-    ) {
-        let values_at = self.at() + LIGHT_HEADER;
-        self.words
-            .extend([dims.nx as u32, dims.ny as u32, dims.nz as u32, values_at]);
-        self.v3(placement.0);
-        self.v3(placement.1);
-        self.v3(placement.2);
-        self.v3(bounds.min);
-        self.v3(bounds.max);
-        self.words.extend(extra);
-    }
-
-    /// A model's relit record: the header, then its stored fields as the CPU's lookup
-    /// reads them (shade.wgsl: relit_sample): every field at every site (uncompressed and
-    /// dense sets), or the Haar blocks' starts, counts (4 per word) and coefficients (split:
-    /// indices 4 per word and f32 values; packed: the u16 words 2 per word and a step per
-    /// field).
-    fn relit_record(&mut self, b: &StoredBasis, bounds: Aabb) {
-        let dims = b.dims();
-        let placement = Placement::new(dims, b.bounds());
-        let last = Vec3::new(
-            (dims.nx - 1) as f32,
-            (dims.ny - 1) as f32,
-            (dims.nz - 1) as f32,
-        );
-        let start = self.at();
-        let mut extra = [0u32; 9];
-        extra[1] = b.field_count() as u32;
-        extra[2] = dims.sites() as u32;
-        self.light_header(
-            dims,
-            (
-                Vec3::from_array(placement.origin()),
-                Vec3::from_array(placement.inv_cell()),
-                last,
-            ),
-            bounds,
-            extra,
-        );
-        let fields = |p: &mut Pool, fields: &[Vec<f32>]| {
-            for f in fields {
-                p.words.extend(f.iter().map(|v| v.to_bits()));
-            }
-        };
-        let bytes_as_words = |p: &mut Pool, bytes: &[u8]| {
-            p.words.extend(bytes.chunks(4).map(|c| {
-                c.iter()
-                    .enumerate()
-                    .fold(0u32, |w, (k, &b)| w | (b as u32) << (8 * k))
-            }));
-        };
-        let header = |p: &mut Pool, k: usize, v: u32| p.words[start as usize + k] = v;
-        match b {
-            StoredBasis::Full(set) => fields(self, set.channels()),
-            StoredBasis::Compressed(c) => match c.stored_fields() {
-                StoredFields::Dense(f) => fields(self, &f),
-                StoredFields::Haar(h) => {
-                    header(self, RELIT_KIND, 1);
-                    header(self, RELIT_KIND + 3, h.blocks[1] as u32);
-                    header(self, RELIT_KIND + 4, h.blocks[2] as u32);
-                    let at = self.at();
-                    header(self, RELIT_KIND + 5, at);
-                    self.words.extend_from_slice(h.starts);
-                    let at = self.at();
-                    header(self, RELIT_KIND + 6, at);
-                    bytes_as_words(self, h.counts);
-                    match h.coefs {
-                        HaarCoefs::Split { indices, values } => {
-                            let at = self.at();
-                            header(self, RELIT_KIND + 7, at);
-                            bytes_as_words(self, indices);
-                            let at = self.at();
-                            header(self, RELIT_KIND + 8, at);
-                            self.words.extend(values.iter().map(|v| v.to_bits()));
-                        }
-                        HaarCoefs::Packed { words, steps } => {
-                            header(self, RELIT_KIND, 2);
-                            let at = self.at();
-                            header(self, RELIT_KIND + 7, at);
-                            self.words.extend(words.chunks(2).map(|c| {
-                                c[0] as u32 | (c.get(1).copied().unwrap_or(0) as u32) << 16
-                            }));
-                            let at = self.at();
-                            header(self, RELIT_KIND + 8, at);
-                            self.words.extend(steps.iter().map(|v| v.to_bits()));
-                        }
-                    }
-                }
-            },
-        }
-    }
-
     /// Per model its record (8 words: indices, normals, uvs, material ids, materials,
-    /// material count, LB light, 0) and data; the instances' world transforms; the ground
-    /// index.
-    fn build(scene: &Scene, materials: &[Vec<ShadeMaterial>], light: FrameLight) -> Pool {
+    /// material count, LB light, 0) and data; the instances' world transforms; the LB light
+    /// as `light` packs it (its records, the ground index).
+    fn build(scene: &Scene, materials: &[Vec<ShadeMaterial>], light: &dyn DeviceLight) -> Pool {
         let mut p = Pool::default();
         let models = p.at();
         p.words.resize(p.words.len() + 8 * scene.models.len(), 0);
@@ -294,19 +136,6 @@ impl Pool {
             p.v3(t.matrix3.y_axis.into());
             p.v3(t.matrix3.z_axis.into());
             p.v3(t.translation.into());
-        }
-        // Per instance, the forest grid's weights of its model's light parts (12 words:
-        // sun, sky through the top, through the sides, ground; RGB each).
-        let mut weights_at = NONE;
-        if let FrameLight::Grids(light) = light {
-            if let Some(w) = light.instance_weights() {
-                weights_at = p.at();
-                for w in w {
-                    for v in [w.sun, w.sky_top, w.sky, w.ground] {
-                        p.v3(v);
-                    }
-                }
-            }
         }
         for (m, model) in scene.models.iter().enumerate() {
             let mesh = &model.mesh;
@@ -360,110 +189,28 @@ impl Pool {
                     p.words[r + 4..r + 8].copy_from_slice(&[at, w, h, wrap]);
                 }
             }
-            match light {
-                FrameLight::Grids(light) => {
-                    if let Some(l) = light.model(m) {
-                        let (dims, origin, inv_cell, last, values) = l.raw();
-                        rec[6] = p.at();
-                        let mut open = [0u32; 9];
-                        if let Some((sky, bottom)) = l.open_field() {
-                            open[0] = 1;
-                            open[1..4].copy_from_slice(&sky.to_array().map(f32::to_bits));
-                            open[4..7].copy_from_slice(&bottom.to_array().map(f32::to_bits));
-                        }
-                        let header = p.at() as usize;
-                        p.light_header(dims, (origin, inv_cell, last), light.model_bounds(m), open);
-                        p.words.extend(values.iter().flatten().map(|v| v.to_bits()));
-                        // The forest grid's weighed parts (shade.wgsl: parts_sample): the four
-                        // parts' RGB per site, and where the instances' weights are.
-                        p.words[header + LIGHT_PARTS] = NONE;
-                        if let (Some(parts), Some(_)) = (l.parts(), light.instance_weights()) {
-                            p.words[header + LIGHT_PARTS] = p.at();
-                            p.words[header + LIGHT_PARTS + 1] = weights_at;
-                            p.words.extend(
-                                parts
-                                    .values()
-                                    .iter()
-                                    .flatten()
-                                    .flatten()
-                                    .map(|v| v.to_bits()),
-                            );
-                        }
-                    }
-                }
-                FrameLight::Relit(light) => {
-                    if let Some(b) = light.model(m) {
-                        rec[6] = p.at();
-                        p.relit_record(b, light.model_bounds(m));
-                    }
-                }
-            }
             rec[7] = 0;
             let at = (models + 8 * m as u32) as usize;
             p.words[at..at + 8].copy_from_slice(&rec);
         }
-        let relit = matches!(light, FrameLight::Relit(_)) as u32;
-        p.params.tables = [models, instances, 0, relit];
-        if let Some(g) = light.ground_index() {
-            let cells = &g.cells;
-            let starts = p.at();
-            let lists = starts + cells.len() as u32 + 1;
-            let mut first = 0u32;
-            for c in cells {
-                p.words.push(first);
-                first += c.len() as u32;
-            }
-            p.words.push(first);
-            for c in cells {
-                p.words.extend_from_slice(c);
-            }
-            p.params.ground = [starts, lists, g.nx as u32, g.nz as u32];
-            p.params.ground_box = [g.origin.x, g.origin.y, g.end.x, g.end.y];
+        // The LB light after the meshes; each model's record says where its part starts.
+        let packed = light.pack(&mut p.words);
+        for m in 0..scene.models.len() {
+            let at = models as usize + 8 * m + 6;
+            p.words[at] = packed.records.get(m).copied().unwrap_or(NONE);
+        }
+        p.params.tables = [models, instances, 0, light.kind().code()];
+        if let Some(g) = packed.ground {
+            p.params.ground = [g.starts, g.lists, g.nx, g.nz];
+            p.params.ground_box = g.bounds;
             p.params.ground_cell = [g.inv_cell, 0.0, 0.0, 0.0];
         }
         p
     }
 }
 
-/// The relit words (shade.wgsl: relit_sample): per instance an entry (first term, term
-/// count, constant per colour), then the terms (field, weight per colour), for `light`'s
-/// current sun. Instances without a basis have no terms.
-fn relit_words(light: &RelitLight, instances: usize) -> Vec<u32> {
-    let mut words = vec![0u32; RELIT_ENTRY * instances];
-    for i in 0..instances {
-        let Some((constant, terms)) = light.instance_terms(i) else {
-            continue;
-        };
-        let first = words.len() as u32;
-        for (field, w) in &terms {
-            words.push(*field);
-            words.extend(w.map(f32::to_bits));
-        }
-        let e = RELIT_ENTRY * i;
-        words[e] = first;
-        words[e + 1] = terms.len() as u32;
-        words[e + 2..e + 5].copy_from_slice(&constant.map(f32::to_bits));
-    }
-    words
-}
-
-/// Words the relit words can take for `scene` (every field of every instance's model).
-fn relit_capacity(light: &RelitLight, scene: &Scene) -> usize {
-    scene
-        .instances
-        .iter()
-        .map(|inst| {
-            RELIT_ENTRY
-                + light
-                    .model(inst.model as usize)
-                    .map_or(0, |b| RELIT_TERM * b.field_count())
-        })
-        .sum::<usize>()
-        .max(RELIT_ENTRY)
-}
-
 /// Device bytes of a scene's shading data (for memory checks and reports).
-pub fn shading_bytes(scene: &Scene, light: FrameLight) -> u64 {
+pub fn shading_bytes(scene: &Scene, light: &dyn DeviceLight) -> u64 {
     let mut words = 8 * scene.models.len() as u64 + 24 * scene.instances.len() as u64;
     for m in &scene.models {
         let mesh = &m.mesh;
@@ -477,21 +224,18 @@ pub fn shading_bytes(scene: &Scene, light: FrameLight) -> u64 {
             }
         }
     }
-    words += light.words(scene);
-    if let FrameLight::Relit(l) = light {
-        words += relit_capacity(l, scene) as u64;
-    }
+    words += light.pool_words() + light.sun_capacity() as u64;
     words * 4
 }
 
 /// The shading data on the device and the frame kernel.
 pub struct GpuFrame {
     ctx: GpuContext,
-    /// The relit light's per-instance combinations (a placeholder for per-sun grids), its
-    /// capacity in words, and its free-space luminance.
+    /// The light's per-sun words (the relit light's per-instance combinations; a
+    /// placeholder word for per-sun grids) and their capacity in words.
     relit: wgpu::Buffer,
     relit_capacity: usize,
-    /// The relit light's free-space luminance as f32 bits (its ambient may change).
+    /// The light's free-space luminance as f32 bits (the relit light's ambient may change).
     free_space: AtomicU32,
     pool: SplitArray,
     params: wgpu::Buffer,
@@ -531,13 +275,14 @@ struct FrameBuffers {
 }
 
 impl GpuFrame {
-    /// Uploads the shading data of `scene` (traced by `tracer`, materials decoded, LB light)
+    /// Uploads the shading data of `scene` (traced by `tracer`, materials decoded, LB light:
+    /// the device side of the scene's indirect light, [`sylva_light::IndirectLight::device`])
     /// and builds the kernel.
     pub fn new(
         tracer: &GpuTracer,
         scene: &Scene,
         materials: &[Vec<ShadeMaterial>],
-        light: FrameLight,
+        light: &dyn DeviceLight,
     ) -> Result<GpuFrame, TraceGpuError> {
         let ctx = tracer.context().clone();
         let tile: u32 = if ctx.is_software() { 1 } else { 8 };
@@ -565,11 +310,9 @@ impl GpuFrame {
             max_binding,
         )?;
         drop(pool.words);
-        // The relit light's per-instance combinations, rewritten when the sun moves.
-        let relit_words = match light {
-            FrameLight::Relit(l) => relit_capacity(l, scene),
-            FrameLight::Grids(_) => RELIT_ENTRY,
-        };
+        // The light's per-sun words, rewritten when the sun moves (a binding holds a word
+        // at least).
+        let relit_words = light.sun_capacity().max(1);
         let relit = ctx.buffer(
             "relit words",
             4 * relit_words as u64,
@@ -684,28 +427,28 @@ impl GpuFrame {
             buffers: Mutex::new(None),
             timer,
         };
-        if let FrameLight::Relit(l) = light {
-            frame.relight(l)?;
-        }
+        frame.relight(light)?;
         Ok(frame)
     }
 
-    /// Uploads the relit light's per-instance combinations for its current sun (after
-    /// [`RelitLight::relight`]); the fields on the device stay.
-    pub fn relight(&self, light: &RelitLight) -> Result<(), GpuError> {
-        let words = relit_words(light, light.instances());
-        if words.len() > self.relit_capacity {
+    /// Uploads the light's per-sun words for its current sun (after its own update, e.g.
+    /// `RelitLight::relight`); what the light packed into the pool stays.
+    pub fn relight(&self, light: &dyn DeviceLight) -> Result<(), GpuError> {
+        let sun = light.sun_words();
+        if sun.words.len() > self.relit_capacity {
             return Err(GpuError::TooLarge(format!(
-                "{} words of relit combinations for a buffer of {}",
-                words.len(),
+                "{} words of the light's per-sun data for a buffer of {}",
+                sun.words.len(),
                 self.relit_capacity
             )));
         }
-        self.ctx
-            .queue
-            .write_buffer(&self.relit, 0, bytemuck::cast_slice(&words));
+        if !sun.words.is_empty() {
+            self.ctx
+                .queue
+                .write_buffer(&self.relit, 0, bytemuck::cast_slice(&sun.words));
+        }
         self.free_space
-            .store(light.free_space().to_bits(), Ordering::Relaxed);
+            .store(sun.free_space.to_bits(), Ordering::Relaxed);
         Ok(())
     }
 

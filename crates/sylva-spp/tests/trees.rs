@@ -542,4 +542,10 @@ fn the_spp_light_is_the_slab_model_inside_a_slab_shaped_tree() {
     assert!(under.max_element() < 0.1, "sky under the slab {under}");
     assert_eq!(light.ground_sky(Vec3::new(20.0, 0.0, 0.0)), Vec3::ONE);
     assert!(SppLight::with_preset(&system, "no such preset").is_err());
+    // No device side: the GPU frame kernel cannot read it, and it says why.
+    let why = light
+        .device()
+        .err()
+        .expect("the SPP light has no device side");
+    assert!(why.0.contains("plane-parallel"), "{why}");
 }

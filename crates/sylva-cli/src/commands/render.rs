@@ -12,7 +12,7 @@ use sylva_lb::relight::{Codec, CompressTarget, Precision};
 use sylva_lb::LbSolver;
 use sylva_light::lighting::{Light, LightingSource};
 use sylva_light::relight::{BasisReport, GlobalGridOptions, SunWeights};
-use sylva_light::{Progress, Silent};
+use sylva_light::{IndirectLight, Progress, Silent};
 use sylva_mpi::Comm;
 use sylva_pipeline::{
     image_paths, load_scene, resolution, tone_map_modes, write_images, BasisUse, LbPlan,
@@ -731,6 +731,12 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
             .context("the plane-parallel light (003 §5)")?;
             let light = SppLight::with_preset(&system, &prepared.scene.lb.preset)?;
             spp_seconds = Some(t.elapsed().as_secs_f64());
+            // The GPU frame kernel reads only lights with a device side; this one says why not.
+            if prepared.tracer.gpu().is_some() {
+                if let Err(why) = light.device() {
+                    println!("shading on the CPU: {why}");
+                }
+            }
             (prepared.render_with(&light, &settings, &bars)?, None)
         }
         None => (prepared.render(&settings, &bars)?, None),

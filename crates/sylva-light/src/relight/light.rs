@@ -7,13 +7,16 @@ use glam::{Affine3A, Vec3};
 use sylva_core::colour::luminance;
 use sylva_geom::{Aabb, Model};
 use sylva_lb::relight::{
-    BasisSet, BasisWeights, CompressedBasis, Placement, ProjectedWeights, RelightError,
+    BasisSet, BasisWeights, CompressedBasis, HaarCoefs, Placement, ProjectedWeights, RelightError,
+    StoredFields,
 };
 use sylva_lb::{Bounds, Dims};
 use sylva_trace::TraceInstance;
 
 use super::global::{GlobalLight, InstanceScale};
 use super::weights::RelitIllumination;
+use crate::device::{DeviceKind, DeviceLight, NoDevice, PackedLight, Packer, SunWords};
+use crate::device::{LIGHT_HEADER, NONE, RELIT_ENTRY, RELIT_KIND, RELIT_TERM};
 use crate::indirect::{ground_shade, GroundIndex, IndirectLight};
 
 /// A model's stored fields: its base solutions, uncompressed or compressed.
@@ -81,6 +84,83 @@ impl StoredBasis {
             (StoredBasis::Compressed(c), ProjectedLight::Compressed(w)) => c.sample_grid(g, w),
             _ => panic!("weights projected for another kind of stored basis"),
         }
+    }
+
+    /// Words [`StoredBasis::pack`] appends at most: f16 values are widened to f32, at most
+    /// 4 × what is stored.
+    fn device_words(&self) -> u64 {
+        let stored = match self {
+            StoredBasis::Full(set) => BasisSet::memory_needed(set.dims),
+            StoredBasis::Compressed(c) => 4 * c.bytes(),
+        };
+        stored / 4 + LIGHT_HEADER as u64
+    }
+
+    /// Appends this model's relit record as shade.wgsl's `relit_sample` reads it
+    /// ([`crate::device`]): the header, then the stored fields as [`StoredBasis::sample_grid`]
+    /// reads them: every field at every site (uncompressed and dense sets), or the Haar
+    /// blocks' starts, counts (4 per word) and coefficients (split: indices 4 per word and
+    /// f32 values; packed: the u16 words 2 per word and a step per field). `placement`: this
+    /// set's, `bounds`: the model's. Returns where it starts.
+    fn pack(&self, p: &mut Packer, placement: &Placement, bounds: Aabb) -> u32 {
+        let dims = self.dims();
+        let mut extra = [0u32; 9];
+        extra[1] = self.field_count() as u32;
+        extra[2] = dims.sites() as u32;
+        let start = p.light_header(
+            dims,
+            (
+                Vec3::from_array(placement.origin()),
+                Vec3::from_array(placement.inv_cell()),
+            ),
+            bounds,
+            extra,
+        );
+        let fields = |p: &mut Packer, fields: &[Vec<f32>]| {
+            for f in fields {
+                p.words.extend(f.iter().map(|v| v.to_bits()));
+            }
+        };
+        let header = |p: &mut Packer, k: usize, v: u32| p.set(start + k as u32, v);
+        match self {
+            StoredBasis::Full(set) => fields(p, set.channels()),
+            StoredBasis::Compressed(c) => match c.stored_fields() {
+                StoredFields::Dense(f) => fields(p, &f),
+                StoredFields::Haar(h) => {
+                    header(p, RELIT_KIND, 1);
+                    header(p, RELIT_KIND + 3, h.blocks[1] as u32);
+                    header(p, RELIT_KIND + 4, h.blocks[2] as u32);
+                    let at = p.at();
+                    header(p, RELIT_KIND + 5, at);
+                    p.words.extend_from_slice(h.starts);
+                    let at = p.at();
+                    header(p, RELIT_KIND + 6, at);
+                    p.bytes(h.counts);
+                    match h.coefs {
+                        HaarCoefs::Split { indices, values } => {
+                            let at = p.at();
+                            header(p, RELIT_KIND + 7, at);
+                            p.bytes(indices);
+                            let at = p.at();
+                            header(p, RELIT_KIND + 8, at);
+                            p.words.extend(values.iter().map(|v| v.to_bits()));
+                        }
+                        HaarCoefs::Packed { words, steps } => {
+                            header(p, RELIT_KIND, 2);
+                            let at = p.at();
+                            header(p, RELIT_KIND + 7, at);
+                            p.words.extend(words.chunks(2).map(|c| {
+                                c[0] as u32 | (c.get(1).copied().unwrap_or(0) as u32) << 16
+                            }));
+                            let at = p.at();
+                            header(p, RELIT_KIND + 8, at);
+                            p.words.extend(steps.iter().map(|v| v.to_bits()));
+                        }
+                    }
+                }
+            },
+        }
+        start
     }
 }
 
@@ -293,19 +373,9 @@ impl RelitLight {
             .map(ProjectedLight::field_terms)
     }
 
-    /// Model `m`'s bounds in model space (where its light ends on the ground).
-    pub fn model_bounds(&self, m: usize) -> Aabb {
-        self.model_bounds[m]
-    }
-
-    /// The ground index (for the GPU frame); `None` when there is none.
-    pub fn ground_index(&self) -> Option<&GroundIndex> {
-        (!self.ground_index.cells.is_empty()).then_some(&self.ground_index)
-    }
-
     /// The relit light's luminance in free space (`1 + ambient`), what the ground's shade is
     /// measured against.
-    pub fn free_space(&self) -> f32 {
+    fn free_space(&self) -> f32 {
         (1.0 + self.illumination.ambient) as f32
     }
 
@@ -343,5 +413,85 @@ impl IndirectLight for RelitLight {
 
     fn memory_bytes(&self) -> u64 {
         self.models.iter().flatten().map(|(b, _)| b.bytes()).sum()
+    }
+
+    fn device(&self) -> Result<&dyn DeviceLight, NoDevice> {
+        Ok(self)
+    }
+}
+
+/// The stored fields as [`RelitLight::sample_instance`] reads them (shade.wgsl:
+/// `relit_sample`): per model its record ([`StoredBasis::pack`]), the ground index; per sun,
+/// each instance's combination of its model's fields.
+impl DeviceLight for RelitLight {
+    fn kind(&self) -> DeviceKind {
+        DeviceKind::Relit
+    }
+
+    fn pool_words(&self) -> u64 {
+        let records: u64 = self
+            .models
+            .iter()
+            .flatten()
+            .map(|(b, _)| b.device_words())
+            .sum();
+        records + self.ground_index.words()
+    }
+
+    fn pack(&self, pool: &mut Vec<u32>) -> PackedLight {
+        let mut p = Packer::new(pool);
+        let records = self
+            .models
+            .iter()
+            .zip(&self.model_bounds)
+            .map(|(b, &bounds)| {
+                b.as_ref()
+                    .map_or(NONE, |(b, placement)| b.pack(&mut p, placement, bounds))
+            })
+            .collect();
+        PackedLight {
+            records,
+            ground: self.ground_index.pack(pool),
+        }
+    }
+
+    /// Per instance an entry (first term, term count, constant per colour), then the terms
+    /// (field, weight per colour), for the current sun. Instances without a basis have no
+    /// terms.
+    fn sun_words(&self) -> SunWords {
+        let n = self.instances.len();
+        let mut words = vec![0u32; RELIT_ENTRY * n];
+        for i in 0..n {
+            let Some((constant, terms)) = self.instance_terms(i) else {
+                continue;
+            };
+            let first = words.len() as u32;
+            for (field, w) in &terms {
+                words.push(*field);
+                words.extend(w.map(f32::to_bits));
+            }
+            let e = RELIT_ENTRY * i;
+            words[e] = first;
+            words[e + 1] = terms.len() as u32;
+            words[e + 2..e + 5].copy_from_slice(&constant.map(f32::to_bits));
+        }
+        SunWords {
+            words,
+            free_space: self.free_space(),
+        }
+    }
+
+    /// Every field of every instance's model.
+    fn sun_capacity(&self) -> usize {
+        self.instances
+            .iter()
+            .map(|inst| {
+                RELIT_ENTRY
+                    + self.models[inst.model as usize]
+                        .as_ref()
+                        .map_or(0, |(b, _)| RELIT_TERM * b.field_count())
+            })
+            .sum::<usize>()
+            .max(RELIT_ENTRY)
     }
 }

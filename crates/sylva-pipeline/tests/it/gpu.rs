@@ -9,6 +9,7 @@ use std::path::Path;
 
 use sylva_lb::relight::{Codec, CompressTarget, Precision};
 use sylva_lb::CpuSolver;
+use sylva_light::device::DeviceKind;
 use sylva_light::{Light, Silent, SunWeights};
 use sylva_pipeline::{
     load_scene, tone_map_modes, BasisUse, LbPlan, PrepareOptions, PreparedScene, RelightPlan,
@@ -192,6 +193,8 @@ fn gpu_shading_matches_the_cpu_per_pixel() {
     for light in [Light::Paper, Light::Physical] {
         let cpu = prepare_with(dir.path(), None, false, None, light);
         let gpu = prepare_with(dir.path(), Some(&ctx), true, None, light);
+        // The kernel reads the per-sun grids through their device side.
+        assert_eq!(gpu.indirect().device().unwrap().kind(), DeviceKind::Grids);
         frames_agree(&ctx, &cpu, &gpu, (1e-5, 1e-3), &format!("{light:?}"));
     }
     // The physical light's forest grid: each instance's weighed parts, on the GPU as on the
@@ -344,6 +347,7 @@ fn relit_light_is_shaded_on_the_gpu_as_on_the_cpu() {
     assert_eq!(gpu.tracer.device(), "gpu");
     assert!(gpu.relit.is_some() && gpu.gpu_frame.is_some());
     assert!(gpu.gpu_shading_note().is_none());
+    assert_eq!(gpu.indirect().device().unwrap().kind(), DeviceKind::Relit);
     let tight = (1e-5, 1e-3);
     for sun in [
         glam::Vec3::new(0.3, 0.8, -0.2),
@@ -412,5 +416,44 @@ fn every_stored_form_of_the_bases_is_read_on_the_gpu_as_on_the_cpu() {
         cpu.set_sun(sun).unwrap();
         gpu.set_sun(sun).unwrap();
         frames_agree(&ctx, &cpu, &gpu, (1e-5, 1e-3), &format!("{target:?}"));
+    }
+}
+
+#[test]
+fn media_say_why_they_are_shaded_on_the_cpu() {
+    // The media have no device side (the volume tracer is the CPU's): the pipeline's note is
+    // their answer, and the GPU still traces the rays, giving the CPU's frame.
+    let Some(ctx) = context() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("cloudy.toml");
+    let cloud = "\n[[media]]\nname = \"puff\"\ngenerator = \"cumulus\"\ngrid = [16, 16, 16]\n\
+                 size = 940.0\nposition = [10.0, 0.0, 300.0]\n";
+    let text = SCENE.replace("[ground]", &format!("{cloud}\n[ground]"));
+    std::fs::write(&path, text).unwrap();
+    let prepare = |gpu: Option<&GpuContext>| {
+        let scene = load_scene(path.to_str().unwrap(), None).unwrap();
+        let opts = PrepareOptions {
+            trace_gpu: gpu,
+            shade_on_gpu: true,
+            ..PrepareOptions::default()
+        };
+        PreparedScene::new(scene, &opts, &Silent).unwrap()
+    };
+    let (cpu, gpu) = (prepare(None), prepare(Some(&ctx)));
+    assert!(!gpu.media.is_empty() && gpu.gpu_frame.is_none());
+    let why = gpu.media.device().unwrap_err();
+    assert_eq!(gpu.gpu_shading_note(), Some(why.0));
+    assert!(why.0.contains("media"), "{why}");
+    // The light alone has a device side; without a GPU there is no note.
+    assert!(gpu.indirect().device().is_ok());
+    assert_eq!(cpu.gpu_shading_note(), None);
+    let cam = cpu.camera(64, 48);
+    let a = cpu.render(&cpu.settings(cam, 1, 1), &Silent).unwrap();
+    let b = gpu.render(&gpu.settings(cam, 1, 1), &Silent).unwrap();
+    if ctx.is_software() {
+        assert!(
+            a.pixels == b.pixels,
+            "GPU rays, CPU shading: the CPU's frame"
+        );
     }
 }

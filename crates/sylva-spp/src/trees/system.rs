@@ -659,4 +659,11 @@ impl sylva_light::IndirectLight for SppLight<'_> {
     fn memory_bytes(&self) -> u64 {
         self.system.memory_bytes()
     }
+
+    fn device(&self) -> Result<&dyn sylva_light::DeviceLight, sylva_light::NoDevice> {
+        Err(sylva_light::NoDevice(
+            "the plane-parallel light (deep opacity maps, eq. 28's diffuse fluxes) has no GPU \
+             kernel; the CPU shades it, the GPU traces the rays",
+        ))
+    }
 }
