@@ -94,33 +94,14 @@ const WHAT: &str = "sylva grid file";
 
 #[derive(Debug, Error)]
 pub enum GridFileError {
-    #[error("cannot read {path}: {source}")]
+    /// What the checked container reports: the file cannot be read, is not a grid file, has
+    /// another version, is truncated or corrupted.
+    #[error(transparent)]
+    Container(#[from] ContainerError),
+    #[error("cannot write {path}: {source}")]
     Io {
         path: PathBuf,
         source: std::io::Error,
-    },
-    /// Not a regular file (a directory, FIFO or device).
-    #[error(transparent)]
-    Input(sylva_core::InputError),
-    #[error("{path} is not a sylva grid file (bad magic; expected it to start with 'SYLVAGRD')")]
-    Magic { path: PathBuf },
-    #[error("{path} has grid file format version {found}; this sylva reads version {VERSION}")]
-    Version { path: PathBuf, found: u32 },
-    #[error("{path} is truncated: the header says {expected} bytes, the file has {found}")]
-    Truncated {
-        path: PathBuf,
-        expected: u64,
-        found: u64,
-    },
-    #[error("{path} has {extra} unexpected bytes after the payload")]
-    Trailing { path: PathBuf, extra: u64 },
-    #[error(
-        "{path} is corrupted: checksum {found:08x} does not match the header's {expected:08x}"
-    )]
-    Checksum {
-        path: PathBuf,
-        expected: u32,
-        found: u32,
     },
     #[error("{path}: invalid header: {what}")]
     Header { path: PathBuf, what: String },
@@ -357,7 +338,7 @@ impl GridFile {
 
     /// Reads and fully validates a grid file.
     pub fn read(path: &Path) -> Result<GridFile, GridFileError> {
-        let c = read_container(path, MAGIC, VERSION, WHAT).map_err(|e| container_error(path, e))?;
+        let c = read_container(path, MAGIC, VERSION, WHAT)?;
         let h = grid_header(path, &c.payload, c.payload.len() as u64)?;
         // Decoding f16 doubles the payload; f32 copies it.
         sylva_core::check_memory(
@@ -409,38 +390,6 @@ fn bytemuck_f32(v: &[f32]) -> &[u8] {
     }
     #[cfg(not(target_endian = "little"))]
     compile_error!("grid files assume a little-endian target");
-}
-
-/// The grid's fields of a container error.
-fn container_error(path: &Path, e: ContainerError) -> GridFileError {
-    let path = path.to_path_buf();
-    match e {
-        ContainerError::Io { path, source } => GridFileError::Io { path, source },
-        ContainerError::Input(e) => GridFileError::Input(e),
-        ContainerError::Magic { path, .. } => GridFileError::Magic { path },
-        ContainerError::Version { path, found, .. } => GridFileError::Version { path, found },
-        ContainerError::Truncated {
-            path,
-            expected,
-            found,
-        } => GridFileError::Truncated {
-            path,
-            expected,
-            found,
-        },
-        ContainerError::Trailing { path, extra } => GridFileError::Trailing { path, extra },
-        ContainerError::Checksum {
-            path,
-            expected,
-            found,
-        } => GridFileError::Checksum {
-            path,
-            expected,
-            found,
-        },
-        ContainerError::Header { path, what } => GridFileError::Header { path, what },
-        ContainerError::Memory(source) => GridFileError::Memory { path, source },
-    }
 }
 
 /// The grid's header at the start of a payload of `payload_len` bytes (`head` holds at least
@@ -513,8 +462,7 @@ fn grid_header(path: &Path, head: &[u8], payload_len: u64) -> Result<GridFields,
 /// Reads only the header and metadata (for `sylva lb info`); the checksum is verified too,
 /// which reads the payload once without keeping it.
 pub fn read_header_verified(path: &Path) -> Result<GridHeader, GridFileError> {
-    let c = read_container_head(path, MAGIC, VERSION, WHAT, GRID_HEADER_LEN)
-        .map_err(|e| container_error(path, e))?;
+    let c = read_container_head(path, MAGIC, VERSION, WHAT, GRID_HEADER_LEN)?;
     let h = grid_header(path, &c.head, c.payload_bytes)?;
     Ok(GridHeader {
         kind: h.kind,
@@ -591,7 +539,9 @@ mod tests {
             assert!(
                 matches!(
                     e,
-                    GridFileError::Truncated { .. } | GridFileError::Magic { .. }
+                    GridFileError::Container(
+                        ContainerError::Truncated { .. } | ContainerError::Magic { .. }
+                    )
                 ),
                 "cut {cut}: {e}"
             );
@@ -602,10 +552,13 @@ mod tests {
         flipped[last] ^= 0x10;
         std::fs::write(&p, &flipped).unwrap();
         let e = GridFile::read(&p).unwrap_err();
-        assert!(matches!(e, GridFileError::Checksum { .. }), "{e}");
+        assert!(
+            matches!(e, GridFileError::Container(ContainerError::Checksum { .. })),
+            "{e}"
+        );
         assert!(matches!(
             read_header_verified(&p).unwrap_err(),
-            GridFileError::Checksum { .. }
+            GridFileError::Container(ContainerError::Checksum { .. })
         ));
 
         // Another version (1: this format's own framing before the checked container).
@@ -615,7 +568,7 @@ mod tests {
             std::fs::write(&p, &other).unwrap();
             let e = GridFile::read(&p).unwrap_err();
             assert!(
-                matches!(e, GridFileError::Version { found, .. } if found == v as u32),
+                matches!(e, GridFileError::Container(ContainerError::Version { found, .. }) if found == v as u32),
                 "{e}"
             );
         }
@@ -651,14 +604,14 @@ mod tests {
         std::fs::write(&p, b"P6\n12 12\n255\n").unwrap();
         assert!(matches!(
             GridFile::read(&p).unwrap_err(),
-            GridFileError::Magic { .. }
+            GridFileError::Container(ContainerError::Magic { .. })
         ));
         let mut trailing = bytes.clone();
         trailing.push(0);
         std::fs::write(&p, &trailing).unwrap();
         assert!(matches!(
             GridFile::read(&p).unwrap_err(),
-            GridFileError::Trailing { extra: 1, .. }
+            GridFileError::Container(ContainerError::Trailing { extra: 1, .. })
         ));
     }
 
