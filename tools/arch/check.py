@@ -31,11 +31,8 @@ ALLOWED = {
                      "sylva-trace", "sylva-trace-gpu", "sylva-wgpu"},
     "sylva-spp": {"sylva-core", "sylva-geom", "sylva-grid", "sylva-lb", "sylva-voxel",
                   "sylva-trace", "sylva-light"},
-    # Until the pipeline's steps run through sylva_core::jobs::Runner everywhere, sylva-mpi
-    # still holds their distributed versions (lighting, forest parts, bases, frame split);
-    # then this row shrinks to {"sylva-core"}.
-    "sylva-mpi": {"sylva-core", "sylva-geom", "sylva-lb", "sylva-light", "sylva-pipeline",
-                  "sylva-render", "sylva-trace"},
+    # Transport and queue only: what runs on the ranks is the pipeline's (jobs of a Runner).
+    "sylva-mpi": {"sylva-core"},
     "sylva-pipeline": {"sylva-core", "sylva-geom", "sylva-grid", "sylva-lb", "sylva-voxel",
                        "sylva-scene", "sylva-trace", "sylva-trace-gpu", "sylva-wgpu",
                        "sylva-light", "sylva-render", "sylva-spp"},

@@ -74,18 +74,20 @@ fn distributed(command: &Command) -> Result<(), &'static str> {
     }
 }
 
-fn run(command: Command, comm: Option<&dyn sylva_mpi::Comm>) -> anyhow::Result<()> {
+/// Runs `command`; its LB solves and frames go through `runner` (this process, or every
+/// rank of an MPI job).
+fn run(command: Command, runner: &dyn sylva_core::jobs::Runner) -> anyhow::Result<()> {
     match command {
         Command::Lb(a) => commands::lb::run(a),
         Command::Voxelize(a) => commands::voxelize::run(a),
         Command::Spp(a) => commands::spp::run(a),
         Command::Scene(a) => commands::scene::run(a),
         Command::Species(a) => commands::species::run(a),
-        Command::Bench(a) => commands::bench::run(a, comm),
+        Command::Bench(a) => commands::bench::run(a, runner),
         Command::Export(a) => commands::export::run(a),
-        Command::Render(a) => commands::render::run(a, comm),
-        Command::Basis(a) => commands::basis::run(a, comm),
-        Command::Relight(a) => commands::relight::run(a, comm),
+        Command::Render(a) => commands::render::run(a, runner),
+        Command::Basis(a) => commands::basis::run(a, runner),
+        Command::Relight(a) => commands::relight::run(a, runner),
     }
 }
 
@@ -145,7 +147,7 @@ fn main() -> std::process::ExitCode {
     if ranks.is_some() {
         return run_mpi(cli.command);
     }
-    commands::finish(run(cli.command, None))
+    commands::finish(run(cli.command, &sylva_core::jobs::Local))
 }
 
 /// Runs a command as one MPI rank: a failure on any rank is printed there and ends the
@@ -157,7 +159,7 @@ fn run_mpi(command: Command) -> std::process::ExitCode {
         Ok(m) => m,
         Err(e) => return commands::finish(Err(anyhow::Error::new(e).context("starting MPI"))),
     };
-    match run(command, Some(&mpi)) {
+    match run(command, &sylva_mpi::QueueRunner::new(&mpi)) {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
             let (rank, size) = (mpi.rank(), mpi.size());

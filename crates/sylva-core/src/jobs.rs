@@ -24,6 +24,12 @@ pub enum JobError {
     Transport(String),
 }
 
+impl From<crate::wire::WireError> for JobError {
+    fn from(e: crate::wire::WireError) -> JobError {
+        JobError::Transport(e.0)
+    }
+}
+
 /// One job's result as the root receives it: the bytes, which process ran it and how long
 /// it took there.
 #[derive(Debug, Clone, PartialEq)]
@@ -118,38 +124,43 @@ impl Runner for Local {
     }
 }
 
-/// Runs `f` on the root, then on the other processes (which may then read what the root
-/// wrote, such as a shared cache): the same value everywhere when `f` is deterministic. The
-/// root passes the barrier whatever `f` returned, so an error there never leaves the others
-/// waiting.
-pub fn root_first<T>(runner: &dyn Runner, f: impl FnOnce() -> T) -> Result<T, JobError> {
+/// The root's `value()` on every process: computed at the root, then encoded, shared and
+/// decoded on the others (in one process, just computed). A failure at the root reaches the
+/// others as [`JobError::Job`] naming `what`, so none is left waiting for data that will not
+/// come.
+pub fn from_root<T, E>(
+    runner: &dyn Runner,
+    what: &str,
+    value: impl FnOnce() -> Result<T, E>,
+    encode: impl FnOnce(&T) -> Vec<u8>,
+    decode: impl FnOnce(&[u8]) -> Result<T, E>,
+) -> Result<T, E>
+where
+    E: From<JobError> + std::fmt::Display,
+{
+    if runner.processes() == 1 {
+        return value();
+    }
     if runner.is_root() {
-        let value = f();
-        runner.share(&mut Vec::new())?;
-        Ok(value)
-    } else {
-        runner.share(&mut Vec::new())?;
-        Ok(f())
+        let value = value();
+        let mut data = match &value {
+            Ok(v) => [&[1u8][..], &encode(v)].concat(),
+            Err(e) => [&[0u8][..], e.to_string().as_bytes()].concat(),
+        };
+        runner.share(&mut data)?;
+        return value;
     }
-}
-
-/// `f32`s as little-endian bytes (a job's grid values).
-pub fn f32s_to_bytes(values: &[f32]) -> Vec<u8> {
-    values.iter().flat_map(|v| v.to_le_bytes()).collect()
-}
-
-/// [`f32s_to_bytes`] back; an error naming `what` unless there are exactly `count` values.
-pub fn f32s_from_bytes(bytes: &[u8], count: usize, what: &str) -> Result<Vec<f32>, JobError> {
-    if bytes.len() != 4 * count {
-        return Err(JobError::Transport(format!(
-            "{what}: {} bytes, expected {count} f32 values",
-            bytes.len()
-        )));
+    let mut data = Vec::new();
+    runner.share(&mut data)?;
+    match data.split_first() {
+        Some((1, rest)) => decode(rest),
+        Some((0, message)) => Err(JobError::Job(format!(
+            "the root process failed making {what}: {}",
+            String::from_utf8_lossy(message)
+        ))
+        .into()),
+        _ => Err(JobError::Transport(format!("{what}: an empty message from the root")).into()),
     }
-    Ok(bytes
-        .chunks_exact(4)
-        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-        .collect())
 }
 
 #[cfg(test)]
@@ -202,10 +213,14 @@ mod tests {
     }
 
     #[test]
-    fn f32_bytes_round_trip_and_check_their_length() {
-        let v = [0.0f32, -1.5, f32::MAX, 1e-30];
-        assert_eq!(f32s_from_bytes(&f32s_to_bytes(&v), 4, "grid").unwrap(), v);
-        let err = f32s_from_bytes(&[0; 7], 2, "grid of rose").unwrap_err();
-        assert!(err.to_string().contains("grid of rose: 7 bytes"), "{err}");
+    fn from_root_in_one_process_is_the_value_itself() {
+        let got: Result<u32, JobError> = from_root(
+            &Local,
+            "a count",
+            || Ok(3),
+            |_| panic!("nothing is encoded in one process"),
+            |_| panic!("nothing is decoded in one process"),
+        );
+        assert_eq!(got.unwrap(), 3);
     }
 }

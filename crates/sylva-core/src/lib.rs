@@ -37,6 +37,7 @@ mod memory;
 mod names;
 mod rng;
 mod sun;
+pub mod wire;
 
 pub use atomic::{atomic_write, atomic_write_with, OutputError, OutputSet};
 pub use colour::{blackbody_rgb, try_blackbody_rgb, SUN_TEMPERATURE_K};

@@ -1372,40 +1372,30 @@ pub fn model_lighting_parts_on(
 ) -> Result<(ModelLighting, LightingReport, DensityGrid, MediumParams), LightingError> {
     let t0 = Instant::now();
     let plan = PartsPlan::new(model, illum, opts, solver, own, shade)?;
-    let mut grids = Vec::with_capacity(PARTS.len());
-    let mut report_source = LightingSource::Cached;
-    let mut path = None;
-    let mut cache_warning = None;
-    for k in 0..PARTS.len() {
-        let CachedGrid {
-            grid,
-            source,
-            path: p,
-            cache_warning: w,
-        } = plan.cached(k, solver, || plan.solve(k, solver, progress))?;
-        cache_warning = cache_warning.or(w);
-        // Reported as one: a bad entry's reason first, else computed if any part was.
-        report_source = match (report_source, source) {
-            (r @ LightingSource::Recomputed { .. }, _) => r,
-            (_, r @ LightingSource::Recomputed { .. }) => r,
-            (LightingSource::Computed, _) | (_, LightingSource::Computed) => {
-                LightingSource::Computed
-            }
-            _ => LightingSource::Cached,
-        };
-        path = path.or(p);
-        grids.push(grid);
-    }
+    let parts = plan.cached_parts(solver, &mut |k| plan.solve(k, solver, progress))?;
     let dims = plan.dims();
-    let (lighting, own, medium) = plan.assemble(&grids);
+    let (lighting, own, medium) = plan.assemble(&parts.grids);
     let report = LightingReport {
-        source: report_source,
+        source: parts.source,
         seconds: t0.elapsed().as_secs_f64(),
-        path,
+        path: parts.path,
         dims,
-        cache_warning,
+        cache_warning: parts.cache_warning,
     };
     Ok((lighting, report, own, medium))
+}
+
+/// A model's four light parts ([`PARTS`] order) gathered through the cache
+/// ([`PartsPlan::cached_parts`]), with what its report says of them.
+#[derive(Debug)]
+pub struct CachedParts {
+    pub grids: Vec<LightingGrid>,
+    /// A bad entry's reason first, else computed if any part was, else cached.
+    pub source: LightingSource,
+    /// The first part's cache entry; `None` without a cache.
+    pub path: Option<PathBuf>,
+    /// Why a solved part could not be stored.
+    pub cache_warning: Option<String>,
 }
 
 /// A model's density with its neighbours' foliage inside its instances' boxes added
@@ -1428,8 +1418,8 @@ pub struct ShadedDensity {
 pub const PARTS: [&str; 4] = ["sun", "sky", "ground", "skytop"];
 
 /// One model's physical light parts as separate solves, for whoever schedules them:
-/// [`model_lighting_parts_on`] runs them in order; `sylva-mpi` hands them to different
-/// processes and caches them at rank 0. A part solved alone is bit for bit the part of the
+/// [`model_lighting_parts_on`] runs them in order; `sylva-pipeline`'s forest hands them to
+/// a job runner (other processes, under MPI) and caches them at the root. A part solved alone is bit for bit the part of the
 /// one-process solve.
 pub struct PartsPlan<'a> {
     model: &'a Model,
@@ -1630,6 +1620,41 @@ impl<'a> PartsPlan<'a> {
             metadata,
             solve,
         )
+    }
+
+    /// Every part from the cache, else `solve(k)`d and (with a cache) stored: the one-process
+    /// solves, or the results of jobs run elsewhere.
+    pub fn cached_parts(
+        &self,
+        solver: &dyn LbSolver,
+        solve: &mut dyn FnMut(usize) -> Result<LightingGrid, LightingError>,
+    ) -> Result<CachedParts, LightingError> {
+        let mut parts = CachedParts {
+            grids: Vec::with_capacity(PARTS.len()),
+            source: LightingSource::Cached,
+            path: None,
+            cache_warning: None,
+        };
+        for k in 0..PARTS.len() {
+            let CachedGrid {
+                grid,
+                source,
+                path,
+                cache_warning,
+            } = self.cached(k, solver, || solve(k))?;
+            parts.cache_warning = parts.cache_warning.or(cache_warning);
+            parts.source = match (parts.source, source) {
+                (r @ LightingSource::Recomputed { .. }, _) => r,
+                (_, r @ LightingSource::Recomputed { .. }) => r,
+                (LightingSource::Computed, _) | (_, LightingSource::Computed) => {
+                    LightingSource::Computed
+                }
+                _ => LightingSource::Cached,
+            };
+            parts.path = parts.path.or(path);
+            parts.grids.push(grid);
+        }
+        Ok(parts)
     }
 
     /// Whether the cache holds a valid entry of part `k`.

@@ -1,7 +1,7 @@
 //! What the distributed work needs from a transport ([`Comm`]): ranks, tagged point-to-point
 //! messages of bytes, a broadcast and an abort. MPI provides it (`crate::mpi`, feature `mpi`);
-//! [`LocalComm`] provides it between threads of one process, so the queue, the frame split
-//! and the distributed lighting are tested without MPI.
+//! [`LocalComm`] provides it between threads of one process, so the queue and the pipeline's
+//! work across processes are tested without MPI.
 
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -178,114 +178,12 @@ impl Comm for LocalComm {
     }
 }
 
-/// Bytes in, bytes out: the little-endian encoding of this crate's messages.
-#[derive(Debug, Default)]
-pub struct Writer(pub Vec<u8>);
+pub use sylva_core::wire::{Reader, Writer};
 
-impl Writer {
-    pub fn u64(&mut self, v: u64) -> &mut Self {
-        self.0.extend_from_slice(&v.to_le_bytes());
-        self
+impl From<sylva_core::wire::WireError> for CommError {
+    fn from(e: sylva_core::wire::WireError) -> CommError {
+        CommError::Protocol(e.0)
     }
-
-    pub fn f64(&mut self, v: f64) -> &mut Self {
-        self.0.extend_from_slice(&v.to_le_bytes());
-        self
-    }
-
-    pub fn f32s(&mut self, v: &[f32]) -> &mut Self {
-        self.0.reserve(4 * v.len());
-        for x in v {
-            self.0.extend_from_slice(&x.to_le_bytes());
-        }
-        self
-    }
-
-    pub fn bytes(&mut self, v: &[u8]) -> &mut Self {
-        self.u64(v.len() as u64);
-        self.0.extend_from_slice(v);
-        self
-    }
-}
-
-/// Reads what a [`Writer`] wrote; running short is a [`CommError::Protocol`] naming `what`.
-pub struct Reader<'a> {
-    data: &'a [u8],
-    what: &'static str,
-}
-
-impl<'a> Reader<'a> {
-    pub fn new(data: &'a [u8], what: &'static str) -> Reader<'a> {
-        Reader { data, what }
-    }
-
-    fn take(&mut self, n: usize) -> Result<&'a [u8], CommError> {
-        if self.data.len() < n {
-            return Err(CommError::Protocol(format!(
-                "{}: {} bytes short",
-                self.what,
-                n - self.data.len()
-            )));
-        }
-        let (head, rest) = self.data.split_at(n);
-        self.data = rest;
-        Ok(head)
-    }
-
-    pub fn u64(&mut self) -> Result<u64, CommError> {
-        Ok(u64::from_le_bytes(self.take(8)?.try_into().expect("8")))
-    }
-
-    pub fn f64(&mut self) -> Result<f64, CommError> {
-        Ok(f64::from_le_bytes(self.take(8)?.try_into().expect("8")))
-    }
-
-    /// `n` f32 values.
-    pub fn f32s(&mut self, n: usize) -> Result<Vec<f32>, CommError> {
-        let b = self.take(
-            n.checked_mul(4)
-                .ok_or_else(|| CommError::Protocol(format!("{}: {n} values", self.what)))?,
-        )?;
-        Ok(b.chunks_exact(4)
-            .map(|c| f32::from_le_bytes(c.try_into().expect("4")))
-            .collect())
-    }
-
-    pub fn bytes(&mut self) -> Result<&'a [u8], CommError> {
-        let n = self.u64()?;
-        let n = usize::try_from(n)
-            .map_err(|_| CommError::Protocol(format!("{}: {n} bytes", self.what)))?;
-        self.take(n)
-    }
-
-    /// Fails unless everything was read.
-    pub fn end(&self) -> Result<(), CommError> {
-        if self.data.is_empty() {
-            Ok(())
-        } else {
-            Err(CommError::Protocol(format!(
-                "{}: {} bytes too many",
-                self.what,
-                self.data.len()
-            )))
-        }
-    }
-}
-
-/// Every rank checks that it agrees with rank 0 on `what` (a fingerprint of its inputs):
-/// ranks started with different arguments, scenes or builds would otherwise render different
-/// pictures into one image. `Err` on the ranks that differ, naming both values.
-pub fn agree(comm: &dyn Comm, what: &str, mine: &str) -> Result<(), crate::DistError> {
-    let mut data = mine.as_bytes().to_vec();
-    comm.broadcast(0, &mut data)?;
-    let root = String::from_utf8_lossy(&data);
-    if root != mine {
-        return Err(crate::DistError::Disagree(format!(
-            "rank {} has {what} {mine}, rank 0 has {root}",
-            comm.rank()
-        )));
-    }
-    Ok(())
 }
 
 #[cfg(test)]
@@ -311,7 +209,7 @@ mod tests {
     }
 
     #[test]
-    fn broadcast_and_agreement() {
+    fn broadcast_reaches_every_rank() {
         let g = LocalComm::group(3);
         std::thread::scope(|s| {
             for c in &g {
@@ -319,15 +217,6 @@ mod tests {
                     let mut d = if c.rank() == 0 { vec![9, 8] } else { vec![] };
                     c.broadcast(0, &mut d).unwrap();
                     assert_eq!(d, vec![9, 8]);
-                    let mine = if c.rank() == 2 { "b" } else { "a" };
-                    let r = agree(c, "scene", mine);
-                    assert_eq!(r.is_err(), c.rank() == 2, "rank {}", c.rank());
-                    if let Err(e) = r {
-                        assert_eq!(
-                            e.to_string(),
-                            "ranks disagree: rank 2 has scene b, rank 0 has a"
-                        );
-                    }
                 });
             }
         });
@@ -345,23 +234,16 @@ mod tests {
     }
 
     #[test]
-    fn encoding_round_trips_and_short_messages_are_errors() {
+    fn a_short_message_is_a_protocol_error_naming_it() {
         let mut w = Writer::default();
-        w.u64(7).f64(-1.5).f32s(&[1.0, f32::NAN]).bytes(b"xy");
-        let mut r = Reader::new(&w.0, "test message");
-        assert_eq!(r.u64().unwrap(), 7);
-        assert_eq!(r.f64().unwrap(), -1.5);
-        let f = r.f32s(2).unwrap();
-        assert!(f[0] == 1.0 && f[1].is_nan());
-        assert_eq!(r.bytes().unwrap(), b"xy");
-        r.end().unwrap();
-        let e = Reader::new(&w.0[..5], "test message").u64().unwrap_err();
+        w.u64(7);
+        let e: CommError = Reader::new(&w.0[..5], "test message")
+            .u64()
+            .unwrap_err()
+            .into();
         assert_eq!(
             e.to_string(),
             "unexpected message: test message: 3 bytes short"
         );
-        let mut r = Reader::new(&w.0, "test message");
-        r.u64().unwrap();
-        assert!(r.end().is_err());
     }
 }

@@ -90,6 +90,19 @@ pub fn run_queue(
     on_done: &(dyn Fn(usize) + Sync),
 ) -> Result<Option<QueueOutcome>, DistError> {
     fail_if_asked(comm.rank())?;
+    // Every queue starts together, with rank 0's job count: a rank done with the previous
+    // queue could otherwise ask for work of this one while rank 0 still serves the previous
+    // (whose server would take the request as its own and release the rank from this one).
+    let mut count = (jobs as u64).to_le_bytes().to_vec();
+    comm.broadcast(0, &mut count)?;
+    if count != (jobs as u64).to_le_bytes() {
+        return Err(CommError::Protocol(format!(
+            "a work queue of {jobs} jobs on rank {}, of {} on rank 0",
+            comm.rank(),
+            Reader::new(&count, "job count").u64()?
+        ))
+        .into());
+    }
     if comm.rank() != 0 {
         work(comm, run)?;
         return Ok(None);
@@ -300,6 +313,69 @@ mod tests {
                 assert!(per_rank.iter().all(|p| p.0 > 0), "{per_rank:?}");
             }
         }
+    }
+
+    /// Queues one after the other with nothing between them (the pipeline's per-model rounds):
+    /// a rank done with one queue must not be released from the next by the first's server.
+    #[test]
+    fn back_to_back_queues_each_run_every_job() {
+        let group = LocalComm::group(3);
+        let rounds: Vec<Vec<Option<usize>>> = std::thread::scope(|s| {
+            let handles: Vec<_> = group
+                .iter()
+                .map(|c| {
+                    s.spawn(move || {
+                        (0..20)
+                            .map(|round| {
+                                let jobs = 10 + round % 3;
+                                // Ranks 0 and 2 slow: rank 1 is done with a queue while
+                                // rank 0 still serves it.
+                                let mut job = |j: usize| {
+                                    if c.rank() != 1 {
+                                        std::thread::sleep(std::time::Duration::from_millis(1));
+                                    }
+                                    Ok(vec![j as u8])
+                                };
+                                run_queue(c, jobs, &mut job, &|_| {})
+                                    .unwrap()
+                                    .map(|o| o.results.len())
+                            })
+                            .collect()
+                    })
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        let want: Vec<Option<usize>> = (0..20).map(|round| Some(10 + round % 3)).collect();
+        assert_eq!(rounds[0], want);
+        assert!(rounds[1..].iter().flatten().all(Option::is_none));
+    }
+
+    #[test]
+    fn ranks_with_different_job_counts_are_refused() {
+        let group = LocalComm::group(2);
+        std::thread::scope(|s| {
+            let handles: Vec<_> = group
+                .iter()
+                .map(|c| {
+                    s.spawn(move || {
+                        let r = run_queue(c, 3 + c.rank(), &mut |_| Ok(Vec::new()), &|_| {});
+                        match (c.rank(), r) {
+                            (1, Err(e)) => {
+                                let e = e.to_string();
+                                assert!(e.contains("4 jobs on rank 1, of 3 on rank 0"), "{e}");
+                                c.abort(1)
+                            }
+                            // Rank 0 waits for rank 1's requests until the abort.
+                            (0, Err(DistError::Comm(CommError::Aborted))) => {}
+                            (rank, r) => panic!("rank {rank}: {:?}", r.map(|_| ())),
+                        }
+                    })
+                })
+                .collect();
+            let joined: Vec<bool> = handles.into_iter().map(|h| h.join().is_ok()).collect();
+            assert_eq!(joined, [true, false], "rank 1 aborted, rank 0 was released");
+        });
     }
 
     #[test]

@@ -76,7 +76,7 @@ impl Runner for QueueRunner<'_> {
 mod tests {
     use super::*;
     use crate::LocalComm;
-    use sylva_core::jobs::{root_first, Local};
+    use sylva_core::jobs::{from_root, Local};
 
     /// The same jobs through one process and through 3 ranks: the same results at the root.
     #[test]
@@ -121,9 +121,23 @@ mod tests {
                         let r = QueueRunner::new(c);
                         let mut data = if r.is_root() { vec![7, 8] } else { Vec::new() };
                         r.share(&mut data).unwrap();
-                        let first = root_first(&r, || r.index()).unwrap();
+                        // The root's value everywhere; a failure at the root reaches the others.
+                        let count = |fail: bool| {
+                            from_root(
+                                &r,
+                                "a count",
+                                || match fail {
+                                    true => Err(JobError::Job("no scene".into())),
+                                    false => Ok(41 + r.index() as u64),
+                                },
+                                |v| v.to_le_bytes().to_vec(),
+                                |d| Ok(u64::from_le_bytes(d.try_into().unwrap())),
+                            )
+                        };
+                        let first = count(false).unwrap();
+                        let failed = count(r.is_root()).map_err(|e| e.to_string());
                         let agree = r.agree("the scene", &format!("scene {}", r.index()));
-                        (data, first, agree.map_err(|e| e.to_string()))
+                        (data, first, agree.map_err(|e| e.to_string()), failed)
                     })
                 })
                 .collect();
@@ -131,7 +145,12 @@ mod tests {
         });
         assert_eq!(out[0].0, [7, 8]);
         assert_eq!(out[1].0, [7, 8]);
-        assert_eq!((out[0].1, out[1].1), (0, 1));
+        assert_eq!((out[0].1, out[1].1), (41, 41));
+        assert_eq!(out[0].3, Err("no scene".to_string()));
+        assert_eq!(
+            out[1].3,
+            Err("the root process failed making a count: no scene".to_string())
+        );
         assert!(out[0].2.is_ok());
         let e = out[1].2.clone().unwrap_err();
         assert!(

@@ -41,7 +41,18 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod bases;
 pub mod bench;
+pub mod forest;
+pub mod frame;
+mod jobs;
+pub mod models;
+
+pub use bases::precompute_relighting;
+pub use forest::{forest_densities, light_forest, uses_forest, ForestDensities};
+pub use frame::{RankWork, SplitFrame, UnitLayout};
+pub use models::light_models;
+pub use sylva_core::jobs::{Local, Runner};
 
 use std::path::{Path, PathBuf};
 
@@ -49,7 +60,7 @@ use glam::Vec3;
 use serde::Serialize;
 use sylva_core::cache::{Cache, CacheKey, CacheKind};
 use sylva_core::{MemoryError, Sun};
-use sylva_geom::{Camera, Model, Scene};
+use sylva_geom::{Camera, Scene};
 use sylva_lb::{LbSolver, ParamError, Preset};
 use sylva_scene::SceneError;
 use sylva_trace::{KdTracer, RayQuery, SceneAccel, TraceError, TraversalConfig};
@@ -57,19 +68,17 @@ use sylva_trace_gpu::{GpuTracer, TraceGpuError};
 use sylva_wgpu::GpuContext;
 
 use sylva_lb::relight::{CompressTarget, RelightError};
-use sylva_light::forest::{neighbour_shade, ForestInstance, ForestLight};
+use sylva_light::forest::ForestLight;
 use sylva_light::indirect::{IndirectLight, ModelGridLight};
 use sylva_light::lighting::{
-    model_density, model_lighting, model_lighting_parts_on, physical_environment, preset_medium,
-    Illumination, Light, LightingError, LightingOptions, LightingReport, LightingSource, MediumKey,
-    ModelLighting, ModelMediumKey, ShadedDensity, CACHE_VERSION, PAPER_OCCUPANCY,
+    preset_medium, Illumination, Light, LightingError, LightingOptions, LightingSource, MediumKey,
+    ModelLighting, ModelMediumKey, CACHE_VERSION, PAPER_OCCUPANCY,
 };
 use sylva_light::media::{prepare_medium, Media, MediumSolve};
 pub use sylva_light::progress::{Progress, Silent};
 use sylva_light::relight::{
-    model_basis, BasisCacheOptions, BasisPlan, GlobalGridOptions, GlobalInstance, GlobalLight,
-    GlobalReport, ModelBasis, RelitIllumination, RelitLight, StoredBasis, SunWeights,
-    GLOBAL_EXTENSION,
+    BasisCacheOptions, BasisPlan, GlobalGridOptions, GlobalInstance, GlobalLight, GlobalReport,
+    ModelBasis, RelitIllumination, RelitLight, StoredBasis, SunWeights, GLOBAL_EXTENSION,
 };
 use sylva_render::gpu_frame::{FrameError, GpuFrame};
 use sylva_render::output::{encode_exr, encode_png, OutputError};
@@ -146,6 +155,23 @@ pub enum PipelineError {
     GpuFailed(String),
     #[error(transparent)]
     Gpu(#[from] sylva_wgpu::GpuError),
+    /// A job, the processes running them or the data between them failed.
+    #[error(transparent)]
+    Jobs(#[from] sylva_core::jobs::JobError),
+}
+
+impl From<sylva_core::wire::WireError> for PipelineError {
+    fn from(e: sylva_core::wire::WireError) -> PipelineError {
+        PipelineError::Jobs(e.into())
+    }
+}
+
+/// Where [`precompute_relighting`] leaves the relighting when several processes make it: at
+/// the root alone (`sylva basis`: the root stores it), or on every process (a relit render).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RelightingAt {
+    Root,
+    Everywhere,
 }
 
 /// Loads a scene file or built-in scene by name and builds it; `sun` replaces its sun.
@@ -274,6 +300,9 @@ impl ShadowMethod {
 /// How [`PreparedScene::new`] prepares a scene.
 #[derive(Clone, Copy)]
 pub struct PrepareOptions<'a> {
+    /// What runs the LB solves: this process ([`Local`], the default) or, under MPI, every
+    /// process of the job (`sylva_mpi::QueueRunner`), each calling with the same options.
+    pub runner: &'a dyn Runner,
     /// LB lighting; `None`: no indirect light on plants (the local-light mode needs none).
     pub lb: Option<LbPlan<'a>>,
     /// How the tracer walks its kd-trees (on either device).
@@ -309,6 +338,7 @@ impl Default for PrepareOptions<'_> {
     fn default() -> Self {
         let s = ShadingParams::default();
         PrepareOptions {
+            runner: &Local,
             lb: None,
             traversal: TraversalConfig::default(),
             trace_gpu: None,
@@ -473,202 +503,6 @@ pub fn lighting_options(scene: &Scene, lb: &LbPlan) -> LightingOptions {
     }
 }
 
-/// Every model's LB lighting, in scene order, each from the cache when it can
-/// ([`model_lighting`]); and how many came from the cache.
-pub fn light_models(
-    scene: &Scene,
-    lb: &LbPlan,
-    progress: &dyn Progress,
-) -> Result<(Vec<ModelLighting>, usize), PipelineError> {
-    let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
-    light_each_model(
-        scene,
-        lb,
-        "",
-        progress,
-        |_, model, illum, lopts, progress| {
-            let (l, report) = model_lighting(model, illum, lopts, lb.solver, progress)?;
-            Ok((l, report, ()))
-        },
-    )
-    .map(|(lighting, cached, _)| (lighting, cached))
-}
-
-/// One model's LB light with its cache report and whatever else the caller keeps of it.
-type LitModel<T> = (ModelLighting, LightingReport, T);
-
-/// Lights every model in scene order through `light` (with the model's preset, a progress
-/// bar labelled `LB NAME{label}`, its span and report); returns the lights, how many came from
-/// the cache, and each model's extra.
-fn light_each_model<T>(
-    scene: &Scene,
-    lb: &LbPlan,
-    label: &str,
-    progress: &dyn Progress,
-    mut light: impl FnMut(
-        usize,
-        &Model,
-        &Illumination,
-        &LightingOptions,
-        &mut dyn FnMut(usize, usize, usize),
-    ) -> Result<LitModel<T>, LightingError>,
-) -> Result<(Vec<ModelLighting>, usize, Vec<T>), PipelineError> {
-    let lopts = lighting_options(scene, lb);
-    let illum = scene_illumination(scene);
-    let mut lighting = Vec::with_capacity(scene.models.len());
-    let mut extra = Vec::with_capacity(scene.models.len());
-    let mut cached = 0;
-    for (k, model) in scene.models.iter().enumerate() {
-        let lopts = lopts.for_model(scene, k);
-        let _m = tracing::info_span!(stage::LB_MODEL, model = %model.name).entered();
-        progress.start(&format!("LB {}{label}", model.name), 3);
-        let lit = light(k, model, &illum, &lopts, &mut |c, step, max| {
-            progress.set((c * max + step) as u64, 3 * max as u64)
-        });
-        progress.finish();
-        let (l, report, more) = lit.map_err(|source| PipelineError::Lighting {
-            model: model.name.clone(),
-            source,
-        })?;
-        cached += (report.source == LightingSource::Cached) as usize;
-        progress.model_lit(model, &report);
-        lighting.push(l);
-        extra.push(more);
-    }
-    Ok((lighting, cached, extra))
-}
-
-/// Whether `PreparedScene::new` lights `scene` through the forest grid: the physical light,
-/// a forest grid asked for, and more than one instance (a lone tree's light is its model's).
-pub fn uses_forest(scene: &Scene, light: Light, forest: Option<&GlobalGridOptions>) -> bool {
-    light == Light::Physical && forest.is_some() && scene.instances.len() > 1
-}
-
-/// What a forest's light parts are solved on ([`light_forest`]): every model's own density
-/// (voxelized as its LB solve sees it, scene order) and the neighbours' foliage added to its
-/// sun part's ([`neighbour_shade`]; `None`: none reaches into its boxes). The same on every
-/// process that builds it (MPI ranks solve parts of it: `sylva_mpi::solve_forest_parts`).
-#[derive(Debug, Clone)]
-pub struct ForestDensities {
-    pub own: Vec<sylva_lb::DensityGrid>,
-    pub shades: Vec<Option<ShadedDensity>>,
-}
-
-/// [`ForestDensities`] of `scene`: its models voxelized, the neighbours' foliage measured on
-/// the coarse grid of `gopts`.
-pub fn forest_densities(
-    scene: &Scene,
-    lb: &LbPlan,
-    gopts: &GlobalGridOptions,
-) -> Result<ForestDensities, PipelineError> {
-    let illum = scene_illumination(scene);
-    let lopts = lighting_options(scene, lb);
-    let own = scene
-        .models
-        .iter()
-        .enumerate()
-        .map(|(k, model)| {
-            let lopts = lopts.for_model(scene, k);
-            model_density(model, &illum, &lopts, lb.solver)
-                .map(|(density, _)| density)
-                .map_err(|source| PipelineError::Lighting {
-                    model: model.name.clone(),
-                    source,
-                })
-        })
-        .collect::<Result<Vec<_>, _>>()?;
-    let grids: Vec<&sylva_lb::DensityGrid> = own.iter().collect();
-    let placed: Vec<(usize, glam::Affine3A)> = scene
-        .instances
-        .iter()
-        .map(|i| (i.model as usize, i.transform()))
-        .collect();
-    let shades =
-        neighbour_shade(&grids, &placed, 0.0, gopts).map_err(|source| PipelineError::Global {
-            scene: scene.name.clone(),
-            source,
-        })?;
-    Ok(ForestDensities { own, shades })
-}
-
-/// Every model's physical light as its four parts ([`sylva_light::lighting::PartsPlan`], each from
-/// the cache when it can), solved on `densities` ([`forest_densities`]), and the coarse forest
-/// grid's weights of them per instance ([`ForestLight`]); how many models came from the cache.
-pub fn light_forest(
-    scene: &Scene,
-    lb: &LbPlan,
-    gopts: &GlobalGridOptions,
-    densities: ForestDensities,
-    progress: &dyn Progress,
-) -> Result<(Vec<ModelLighting>, usize, ForestLight), PipelineError> {
-    let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
-    let illum = scene_illumination(scene);
-    let err = |source| PipelineError::Global {
-        scene: scene.name.clone(),
-        source,
-    };
-    let ForestDensities { own, shades } = densities;
-    if own.len() != scene.models.len() || shades.len() != scene.models.len() {
-        return Err(err(LightingError::Global(format!(
-            "forest densities of {} models for {} models",
-            own.len(),
-            scene.models.len()
-        ))));
-    }
-    for (model, shade) in scene.models.iter().zip(&shades) {
-        if let Some(s) = shade {
-            progress.neighbour_shade(model, s);
-        }
-    }
-    let mut own: Vec<Option<sylva_lb::DensityGrid>> = own.into_iter().map(Some).collect();
-    let (lighting, cached, fine) = light_each_model(
-        scene,
-        lb,
-        " (parts)",
-        progress,
-        |k, model, illum, lopts, progress| {
-            let density = own[k].take().expect("one solve per model");
-            let (l, report, density, medium) = model_lighting_parts_on(
-                model,
-                illum,
-                lopts,
-                lb.solver,
-                density,
-                shades[k].as_ref(),
-                progress,
-            )?;
-            Ok((l, report, (density, medium)))
-        },
-    )?;
-    let t0 = std::time::Instant::now();
-    let env = physical_environment(&illum).map_err(err)?;
-    let instances: Vec<ForestInstance> = scene
-        .instances
-        .iter()
-        .map(|i| {
-            let (d, m) = &fine[i.model as usize];
-            ForestInstance {
-                model: Some((d, m)),
-                to_world: i.transform(),
-            }
-        })
-        .collect();
-    progress.start("forest grid", 3);
-    let forest = ForestLight::solve(&instances, &env, 0.0, gopts, &mut |done, total| {
-        progress.set(done as u64, total as u64)
-    });
-    progress.finish();
-    let forest = forest.map_err(err)?;
-    progress.global_grid(&GlobalReport {
-        source: LightingSource::Computed,
-        seconds: t0.elapsed().as_secs_f64(),
-        dims: forest.dims,
-        path: None,
-        cache_warning: None,
-    });
-    Ok((lighting, cached, forest))
-}
-
 /// The scene's media ready to draw: each lit by its two LB solves (sun and sky, cached) when
 /// `opts.lb` is given, else by the sun alone.
 fn prepare_media(
@@ -721,35 +555,17 @@ fn prepare_media(
 }
 
 impl PreparedScene {
-    /// Checks the frame's memory and the shading constants, lights every model (in scene
-    /// order, each from the cache when it can: [`light_models`]) and builds the kd-trees.
+    /// Checks the frame's memory and the shading constants, lights every model (from the
+    /// cache when it can: [`light_models`], [`light_forest`] or [`precompute_relighting`], as
+    /// `opts` asks, the solves run by `opts.runner`) and builds the kd-trees. Under MPI every
+    /// process calls it with the same scene and options and gets the same scene.
     pub fn new(
         scene: Scene,
         opts: &PrepareOptions,
         progress: &dyn Progress,
     ) -> Result<PreparedScene, PipelineError> {
-        Self::prepare(scene, opts, None, progress)
-    }
-
-    /// [`PreparedScene::new`] of a scene lit through the forest grid, its models' densities
-    /// already built ([`forest_densities`] of the same scene, plan and grid options; under
-    /// mpirun each rank builds them once for the parts' solves and the preparation).
-    pub fn with_forest_densities(
-        scene: Scene,
-        opts: &PrepareOptions,
-        densities: ForestDensities,
-        progress: &dyn Progress,
-    ) -> Result<PreparedScene, PipelineError> {
-        Self::prepare(scene, opts, Some(densities), progress)
-    }
-
-    fn prepare(
-        scene: Scene,
-        opts: &PrepareOptions,
-        densities: Option<ForestDensities>,
-        progress: &dyn Progress,
-    ) -> Result<PreparedScene, PipelineError> {
         let shading = Self::check(&scene, opts)?;
+        let runner = opts.runner;
         let none = || (0..scene.models.len()).map(|_| None).collect();
         let lb = opts.lb.as_ref().map(|lb| LbPlan {
             light: opts.light,
@@ -757,23 +573,28 @@ impl PreparedScene {
         });
         let mut relit_parts = None;
         if let (Some(lb), Some(plan)) = (&lb, &opts.relight) {
-            relit_parts = precompute_relighting(&scene, lb, plan, progress)?;
+            relit_parts = precompute_relighting(
+                &scene,
+                lb,
+                plan,
+                runner,
+                RelightingAt::Everywhere,
+                progress,
+            )?;
         }
         let mut forest = None;
         let (lighting, cached) = match (&lb, &relit_parts) {
             (_, Some(parts)) => (none(), parts.cached),
             (Some(lb), None) if uses_forest(&scene, lb.light, opts.forest.as_ref()) => {
                 let gopts = opts.forest.expect("uses_forest checks it");
-                let densities = match densities {
-                    Some(d) => d,
-                    None => forest_densities(&scene, lb, &gopts)?,
-                };
-                let (lit, cached, f) = light_forest(&scene, lb, &gopts, densities, progress)?;
+                let densities = forest_densities(&scene, lb, &gopts)?;
+                let (lit, cached, f) =
+                    light_forest(&scene, lb, &gopts, densities, runner, progress)?;
                 forest = Some(f);
                 (lit.into_iter().map(Some).collect(), cached)
             }
             (Some(lb), None) => {
-                let (lit, cached) = light_models(&scene, lb, progress)?;
+                let (lit, cached) = light_models(&scene, lb, runner, progress)?;
                 (lit.into_iter().map(Some).collect(), cached)
             }
             (None, None) => (none(), 0),
@@ -790,52 +611,6 @@ impl PreparedScene {
         )?;
         prepared.forest = forest;
         Ok(prepared)
-    }
-
-    /// A scene whose models were lit elsewhere (`lighting` in scene order; `cached` of them
-    /// from a cache): [`PreparedScene::new`] without the models' LB work. `opts.lb` still
-    /// lights the scene's media (under mpirun each rank lights them itself, from the cache
-    /// when it holds them).
-    pub fn with_lighting(
-        scene: Scene,
-        opts: &PrepareOptions,
-        lighting: Vec<ModelLighting>,
-        cached: usize,
-    ) -> Result<PreparedScene, PipelineError> {
-        assert_eq!(lighting.len(), scene.models.len(), "one lighting per model");
-        let shading = Self::check(&scene, opts)?;
-        Self::build(
-            scene,
-            opts,
-            shading,
-            lighting.into_iter().map(Some).collect(),
-            cached,
-            None,
-            None,
-            &Silent,
-        )
-    }
-
-    /// A scene relit from base solutions made elsewhere ([`precompute_relighting`] with
-    /// `opts.relight`'s plan): [`PreparedScene::new`] without the LB work.
-    pub fn with_relighting(
-        scene: Scene,
-        opts: &PrepareOptions,
-        relighting: Relighting,
-    ) -> Result<PreparedScene, PipelineError> {
-        let shading = Self::check(&scene, opts)?;
-        let none = (0..scene.models.len()).map(|_| None).collect();
-        let cached = relighting.cached;
-        Self::build(
-            scene,
-            opts,
-            shading,
-            none,
-            cached,
-            Some(relighting),
-            None,
-            &Silent,
-        )
     }
 
     /// What [`PreparedScene::new`] checks before any LB or acceleration work: the largest
@@ -1189,22 +964,6 @@ impl PreparedScene {
     }
 }
 
-/// Every model's base solutions and the scene's global grid as `plan` asks (from the cache,
-/// or solved on `lb.solver` and cached), without building anything else: what `sylva basis`
-/// runs. `None` when the plan takes cached bases only and one is missing. (Across MPI ranks:
-/// `sylva_mpi::relight::precompute_relighting`, which shares [`relight_options`],
-/// `model_basis`'s pieces and [`finish_relighting`] with this.)
-pub fn precompute_relighting(
-    scene: &Scene,
-    lb: &LbPlan,
-    plan: &RelightPlan,
-    progress: &dyn Progress,
-) -> Result<Option<Relighting>, PipelineError> {
-    let (lopts, bopts) = relight_options(scene, lb, plan)?;
-    let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
-    prepare_bases(scene, &lopts, &bopts, lb, plan, progress)
-}
-
 /// The lighting options of `lb` for `scene` and, per model, how its basis is made and kept
 /// (each model's medium is its own preset's, [`Scene::model_preset`]). Base solutions are the
 /// paper light's: any other light is refused.
@@ -1225,54 +984,6 @@ pub fn relight_options(
         })
         .collect();
     Ok((lopts, bopts))
-}
-
-/// [`precompute_relighting`] with the options made.
-fn prepare_bases(
-    scene: &Scene,
-    lopts: &LightingOptions,
-    bopts: &[BasisCacheOptions],
-    lb: &LbPlan,
-    plan: &RelightPlan,
-    progress: &dyn Progress,
-) -> Result<Option<Relighting>, PipelineError> {
-    let solver = match plan.basis {
-        BasisUse::IfCached => None,
-        BasisUse::Always => Some(lb.solver),
-    };
-    let mut bases: Vec<ModelBasis> = Vec::with_capacity(scene.models.len());
-    let mut reports = Vec::with_capacity(scene.models.len());
-    let mut cached = 0;
-    for (model, bopts) in scene.models.iter().zip(bopts) {
-        let _m = tracing::info_span!(stage::LB_MODEL, model = %model.name).entered();
-        progress.start(&format!("basis {}", model.name), 1);
-        let got = model_basis(model, bopts, solver, &mut |p| {
-            progress.set(
-                (p.done * p.max_steps + p.step) as u64,
-                (p.solves * p.max_steps) as u64,
-            )
-        });
-        progress.finish();
-        let got = got.map_err(|source| PipelineError::Lighting {
-            model: model.name.clone(),
-            source,
-        })?;
-        let Some((basis, report)) = got else {
-            return Ok(None);
-        };
-        cached += (report.source == LightingSource::Cached) as usize;
-        if solver.is_some() {
-            progress.model_basis(model, &report);
-        } else {
-            reports.push(report);
-        }
-        bases.push(basis);
-    }
-    // Reported once every model's basis was found, so a fall-back reports nothing.
-    for (model, report) in scene.models.iter().zip(&reports) {
-        progress.model_basis(model, report);
-    }
-    finish_relighting(scene, lopts, plan, bases, cached, progress).map(Some)
 }
 
 /// Every model's basis (in scene order; `cached` of them from the cache) and, as `plan`

@@ -1,7 +1,7 @@
 //! `sylva basis SCENE`: precomputes every model's 19 base solutions (paper 004 §3.1: 54
 //! solves per model, `B_0` summed), compresses and caches them, and the scene's coarse global
 //! grid; afterwards `sylva render` and `sylva relight` move the sun with no LB solve. Under
-//! `mpirun` the solves are jobs handed out across the ranks (`sylva_mpi::relight`); rank 0
+//! `mpirun` the solves are jobs handed out across the ranks (`sylva_pipeline::bases`); rank 0
 //! alone prints and writes the cache, which holds what one process writes.
 
 use std::time::Instant;
@@ -9,8 +9,7 @@ use std::time::Instant;
 use anyhow::Result;
 use clap::Args;
 use sylva_light::{Progress, Silent};
-use sylva_mpi::Comm;
-use sylva_pipeline::{load_scene, precompute_relighting, LbPlan};
+use sylva_pipeline::{load_scene, precompute_relighting, LbPlan, RelightingAt, Runner};
 
 use super::progress::{Bars, Report};
 use super::render::{report_line, FrameArgs};
@@ -32,9 +31,9 @@ pub struct BasisArgs {
     pub list_jobs: bool,
 }
 
-pub fn run(a: BasisArgs, comm: Option<&dyn Comm>) -> Result<()> {
+pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
     let t0 = Instant::now();
-    let root = comm.is_none_or(|c| c.rank() == 0);
+    let root = runner.is_root();
     let scene = load_scene(&a.frame.scene, None)?;
     // Base solutions are the paper light's (004's boundary solves): basis sets it.
     let light = a.frame.light_for(true)?;
@@ -83,22 +82,17 @@ pub fn run(a: BasisArgs, comm: Option<&dyn Comm>) -> Result<()> {
         }
         println!("{line}");
     });
-    let done = match comm {
-        None => precompute_relighting(&scene, &lb, &plan, &progress)?,
-        Some(comm) => {
-            let progress: &dyn Progress = if root { &progress } else { &Silent };
-            // Only rank 0 needs the sets: it prints their size.
-            sylva_mpi::precompute_relighting(comm, &scene, &lb, &plan, false, progress)?
-        }
-    };
+    let progress: &dyn Progress = if root { &progress } else { &Silent };
+    // Only the root needs the sets: it prints their size.
+    let done = precompute_relighting(&scene, &lb, &plan, runner, RelightingAt::Root, progress)?;
     if !root {
         return Ok(());
     }
     let done = done.expect("a forced plan solves what is missing");
-    if let Some(comm) = comm {
+    if runner.processes() > 1 {
         say(format!(
             "MPI: base solutions solved across {} ranks",
-            comm.size()
+            runner.processes()
         ));
     }
     let bytes: u64 = done.compressed.iter().flatten().map(|b| b.bytes()).sum();

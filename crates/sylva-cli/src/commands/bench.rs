@@ -81,12 +81,12 @@ struct BenchLbArgs {
     precision: super::device::PrecisionArg,
 }
 
-pub fn run(args: BenchArgs, comm: Option<&dyn sylva_mpi::Comm>) -> Result<()> {
+pub fn run(args: BenchArgs, runner: &dyn sylva_pipeline::Runner) -> Result<()> {
     match args.command {
         BenchCommand::Lb(a) => bench_lb(a),
         BenchCommand::Scene(a) => super::bench_scene::run(a),
         BenchCommand::Voxelize(a) => super::bench_voxel::run(a),
-        BenchCommand::Trace(a) => super::bench_trace::run(a, comm),
+        BenchCommand::Trace(a) => super::bench_trace::run(a, runner),
         BenchCommand::Spp(a) => super::bench_spp::run(a),
         BenchCommand::Relight(a) => super::bench_relight::run(a),
     }

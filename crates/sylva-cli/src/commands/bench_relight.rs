@@ -44,7 +44,7 @@ impl BenchRelightArgs {
 
 pub fn run(a: BenchRelightArgs) -> Result<()> {
     let t_prepare = Instant::now();
-    let mut p = prepare(&a.frame, a.request(), None)?;
+    let mut p = prepare(&a.frame, a.request(), &sylva_pipeline::Local)?;
     let prepare_seconds = t_prepare.elapsed().as_secs_f64();
     let plan = RelightBenchPlan {
         suns: a.suns as usize,

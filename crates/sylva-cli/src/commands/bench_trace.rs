@@ -4,9 +4,9 @@
 
 use anyhow::Result;
 use sylva_light::Silent;
-use sylva_mpi::model::TileCosts;
-use sylva_mpi::Comm;
+use sylva_pipeline::bench::scaling::TileCosts;
 use sylva_pipeline::bench::{self, RankSplit, ScalingModel, TimedFrame, TraceBench, TraceRun};
+use sylva_pipeline::Runner;
 use sylva_render::stage;
 
 use super::output::emit;
@@ -43,16 +43,17 @@ impl BenchTraceArgs {
     }
 }
 
-pub fn run(a: BenchTraceArgs, comm: Option<&dyn Comm>) -> Result<()> {
-    if a.tile_costs && comm.is_some() {
+pub fn run(a: BenchTraceArgs, runner: &dyn Runner) -> Result<()> {
+    let several = runner.processes() > 1;
+    if a.tile_costs && several {
         anyhow::bail!("--tile-costs times tiles in one process: run it without mpirun");
     }
     let clock = super::stage_clock();
     clock.reset();
-    let prepared = prepare(&a.frame, a.request(), comm)?;
+    let prepared = prepare(&a.frame, a.request(), runner)?;
     let run = TraceRun {
         runs: a.runs,
-        mpi_ranks: comm.map(|c| c.size()),
+        mpi_ranks: several.then(|| runner.processes()),
         lb: !a.no_lb,
         accel_build_seconds: clock.seconds(stage::ACCEL_BUILD),
         lb_seconds: clock.seconds(stage::LB_PRECOMPUTE),
@@ -61,13 +62,9 @@ pub fn run(a: BenchTraceArgs, comm: Option<&dyn Comm>) -> Result<()> {
     let camera = p.camera(prepared.width, prepared.height);
     // One frame: alone, or across the ranks (`None` on ranks other than 0).
     let mut frame = |settings: &sylva_render::RenderSettings| -> Result<Option<TimedFrame>> {
-        Ok(match comm {
-            None => Some(TimedFrame {
-                frame: p.render(settings, &Silent)?,
-                split: None,
-            }),
-            Some(c) => sylva_mpi::render_frame(c, p, settings, &Silent)?.map(|d| TimedFrame {
-                split: Some(RankSplit {
+        Ok(p.render_split(runner, settings, &Silent)?
+            .map(|d| TimedFrame {
+                split: several.then(|| RankSplit {
                     wall_seconds: d.wall_seconds,
                     units: d.layout.units(),
                     unit_edge: d.layout.edge,
@@ -76,17 +73,13 @@ pub fn run(a: BenchTraceArgs, comm: Option<&dyn Comm>) -> Result<()> {
                     imbalance: d.imbalance(),
                 }),
                 frame: d.frame,
-            }),
-        })
+            }))
     };
     let mut measures = Vec::new();
     for rpp in [1u32, 4] {
         let settings = p.settings(camera, rpp, a.frame.seed);
         measures.extend(bench::measure_frames(
-            &settings,
-            a.runs,
-            comm.is_none(),
-            &mut frame,
+            &settings, a.runs, !several, &mut frame,
         )?);
     }
     let Ok(measures) = <[_; 2]>::try_from(measures) else {

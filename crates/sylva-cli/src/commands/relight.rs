@@ -3,7 +3,7 @@
 //! and renders. Numbered PNGs and an animated PNG, tone mapped with one exposure for the
 //! whole sequence so frames compare, and the time of every frame. Under `mpirun` the missing
 //! base solutions are solved across the ranks and every frame is rendered across them
-//! (`sylva_mpi::render_frame`); rank 0 writes the images, the same as one process's.
+//! (`PreparedScene::render_split`); rank 0 writes the images, the same as one process's.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -12,7 +12,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use sylva_light::relight::sun_path;
 use sylva_light::Silent;
-use sylva_mpi::Comm;
+use sylva_pipeline::Runner;
 use sylva_render::output::{encode_apng, encode_png};
 use sylva_render::tonemap::srgb8;
 use sylva_render::{mean_luminance, Mode, ToneMap};
@@ -50,8 +50,8 @@ pub struct RelightArgs {
     pub white: Option<f32>,
 }
 
-pub fn run(a: RelightArgs, comm: Option<&dyn Comm>) -> Result<()> {
-    let root = comm.is_none_or(|c| c.rank() == 0);
+pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
+    let root = runner.is_root();
     if let Some(r) = a.rpp {
         let range = sylva_core::limits::RAYS_PER_PIXEL;
         if !range.contains(&r) {
@@ -84,7 +84,7 @@ pub fn run(a: RelightArgs, comm: Option<&dyn Comm>) -> Result<()> {
             force_basis: true,
             ..PrepareRequest::default()
         },
-        comm,
+        runner,
     )?;
     let mut prepared = p.scene;
     let rpp = a.rpp.unwrap_or(prepared.scene.camera.rays_per_pixel);
@@ -118,8 +118,10 @@ pub fn run(a: RelightArgs, comm: Option<&dyn Comm>) -> Result<()> {
             suns.len(),
             p.width,
             p.height,
-            comm.map(|c| format!(", {} MPI ranks", c.size()))
-                .unwrap_or_default()
+            match runner.processes() {
+                1 => String::new(),
+                n => format!(", {n} MPI ranks"),
+            }
         );
     }
     let pb = if root {
@@ -134,13 +136,10 @@ pub fn run(a: RelightArgs, comm: Option<&dyn Comm>) -> Result<()> {
         prepared.set_sun(sun)?;
         let t1 = Instant::now();
         // Every rank relights (cheap) and renders its share; rank 0 gets the frame.
-        let frame = match comm {
-            None => prepared.render(&settings, &Silent)?,
-            Some(c) => match sylva_mpi::render_frame(c, &prepared, &settings, &Silent)? {
-                Some(d) => d.frame,
-                None => continue,
-            },
+        let Some(frame) = prepared.render_split(runner, &settings, &Silent)? else {
+            continue;
         };
+        let frame = frame.frame;
         let t2 = Instant::now();
         let (relight, render) = ((t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64());
         pb.suspend(|| {

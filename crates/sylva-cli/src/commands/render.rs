@@ -13,10 +13,9 @@ use sylva_lb::LbSolver;
 use sylva_light::lighting::{Light, LightingSource};
 use sylva_light::relight::{BasisReport, GlobalGridOptions, SunWeights};
 use sylva_light::{IndirectLight, Progress, Silent};
-use sylva_mpi::Comm;
 use sylva_pipeline::{
     image_paths, load_scene, resolution, tone_map_modes, write_images, BasisUse, LbPlan,
-    PrepareOptions, PreparedScene, RelightPlan, ShadowMethod,
+    PrepareOptions, PreparedScene, RelightPlan, Runner, ShadowMethod,
 };
 use sylva_render::{stage, Mode, ShadingParams, ToneMap};
 use sylva_spp::trees::system::{SppLight, SppSystem, SystemConfig};
@@ -431,9 +430,9 @@ pub struct PrepareRequest {
 }
 
 /// Loads the scene, lights every model (from the cache when it can) and builds its
-/// kd-trees, printing what it does (where `req.say` says). Under MPI (`comm`) the models'
-/// LB colours, or their base solutions, are solved across the ranks and only rank 0 prints.
-pub fn prepare(a: &FrameArgs, req: PrepareRequest, comm: Option<&dyn Comm>) -> Result<Prepared> {
+/// kd-trees, printing what it does (where `req.say` says). Under MPI (`runner` over the
+/// ranks) the LB solves are shared out across the ranks and only rank 0 prints.
+pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Result<Prepared> {
     let PrepareRequest {
         need_lb,
         rays_per_pixel,
@@ -443,7 +442,7 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, comm: Option<&dyn Comm>) -> R
         keep_raw,
         instance_weights,
     } = req;
-    let root = comm.is_none_or(|c| c.rank() == 0);
+    let root = runner.is_root();
     // Machine-readable runs keep stdout for their JSON.
     let say = |s: String| {
         if !root {
@@ -496,6 +495,7 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, comm: Option<&dyn Comm>) -> R
         None
     };
     let opts = PrepareOptions {
+        runner,
         lb: solver.as_deref().map(|solver| LbPlan {
             solver,
             grid: a.lb_grid,
@@ -526,67 +526,9 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, comm: Option<&dyn Comm>) -> R
         }
         say(line);
     });
-    let scene = match comm {
-        None => PreparedScene::new(scene, &opts, &progress)?,
-        Some(comm) => {
-            let progress: &dyn Progress = if root { &progress } else { &Silent };
-            match &opts.lb {
-                Some(lb) => {
-                    PreparedScene::check(&scene, &opts)?;
-                    // Rank 0 reads the cached bases, missing ones (--basis always) are solved
-                    // across the ranks, and every rank gets the sets from rank 0.
-                    let relit = match &opts.relight {
-                        Some(plan) => sylva_mpi::precompute_relighting(
-                            comm, &scene, lb, plan, true, progress,
-                        )?,
-                        None => None,
-                    };
-                    match relit {
-                        Some(parts) => PreparedScene::with_relighting(scene, &opts, parts)?,
-                        None if sylva_pipeline::uses_forest(
-                            &scene,
-                            lb.light,
-                            opts.forest.as_ref(),
-                        ) =>
-                        {
-                            // The forest grid weighs every model's light parts by the whole
-                            // forest: the parts missing from rank 0's cache are solved across
-                            // the ranks and stored there; rank 0 then prepares from the cache,
-                            // and the other ranks after it (the same inputs, so the same light).
-                            let gopts = opts.forest.expect("uses_forest checks it");
-                            let t = std::time::Instant::now();
-                            // Each rank builds the densities once, for the solves and the
-                            // preparation.
-                            let densities = sylva_pipeline::forest_densities(&scene, lb, &gopts)?;
-                            let solved = sylva_mpi::solve_forest_parts(
-                                comm, &scene, lb, &gopts, &densities, progress,
-                            )?;
-                            if solved > 0 {
-                                say(format!(
-                                    "  LB: {solved} light parts solved across {} ranks in {:.1} s",
-                                    comm.size(),
-                                    t.elapsed().as_secs_f64()
-                                ));
-                            }
-                            prepare_on_root_first(comm, || {
-                                PreparedScene::with_forest_densities(
-                                    scene.clone(),
-                                    &opts,
-                                    densities.clone(),
-                                    progress,
-                                )
-                            })?
-                        }
-                        None => {
-                            let (lighting, cached) =
-                                sylva_mpi::light_models(comm, &scene, lb, progress)?;
-                            PreparedScene::with_lighting(scene, &opts, lighting, cached)?
-                        }
-                    }
-                }
-                None => PreparedScene::new(scene, &opts, progress)?,
-            }
-        }
+    let scene = {
+        let progress: &dyn Progress = if root { &progress } else { &Silent };
+        PreparedScene::new(scene, &opts, progress)?
     };
     say(format!(
         "ray tracer: {}{}",
@@ -663,7 +605,7 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, comm: Option<&dyn Comm>) -> R
     })
 }
 
-pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
+pub fn run(a: RenderArgs, runner: &dyn Runner) -> Result<()> {
     let modes: Vec<Mode> = match a.mode.as_str() {
         "all" => Mode::ALL.to_vec(),
         m => vec![Mode::parse(m)
@@ -700,7 +642,7 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
     clock.reset();
     let t_all = Instant::now();
     let spp = a.frame.light.as_deref() == Some("spp");
-    if spp && comm.is_some() {
+    if spp && runner.processes() > 1 {
         bail!("--light spp renders in one process: run it without mpirun");
     }
     let p = prepare(
@@ -712,7 +654,7 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
             instance_weights: a.forest_weights,
             ..PrepareRequest::default()
         },
-        comm,
+        runner,
     )?;
     let prepared = &p.scene;
     let rpp = a.rpp.unwrap_or(prepared.scene.camera.rays_per_pixel);
@@ -720,36 +662,33 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
     let settings = prepared.settings(camera, rpp, a.frame.seed);
     let bars = Bars::new(|_: Report| {});
     let mut spp_seconds = None;
-    let (frame, split) = match comm {
-        None if spp => {
-            let t = Instant::now();
-            let system = SppSystem::for_scene(
-                &prepared.scene,
-                &prepared.tracer.cpu().accel,
-                SystemConfig::default(),
-            )
-            .context("the plane-parallel light (003 §5)")?;
-            let light = SppLight::with_preset(&system, &prepared.scene.lb.preset)?;
-            spp_seconds = Some(t.elapsed().as_secs_f64());
-            // The GPU frame kernel reads only lights with a device side; this one says why not.
-            if prepared.tracer.gpu().is_some() {
-                if let Err(why) = light.device() {
-                    println!("shading on the CPU: {why}");
-                }
+    let (frame, split) = if spp {
+        let t = Instant::now();
+        let system = SppSystem::for_scene(
+            &prepared.scene,
+            &prepared.tracer.cpu().accel,
+            SystemConfig::default(),
+        )
+        .context("the plane-parallel light (003 §5)")?;
+        let light = SppLight::with_preset(&system, &prepared.scene.lb.preset)?;
+        spp_seconds = Some(t.elapsed().as_secs_f64());
+        // The GPU frame kernel reads only lights with a device side; this one says why not.
+        if prepared.tracer.gpu().is_some() {
+            if let Err(why) = light.device() {
+                println!("shading on the CPU: {why}");
             }
-            (prepared.render_with(&light, &settings, &bars)?, None)
         }
-        None => (prepared.render(&settings, &bars)?, None),
-        Some(comm) => {
-            let progress: &dyn Progress = if comm.rank() == 0 { &bars } else { &Silent };
-            match sylva_mpi::render_frame(comm, prepared, &settings, progress)? {
-                Some(d) => {
-                    let split = split_summary(&d);
-                    (d.frame, Some(split))
-                }
-                // Rank 0 writes the image.
-                None => return Ok(()),
+        (prepared.render_with(&light, &settings, &bars)?, None)
+    } else {
+        let progress: &dyn Progress = if runner.is_root() { &bars } else { &Silent };
+        match prepared.render_split(runner, &settings, progress)? {
+            Some(d) if runner.processes() > 1 => {
+                let split = split_summary(&d);
+                (d.frame, Some(split))
             }
+            Some(d) => (d.frame, None),
+            // The root writes the image.
+            None => return Ok(()),
         }
     };
 
@@ -820,7 +759,7 @@ pub fn run(a: RenderArgs, comm: Option<&dyn Comm>) -> Result<()> {
 }
 
 /// One line on how a frame was split across MPI ranks.
-pub fn split_summary(d: &sylva_mpi::DistributedFrame) -> String {
+pub fn split_summary(d: &sylva_pipeline::SplitFrame) -> String {
     let ranks: Vec<String> = d
         .ranks
         .iter()
@@ -837,35 +776,4 @@ pub fn split_summary(d: &sylva_mpi::DistributedFrame) -> String {
         ranks.join(", "),
         100.0 * d.imbalance()
     )
-}
-
-/// Runs `prepare` on rank 0, then (rank 0 having succeeded) on every other rank; a failure on
-/// rank 0 ends every rank with a message instead of leaving them waiting.
-fn prepare_on_root_first<T>(
-    comm: &dyn Comm,
-    prepare: impl Fn() -> Result<T, sylva_pipeline::PipelineError>,
-) -> Result<T> {
-    let mut done = Vec::new();
-    let mine = if comm.rank() == 0 {
-        let r = prepare();
-        done = match &r {
-            Ok(_) => b"ok".to_vec(),
-            Err(e) => format!("rank 0 failed preparing the scene: {e}").into_bytes(),
-        };
-        Some(r)
-    } else {
-        None
-    };
-    comm.broadcast(0, &mut done)
-        .map_err(|e| anyhow::anyhow!("waiting for rank 0: {e}"))?;
-    if done != b"ok" {
-        match mine {
-            Some(r) => return Ok(r?),
-            None => bail!("{}", String::from_utf8_lossy(&done)),
-        }
-    }
-    match mine {
-        Some(r) => Ok(r?),
-        None => Ok(prepare()?),
-    }
 }

@@ -2,6 +2,7 @@
 //! through serde, text through `Display`); the command line only parses and prints.
 
 mod relight;
+pub mod scaling;
 mod spp;
 mod trace;
 

@@ -335,9 +335,10 @@ fn media_and_model_presets_are_cached_by_what_they_depend_on() {
     assert_eq!(
         *log.0.lock().unwrap(),
         [
+            // The models' solves (jobs), then each model's report as the root stores it.
             "start LB rose 3",
-            "lit rose computed",
             "start LB rose_own 3",
+            "lit rose computed",
             "lit rose_own computed",
             "start LB puff 6",
             "lit puff computed computed",

@@ -1,6 +1,6 @@
-//! A scaling model of the split from measured per-tile costs: how long a frame takes on N
-//! ranks with the paper's fixed strips (000 §4.3: the image split along its vertical axis,
-//! no load balancing) and with this crate's units handed out on demand, leaving out
+//! A scaling model of the frame split ([`crate::frame`]) from measured per-tile costs: how
+//! long a frame takes on N ranks with the paper's fixed strips (000 §4.3: the image split along its vertical axis,
+//! no load balancing) and with the pipeline's units handed out on demand, leaving out
 //! communication (measured separately: `bench trace` under `mpirun`).
 
 use sylva_render::render::TILE;

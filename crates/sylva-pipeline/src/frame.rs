@@ -1,23 +1,25 @@
-//! A frame across ranks: the image is cut into units (squares of whole 8×8 tiles on the
-//! image's tile grid), the units are handed out on demand by rank 0's work queue, each rank
-//! renders its units as image regions, and rank 0 puts the pixels together.
+//! A frame as jobs of a [`Runner`] ([`PreparedScene::render_split`]): the image is cut into
+//! units (squares of whole 8×8 tiles on the image's tile grid), the runner hands them out
+//! (under MPI on demand, by the root's work queue), each process renders its units as image
+//! regions, and the root puts the pixels together.
 //!
 //! A region's pixels are bit-identical to the same pixels of a whole-image render (every
 //! sample depends only on its pixel's place in the whole image, tiles stay on the whole
 //! image's grid: `sylva_render::render`), so the gathered frame is the one-process frame
-//! whatever the split, the rank count or the thread counts.
+//! whatever the split, the process count or the thread counts.
 
 use std::time::Instant;
 
+use sylva_core::jobs::{from_root, Runner};
+use sylva_core::wire::{Reader, WireError, Writer};
 use sylva_light::Progress;
-use sylva_pipeline::PreparedScene;
 use sylva_render::render::{tile_count, TILE};
-use sylva_render::{stage, Frame, FrameTimings, Radiance, Region, RenderSettings};
+use sylva_render::stages::stage;
+use sylva_render::{Frame, FrameTimings, Radiance, Region, RenderSettings};
 use sylva_trace::TraceStats;
 
-use crate::comm::{agree, Comm, Reader, Writer};
-use crate::queue::run_queue;
-use crate::DistError;
+use crate::jobs::run_jobs;
+use crate::{PipelineError, PreparedScene};
 
 /// Units per rank the split aims at: enough that the last units to finish leave little
 /// imbalance, few enough that each unit keeps a rank's threads busy.
@@ -106,9 +108,9 @@ pub struct RankWork {
     pub seconds: f64,
 }
 
-/// A frame rendered across ranks, at rank 0.
+/// A frame rendered as units of a [`Runner`], at the root.
 #[derive(Debug, Clone)]
-pub struct DistributedFrame {
+pub struct SplitFrame {
     /// The gathered frame. Its pass timings are the units' summed over all ranks and
     /// divided by the rank count (a rank's mean); its stats are summed.
     pub frame: Frame,
@@ -121,7 +123,7 @@ pub struct DistributedFrame {
     pub wall_seconds: f64,
 }
 
-impl DistributedFrame {
+impl SplitFrame {
     /// `max / mean - 1` of the ranks' busy seconds: 0 when perfectly balanced.
     pub fn imbalance(&self) -> f64 {
         imbalance(&self.ranks.iter().map(|r| r.seconds).collect::<Vec<_>>())
@@ -172,7 +174,7 @@ fn encode_unit(f: &Frame) -> Vec<u8> {
     w.0
 }
 
-fn decode_unit(data: &[u8], region: Region) -> Result<Frame, DistError> {
+fn decode_unit(data: &[u8], region: Region) -> Result<Frame, WireError> {
     let mut r = Reader::new(data, "rendered unit");
     let timings = FrameTimings {
         primary_seconds: r.f64()?,
@@ -216,126 +218,153 @@ fn decode_unit(data: &[u8], region: Region) -> Result<Frame, DistError> {
     })
 }
 
-/// Renders `settings` across the ranks of `comm` (every rank calls it with the same scene
-/// and settings; that is checked): `Some` of the gathered frame at rank 0, `None` elsewhere.
-/// Rank 0 reports tiles to `progress` as units arrive.
-pub fn render_frame(
-    comm: &dyn Comm,
-    prepared: &PreparedScene,
-    settings: &RenderSettings,
-    progress: &dyn Progress,
-) -> Result<Option<DistributedFrame>, DistError> {
-    let _span = tracing::info_span!(stage::FRAME).entered();
-    let scene = &prepared.scene;
-    agree(
-        comm,
-        "the frame",
-        &format!(
-            "{} ({} models, {} instances) {settings:?}",
-            scene.name,
-            scene.models.len(),
-            scene.instances.len()
-        ),
-    )?;
-    let region = settings.region;
-    if !region.fits(settings.camera.width, settings.camera.height) {
-        return Err(sylva_render::RenderError::Region {
-            region,
-            width: settings.camera.width,
-            height: settings.camera.height,
+impl PreparedScene {
+    /// Renders `settings` as units of `runner` (every process calls it with the same scene
+    /// and settings; that is checked): `Some` of the gathered frame at the root, `None`
+    /// elsewhere. In one process the frame is [`PreparedScene::render`]'s, as one unit; across
+    /// processes its units are rendered on the CPU (the GPU frame kernel takes whole images)
+    /// and the root reports tiles to `progress` as they arrive.
+    pub fn render_split(
+        &self,
+        runner: &dyn Runner,
+        settings: &RenderSettings,
+        progress: &dyn Progress,
+    ) -> Result<Option<SplitFrame>, PipelineError> {
+        let region = settings.region;
+        if runner.processes() == 1 {
+            let t0 = Instant::now();
+            let frame = self.render(settings, progress)?;
+            let seconds = t0.elapsed().as_secs_f64();
+            let tiles = (region.width.max(region.height)).div_ceil(TILE).max(1);
+            return Ok(Some(SplitFrame {
+                frame,
+                layout: UnitLayout::new(region, tiles),
+                ranks: vec![RankWork { units: 1, seconds }],
+                unit_seconds: vec![(seconds, 0)],
+                wall_seconds: seconds,
+            }));
         }
-        .into());
-    }
-    // Rank 0 picks the split; the others take it.
-    let mut edge = UnitLayout::choose(region, comm.size(), rayon_threads())
-        .edge
-        .to_le_bytes()
-        .to_vec();
-    comm.broadcast(0, &mut edge)?;
-    let edge = u32::from_le_bytes(
-        edge.as_slice()
-            .try_into()
-            .map_err(|_| crate::CommError::Protocol("unit edge".into()))?,
-    );
-    let layout = UnitLayout::new(region, edge);
+        let _span = tracing::info_span!(stage::FRAME).entered();
+        let scene = &self.scene;
+        runner.agree(
+            "the frame",
+            &format!(
+                "{} ({} models, {} instances) {settings:?}",
+                scene.name,
+                scene.models.len(),
+                scene.instances.len()
+            ),
+        )?;
+        if !region.fits(settings.camera.width, settings.camera.height) {
+            return Err(sylva_render::RenderError::Region {
+                region,
+                width: settings.camera.width,
+                height: settings.camera.height,
+            }
+            .into());
+        }
+        // The root picks the split; the others take it.
+        let edge = from_root(
+            runner,
+            "the frame's units",
+            || {
+                Ok::<_, PipelineError>(
+                    UnitLayout::choose(region, runner.processes(), rayon::current_num_threads())
+                        .edge,
+                )
+            },
+            |e| u64::from(*e).to_le_bytes().to_vec(),
+            |data| {
+                let mut r = Reader::new(data, "unit edge");
+                let e = r.u64()?;
+                r.end()?;
+                u32::try_from(e)
+                    .ok()
+                    .filter(|&e| e > 0)
+                    .ok_or_else(|| WireError(format!("a unit edge of {e} tiles")).into())
+            },
+        )?;
+        let layout = UnitLayout::new(region, edge);
 
-    let t0 = Instant::now();
-    let renderer = prepared.renderer();
-    if comm.rank() == 0 {
-        progress.start("render", 3 * tile_count(region));
-    }
-    let outcome = run_queue(
-        comm,
-        layout.units(),
-        &mut |i| {
-            let unit = RenderSettings {
-                region: layout.unit(i),
-                ..*settings
+        let t0 = Instant::now();
+        let renderer = self.renderer();
+        let root = runner.is_root();
+        if root {
+            progress.start("render", 3 * tile_count(region));
+        }
+        let outcome = run_jobs(
+            runner,
+            layout.units(),
+            &mut |i| {
+                let unit = RenderSettings {
+                    region: layout.unit(i),
+                    ..*settings
+                };
+                let frame = renderer.render(&unit, &|_| {})?;
+                Ok(encode_unit(&frame))
+            },
+            &|i| progress.advance(3 * tile_count(layout.unit(i))),
+        );
+        if root {
+            progress.finish();
+        }
+        let Some(results) = outcome? else {
+            return Ok(None);
+        };
+
+        let mut pixels = vec![Radiance::default(); region.pixels() as usize];
+        let mut timings = FrameTimings::default();
+        let mut stats = TraceStats::default();
+        let mut ranks = vec![
+            RankWork {
+                units: 0,
+                seconds: 0.0
             };
-            let frame = renderer.render(&unit, &|_| {})?;
-            Ok(encode_unit(&frame))
-        },
-        &|i| progress.advance(3 * tile_count(layout.unit(i))),
-    );
-    if comm.rank() == 0 {
-        progress.finish();
-    }
-    let Some(outcome) = outcome? else {
-        return Ok(None);
-    };
-
-    let mut pixels = vec![Radiance::default(); region.pixels() as usize];
-    let mut timings = FrameTimings::default();
-    let mut stats = TraceStats::default();
-    for (i, data) in outcome.results.iter().enumerate() {
-        let u = layout.unit(i);
-        let f = decode_unit(data, u)?;
-        for (row, values) in f.pixels.chunks_exact(u.width as usize).enumerate() {
-            let y = (u.y0 - region.y0) as usize + row;
-            let start = y * region.width as usize + (u.x0 - region.x0) as usize;
-            pixels[start..start + values.len()].copy_from_slice(values);
+            runner.processes()
+        ];
+        for (i, done) in results.iter().enumerate() {
+            let u = layout.unit(i);
+            let f = decode_unit(&done.bytes, u)?;
+            for (row, values) in f.pixels.chunks_exact(u.width as usize).enumerate() {
+                let y = (u.y0 - region.y0) as usize + row;
+                let start = y * region.width as usize + (u.x0 - region.x0) as usize;
+                pixels[start..start + values.len()].copy_from_slice(values);
+            }
+            timings.primary_seconds += f.timings.primary_seconds;
+            timings.shadow_seconds += f.timings.shadow_seconds;
+            timings.shading_seconds += f.timings.shading_seconds;
+            timings.fused_seconds += f.timings.fused_seconds;
+            timings.gpu_kernel_seconds += f.timings.gpu_kernel_seconds;
+            timings.primary_rays += f.timings.primary_rays;
+            timings.shadow_rays += f.timings.shadow_rays;
+            stats += f.stats;
+            if let Some(r) = ranks.get_mut(done.process) {
+                r.units += 1;
+                r.seconds += done.seconds;
+            }
         }
-        timings.primary_seconds += f.timings.primary_seconds;
-        timings.shadow_seconds += f.timings.shadow_seconds;
-        timings.shading_seconds += f.timings.shading_seconds;
-        timings.fused_seconds += f.timings.fused_seconds;
-        timings.gpu_kernel_seconds += f.timings.gpu_kernel_seconds;
-        timings.primary_rays += f.timings.primary_rays;
-        timings.shadow_rays += f.timings.shadow_rays;
-        stats += f.stats;
+        let n = runner.processes() as f64;
+        timings.primary_seconds /= n;
+        timings.shadow_seconds /= n;
+        timings.shading_seconds /= n;
+        timings.fused_seconds /= n;
+        timings.gpu_kernel_seconds /= n;
+        Ok(Some(SplitFrame {
+            frame: Frame {
+                region,
+                width: region.width,
+                height: region.height,
+                pixels,
+                timings,
+                stats,
+            },
+            layout,
+            unit_seconds: results.iter().map(|d| (d.seconds, d.process)).collect(),
+            ranks,
+            wall_seconds: t0.elapsed().as_secs_f64(),
+        }))
     }
-    let ranks = comm.size() as f64;
-    timings.primary_seconds /= ranks;
-    timings.shadow_seconds /= ranks;
-    timings.shading_seconds /= ranks;
-    timings.fused_seconds /= ranks;
-    timings.gpu_kernel_seconds /= ranks;
-    let per_rank = outcome
-        .per_rank(comm.size())
-        .into_iter()
-        .map(|(units, seconds)| RankWork { units, seconds })
-        .collect();
-    Ok(Some(DistributedFrame {
-        frame: Frame {
-            region,
-            width: region.width,
-            height: region.height,
-            pixels,
-            timings,
-            stats,
-        },
-        layout,
-        ranks: per_rank,
-        unit_seconds: outcome.done.iter().map(|d| (d.seconds, d.rank)).collect(),
-        wall_seconds: t0.elapsed().as_secs_f64(),
-    }))
 }
-
-/// This process's rayon threads (what a unit of work is shared among).
-fn rayon_threads() -> usize {
-    rayon::current_num_threads()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

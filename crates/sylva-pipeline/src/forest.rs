@@ -1,0 +1,317 @@
+//! The physical light of a forest: every model's four light parts
+//! ([`sylva_light::lighting::PARTS`]) solved as jobs ([`crate::jobs`]) on its own density, its
+//! sun part with the neighbours' foliage added, and the coarse forest grid's weights of them
+//! per instance ([`ForestLight`]).
+//!
+//! Every process builds the models' densities and that foliage ([`forest_densities`]: the
+//! same inputs and a deterministic computation, so the same everywhere); the root lists the
+//! parts its cache lacks, they are solved as jobs, the root stores each as one process would
+//! (the same file, byte for byte) and sends every model's parts to every process, which
+//! weighs them through the forest grid itself.
+
+use std::time::Instant;
+
+use sylva_core::jobs::{from_root, Runner};
+use sylva_core::wire::{Reader, Writer};
+use sylva_geom::Scene;
+use sylva_lb::{DensityGrid, LightingGrid};
+use sylva_light::forest::{neighbour_shade, ForestInstance, ForestLight};
+use sylva_light::lighting::{
+    model_density, physical_environment, Light, LightingError, LightingReport, LightingSource,
+    ModelLighting, PartsPlan, ShadedDensity, PARTS,
+};
+use sylva_light::relight::{GlobalGridOptions, GlobalReport};
+use sylva_light::Progress;
+use sylva_render::stages::stage;
+
+use crate::jobs::{root_count, run_jobs};
+use crate::{lighting_options, scene_illumination, scene_to_sun, LbPlan, PipelineError};
+
+/// Whether `PreparedScene::new` lights `scene` through the forest grid: the physical light,
+/// a forest grid asked for, and more than one instance (a lone tree's light is its model's).
+pub fn uses_forest(scene: &Scene, light: Light, forest: Option<&GlobalGridOptions>) -> bool {
+    light == Light::Physical && forest.is_some() && scene.instances.len() > 1
+}
+
+/// What a forest's light parts are solved on ([`light_forest`]): every model's own density
+/// (voxelized as its LB solve sees it, scene order) and the neighbours' foliage added to its
+/// sun part's ([`neighbour_shade`]; `None`: none reaches into its boxes).
+#[derive(Debug, Clone)]
+pub struct ForestDensities {
+    pub own: Vec<DensityGrid>,
+    pub shades: Vec<Option<ShadedDensity>>,
+}
+
+/// [`ForestDensities`] of `scene`: its models voxelized, the neighbours' foliage measured on
+/// the coarse grid of `gopts`.
+pub fn forest_densities(
+    scene: &Scene,
+    lb: &LbPlan,
+    gopts: &GlobalGridOptions,
+) -> Result<ForestDensities, PipelineError> {
+    let illum = scene_illumination(scene);
+    let lopts = lighting_options(scene, lb);
+    let own = scene
+        .models
+        .iter()
+        .enumerate()
+        .map(|(k, model)| {
+            let lopts = lopts.for_model(scene, k);
+            model_density(model, &illum, &lopts, lb.solver)
+                .map(|(density, _)| density)
+                .map_err(|source| PipelineError::Lighting {
+                    model: model.name.clone(),
+                    source,
+                })
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let grids: Vec<&DensityGrid> = own.iter().collect();
+    let placed: Vec<(usize, glam::Affine3A)> = scene
+        .instances
+        .iter()
+        .map(|i| (i.model as usize, i.transform()))
+        .collect();
+    let shades =
+        neighbour_shade(&grids, &placed, 0.0, gopts).map_err(|source| PipelineError::Global {
+            scene: scene.name.clone(),
+            source,
+        })?;
+    Ok(ForestDensities { own, shades })
+}
+
+/// Every model's physical light as its four parts (each from the root's cache when it can),
+/// solved on `densities` ([`forest_densities`]) through `runner`, and the coarse forest
+/// grid's weights of them per instance ([`ForestLight`]); how many models came from the
+/// cache. Every process of `runner` calls it with the same scene, plan and densities (the
+/// scene and plan are checked) and gets the same light.
+pub fn light_forest(
+    scene: &Scene,
+    lb: &LbPlan,
+    gopts: &GlobalGridOptions,
+    densities: ForestDensities,
+    runner: &dyn Runner,
+    progress: &dyn Progress,
+) -> Result<(Vec<ModelLighting>, usize, ForestLight), PipelineError> {
+    let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
+    let (root, several) = (runner.is_root(), runner.processes() > 1);
+    let illum = scene_illumination(scene);
+    let global_err = |source| PipelineError::Global {
+        scene: scene.name.clone(),
+        source,
+    };
+    let mut opts = lighting_options(scene, lb);
+    if several {
+        runner.agree("the LB solver", &lb.solver.cache_tag())?;
+        runner.agree(
+            "the forest's LB settings",
+            &format!(
+                "{} ({} models, {} instances) grid {} light {} sun {:?} forest grid {}",
+                scene.name,
+                scene.models.len(),
+                scene.instances.len(),
+                opts.grid,
+                opts.light.name(),
+                scene_to_sun(scene),
+                gopts.sites
+            ),
+        )?;
+    }
+    if !root {
+        opts.cache_dir = None;
+    }
+    let ForestDensities { own, shades } = densities;
+    if own.len() != scene.models.len() || shades.len() != scene.models.len() {
+        return Err(global_err(LightingError::Global(format!(
+            "forest densities of {} models for {} models",
+            own.len(),
+            scene.models.len()
+        ))));
+    }
+    for (model, shade) in scene.models.iter().zip(&shades) {
+        if let Some(s) = shade {
+            progress.neighbour_shade(model, s);
+        }
+    }
+    let lighting_err = |k: usize, source| PipelineError::Lighting {
+        model: scene.models[k].name.clone(),
+        source,
+    };
+    let plans = scene
+        .models
+        .iter()
+        .zip(own)
+        .enumerate()
+        .map(|(k, (m, own))| {
+            let opts = opts.for_model(scene, k);
+            PartsPlan::new(m, &illum, &opts, lb.solver, own, shades[k].as_ref())
+                .map_err(|e| lighting_err(k, e))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+
+    // The root: the parts its cache lacks (model × 4 + part), to every process.
+    let count = plans.len() * PARTS.len();
+    let jobs: Vec<usize> = from_root(
+        runner,
+        "the light parts to solve",
+        || {
+            Ok::<_, PipelineError>(
+                (0..count)
+                    .filter(|&j| !plans[j / PARTS.len()].is_cached(j % PARTS.len()))
+                    .collect(),
+            )
+        },
+        |jobs: &Vec<usize>| {
+            let mut w = Writer::default();
+            w.u64s(&jobs.iter().map(|&j| j as u64).collect::<Vec<_>>());
+            w.0
+        },
+        |data| {
+            let mut r = Reader::new(data, "light parts to solve");
+            let jobs = r.indices(count)?;
+            r.end()?;
+            Ok(jobs)
+        },
+    )?;
+    let bar = several && root && !jobs.is_empty();
+    if bar {
+        progress.start("LB light parts", jobs.len() as u64);
+    }
+    let outcome = run_jobs(
+        runner,
+        jobs.len(),
+        &mut |j| {
+            let (m, k) = (jobs[j] / PARTS.len(), jobs[j] % PARTS.len());
+            let plan = &plans[m];
+            let name = &scene.models[m].name;
+            let _span =
+                (!several).then(|| tracing::info_span!(stage::LB_MODEL, model = %name).entered());
+            if !several {
+                progress.start(&format!("LB {name} ({} part)", PARTS[k]), 3);
+            }
+            let grid = plan.solve(k, lb.solver, &mut |c, step, max| {
+                if !several {
+                    progress.set((c * max + step) as u64, 3 * max as u64)
+                }
+            });
+            if !several {
+                progress.finish();
+            }
+            let mut w = Writer::default();
+            for c in &grid.map_err(|e| lighting_err(m, e))?.colours {
+                w.f32s(c);
+            }
+            Ok(w.0)
+        },
+        &|_| {
+            if several {
+                progress.advance(1)
+            }
+        },
+    );
+    if bar {
+        progress.finish();
+    }
+    let outcome = outcome?;
+
+    // The root: each part from its cache or the jobs, stored; every model's parts to every
+    // process.
+    let mut solved: Vec<Option<(Vec<f32>, f64)>> = (0..count).map(|_| None).collect();
+    if let Some(results) = outcome {
+        for (&j, done) in jobs.iter().zip(results) {
+            let sites = plans[j / PARTS.len()].dims().sites();
+            let mut r = Reader::new(&done.bytes, "a light part");
+            solved[j] = Some((r.f32s(3 * sites)?, done.seconds));
+            r.end()?;
+        }
+    }
+    let mut cached = 0;
+    let mut lighting = Vec::with_capacity(plans.len());
+    let mut fine = Vec::with_capacity(plans.len());
+    for (m, plan) in plans.into_iter().enumerate() {
+        let t = Instant::now();
+        let mut report = None;
+        let grids = from_root(
+            runner,
+            "a model's light parts",
+            || {
+                let mut seconds = 0.0;
+                let parts = plan
+                    .cached_parts(lb.solver, &mut |k| {
+                        let (values, s) = solved[m * PARTS.len() + k].take().ok_or_else(|| {
+                            LightingError::Global(format!(
+                                "the {} part was neither in the cache nor solved",
+                                PARTS[k]
+                            ))
+                        })?;
+                        seconds += s;
+                        plan.grid_from(values)
+                    })
+                    .map_err(|e| lighting_err(m, e))?;
+                report = Some(LightingReport {
+                    source: parts.source,
+                    seconds: seconds + t.elapsed().as_secs_f64(),
+                    path: parts.path,
+                    dims: plan.dims(),
+                    cache_warning: parts.cache_warning,
+                });
+                Ok::<_, PipelineError>(parts.grids)
+            },
+            |grids: &Vec<LightingGrid>| {
+                let mut w = Writer::default();
+                for c in grids.iter().flat_map(|g| &g.colours) {
+                    w.f32s(c);
+                }
+                w.0
+            },
+            |data| {
+                let mut r = Reader::new(data, "a model's light parts");
+                let grids = (0..PARTS.len())
+                    .map(|_| {
+                        let values = r.f32s(3 * plan.dims().sites())?;
+                        plan.grid_from(values).map_err(|e| lighting_err(m, e))
+                    })
+                    .collect::<Result<Vec<_>, PipelineError>>()?;
+                r.end()?;
+                Ok(grids)
+            },
+        )?;
+        if let Some(report) = report {
+            cached += (report.source == LightingSource::Cached) as usize;
+            progress.model_lit(&scene.models[m], &report);
+        }
+        let (l, density, medium) = plan.assemble(&grids);
+        lighting.push(l);
+        fine.push((density, medium));
+    }
+    let cached = root_count(runner, "cached models", cached)?;
+
+    // Every process weighs the parts through the forest grid (deterministic: the same
+    // weights everywhere).
+    let t0 = Instant::now();
+    let env = physical_environment(&illum).map_err(global_err)?;
+    let instances: Vec<ForestInstance> = scene
+        .instances
+        .iter()
+        .map(|i| {
+            let (d, m) = &fine[i.model as usize];
+            ForestInstance {
+                model: Some((d, m)),
+                to_world: i.transform(),
+            }
+        })
+        .collect();
+    progress.start("forest grid", 3);
+    let forest = ForestLight::solve(&instances, &env, 0.0, gopts, &mut |done, total| {
+        progress.set(done as u64, total as u64)
+    });
+    progress.finish();
+    let forest = forest.map_err(global_err)?;
+    progress.global_grid(&GlobalReport {
+        source: LightingSource::Computed,
+        seconds: t0.elapsed().as_secs_f64(),
+        dims: forest.dims,
+        path: None,
+        cache_warning: None,
+    });
+    Ok((lighting, cached, forest))
+}
