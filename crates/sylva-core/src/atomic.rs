@@ -382,8 +382,10 @@ mod tests {
             let e = OutputSet::new::<&Path>(&[]).plan(&[&p]).unwrap_err();
             assert!(matches!(e, OutputError::ParentNotDirectory { .. }), "{e}");
             assert!(
-                e.to_string()
-                    .contains(&format!("{} is a file, not a directory", d.join("afile").display())),
+                e.to_string().contains(&format!(
+                    "{} is a file, not a directory",
+                    d.join("afile").display()
+                )),
                 "{e}"
             );
         }

@@ -124,7 +124,11 @@ fn mitsuba_xml_is_consistent_with_its_files_and_the_scene() {
     })
     .unwrap();
     assert_eq!(calls, [1, 2]);
-    assert_eq!(written.files, mitsuba::files(&scene), "planned and written files differ");
+    assert_eq!(
+        written.files,
+        mitsuba::files(&scene),
+        "planned and written files differ"
+    );
     assert_eq!(written.triangles, scene.instanced_triangles() + 2);
     for f in &written.files {
         assert!(out.join(f).is_file(), "{}", f.display());
@@ -384,7 +388,11 @@ fn obj_reads_back_to_the_instanced_scene() {
     })
     .unwrap();
     assert_eq!(last, scene.instances.len() as u64);
-    assert_eq!(written.files, obj::files(&scene), "planned and written files differ");
+    assert_eq!(
+        written.files,
+        obj::files(&scene),
+        "planned and written files differ"
+    );
     let o = read_obj(&out.join(obj::OBJ_FILE));
     assert_eq!(o.mtllib, obj::MTL_FILE);
     assert_eq!(o.v.len(), o.vt.len());
@@ -702,7 +710,11 @@ fn media_export_as_heterogeneous_volumes_in_world_units() {
     let out = tmp.path().join("media");
     let opts = mitsuba::MitsubaOptions::for_scene(&scene);
     let written = mitsuba::write(&scene, &out, &opts, &mut |_| true).unwrap();
-    assert_eq!(written.files, mitsuba::files(&scene), "planned and written files differ");
+    assert_eq!(
+        written.files,
+        mitsuba::files(&scene),
+        "planned and written files differ"
+    );
 
     // The VOL file: header, then x fastest, then y, then z, the density unchanged.
     let vol = fs::read(out.join("media/puff.vol")).unwrap();
@@ -790,12 +802,20 @@ fn an_export_onto_its_own_input_replaces_nothing() {
         msg.contains("scene.obj") && msg.contains("is an input of this command"),
         "{msg}"
     );
-    assert_eq!(before("scene.mtl"), precious.as_bytes(), "scene.mtl replaced");
+    assert_eq!(
+        before("scene.mtl"),
+        precious.as_bytes(),
+        "scene.mtl replaced"
+    );
     assert_eq!(before("scene.obj"), obj_text);
     let mut names: Vec<String> = fs::read_dir(&e)
         .unwrap()
         .map(|d| d.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     names.sort();
-    assert_eq!(names, ["s.toml", "scene.mtl", "scene.obj"], "files left behind");
+    assert_eq!(
+        names,
+        ["s.toml", "scene.mtl", "scene.obj"],
+        "files left behind"
+    );
 }

@@ -1251,7 +1251,9 @@ fn obj_references_outside_the_model_folder_are_refused() {
     let d = tmp.path().join("a/b/model");
     write(tmp.path(), "a/secret.mtl", "newmtl Bark\nKd 1 0 0\n");
     write(tmp.path(), "a/secret.png", png(2, 2, |_, _| [9, 9, 9, 255]));
-    let obj = |mtllib: &str| format!("mtllib {mtllib}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl Bark\nf 1 2 3\n");
+    let obj = |mtllib: &str| {
+        format!("mtllib {mtllib}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl Bark\nf 1 2 3\n")
+    };
     for reference in ["../../secret.mtl", "sub/../../../secret.mtl"] {
         let p = write(&d, "t.obj", obj(reference));
         let e = load_err(&p, &ImportOptions::default());

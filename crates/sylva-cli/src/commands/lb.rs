@@ -318,7 +318,10 @@ fn solve(a: SolveArgs) -> Result<()> {
     // Outputs named on the command line are checked (writable, not a directory) before the
     // grid is built; default names wait for the grid's name.
     let early: Vec<PathBuf> = match (&a.output, &a.png) {
-        (Some(o), p) => vec![o.clone(), p.clone().unwrap_or_else(|| o.with_extension("png"))],
+        (Some(o), p) => vec![
+            o.clone(),
+            p.clone().unwrap_or_else(|| o.with_extension("png")),
+        ],
         (None, Some(p)) => vec![p.clone()],
         (None, None) => Vec::new(),
     };

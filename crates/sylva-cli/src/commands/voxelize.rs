@@ -171,7 +171,10 @@ pub fn run(a: VoxelizeArgs) -> Result<()> {
     // Before the work: the grid and its preview must differ, replace no input (the model
     // file is protected once read) and be writable. Default names wait for the model's name.
     let early: Vec<PathBuf> = match (&a.output, &a.png) {
-        (Some(o), p) => vec![o.clone(), p.clone().unwrap_or_else(|| o.with_extension("png"))],
+        (Some(o), p) => vec![
+            o.clone(),
+            p.clone().unwrap_or_else(|| o.with_extension("png")),
+        ],
         (None, Some(p)) => vec![p.clone()],
         (None, None) => Vec::new(),
     };

@@ -361,11 +361,7 @@ fn ply_bytes(scene: &Scene, written: &[bool]) -> u64 {
 /// Writes `m`'s density as Mitsuba's binary grid volume (`VOL` version 3: float32, one
 /// channel, x fastest, then the bounding box, which Mitsuba 3 ignores in favour of the
 /// volume's `to_world`).
-fn write_vol(
-    set: &mut sylva_core::OutputSet,
-    path: &Path,
-    m: &Medium,
-) -> Result<(), ExportError> {
+fn write_vol(set: &mut sylva_core::OutputSet, path: &Path, m: &Medium) -> Result<(), ExportError> {
     let [nx, ny, nz] = m.dims;
     write_file(set, path, |w| {
         let mut head = Vec::with_capacity(48);
