@@ -645,10 +645,9 @@ pub fn write(
                 reflect: None,
                 transmit: None,
             };
-            if mat.texture.is_some() {
+            if let Some(t) = &mat.texture {
                 for (suffix, factor) in scaled_textures(mat) {
                     let rel = format!("{TEXTURE_DIR}/{}_{suffix}.exr", mat_stems[k][j]);
-                    let t = mat.texture.as_ref().expect("textured");
                     write_scaled_exr(&mut set, &dir.join(&rel), t, factor)?;
                     match suffix {
                         "reflect" => files.reflect = Some(rel),
