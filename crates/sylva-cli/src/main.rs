@@ -18,8 +18,10 @@ ray tracer. Run `sylva <command> --help` for each command's options."
 )]
 struct Cli {
     /// Worker threads, 1 to 256 (default: all cores). Results do not depend on it.
-    #[arg(long, global = true)]
-    threads: Option<usize>,
+    // Signed, and negative numbers taken as values: `--threads -1` gets the range message
+    // below instead of clap's "unexpected argument '-1'".
+    #[arg(long, global = true, allow_negative_numbers = true)]
+    threads: Option<i64>,
     #[command(subcommand)]
     command: Command,
 }
@@ -104,13 +106,17 @@ fn main() -> std::process::ExitCode {
     // Ctrl-C while outputs are written removes the temporaries and replaces nothing.
     sylva_core::interrupt::install();
     let cli = Cli::parse();
+    let mut threads = None;
     if let Some(n) = cli.threads {
         let range = sylva_core::limits::THREADS;
-        if !range.contains(&n) {
-            return commands::finish(Err(anyhow::anyhow!(
-                "--threads {n}: must be {}",
-                sylva_core::limits::describe(&range)
-            )));
+        match usize::try_from(n) {
+            Ok(k) if range.contains(&k) => threads = Some(k),
+            _ => {
+                return commands::finish(Err(anyhow::anyhow!(
+                    "--threads {n}: must be {}",
+                    sylva_core::limits::describe(&range)
+                )))
+            }
         }
     }
     // One of several processes started by mpirun: the command must split its work.
@@ -131,7 +137,7 @@ fn main() -> std::process::ExitCode {
         }
     }
     // Under mpirun, the ranks on one machine share its cores unless told otherwise.
-    let threads = cli.threads.or_else(|| {
+    let threads = threads.or_else(|| {
         let local = sylva_mpi::launch::local_size().filter(|_| ranks.is_some())?;
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         Some((cores / local.max(1)).clamp(1, *sylva_core::limits::THREADS.end()))
@@ -165,10 +171,7 @@ fn run_mpi(command: Command) -> std::process::ExitCode {
             let (rank, size) = (mpi.rank(), mpi.size());
             // One write for the whole report: eprintln! writes a formatted line in pieces,
             // and mpirun relays each as it comes, so its abort banner could split the line.
-            let mut report = format!("error: rank {rank} of {size}: {e}\n");
-            for cause in e.chain().skip(1) {
-                report.push_str(&format!("  caused by: {cause}\n"));
-            }
+            let mut report = commands::error_report(&format!("error: rank {rank} of {size}: "), &e);
             report.push_str(&format!(
                 "sylva: rank {rank} failed; aborting the MPI job\n"
             ));

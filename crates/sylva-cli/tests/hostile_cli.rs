@@ -258,3 +258,87 @@ fn probing_for_a_gpu_prints_no_driver_warnings() {
     assert!(out.status.success(), "{stderr}");
     assert!(!stderr.contains("XDG_RUNTIME_DIR"), "{stderr}");
 }
+
+/// Issue 31 item 6: an output that cannot be written fails before the LB and the frame, with
+/// the real reason (the cache directory is never created: no LB work started).
+#[test]
+fn unwritable_outputs_fail_before_the_work_with_the_real_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    fs::create_dir(p("dir.png")).unwrap();
+    fs::write(p("afile"), b"x").unwrap();
+    let mut cases = vec![
+        (p("dir.png"), "is a directory".to_string()),
+        (
+            p("afile/x.png"),
+            format!("{} is a file, not a directory", p("afile")),
+        ),
+    ];
+    // /sys takes no new file even from root, whom permission bits would let through.
+    if cfg!(target_os = "linux") && std::path::Path::new("/sys/kernel").is_dir() {
+        cases.push((
+            "/sys/x.png".into(),
+            "no file can be created in the directory /sys".into(),
+        ));
+    }
+    let cache = p("cache");
+    for (output, want) in &cases {
+        let args = [
+            "render",
+            "catalpa",
+            "--width",
+            "16",
+            "--height",
+            "16",
+            "--cache-dir",
+            &cache,
+            "-o",
+            output,
+        ];
+        fails_with(&args, want);
+        let (_, _, stderr) = sylva(&args);
+        assert!(!stderr.contains("File exists"), "{stderr}");
+        assert!(
+            !stderr.contains("LB"),
+            "the LB ran before the check: {stderr}"
+        );
+        assert!(
+            !std::path::Path::new(&cache).exists(),
+            "the LB ran before the check"
+        );
+    }
+    fails_with(
+        &["relight", "demo", "--suns", "2", "-o", &p("afile")],
+        "is a file, not a directory",
+    );
+    fails_with(
+        &["voxelize", "dogrose", "-o", &p("dir.png")],
+        "is a directory",
+    );
+}
+
+/// Issue 31 item 8: negative counts get the range message, and a cause already in the
+/// message is not printed again.
+#[test]
+fn negative_counts_and_repeated_causes() {
+    fails_with(
+        &["render", "demo", "--gather-rays", "-1"],
+        "-1 is not in 0..=256",
+    );
+    fails_with(
+        &["--threads", "-1", "scene", "list"],
+        "--threads -1: must be 1 to 256",
+    );
+    fails_with(
+        &["scene", "list", "--threads", "-1"],
+        "--threads -1: must be 1 to 256",
+    );
+    let (ok, _, stderr) = sylva(&["render", "catalpa", "-o", "/sys/x.png"]);
+    if cfg!(target_os = "linux") && std::path::Path::new("/sys/kernel").is_dir() {
+        assert!(!ok);
+        assert!(
+            stderr.contains("Permission denied") && !stderr.contains("caused by"),
+            "{stderr}"
+        );
+    }
+}

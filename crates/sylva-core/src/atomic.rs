@@ -82,6 +82,16 @@ pub enum OutputError {
     Duplicate(PathBuf),
     #[error("{}: is an input of this command ({}); writing it would destroy it: choose another output", path.display(), input.display())]
     IsInput { path: PathBuf, input: PathBuf },
+    #[error("cannot write {}: it is a directory; name a file (e.g. {})", .0.display(), .0.join("out.png").display())]
+    IsDirectory(PathBuf),
+    #[error("cannot write {}: {} is a file, not a directory", path.display(), parent.display())]
+    ParentNotDirectory { path: PathBuf, parent: PathBuf },
+    #[error("cannot write {}: no file can be created in the directory {}: {source}", path.display(), dir.display())]
+    NotWritable {
+        path: PathBuf,
+        dir: PathBuf,
+        source: io::Error,
+    },
     #[error("cannot write {}: {source}", path.display())]
     Io { path: PathBuf, source: io::Error },
 }
@@ -98,6 +108,8 @@ pub struct OutputSet {
     /// Each temporary and the file it becomes. Before `_staging`: fields drop in order, so the
     /// temporaries are gone before a signal may end the process again.
     staged: Vec<(TempPath, PathBuf)>,
+    /// Directories [`OutputSet::plan`] found writable, so each is probed once.
+    writable: Vec<PathBuf>,
     _staging: Option<StagingGuard>,
 }
 
@@ -117,12 +129,15 @@ impl OutputSet {
                 .collect(),
             planned: Vec::new(),
             staged: Vec::new(),
+            writable: Vec::new(),
             _staging: None,
         }
     }
 
-    /// Adds the files a command will write, refusing a file named twice or one that is an
-    /// input. Call it before the long work, so a bad output name fails at once.
+    /// Adds the files a command will write, refusing a file named twice, one that is an input,
+    /// a directory, and one whose directory is a file or cannot take a new file. Call it
+    /// before the long work, so a bad output name fails at once and before any file of the
+    /// set is written.
     pub fn plan<P: AsRef<Path>>(&mut self, outputs: &[P]) -> Result<(), OutputError> {
         for p in outputs {
             let p = p.as_ref();
@@ -142,8 +157,54 @@ impl OutputSet {
             if self.planned.iter().any(|(i, _)| *i == id) {
                 return Err(OutputError::Duplicate(p.to_path_buf()));
             }
+            self.check_writable(p)?;
             self.planned.push((id, p.to_path_buf()));
         }
+        Ok(())
+    }
+
+    /// Refuses `path` where a file cannot go: a directory of that name, a file where one of
+    /// its directories should be, or a directory that cannot take a new file. The nearest
+    /// existing directory is probed with a temporary file (removed at once): permission bits
+    /// do not tell (root, ACLs, read-only mounts).
+    fn check_writable(&mut self, path: &Path) -> Result<(), OutputError> {
+        if path.is_dir() {
+            return Err(OutputError::IsDirectory(path.to_path_buf()));
+        }
+        let mut dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        // The directories `write` would create are checked at their nearest existing one.
+        while !dir.exists() {
+            match dir.parent() {
+                Some(d) if !d.as_os_str().is_empty() => dir = d,
+                _ => {
+                    dir = Path::new(".");
+                    break;
+                }
+            }
+        }
+        if !dir.is_dir() {
+            return Err(OutputError::ParentNotDirectory {
+                path: path.to_path_buf(),
+                parent: dir.to_path_buf(),
+            });
+        }
+        let key = identity(dir);
+        if self.writable.contains(&key) {
+            return Ok(());
+        }
+        tempfile::Builder::new()
+            .prefix(".sylva-probe.")
+            .tempfile_in(dir)
+            .map_err(|e| OutputError::NotWritable {
+                path: path.to_path_buf(),
+                dir: dir.to_path_buf(),
+                // tempfile appends "at path ..." with its random name: keep the system's reason.
+                source: io::Error::new(e.kind(), strip_tempfile_path(&e)),
+            })?;
+        self.writable.push(key);
         Ok(())
     }
 
@@ -199,6 +260,15 @@ impl OutputSet {
             }
         }
         Ok(done)
+    }
+}
+
+/// The message of an error from `tempfile` without the " at path ..." it appends.
+fn strip_tempfile_path(e: &io::Error) -> String {
+    let text = e.to_string();
+    match text.find(" at path ") {
+        Some(k) => text[..k].to_string(),
+        None => text,
     }
 }
 
@@ -293,5 +363,62 @@ mod tests {
         let e = set.plan(&[dir.path().join("./l.png")]).unwrap_err();
         assert!(matches!(e, OutputError::Duplicate(_)), "{e}");
         assert_eq!(fs::read(&input).unwrap(), b"grid");
+    }
+
+    #[test]
+    fn outputs_that_cannot_be_written_are_refused_when_planned() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = dir.path();
+        // A directory named like the image.
+        fs::create_dir(d.join("dir.png")).unwrap();
+        let e = OutputSet::new::<&Path>(&[])
+            .plan(&[d.join("dir.png")])
+            .unwrap_err();
+        assert!(matches!(e, OutputError::IsDirectory(_)), "{e}");
+        assert!(e.to_string().contains("is a directory"), "{e}");
+        // A file where a directory should be, directly or further up.
+        fs::write(d.join("afile"), b"x").unwrap();
+        for p in [d.join("afile/x.png"), d.join("afile/sub/x.png")] {
+            let e = OutputSet::new::<&Path>(&[]).plan(&[&p]).unwrap_err();
+            assert!(matches!(e, OutputError::ParentNotDirectory { .. }), "{e}");
+            assert!(
+                e.to_string().contains(&format!(
+                    "{} is a file, not a directory",
+                    d.join("afile").display()
+                )),
+                "{e}"
+            );
+        }
+        // Missing directories are fine: `write` creates them.
+        let mut set = OutputSet::new::<&Path>(&[]);
+        set.plan(&[d.join("new/deeper/x.png"), d.join("new/y.png")])
+            .unwrap();
+        assert!(!d.join("new").exists(), "planning must not create anything");
+        // The probe leaves nothing behind.
+        let mut names: Vec<_> = fs::read_dir(d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        names.sort();
+        assert_eq!(names, ["afile", "dir.png"]);
+    }
+
+    /// /sys refuses new files even to root, where permission bits would not.
+    #[cfg(target_os = "linux")]
+    #[test]
+    fn an_unwritable_directory_is_refused_with_the_systems_reason() {
+        if !Path::new("/sys/kernel").is_dir() {
+            eprintln!("skipping: no /sys on this system");
+            return;
+        }
+        let e = OutputSet::new::<&Path>(&[])
+            .plan(&[Path::new("/sys/x.png")])
+            .unwrap_err();
+        assert!(matches!(e, OutputError::NotWritable { .. }), "{e}");
+        let text = e.to_string();
+        assert!(
+            text.contains("directory /sys") && !text.contains("at path"),
+            "{text}"
+        );
     }
 }

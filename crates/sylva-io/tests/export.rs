@@ -124,6 +124,11 @@ fn mitsuba_xml_is_consistent_with_its_files_and_the_scene() {
     })
     .unwrap();
     assert_eq!(calls, [1, 2]);
+    assert_eq!(
+        written.files,
+        mitsuba::files(&scene),
+        "planned and written files differ"
+    );
     assert_eq!(written.triangles, scene.instanced_triangles() + 2);
     for f in &written.files {
         assert!(out.join(f).is_file(), "{}", f.display());
@@ -383,6 +388,11 @@ fn obj_reads_back_to_the_instanced_scene() {
     })
     .unwrap();
     assert_eq!(last, scene.instances.len() as u64);
+    assert_eq!(
+        written.files,
+        obj::files(&scene),
+        "planned and written files differ"
+    );
     let o = read_obj(&out.join(obj::OBJ_FILE));
     assert_eq!(o.mtllib, obj::MTL_FILE);
     assert_eq!(o.v.len(), o.vt.len());
@@ -699,7 +709,12 @@ fn media_export_as_heterogeneous_volumes_in_world_units() {
     scene.media.push(m.clone());
     let out = tmp.path().join("media");
     let opts = mitsuba::MitsubaOptions::for_scene(&scene);
-    mitsuba::write(&scene, &out, &opts, &mut |_| true).unwrap();
+    let written = mitsuba::write(&scene, &out, &opts, &mut |_| true).unwrap();
+    assert_eq!(
+        written.files,
+        mitsuba::files(&scene),
+        "planned and written files differ"
+    );
 
     // The VOL file: header, then x fastest, then y, then z, the density unchanged.
     let vol = fs::read(out.join("media/puff.vol")).unwrap();
@@ -760,4 +775,47 @@ fn media_export_as_heterogeneous_volumes_in_world_units() {
     let half = Vec3::splat(h / 2.0);
     assert!(close(&vt("scale"), &(size + 2.0 * half).to_array(), 1e-4));
     assert!(close(&vt("translate"), &(lo - half).to_array(), 1e-4));
+}
+
+/// Issue 31 item 1: exporting into the folder of the scene's own OBJ must fail before any
+/// file is replaced, a `scene.mtl` that the scene does not read included.
+#[test]
+fn an_export_onto_its_own_input_replaces_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let e = tmp.path().join("e");
+    fs::create_dir(&e).unwrap();
+    fs::write(e.join("scene.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let precious = "# precious\nnewmtl bark\nKd 0.5 0.3 0.1\n";
+    fs::write(e.join("scene.mtl"), precious).unwrap();
+    let toml = e.join("s.toml");
+    fs::write(
+        &toml,
+        "[[models]]\nname = \"thing\"\nmesh = \"scene.obj\"\n\n[[instances]]\nmodel = \"thing\"\nposition = [0.0, 0.0, 0.0]\n",
+    )
+    .unwrap();
+    let scene = sylva_scene::load(toml.to_str().unwrap()).unwrap();
+    let before = |name: &str| fs::read(e.join(name)).unwrap();
+    let obj_text = before("scene.obj");
+    let err = obj::write(&scene, &e, &mut |_| true).unwrap_err();
+    let msg = err.to_string();
+    assert!(
+        msg.contains("scene.obj") && msg.contains("is an input of this command"),
+        "{msg}"
+    );
+    assert_eq!(
+        before("scene.mtl"),
+        precious.as_bytes(),
+        "scene.mtl replaced"
+    );
+    assert_eq!(before("scene.obj"), obj_text);
+    let mut names: Vec<String> = fs::read_dir(&e)
+        .unwrap()
+        .map(|d| d.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(
+        names,
+        ["s.toml", "scene.mtl", "scene.obj"],
+        "files left behind"
+    );
 }

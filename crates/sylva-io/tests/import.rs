@@ -1242,3 +1242,49 @@ fn species_written_as_obj_reads_back() {
         }
     }
 }
+
+/// Issue 31 item 5: an OBJ's `mtllib` and an MTL's texture maps stay inside the model's folder,
+/// as glTF's buffers and images do; an MTL in a subfolder may still name a texture beside it.
+#[test]
+fn obj_references_outside_the_model_folder_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let d = tmp.path().join("a/b/model");
+    write(tmp.path(), "a/secret.mtl", "newmtl Bark\nKd 1 0 0\n");
+    write(tmp.path(), "a/secret.png", png(2, 2, |_, _| [9, 9, 9, 255]));
+    let obj = |mtllib: &str| {
+        format!("mtllib {mtllib}\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl Bark\nf 1 2 3\n")
+    };
+    for reference in ["../../secret.mtl", "sub/../../../secret.mtl"] {
+        let p = write(&d, "t.obj", obj(reference));
+        let e = load_err(&p, &ImportOptions::default());
+        assert!(
+            e.contains(&format!("t.obj: line 1: mtllib '{reference}'"))
+                && e.contains("outside the model's folder"),
+            "{e}"
+        );
+    }
+    let abs = tmp.path().join("a/secret.mtl");
+    let p = write(&d, "t.obj", obj(abs.to_str().unwrap()));
+    let e = load_err(&p, &ImportOptions::default());
+    assert!(e.contains("outside the model's folder"), "{e}");
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink(&abs, d.join("link.mtl")).unwrap();
+        let p = write(&d, "t.obj", obj("link.mtl"));
+        let e = load_err(&p, &ImportOptions::default());
+        assert!(e.contains("outside the model's folder"), "{e}");
+    }
+
+    // Texture maps: against the model's folder, not the MTL's.
+    let p = write(&d, "t.obj", obj("mtl/t.mtl"));
+    write(&d, "mtl/t.mtl", "newmtl Bark\nmap_Kd ../../../secret.png\n");
+    let e = load_err(&p, &ImportOptions::default());
+    assert!(
+        e.contains("t.mtl: line 2: map_Kd '../../../secret.png'")
+            && e.contains("outside the model's folder"),
+        "{e}"
+    );
+    write(&d, "tex/ok.png", png(2, 2, |_, _| [200, 10, 10, 255]));
+    write(&d, "mtl/t.mtl", "newmtl Bark\nmap_Kd ../tex/ok.png\n");
+    assert_eq!(load(&p).triangle_count(), 1);
+}

@@ -152,6 +152,39 @@ fn layout(
 /// The forest's mean medium per colour: each model's leaf and bark parameters weighted by
 /// their optical depth (`Σ -ln(1 - ρ) h²` over its sites, green and wood shares apart) times
 /// its instances' scale².
+/// How far past a bound rounding may push a weighted mean of valid parameters: far above the
+/// error of summing millions of shares (about 1e-16 each), far below any real excess.
+const MIX_ROUNDING: f64 = 1e-9;
+
+/// The colour of a weighted mean of valid media. Mathematically its σ_a, σ_s lie in [0, 1], its
+/// g in [-1, 1] and its σ_t in (0, 1], as every input's do; a sum over a dense forest's 100 000
+/// shares rounds past 1 by about 1e-12, which the lattice's stability check would refuse.
+/// Such excess (up to [`MIX_ROUNDING`]) is pulled back; a larger one is left for the check to
+/// report, since it cannot come from rounding.
+fn mean_colour(sigma_s: f64, sigma_a: f64, g: f64) -> ColourParams {
+    let pull = |v: f64, lo: f64, hi: f64| {
+        if v < lo && v >= lo - MIX_ROUNDING {
+            lo
+        } else if v > hi && v <= hi + MIX_ROUNDING {
+            hi
+        } else {
+            v
+        }
+    };
+    let (mut sigma_s, mut sigma_a) = (pull(sigma_s, 0.0, 1.0), pull(sigma_a, 0.0, 1.0));
+    let t = sigma_s + sigma_a;
+    if t > 1.0 && t <= 1.0 + MIX_ROUNDING {
+        sigma_s /= t;
+        // σ_a from σ_s, not divided too: the sum is then 1 within an ulp, not two.
+        sigma_a = (1.0 - sigma_s).min(sigma_a / t);
+    }
+    ColourParams {
+        sigma_s,
+        sigma_a,
+        g: g.clamp(-1.0, 1.0),
+    }
+}
+
 fn forest_medium(instances: &[ForestInstance], fine: &[Option<Placed>]) -> Option<MediumParams> {
     // Per distinct fine grid: its green and wood optical depth (model units).
     let mut depth: HashMap<usize, (f64, f64)> = HashMap::new();
@@ -198,10 +231,9 @@ fn forest_medium(instances: &[ForestInstance], fine: &[Option<Placed>]) -> Optio
     let mean = |k: usize| -> [ColourParams; 3] {
         // A kind that is absent takes the other's parameters (no site uses it).
         let k = if w[k] > 0.0 { k } else { 1 - k };
-        std::array::from_fn(|c| ColourParams {
-            sigma_s: sums[k][c][0] / w[k],
-            sigma_a: sums[k][c][1] / w[k],
-            g: (sums[k][c][2] / w[k]).clamp(-1.0, 1.0),
+        std::array::from_fn(|c| {
+            let [s, a, g] = sums[k][c];
+            mean_colour(s / w[k], a / w[k], g / w[k])
         })
     };
     Some(MediumParams {
@@ -678,6 +710,37 @@ mod tests {
         );
     }
     use sylva_lb::Bounds;
+
+    /// Issue 31 item 3: a mix whose σ_t rounding put at 1 + 1.1e-12 (what a dense forest of
+    /// 100 000 dogroses gave) is a valid medium; an excess rounding cannot make is not hidden.
+    #[test]
+    fn mixed_media_are_valid_within_rounding() {
+        let (s, a): (f64, f64) = (0.897_000_000_001_1, 0.103);
+        assert!((s + a - 1.0 - 1.1e-12).abs() < 1e-15);
+        assert!(
+            ColourParams::new(a, s, 0.0).is_err(),
+            "the raw mean is refused"
+        );
+        let c = mean_colour(s, a, 0.5);
+        c.validate("").unwrap();
+        assert!(c.sigma_t() <= 1.0 + f64::EPSILON, "{}", c.sigma_t());
+        assert!((c.sigma_s - s).abs() < 1e-11 && (c.sigma_a - a).abs() < 1e-11);
+        // A g or σ just past its bound by rounding.
+        let c = mean_colour(1.0 + 1e-13, -1e-13, -1.0 - 1e-13);
+        assert_eq!((c.sigma_s, c.sigma_a, c.g), (1.0, 0.0, -1.0));
+        c.validate("").unwrap();
+        // Valid means pass through unchanged.
+        assert_eq!(
+            mean_colour(0.7, 0.2, 0.3),
+            ColourParams {
+                sigma_s: 0.7,
+                sigma_a: 0.2,
+                g: 0.3
+            }
+        );
+        // Not rounding: left for the check to refuse.
+        assert!(mean_colour(0.9, 0.2, 0.0).validate("").is_err());
+    }
 
     /// A cube of uniform density `rho` over `[-1, 1]³` (shell empty), `n` sites per axis.
     fn cube(n: usize, rho: f32) -> DensityGrid {

@@ -33,6 +33,9 @@ pub enum SceneError {
     Input(#[from] sylva_core::InputError),
     #[error("no scene file '{0}' and no built-in scene of that name (built-in scenes: {builtins})", builtins = builtin_scenes::NAMES.join(", "))]
     NotFound(String),
+    /// A model file (OBJ, glTF) given where a scene is expected.
+    #[error("{}: is a {kind} model, not a scene: scene files are TOML (docs/scenes.md); to use the model, name it in a scene: [[models]] mesh = \"{}\"", path.display(), path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default())]
+    ModelNotScene { path: PathBuf, kind: &'static str },
     /// Syntax, unknown keys, wrong types and bad values.
     #[error("{origin}{}: {message}", line.map(|l| format!(": line {l}")).unwrap_or_default())]
     Invalid {
@@ -423,7 +426,9 @@ impl SceneDesc {
     /// A scene by file path, or a built-in scene by name when no such file exists.
     pub fn load(name_or_path: &str) -> Result<SceneDesc, SceneError> {
         let path = Path::new(name_or_path);
-        if path.exists() {
+        // Not `exists()`: a link that loops or dangles is a file name the user gave, and the
+        // reader says what is wrong with it.
+        if path.symlink_metadata().is_ok() {
             return SceneDesc::load_file(path);
         }
         match builtin_scenes::source(name_or_path) {
@@ -433,6 +438,20 @@ impl SceneDesc {
     }
 
     pub fn load_file(path: &Path) -> Result<SceneDesc, SceneError> {
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase());
+        let kind = match ext.as_deref() {
+            Some("gltf") | Some("glb") => Some("glTF"),
+            Some("obj") => Some("Wavefront OBJ"),
+            _ => None,
+        };
+        if let Some(kind) = kind {
+            return Err(SceneError::ModelNotScene {
+                path: path.to_path_buf(),
+                kind,
+            });
+        }
         let text =
             sylva_core::read_text_file(path, sylva_core::limits::TEXT_FILE_BYTES, "scene files")?;
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();

@@ -284,3 +284,37 @@ fn single_tree_scenes_build_for_every_species_and_not_for_others() {
     assert_eq!(scene.models[0].name, "red_maple");
     assert!(builtin_scenes::single_tree("oak_of_nowhere").is_none());
 }
+
+/// Issue 31 item 8: a scene name that is a looping link says so (not "no scene file"); a
+/// model file given as a scene says what the command expects instead of a TOML error.
+#[test]
+fn links_and_model_files_given_as_scenes_say_what_they_are() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = |n: &str| dir.path().join(n).to_str().unwrap().to_string();
+    #[cfg(unix)]
+    {
+        std::os::unix::fs::symlink(s("loop2"), s("loop1")).unwrap();
+        std::os::unix::fs::symlink(s("loop1"), s("loop2")).unwrap();
+        let e = SceneDesc::load(&s("loop1")).unwrap_err();
+        assert!(!matches!(e, SceneError::NotFound(_)), "{e}");
+        let msg = e.to_string();
+        assert!(
+            msg.contains("loop1") && msg.contains("symbolic links"),
+            "{msg}"
+        );
+    }
+    for (name, kind) in [
+        ("x.gltf", "glTF"),
+        ("x.GLB", "glTF"),
+        ("x.obj", "Wavefront OBJ"),
+    ] {
+        fs::write(s(name), r#"{"asset": {"version": "2.0"}}"#).unwrap();
+        let msg = SceneDesc::load(&s(name)).unwrap_err().to_string();
+        assert!(
+            msg.contains(&format!("is a {kind}"))
+                && msg.contains("not a scene")
+                && msg.contains(&format!("mesh = \"{name}\"")),
+            "{msg}"
+        );
+    }
+}

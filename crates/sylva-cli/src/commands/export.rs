@@ -23,7 +23,8 @@ pub struct ExportArgs {
     /// and media (clouds) as heterogeneous volumes.
     #[arg(long, short = 'f', value_name = "FORMAT")]
     pub format: Format,
-    /// Output directory; created if missing, files of the same name in it are replaced.
+    /// Output directory; created if missing, files of the same name in it are replaced (all
+    /// together once every file is written; none on an error).
     #[arg(long, short = 'o', value_name = "DIR")]
     pub output: PathBuf,
     /// Mitsuba: samples per pixel written as the XML's `spp` default (default: the scene's
@@ -55,8 +56,15 @@ fn keep_going() -> bool {
 }
 
 pub fn run(args: ExportArgs) -> Result<()> {
-    // Fail on a bad output directory before the (possibly long) scene build.
+    // Fail on a bad or unwritable output directory before the (possibly long) scene build;
+    // the writers check each of their files again, against the scene's inputs, before the
+    // first is written.
     export::prepare_dir(&args.output)?;
+    let main_file = match args.format {
+        Format::Obj => obj::OBJ_FILE,
+        Format::Mitsuba => mitsuba::XML_FILE,
+    };
+    sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&[args.output.join(main_file)])?;
     let t0 = Instant::now();
     let scene = sylva_scene::load(&args.scene)?;
     let triangles = scene.instanced_triangles();
@@ -110,8 +118,7 @@ pub fn run(args: ExportArgs) -> Result<()> {
     };
     let written = match result {
         Err(_) if sylva_core::interrupt::interrupted() => anyhow::bail!(
-            "{}: export interrupted (Ctrl-C): the file being written was removed; files \
-             finished before it were kept",
+            "{}: export interrupted (Ctrl-C): no file was replaced, the partial ones were removed",
             args.output.display()
         ),
         r => r?,

@@ -315,6 +315,17 @@ fn solve(a: SolveArgs) -> Result<()> {
     if !(a.intensity.is_finite() && a.intensity > 0.0) {
         bail!("--intensity {} must be a positive number", a.intensity);
     }
+    // Outputs named on the command line are checked (writable, not a directory) before the
+    // grid is built; default names wait for the grid's name.
+    let early: Vec<PathBuf> = match (&a.output, &a.png) {
+        (Some(o), p) => vec![
+            o.clone(),
+            p.clone().unwrap_or_else(|| o.with_extension("png")),
+        ],
+        (None, Some(p)) => vec![p.clone()],
+        (None, None) => Vec::new(),
+    };
+    sylva_core::OutputSet::new::<&Path>(&[]).plan(&early)?;
     let t0 = Instant::now();
     let (grid, name) = load_source(&a, scene.as_ref())?;
     let dims = grid.dims;

@@ -26,13 +26,25 @@ pub fn finish(result: anyhow::Result<()>) -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e}");
-            for cause in e.chain().skip(1) {
-                eprintln!("  caused by: {cause}");
-            }
+            eprint!("{}", error_report("error: ", &e));
             ExitCode::FAILURE
         }
     }
+}
+
+/// `e` as `{head}message` then one `  caused by: ...` line per cause, each line ending in a
+/// newline. A cause whose text a line above already holds is left out: most errors here put
+/// their source's message into their own (`cannot write x.png: Permission denied`), so
+/// printing the chain as it is would say everything twice.
+pub fn error_report(head: &str, e: &anyhow::Error) -> String {
+    let mut report = format!("{head}{e}\n");
+    for cause in e.chain().skip(1) {
+        let text = cause.to_string();
+        if !report.contains(&text) {
+            report.push_str(&format!("  caused by: {text}\n"));
+        }
+    }
+    report
 }
 
 pub mod basis;
@@ -54,3 +66,42 @@ pub mod species;
 pub mod spp;
 pub mod spp_trees;
 pub mod voxelize;
+
+#[cfg(test)]
+mod tests {
+    use super::error_report;
+
+    /// An error that writes its source's message into its own, as most of sylva's do.
+    #[derive(Debug)]
+    struct Wrapper(std::io::Error);
+
+    impl std::fmt::Display for Wrapper {
+        fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+            write!(f, "cannot write x.png: {}", self.0)
+        }
+    }
+
+    impl std::error::Error for Wrapper {
+        fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+            Some(&self.0)
+        }
+    }
+
+    /// Issue 31 item 8: a cause already in the message above is not printed again; a cause
+    /// that adds something is.
+    #[test]
+    fn causes_already_in_the_message_are_not_repeated() {
+        let io = std::io::Error::new(std::io::ErrorKind::PermissionDenied, "Permission denied");
+        let e = anyhow::Error::new(Wrapper(io));
+        assert_eq!(
+            error_report("error: ", &e),
+            "error: cannot write x.png: Permission denied\n"
+        );
+        let e = anyhow::Error::new(Wrapper(std::io::Error::other("disk full")))
+            .context("rendering frame 3");
+        assert_eq!(
+            error_report("error: ", &e),
+            "error: rendering frame 3\n  caused by: cannot write x.png: disk full\n"
+        );
+    }
+}

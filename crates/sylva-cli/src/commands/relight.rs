@@ -75,6 +75,11 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
         white: a.white,
     };
     tm.validate().map_err(anyhow::Error::msg)?;
+    if let (Some(dir), true) = (&a.output, root) {
+        // A folder that is a file or takes no files fails now, not after the basis solves
+        // (the frame names are checked in full below, once the scene is known).
+        sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&[dir.join("frame-00.png")])?;
+    }
     let p = prepare(
         &a.frame,
         PrepareRequest {

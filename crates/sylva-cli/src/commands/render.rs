@@ -107,7 +107,12 @@ pub struct FrameArgs {
     /// arriving at a leaf is traced one bounce (sky, ground, other leaves lit by the sun and
     /// their LB light); 0 takes the LB light at the leaf itself, several times faster and less
     /// exact (docs/light.md, "The final gather").
-    #[arg(long, default_value_t = ShadingParams::default().gather_rays)]
+    #[arg(
+        long,
+        default_value_t = ShadingParams::default().gather_rays,
+        allow_negative_numbers = true,
+        value_parser = clap::value_parser!(u32).range(0..=i64::from(sylva_render::gather::MAX_GATHER_RAYS))
+    )]
     pub gather_rays: u32,
     /// Paper light: sky light on the ground as a fraction of the sun's.
     #[arg(long, default_value_t = ShadingParams::default().sky_ambient)]

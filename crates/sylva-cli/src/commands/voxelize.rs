@@ -168,11 +168,17 @@ pub fn summary(g: &DensityGrid) -> String {
 
 pub fn run(a: VoxelizeArgs) -> Result<()> {
     let t0 = Instant::now();
-    // Before the work: the grid and its preview must differ and replace no input (the
-    // model file is protected once read).
-    if let (Some(o), Some(p)) = (&a.output, &a.png) {
-        sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&[o, p])?;
-    }
+    // Before the work: the grid and its preview must differ, replace no input (the model
+    // file is protected once read) and be writable. Default names wait for the model's name.
+    let early: Vec<PathBuf> = match (&a.output, &a.png) {
+        (Some(o), p) => vec![
+            o.clone(),
+            p.clone().unwrap_or_else(|| o.with_extension("png")),
+        ],
+        (None, Some(p)) => vec![p.clone()],
+        (None, None) => Vec::new(),
+    };
+    sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&early)?;
     let v = load_and_voxelize(&a.model, a.grid, !a.no_alpha, a.occupancy.into())?;
     let name = sylva_core::file_stem(&v.name, "model");
     let output = a

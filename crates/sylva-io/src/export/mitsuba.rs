@@ -267,7 +267,13 @@ fn bsdf(out: &mut String, id: &str, mat: &Material, files: &MaterialFiles, alpha
 
 /// Writes the triangles `tris` of `model` as a binary little-endian PLY (x y z nx ny nz u v,
 /// faces as `vertex_indices`), with only the vertices they use.
-fn write_ply(path: &Path, model: &Model, tris: &[u32], comment: &str) -> Result<(), ExportError> {
+fn write_ply(
+    set: &mut sylva_core::OutputSet,
+    path: &Path,
+    model: &Model,
+    tris: &[u32],
+    comment: &str,
+) -> Result<(), ExportError> {
     let mesh = &model.mesh;
     let mut remap = vec![u32::MAX; mesh.vertex_count()];
     let mut used: Vec<u32> = Vec::new();
@@ -279,7 +285,7 @@ fn write_ply(path: &Path, model: &Model, tris: &[u32], comment: &str) -> Result<
             }
         }
     }
-    write_file(path, |w| {
+    write_file(set, path, |w| {
         write!(
             w,
             "ply\nformat binary_little_endian 1.0\ncomment {comment}\nelement vertex {}\n\
@@ -355,9 +361,9 @@ fn ply_bytes(scene: &Scene, written: &[bool]) -> u64 {
 /// Writes `m`'s density as Mitsuba's binary grid volume (`VOL` version 3: float32, one
 /// channel, x fastest, then the bounding box, which Mitsuba 3 ignores in favour of the
 /// volume's `to_world`).
-fn write_vol(path: &Path, m: &Medium) -> Result<(), ExportError> {
+fn write_vol(set: &mut sylva_core::OutputSet, path: &Path, m: &Medium) -> Result<(), ExportError> {
     let [nx, ny, nz] = m.dims;
-    write_file(path, |w| {
+    write_file(set, path, |w| {
         let mut head = Vec::with_capacity(48);
         head.extend_from_slice(b"VOL");
         head.push(3);
@@ -411,8 +417,102 @@ fn medium_optics(m: &Medium) -> Result<(f32, [f32; 3], f32, bool), ExportError> 
     Ok(((sigma_t / m.cell() as f64) as f32, albedo, g as f32, grey_g))
 }
 
+/// Which models are written: those placed and with geometry.
+fn written_models(scene: &Scene) -> Vec<bool> {
+    (0..scene.models.len())
+        .map(|k| {
+            scene.models[k].triangle_count() > 0
+                && scene.instances.iter().any(|i| i.model as usize == k)
+        })
+        .collect()
+}
+
+/// The distinct textures of the written models, with their stems.
+fn needed_textures<'a>(
+    scene: &'a Scene,
+    textures: &TextureFiles,
+    written: &[bool],
+) -> Vec<(&'a std::sync::Arc<sylva_geom::Texture>, String)> {
+    let needed: std::collections::HashSet<&str> = scene
+        .models
+        .iter()
+        .zip(written)
+        .filter(|(_, w)| **w)
+        .flat_map(|(m, _)| m.materials.iter().filter_map(|mat| mat.texture.as_ref()))
+        .map(|t| textures.stem(t))
+        .collect();
+    textures
+        .unique(&scene.models)
+        .into_iter()
+        .filter(|(_, stem)| needed.contains(stem.as_str()))
+        .collect()
+}
+
+/// The EXR textures of a textured material, by suffix, with the factor on its colour: a leaf's
+/// `2R` and `2T`; wood's `R` where it scales its texture.
+fn scaled_textures(mat: &Material) -> Vec<(&'static str, [f32; 3])> {
+    let o = &mat.optics;
+    if mat.is_leaf() {
+        vec![
+            ("reflect", o.reflect.map(|f| 2.0 * f)),
+            ("transmit", o.transmit.map(|f| 2.0 * f)),
+        ]
+    } else if o.reflect != [1.0; 3] {
+        vec![("reflect", o.reflect)]
+    } else {
+        Vec::new()
+    }
+}
+
+/// The files [`write`] writes for `scene`, relative to its directory, in the order written:
+/// textures, EXR textures, media, meshes, `scene.xml`.
+pub fn files(scene: &Scene) -> Vec<PathBuf> {
+    let mat_stems = material_stems(&scene.models);
+    let textures = TextureFiles::new(&scene.models, &mat_stems);
+    let written = written_models(scene);
+    let mut files = Vec::new();
+    for (t, stem) in needed_textures(scene, &textures, &written) {
+        files.push(PathBuf::from(TEXTURE_DIR).join(format!("{stem}.png")));
+        if has_transparency(t) {
+            files.push(PathBuf::from(TEXTURE_DIR).join(format!("{stem}_alpha.png")));
+        }
+    }
+    for (k, model) in scene.models.iter().enumerate() {
+        if !written[k] {
+            continue;
+        }
+        for (j, mat) in model.materials.iter().enumerate() {
+            if mat.texture.is_some() {
+                for (suffix, _) in scaled_textures(mat) {
+                    files.push(PathBuf::from(format!(
+                        "{TEXTURE_DIR}/{}_{suffix}.exr",
+                        mat_stems[k][j]
+                    )));
+                }
+            }
+        }
+    }
+    let media_stems = file_stems(&scene.media.iter().map(|m| &m.name).collect::<Vec<_>>());
+    for stem in media_stems {
+        files.push(PathBuf::from(MEDIA_DIR).join(format!("{stem}.vol")));
+    }
+    for (k, model) in scene.models.iter().enumerate() {
+        if !written[k] {
+            continue;
+        }
+        for (j, tris) in triangles_by_material(model).iter().enumerate() {
+            if !tris.is_empty() {
+                files.push(PathBuf::from(format!("{MESH_DIR}/{}.ply", mat_stems[k][j])));
+            }
+        }
+    }
+    files.push(PathBuf::from(XML_FILE));
+    files
+}
+
 /// Writes `scene.xml`, the PLY meshes and the textures into `dir` (created if needed), after
-/// checking that the disk has room. `progress(n)` is called with the number of models written
+/// checking that the disk has room and that every file can be written; the files replace the
+/// old ones together at the end, or none does. `progress(n)` is called with the number of models written
 /// so far; returning `false` cancels the export ([`ExportError::Cancelled`]) before
 /// `scene.xml` is written.
 pub fn write(
@@ -427,14 +527,7 @@ pub fn write(
     let model_stems = file_stems(&scene.models.iter().map(|m| &m.name).collect::<Vec<_>>());
     let mat_stems = material_stems(&scene.models);
     let textures = TextureFiles::new(&scene.models, &mat_stems);
-    let mut out = Exported::default();
-    // Only models that are placed and have geometry are written.
-    let written: Vec<bool> = (0..scene.models.len())
-        .map(|k| {
-            scene.models[k].triangle_count() > 0
-                && scene.instances.iter().any(|i| i.model as usize == k)
-        })
-        .collect();
+    let written = written_models(scene);
     let media_bytes: u64 = scene.media.iter().map(|m| m.memory_bytes() + 48).sum();
     super::check_disk_space(
         dir,
@@ -446,27 +539,14 @@ pub fn write(
         .iter()
         .map(medium_optics)
         .collect::<Result<Vec<_>, _>>()?;
+    let mut set = Exported::plan(dir, &files(scene))?;
 
-    // Textures of the written models only.
-    let needed: std::collections::HashSet<&str> = scene
-        .models
-        .iter()
-        .zip(&written)
-        .filter(|(_, w)| **w)
-        .flat_map(|(m, _)| m.materials.iter().filter_map(|mat| mat.texture.as_ref()))
-        .map(|t| textures.stem(t))
-        .collect();
-    for (t, stem) in textures.unique(&scene.models) {
-        if !needed.contains(stem.as_str()) {
-            continue;
-        }
+    for (t, stem) in needed_textures(scene, &textures, &written) {
         let rel = PathBuf::from(TEXTURE_DIR).join(format!("{stem}.png"));
-        write_png(&dir.join(&rel), t, PngChannels::Rgb)?;
-        out.add(dir, rel)?;
+        write_png(&mut set, &dir.join(&rel), t, PngChannels::Rgb)?;
         if has_transparency(t) {
             let rel = PathBuf::from(TEXTURE_DIR).join(format!("{stem}_alpha.png"));
-            write_png(&dir.join(&rel), t, PngChannels::Alpha)?;
-            out.add(dir, rel)?;
+            write_png(&mut set, &dir.join(&rel), t, PngChannels::Alpha)?;
         }
     }
 
@@ -566,18 +646,13 @@ pub fn write(
                 transmit: None,
             };
             if let Some(t) = &mat.texture {
-                let mut exr = |suffix: &str, factor: [f32; 3]| -> Result<String, ExportError> {
+                for (suffix, factor) in scaled_textures(mat) {
                     let rel = format!("{TEXTURE_DIR}/{}_{suffix}.exr", mat_stems[k][j]);
-                    write_scaled_exr(&dir.join(&rel), t, factor)?;
-                    out.add(dir, PathBuf::from(&rel))?;
-                    Ok(rel)
-                };
-                let o = &mat.optics;
-                if mat.is_leaf() {
-                    files.reflect = Some(exr("reflect", o.reflect.map(|f| 2.0 * f))?);
-                    files.transmit = Some(exr("transmit", o.transmit.map(|f| 2.0 * f))?);
-                } else if o.reflect != [1.0; 3] {
-                    files.reflect = Some(exr("reflect", o.reflect)?);
+                    write_scaled_exr(&mut set, &dir.join(&rel), t, factor)?;
+                    match suffix {
+                        "reflect" => files.reflect = Some(rel),
+                        _ => files.transmit = Some(rel),
+                    }
                 }
             }
             let alpha = stem.map(|s| format!("{TEXTURE_DIR}/{s}_alpha.png"));
@@ -616,8 +691,7 @@ pub fn write(
         scene.media.iter().zip(&media_stems).zip(optics)
     {
         let rel = PathBuf::from(MEDIA_DIR).join(format!("{stem}.vol"));
-        write_vol(&dir.join(&rel), m)?;
-        out.add(dir, rel)?;
+        write_vol(&mut set, &dir.join(&rel), m)?;
         let (lo, hi) = cell_box(m);
         let (centre, half) = ((lo + hi) * 0.5, (hi - lo) * 0.5);
         let _ = writeln!(
@@ -671,12 +745,12 @@ pub fn write(
             let name = format!("{MESH_DIR}/{}.ply", mat_stems[k][j]);
             let rel = PathBuf::from(&name);
             write_ply(
+                &mut set,
                 &dir.join(&rel),
                 model,
                 tris,
                 &format!("sylva model {} material {}", model_stems[k], j),
             )?;
-            out.add(dir, rel.clone())?;
             let _ = writeln!(
                 x,
                 "        <shape type=\"ply\">\n            <string name=\"filename\" value=\"{}\"/>\n            <ref id=\"bsdf-{}\"/>\n        </shape>",
@@ -706,8 +780,9 @@ pub fn write(
         );
     }
     let _ = writeln!(x, "</scene>");
-    write_file(&dir.join(XML_FILE), |w| w.write_all(x.as_bytes()))?;
-    out.add(dir, PathBuf::from(XML_FILE))?;
+    write_file(&mut set, &dir.join(XML_FILE), |w| w.write_all(x.as_bytes()))?;
+    let mut out = Exported::default();
+    out.commit(dir, set)?;
     out.triangles = scene.instanced_triangles()
         + if super::ground_quad(scene).is_some() {
             2

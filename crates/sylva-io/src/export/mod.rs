@@ -7,8 +7,10 @@
 //!   once as binary PLY files (one per material, since a Mitsuba shape has one BSDF) inside a
 //!   `shapegroup`, one `instance` per plant; sun, sky, ground, camera and integrator alike.
 //!
-//! Every file is written atomically ([`sylva_core::atomic_write_with`]). File and XML names
-//! come from model names made safe by [`file_stems`].
+//! An export's files form one [`sylva_core::OutputSet`]: all of them are checked (not an
+//! input, not a directory, a writable directory) before any is written, and they replace the
+//! old ones together at the end or not at all (an error or Ctrl-C leaves every file as it
+//! was). File and XML names come from model names made safe by [`file_stems`].
 
 pub mod mitsuba;
 pub mod obj;
@@ -50,6 +52,8 @@ pub enum ExportError {
     },
     #[error("export cancelled")]
     Cancelled,
+    #[error(transparent)]
+    Output(#[from] sylva_core::OutputError),
 }
 
 impl ExportError {
@@ -107,13 +111,24 @@ pub struct Exported {
 }
 
 impl Exported {
-    fn add(&mut self, dir: &Path, rel: PathBuf) -> Result<(), ExportError> {
-        let path = dir.join(&rel);
-        let len = std::fs::metadata(&path)
-            .map_err(|e| ExportError::io(&path, e))?
-            .len();
-        self.bytes += len;
-        self.files.push(rel);
+    /// Plans `files` (relative to `dir`) in a new output set: every one is checked before
+    /// the first is written.
+    fn plan(dir: &Path, files: &[PathBuf]) -> Result<sylva_core::OutputSet, ExportError> {
+        let mut set = sylva_core::OutputSet::new::<&Path>(&[]);
+        set.plan(&files.iter().map(|f| dir.join(f)).collect::<Vec<_>>())?;
+        Ok(set)
+    }
+
+    /// Renames the files of `set` into place and records them with their sizes.
+    fn commit(&mut self, dir: &Path, set: sylva_core::OutputSet) -> Result<(), ExportError> {
+        for path in set.commit()? {
+            let len = std::fs::metadata(&path)
+                .map_err(|e| ExportError::io(&path, e))?
+                .len();
+            self.bytes += len;
+            self.files
+                .push(path.strip_prefix(dir).unwrap_or(&path).to_path_buf());
+        }
         Ok(())
     }
 }
@@ -148,12 +163,17 @@ pub fn check_disk_space(
     }
 }
 
-/// Writes `path` atomically, streaming through `fill`; errors name the file.
-pub(crate) fn write_file<F>(path: &Path, fill: F) -> Result<(), ExportError>
+/// Writes `path` into `set` (a temporary until the set is committed), streaming through
+/// `fill`; errors name the file.
+pub(crate) fn write_file<F>(
+    set: &mut sylva_core::OutputSet,
+    path: &Path,
+    fill: F,
+) -> Result<(), ExportError>
 where
     F: FnOnce(&mut dyn io::Write) -> io::Result<()>,
 {
-    sylva_core::atomic_write_with(path, fill).map_err(|e| ExportError::io(path, e))
+    Ok(set.write(path, fill)?)
 }
 
 /// `name` made safe as a file name and an XML id: ASCII letters, digits, `_` and `-` are
@@ -236,6 +256,7 @@ pub(crate) enum PngChannels {
 /// [`sylva_core::colour::srgb_to_linear`]) times `factor` per colour, as a 32-bit float
 /// OpenEXR (row 0 at the top): a texture whose values can exceed 1.
 pub(crate) fn write_scaled_exr(
+    set: &mut sylva_core::OutputSet,
     path: &Path,
     t: &Texture,
     factor: [f32; 3],
@@ -256,11 +277,12 @@ pub(crate) fn write_scaled_exr(
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
-    write_file(path, |w| w.write_all(bytes.get_ref()))
+    write_file(set, path, |w| w.write_all(bytes.get_ref()))
 }
 
 /// Writes `t` as a PNG (row 0 of the texture, v = 0, is the image's top row).
 pub(crate) fn write_png(
+    set: &mut sylva_core::OutputSet,
     path: &Path,
     t: &Texture,
     channels: PngChannels,
@@ -287,7 +309,7 @@ pub(crate) fn write_png(
             path: path.to_path_buf(),
             message: e.to_string(),
         })?;
-    write_file(path, |w| w.write_all(&png))
+    write_file(set, path, |w| w.write_all(&png))
 }
 
 /// One file per distinct texture (by identity: materials sharing an `Arc` share the file).

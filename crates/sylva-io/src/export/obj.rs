@@ -180,8 +180,24 @@ pub fn estimate_size(scene: &Scene) -> u64 {
     total
 }
 
+/// The files [`write`] writes for `scene`, relative to its directory, in the order written:
+/// the textures, the MTL file, the OBJ file.
+pub fn files(scene: &Scene) -> Vec<PathBuf> {
+    let textures = TextureFiles::new(&scene.models, &material_stems(&scene.models));
+    let mut files = Vec::new();
+    for (t, stem) in textures.unique(&scene.models) {
+        files.push(PathBuf::from(TEXTURE_DIR).join(format!("{stem}.png")));
+        if has_transparency(t) {
+            files.push(PathBuf::from(TEXTURE_DIR).join(format!("{stem}_alpha.png")));
+        }
+    }
+    files.extend([PathBuf::from(MTL_FILE), PathBuf::from(OBJ_FILE)]);
+    files
+}
+
 /// Writes `scene.obj`, `scene.mtl` and the textures into `dir` (created if needed), after
-/// checking that the disk has room for the estimated size. `progress(n)` is called with the
+/// checking that the disk has room for the estimated size and that every file can be
+/// written; the files replace the old ones together at the end, or none does. `progress(n)` is called with the
 /// number of instances written so far; returning `false` cancels the export
 /// ([`ExportError::Cancelled`]) and leaves no partial `scene.obj` behind.
 pub fn write(
@@ -195,23 +211,21 @@ pub fn write(
     let prep = prepare(scene);
     let mat_stems = material_stems(&scene.models);
     let textures = TextureFiles::new(&scene.models, &mat_stems);
-    let mut out = Exported::default();
+    let mut set = Exported::plan(dir, &files(scene))?;
 
     // Textures: RGBA for map_Kd; the alpha alone for map_d where the texture cuts a shape.
     for (t, stem) in textures.unique(&scene.models) {
         let rel = PathBuf::from(TEXTURE_DIR).join(format!("{stem}.png"));
-        write_png(&dir.join(&rel), t, PngChannels::Rgba)?;
-        out.add(dir, rel)?;
+        write_png(&mut set, &dir.join(&rel), t, PngChannels::Rgba)?;
         if has_transparency(t) {
             let rel = PathBuf::from(TEXTURE_DIR).join(format!("{stem}_alpha.png"));
-            write_png(&dir.join(&rel), t, PngChannels::Alpha)?;
-            out.add(dir, rel)?;
+            write_png(&mut set, &dir.join(&rel), t, PngChannels::Alpha)?;
         }
     }
 
     // Material library.
     let mtl_path = dir.join(MTL_FILE);
-    write_file(&mtl_path, |w| {
+    write_file(&mut set, &mtl_path, |w| {
         writeln!(w, "# sylva materials of scene '{}'", scene.name)?;
         writeln!(w, "# Kd is linear RGB; texture maps are sRGB PNGs.")?;
         if super::ground_quad(scene).is_some() {
@@ -248,7 +262,6 @@ pub fn write(
         }
         Ok(())
     })?;
-    out.add(dir, PathBuf::from(MTL_FILE))?;
 
     // Geometry.
     let threads = rayon::current_num_threads().max(1);
@@ -266,7 +279,7 @@ pub fn write(
     )?;
     let obj_path = dir.join(OBJ_FILE);
     let mut cancelled = false;
-    let result = write_file(&obj_path, |w| {
+    let result = write_file(&mut set, &obj_path, |w| {
         writeln!(
             w,
             "# sylva scene '{}' ({}), flattened: {} instances, {} triangles plus the ground",
@@ -335,7 +348,8 @@ pub fn write(
         return Err(ExportError::Cancelled);
     }
     result?;
-    out.add(dir, PathBuf::from(OBJ_FILE))?;
+    let mut out = Exported::default();
+    out.commit(dir, set)?;
     out.triangles = scene.instanced_triangles()
         + if super::ground_quad(scene).is_some() {
             2

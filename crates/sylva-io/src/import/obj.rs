@@ -26,11 +26,13 @@ pub(super) fn load(path: &Path) -> Result<RawModel, ImportError> {
 
     let mut libs = Vec::new();
     for (line, name) in &scan.mtllibs {
-        let p = resolve(dir, name);
+        let what = format!("line {line}: mtllib '{name}'");
+        let p = resolve(dir, dir, name, path, &what)?;
         let text = read_text(&p, path, Some((*line, &format!("mtllib '{name}'"))))?;
         let materials = scan_mtl(&text, &p)?;
         libs.push(MtlLib {
             name: name.clone(),
+            folder: dir.to_path_buf(),
             path: p,
             text,
             materials,
@@ -169,16 +171,38 @@ fn read_text(
     })
 }
 
-/// `dir/name`, also trying `\` as a separator (files written on Windows).
-fn resolve(dir: &Path, name: &str) -> PathBuf {
-    let p = dir.join(name);
-    if !p.exists() && name.contains('\\') {
-        let q = dir.join(name.replace('\\', "/"));
-        if q.exists() {
-            return q;
+/// `dir/name` (`name` as `file` wrote it, `what` the reference for errors), also trying `\`
+/// as a separator (files written on Windows). Refused when it lies outside `folder`, the
+/// model's folder (the OBJ's; `dir` is inside it): a model must not read /etc/passwd. The
+/// same rule as glTF's ([`sylva_core::resolve_inside`]).
+fn resolve(
+    folder: &Path,
+    dir: &Path,
+    name: &str,
+    file: &Path,
+    what: &str,
+) -> Result<PathBuf, ImportError> {
+    let mut name = name.to_string();
+    if !dir.join(&name).exists() && name.contains('\\') {
+        let slashed = name.replace('\\', "/");
+        if dir.join(&slashed).exists() {
+            name = slashed;
         }
     }
-    p
+    // Checked from the model's folder, so an MTL file in a subfolder may name `../tex.png`.
+    let from_folder = dir.strip_prefix(folder).unwrap_or(dir).join(&name);
+    match sylva_core::resolve_inside(folder, &from_folder.to_string_lossy(), file) {
+        Ok(_) => Ok(dir.join(&name)),
+        Err(sylva_core::InputError::OutsideFolder { dir: folder, .. }) => Err(ImportError::at(
+            file,
+            what,
+            format!(
+                "lies outside the model's folder {}: only files inside it are read",
+                folder.display()
+            ),
+        )),
+        Err(e) => Err(ImportError::at(file, what, e.problem())),
+    }
 }
 
 // ---------- the line-by-line check ----------
@@ -367,6 +391,8 @@ fn check_face_vertex(tok: &str, totals: &[usize; 3], so_far: &[usize; 3]) -> Res
 struct MtlLib {
     /// As the mtllib line wrote it.
     name: String,
+    /// The model's folder (the OBJ's), where its textures must lie.
+    folder: PathBuf,
     path: PathBuf,
     text: String,
     materials: Vec<MtlInfo>,
@@ -505,7 +531,7 @@ fn build_material(
         if r.file.is_empty() {
             return Err(ImportError::at(&lib.path, what, "no file name"));
         }
-        let p = resolve(dir, &r.file);
+        let p = resolve(&lib.folder, dir, &r.file, &lib.path, &what)?;
         let bytes = read_referenced(&p, &lib.path, &what, sylva_core::limits::MODEL_FILE_BYTES)?;
         let (img, has_alpha) = decode_image_with_alpha(&bytes, &lib.path, &what)?;
         let wrap = if r.clamp { Wrap::Clamp } else { Wrap::Repeat };
