@@ -24,7 +24,7 @@ use sylva_light::relight::{GlobalGridOptions, GlobalReport};
 use sylva_light::Progress;
 use sylva_render::stages::stage;
 
-use crate::jobs::{root_count, run_jobs};
+use crate::jobs::{root_count, run_jobs_with_bar};
 use crate::{lighting_options, scene_illumination, scene_to_sun, LbPlan, PipelineError};
 
 /// Whether `PreparedScene::new` lights `scene` through the forest grid: the physical light,
@@ -172,12 +172,9 @@ pub fn light_forest(
             Ok(jobs)
         },
     )?;
-    let bar = several && root && !jobs.is_empty();
-    if bar {
-        progress.start("LB light parts", jobs.len() as u64);
-    }
-    let outcome = run_jobs(
+    let outcome = run_jobs_with_bar(
         runner,
+        "LB light parts",
         jobs.len(),
         &mut |j| {
             let (m, k) = (jobs[j] / PARTS.len(), jobs[j] % PARTS.len());
@@ -202,15 +199,8 @@ pub fn light_forest(
             }
             Ok(w.0)
         },
-        &|_| {
-            if several {
-                progress.advance(1)
-            }
-        },
+        progress,
     );
-    if bar {
-        progress.finish();
-    }
     let outcome = outcome?;
 
     // The root: each part from its cache or the jobs, stored; every model's parts to every

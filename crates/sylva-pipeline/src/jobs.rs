@@ -8,6 +8,7 @@ use std::error::Error;
 
 use sylva_core::jobs::{from_root, JobError, JobResult, Runner};
 use sylva_core::wire::Reader;
+use sylva_light::Progress;
 
 use crate::PipelineError;
 
@@ -36,6 +37,31 @@ pub(crate) fn run_jobs(
         Ok(results) => Ok(results),
         Err(e) => Err(failed.take().unwrap_or(PipelineError::Jobs(e))),
     }
+}
+
+/// [`run_jobs`] with one bar `label` at the root when several processes share the jobs, a
+/// unit per job (in one process each job reports its own progress).
+pub(crate) fn run_jobs_with_bar(
+    runner: &dyn Runner,
+    label: &str,
+    jobs: usize,
+    work: &mut dyn FnMut(usize) -> Result<Vec<u8>, PipelineError>,
+    progress: &dyn Progress,
+) -> Result<Option<Vec<JobResult>>, PipelineError> {
+    let several = runner.processes() > 1;
+    let bar = several && runner.is_root() && jobs > 0;
+    if bar {
+        progress.start(label, jobs as u64);
+    }
+    let outcome = run_jobs(runner, jobs, work, &|_| {
+        if several {
+            progress.advance(1)
+        }
+    });
+    if bar {
+        progress.finish();
+    }
+    outcome
 }
 
 /// `e` and its causes, one after the other.

@@ -17,7 +17,7 @@ use sylva_light::lighting::{
 use sylva_light::Progress;
 use sylva_render::stages::stage;
 
-use crate::jobs::{root_count, run_jobs};
+use crate::jobs::{root_count, run_jobs_with_bar};
 use crate::{lighting_options, scene_illumination, scene_to_sun, LbPlan, PipelineError};
 
 /// Every model's LB lighting, in scene order, on every process of `runner` (each calls it
@@ -112,14 +112,11 @@ pub fn light_models(
         }
     }
 
-    let bar = several && root && !jobs.is_empty();
-    if bar {
-        progress.start("LB solves", jobs.len() as u64);
-    }
     // The density of the model whose jobs this process runs, kept for its next job.
     let mut held: Option<(usize, DensityGrid)> = None;
-    let outcome = run_jobs(
+    let outcome = run_jobs_with_bar(
         runner,
+        "LB solves",
         jobs.len(),
         &mut |j| {
             let (m, colour) = jobs[j];
@@ -150,15 +147,8 @@ pub fn light_models(
             }
             Ok(w.0)
         },
-        &|_| {
-            if several {
-                progress.advance(1)
-            }
-        },
+        progress,
     );
-    if bar {
-        progress.finish();
-    }
     let outcome = outcome?;
 
     // The root: each solved model's grid assembled and stored.
