@@ -37,7 +37,8 @@ enum Command {
     Voxelize(commands::voxelize::VoxelizeArgs),
     /// Lattice-Boltzmann lighting: solve a grid, describe grid files.
     Lb(commands::lb::LbArgs),
-    /// Plane-parallel scattering in slabs (paper 003): radiance, Tables 1 and 2.
+    /// Plane-parallel scattering (paper 003): radiance in slabs, Tables 1 and 2, and Table 3
+    /// on a scene's trees (`spp trees`).
     Spp(commands::spp::SppArgs),
     /// Write a scene for other renderers: OBJ (flattened) or Mitsuba 3 (instanced), e.g.
     /// `sylva export demo --format mitsuba -o out/`.
@@ -190,4 +191,124 @@ fn run_mpi(command: Command) -> std::process::ExitCode {
 #[cfg(not(feature = "mpi"))]
 fn run_mpi(_command: Command) -> std::process::ExitCode {
     unreachable!("refused above without the mpi feature")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every `sylva …` line in a code block of README.md and docs/*.md (`cargo run --release
+    /// --` and `mpirun … target/release/sylva` read as `sylva`), its comment and redirection
+    /// cut: the file and line, and the arguments.
+    fn documented_commands() -> Vec<(String, Vec<String>)> {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let mut files = vec![root.join("README.md")];
+        let mut docs: Vec<_> = std::fs::read_dir(root.join("docs"))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "md"))
+            .collect();
+        docs.sort();
+        files.extend(docs);
+        let mut commands = Vec::new();
+        for file in files {
+            let text = std::fs::read_to_string(&file).unwrap();
+            let mut in_code = false;
+            for (n, line) in text.lines().enumerate() {
+                if line.trim_start().starts_with("```") {
+                    in_code = !in_code;
+                    continue;
+                }
+                if !in_code {
+                    continue;
+                }
+                let line = line.split(" #").next().unwrap().trim();
+                let line = line.split(['>', '|']).next().unwrap().trim();
+                let line = line.strip_prefix("$ ").unwrap_or(line);
+                let line = match (
+                    line.find("target/release/sylva "),
+                    line.strip_prefix("cargo run --release -- "),
+                ) {
+                    (_, Some(rest)) => format!("sylva {rest}"),
+                    (Some(i), None) if line.starts_with("mpirun") => {
+                        line["target/release/".len() + i..].to_string()
+                    }
+                    _ => line.to_string(),
+                };
+                // Synopses (`[--json]`, `...`) and placeholders are not commands to type.
+                let synopsis = ["$", "…", "...", "["].iter().any(|c| line.contains(c));
+                if !line.starts_with("sylva ") || synopsis {
+                    continue;
+                }
+                let args = line.split_whitespace().map(str::to_string).collect();
+                commands.push((format!("{}:{}", file.display(), n + 1), args));
+            }
+        }
+        commands
+    }
+
+    /// Issue 31 item 10: what the docs tell a user to type parses (every command and option
+    /// exists, every value is of its kind), and every built-in scene they name exists.
+    #[test]
+    fn documented_commands_parse_and_name_scenes_that_exist() {
+        let commands = documented_commands();
+        assert!(commands.len() > 80, "found {} commands", commands.len());
+        let mut failures = Vec::new();
+        for (place, args) in &commands {
+            if let Err(e) = Cli::try_parse_from(args) {
+                failures.push(format!("{place}: `{}`: {}", args.join(" "), e.kind()));
+            }
+            // The scene argument of the commands that take one: a file or a built-in name.
+            let takes_scene = ["render", "basis", "relight", "export", "info", "source"];
+            let scene_at = match args.get(1).map(String::as_str) {
+                Some("bench") => matches!(
+                    args.get(2).map(String::as_str),
+                    Some("trace" | "relight" | "scene")
+                )
+                .then_some(3),
+                Some("scene") => Some(3),
+                Some(c) if takes_scene.contains(&c) => Some(2),
+                _ => None,
+            };
+            if let Some(name) = scene_at.and_then(|i| args.get(i)) {
+                let placeholder = name.chars().all(|c| c.is_ascii_uppercase());
+                let file = placeholder || name.contains('.') || name.contains('/');
+                if !file
+                    && !name.starts_with('-')
+                    && sylva_scene::builtin_scenes::source(name).is_none()
+                {
+                    failures.push(format!("{place}: no built-in scene '{name}'"));
+                }
+            }
+        }
+        assert!(failures.is_empty(), "{}", failures.join("\n"));
+    }
+
+    /// The scene list in the help and README's table of scenes name every built-in scene.
+    #[test]
+    fn the_help_and_readme_list_every_built_in_scene() {
+        let readme = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../README.md");
+        let readme = std::fs::read_to_string(readme).unwrap();
+        for name in sylva_scene::builtin_scenes::NAMES {
+            let row = format!("| `{name}` |");
+            assert!(readme.contains(&row), "README's scene table omits '{name}'");
+        }
+        use clap::CommandFactory;
+        let mut cli = Cli::command();
+        let render = cli.find_subcommand_mut("render").unwrap();
+        let scene = render
+            .get_arguments()
+            .find(|a| a.get_id() == "scene")
+            .unwrap();
+        let help = scene.get_help().unwrap().to_string();
+        let listed: Vec<&str> = help
+            .split(|c: char| !(c.is_alphanumeric() || c == '_'))
+            .collect();
+        for name in sylva_scene::builtin_scenes::NAMES {
+            assert!(
+                listed.contains(name),
+                "the scene's help omits '{name}': {help}"
+            );
+        }
+    }
 }

@@ -194,7 +194,7 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
         dir.display()
     );
     println!(
-        "frame time: mean {mean:.3} s, median {:.3} s, min {:.3} s, max {:.3} s; mean luminance first {:.4}, last {:.4}; no LB solve",
+        "frame time: mean {mean:.3} s, median {:.3} s, min {:.3} s, max {:.3} s; mean luminance first {:.4}, last {:.4}; no LB solve while the sun moves",
         sorted[sorted.len() / 2],
         sorted[0],
         sorted[sorted.len() - 1],

@@ -67,8 +67,8 @@ pub enum BasisPrecisionArg {
 /// Options shared by `sylva render` and `sylva bench trace`: what the frame looks like.
 #[derive(Args, Debug, Clone)]
 pub struct FrameArgs {
-    /// Scene file (.toml) or built-in scene name (demo, beech, catalpa, canopy, cloud,
-    /// teapot, demo_cloud).
+    /// Scene file (.toml) or built-in scene name (demo, beech, catalpa, canopy, shade, cloud,
+    /// teapot, demo_cloud; `sylva scene list`).
     #[arg(default_value = "demo")]
     pub scene: String,
     /// Image width in pixels (default: the scene camera's; with only --width or --height the
@@ -157,7 +157,7 @@ pub struct FrameArgs {
     #[arg(long)]
     pub no_global: bool,
     /// Sites of the coarse global grid (relighting) or forest grid (physical light) along the
-    /// forest's longest edge.
+    /// forest's longest edge, 16 to 512.
     #[arg(long, default_value_t = GlobalGridOptions::default().sites)]
     pub global_grid: usize,
     /// Shadow rays through the sun-aligned grid (004 §4.1) or the top-level kd-tree.
@@ -370,8 +370,8 @@ pub fn report_line(r: Report) -> (String, Option<String>) {
 pub struct RenderArgs {
     #[command(flatten)]
     pub frame: FrameArgs,
-    /// Output PNG (8-bit sRGB, tone mapped). Default: sylva-out/<scene>.png; modes other than
-    /// full add -<mode> to the name.
+    /// Output PNG (8-bit sRGB, tone mapped). Default: sylva-out/<scene>.png; with one mode the
+    /// name as given, with several (--mode all) every mode adds -<mode>, full included.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// Also write the linear HDR image as OpenEXR beside the PNG (same name, .exr).
@@ -531,6 +531,12 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
         }
         say(line);
     });
+    if need_lb && runner.processes() > 1 {
+        say(format!(
+            "MPI: LB solves shared across {} ranks",
+            runner.processes()
+        ));
+    }
     let scene = {
         let progress: &dyn Progress = if root { &progress } else { &Silent };
         PreparedScene::new(scene, &opts, progress)?
