@@ -181,6 +181,11 @@ fn sun_below_the_horizon_is_refused_and_negative_numbers_parse() {
         &["render", "demo", "--sun", "0,-1,0", "--mode", "local"],
         "90.0° below the horizon",
     );
+    // Issue 31 item 10: past the zenith, the help's range (not the internal [-90, 90]).
+    fails_with(
+        &["render", "demo", "--elevation", "95", "--mode", "local"],
+        "--elevation 95: degrees above the horizon, 0 to 90",
+    );
 }
 
 #[test]

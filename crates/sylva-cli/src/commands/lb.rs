@@ -177,8 +177,9 @@ pub fn parse_sun(sun: Option<&str>, elevation: Option<f64>, azimuth: Option<f64>
         (Some(v), _, _) => Sun::parse_vector(v).context("--sun")?,
         (None, None, None) => Sun::default(),
         (None, e, a) => {
-            // sylva lights by the sun: at or above the horizon (the help's range).
-            if let Some(e) = e.filter(|e| !(0.0..=90.0).contains(e)) {
+            // Above the zenith is a typing error (the help's range); below the horizon the
+            // pipeline explains why the sun must be up.
+            if let Some(e) = e.filter(|e| e.is_nan() || *e > 90.0) {
                 anyhow::bail!("--elevation {e}: degrees above the horizon, 0 to 90");
             }
             Sun::from_angles(e.unwrap_or(50.0), a.unwrap_or(30.0))
