@@ -1,7 +1,7 @@
 //! `sylva basis`, `sylva render` with cached bases, `sylva relight` and `sylva bench relight`
 //! end to end on a small scene.
 
-mod common;
+use crate::common;
 
 use common::sylva;
 use std::fs;

@@ -1,6 +1,6 @@
 //! `sylva scene` and `sylva species` as a user runs them.
 
-mod common;
+use crate::common;
 use common::sylva;
 
 #[test]

@@ -2,7 +2,7 @@
 //! GPU runs use any adapter (lavapipe in CI); where none exists the GPU halves say SKIPPED
 //! (fail under `SYLVA_REQUIRE_GPU=1`, as in CI).
 
-mod common;
+use crate::common;
 use common::sylva;
 use sylva_lb_gpu::{AdapterChoice, ContextOptions};
 

@@ -1,7 +1,7 @@
 //! Issue 19: what a hostile user tried, each now a clear error (or a quiet exit), never a
 //! panic, an abort, a hang or a destroyed input.
 
-mod common;
+use crate::common;
 
 use common::sylva;
 use std::fs;

@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-mod common;
+use crate::common;
 use common::sylva;
 
 /// A 14×12×10 raw f32 medium: a half-dense ball.

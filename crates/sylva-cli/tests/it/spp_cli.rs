@@ -1,6 +1,6 @@
 //! `sylva spp trees` on `sparse_maple`, the tree of 003 Table 3's size (docs/spp.md).
 
-mod common;
+use crate::common;
 use common::sylva;
 
 fn trees(extra: &[&str]) -> serde_json::Value {

@@ -1,6 +1,6 @@
 //! `sylva export` as a user runs it.
 
-mod common;
+use crate::common;
 use common::sylva;
 use std::fs;
 

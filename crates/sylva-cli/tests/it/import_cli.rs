@@ -1,6 +1,6 @@
 //! `sylva scene info` on a scene whose model is an imported mesh file.
 
-mod common;
+use crate::common;
 use common::sylva;
 use std::path::Path;
 

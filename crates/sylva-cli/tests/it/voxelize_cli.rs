@@ -1,7 +1,7 @@
 //! `sylva voxelize`, `sylva lb solve --model/--scene` and `sylva bench voxelize` as a user runs
 //! them.
 
-mod common;
+use crate::common;
 use common::sylva;
 
 use sylva_lb::GridFile;

@@ -1,6 +1,6 @@
 //! `sylva render` and `sylva bench trace` end to end on a small scene.
 
-mod common;
+use crate::common;
 
 use common::sylva;
 use std::fs;
