@@ -165,6 +165,8 @@ fn basis_args<'a>(scene: &'a str, cache: &'a str) -> Vec<&'a str> {
     vec![
         "basis",
         scene,
+        "--light",
+        "paper",
         "--lb-grid",
         "12",
         "--global-grid",

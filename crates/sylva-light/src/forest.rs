@@ -554,6 +554,195 @@ pub fn neighbour_shade(
     Ok(out)
 }
 
+/// Per instance and colour, what the forest grid measures of one coarse solve: the side
+/// faces' class inflows ([`class_inflow`]) and the top face's downward inflow. Linear in the
+/// coarse light, so the measures of a sum of solves are the sums of their measures.
+type Inflow = [([f64; 3], f64); 3];
+
+/// The coarse grid over a forest, ready to solve: its layout and medium, each instance's
+/// fine placement and shell faces.
+struct Coarse {
+    dims: Dims,
+    origin: Vec3,
+    cell: f32,
+    grid: DensityGrid,
+    medium: MediumParams,
+    /// Per instance in the coarse medium, the world box of its fine cells.
+    boxes: Vec<Option<Aabb>>,
+    shells: Vec<Option<Vec<ShellFace>>>,
+    /// Per instance, the side faces' lattice directions measured (the same in every solve).
+    measured: Vec<[bool; Q]>,
+}
+
+fn solve_err(e: sylva_lb::SolveError) -> LightingError {
+    LightingError::Global(format!("coarse solve: {e}"))
+}
+
+impl Coarse {
+    /// The coarse grid over `instances` (ground at `ground_y`); `None` when no instance is in
+    /// the coarse medium (every instance keeps the free weights).
+    fn new(
+        instances: &[ForestInstance],
+        ground_y: f32,
+        opts: &GlobalGridOptions,
+    ) -> Result<Option<Coarse>, LightingError> {
+        opts.validate().map_err(LightingError::Global)?;
+        let global: Vec<GlobalInstance> = instances
+            .iter()
+            .map(|i| GlobalInstance {
+                density: i.model.map(|m| m.0),
+                to_world: i.to_world,
+            })
+            .collect();
+        let fine: Vec<Option<Placed>> = global.iter().map(placed).collect();
+        let boxes: Vec<Aabb> = fine.iter().flatten().map(|p| p.world).collect();
+        let medium = forest_medium(instances, &fine);
+        let (Some(medium), false) = (medium, boxes.is_empty()) else {
+            return Ok(None);
+        };
+        medium
+            .validate()
+            .map_err(|e| LightingError::Global(format!("the forest's medium: {e}")))?;
+        let (dims, origin, cell) = layout(&boxes, ground_y, opts).map_err(LightingError::Global)?;
+        let grid = coarse_density(dims, origin, cell, &fine)?;
+        let shells: Vec<Option<Vec<ShellFace>>> = fine
+            .iter()
+            .map(|p| {
+                p.as_ref()
+                    .map(|p| shell_faces(&p.world, dims, origin, cell))
+            })
+            .collect();
+        let measured = shells
+            .iter()
+            .map(|shell| match shell {
+                Some(faces) => {
+                    let sides: Vec<&ShellFace> = faces.iter().filter(|f| f.axis != 1).collect();
+                    class_inflow(&|_, _| 0.0, &sides).1
+                }
+                None => [false; Q],
+            })
+            .collect();
+        Ok(Some(Coarse {
+            dims,
+            origin,
+            cell,
+            grid,
+            medium,
+            boxes: fine.iter().map(|p| p.as_ref().map(|p| p.world)).collect(),
+            shells,
+            measured,
+        }))
+    }
+
+    /// Solves colour `c` under `boundary`, `floor` and `source` and measures every instance's
+    /// inflows.
+    fn solve_colour(
+        &self,
+        c: usize,
+        boundary: sylva_lb::Boundary,
+        floor: Option<&sylva_lb::solver::Floor>,
+        source: Option<&sylva_lb::solver::VolumeSource>,
+        out: &mut [Inflow],
+    ) -> Result<(), LightingError> {
+        let sopts = SolveOptions::papers(self.dims);
+        let mut lat = Lattice::new(&self.grid, &self.medium, c, boundary).map_err(solve_err)?;
+        lat.set_floor(floor.map(|f| f.radiance[c].clone()));
+        lat.set_source(source.map(|s| s.colour(c)));
+        lat.reset(boundary);
+        lat.run(&sopts, &mut |_, _| {}).map_err(solve_err)?;
+        let f = |s: [usize; 3], k: usize| lat.f(s[0], s[1], s[2], k);
+        for (i, shell) in self.shells.iter().enumerate() {
+            if let Some(faces) = shell {
+                let sides: Vec<&ShellFace> = faces.iter().filter(|f| f.axis != 1).collect();
+                let top: Vec<&ShellFace> = faces.iter().filter(|f| f.axis == 1 && f.high).collect();
+                let (m, _) = class_inflow(&f, &sides);
+                let (t, _) = class_inflow(&f, &top);
+                out[i][c] = (m, t[0]);
+            }
+        }
+        Ok(())
+    }
+
+    /// Solves all three colours of one coarse light (`env`'s floor with `floor`, its sun's
+    /// first collisions with `sun`, `boundaries` on the shell); the inflows per instance.
+    fn solve(
+        &self,
+        env: &Environment,
+        boundaries: [sylva_lb::Boundary; 3],
+        floor: bool,
+        sun: bool,
+        progress: &mut dyn FnMut(usize),
+    ) -> Result<Vec<Inflow>, LightingError> {
+        // Without `floor` a ground is dark (the ground part's floor), not left out: with no
+        // floor at all the bottom shell would hold the boundary's open ground.
+        let floor = match (floor, env.ground_albedo) {
+            (true, _) => env.floor(&self.grid, &self.medium).map_err(solve_err)?,
+            (false, Some(_)) => Some(sylva_lb::solver::Floor {
+                nx: self.dims.nx,
+                nz: self.dims.nz,
+                radiance: std::array::from_fn(|_| vec![0.0; self.dims.nx * self.dims.nz]),
+            }),
+            (false, None) => None,
+        };
+        let source = match sun {
+            true => Some(
+                light::first_collision_source(
+                    &self.grid,
+                    &self.medium,
+                    env.sun_travel,
+                    env.sun_irradiance,
+                )
+                .map_err(solve_err)?,
+            ),
+            false => None,
+        };
+        let mut inflow = vec![[([0.0f64; 3], 0.0f64); 3]; self.shells.len()];
+        for (c, &boundary) in boundaries.iter().enumerate() {
+            self.solve_colour(c, boundary, floor.as_ref(), source.as_ref(), &mut inflow)?;
+            progress(c + 1);
+        }
+        Ok(inflow)
+    }
+
+    /// Each instance's part weights from its inflows under the whole light of `env` (the
+    /// sun's transmittance marched towards `env`'s sun through the coarse extinction).
+    fn weights(&self, inflow: &[Inflow], env: &Environment, free: PartWeights) -> Vec<PartWeights> {
+        let to_sun = Vec3::from_array(env.sun_travel.map(|v| -v as f32)).normalize_or_zero();
+        let kappa: [Vec<f64>; 3] =
+            std::array::from_fn(|c| light::extinction(&self.grid, &self.medium, c));
+        let unit_sky = light::sky_boundaries([1.0; 3])[0];
+        let top_unit: f64 = (1..Q)
+            .filter(|&k| class(k) == 0)
+            .map(|k| unit_sky.values[k] as f64)
+            .sum();
+        self.boxes
+            .iter()
+            .zip(inflow)
+            .zip(&self.measured)
+            .map(|((world, m), measured)| {
+                let Some(world) = world else {
+                    return free;
+                };
+                let fits: [(f64, f64); 3] =
+                    std::array::from_fn(|c| fit_sky_ground(m[c].0, measured));
+                // Through the top only downward directions enter: a unit sky's sum there.
+                let top: [f32; 3] = std::array::from_fn(|c| (m[c].1 / top_unit) as f32);
+                let sun = if to_sun.y > 0.0 {
+                    sun_transmittance(world, self.dims, self.origin, self.cell, &kappa, to_sun)
+                } else {
+                    Vec3::ZERO
+                };
+                PartWeights {
+                    sun,
+                    sky_top: Vec3::from_array(top),
+                    sky: Vec3::from_array(fits.map(|f| f.0.max(0.0) as f32)),
+                    ground: Vec3::from_array(fits.map(|f| f.1.max(0.0) as f32)),
+                }
+            })
+            .collect()
+    }
+}
+
 impl ForestLight {
     /// Lays the coarse grid over `instances` (ground at `ground_y`), resamples their fine
     /// grids into it, solves it per colour under `env` (sky and open ground on the shell, the
@@ -566,106 +755,156 @@ impl ForestLight {
         opts: &GlobalGridOptions,
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<ForestLight, LightingError> {
-        opts.validate().map_err(LightingError::Global)?;
         env.validate().map_err(LightingError::Illumination)?;
         let free = free_weights(env);
-        let global: Vec<GlobalInstance> = instances
-            .iter()
-            .map(|i| GlobalInstance {
-                density: i.model.map(|m| m.0),
-                to_world: i.to_world,
-            })
-            .collect();
-        let fine: Vec<Option<Placed>> = global.iter().map(placed).collect();
-        let boxes: Vec<Aabb> = fine.iter().flatten().map(|p| p.world).collect();
-        let medium = forest_medium(instances, &fine);
-        let (Some(medium), false) = (medium, boxes.is_empty()) else {
-            return Ok(ForestLight {
-                dims: Dims::new(3, 3, 3).expect("valid"),
-                origin: [0.0; 3],
-                cell: 1.0,
-                weights: vec![free; instances.len()],
-                free,
-            });
+        let Some(coarse) = Coarse::new(instances, ground_y, opts)? else {
+            return Ok(ForestLight::alone(instances.len(), free));
         };
-        medium
-            .validate()
-            .map_err(|e| LightingError::Global(format!("the forest's medium: {e}")))?;
-        let (dims, origin, cell) = layout(&boxes, ground_y, opts).map_err(LightingError::Global)?;
-        let grid = coarse_density(dims, origin, cell, &fine)?;
-        let solve_err =
-            |e: sylva_lb::SolveError| LightingError::Global(format!("coarse solve: {e}"));
-        let boundaries = env.diffuse_boundaries();
-        let floor = env.floor(&grid, &medium).map_err(solve_err)?;
-        let source =
-            light::first_collision_source(&grid, &medium, env.sun_travel, env.sun_irradiance)
-                .map_err(solve_err)?;
-        let shells: Vec<Option<Vec<ShellFace>>> = fine
-            .iter()
-            .map(|p| {
-                p.as_ref()
-                    .map(|p| shell_faces(&p.world, dims, origin, cell))
-            })
-            .collect();
-        let sopts = SolveOptions::papers(dims);
-        // Per instance and colour: the side faces' class inflows and the directions
-        // measured, and the top face's downward inflow.
-        let mut inflow = vec![[([0.0f64; 3], [false; Q], 0.0f64); 3]; instances.len()];
-        for c in 0..3 {
-            let mut lat = Lattice::new(&grid, &medium, c, boundaries[c]).map_err(solve_err)?;
-            lat.set_floor(floor.as_ref().map(|f| f.radiance[c].clone()));
-            lat.set_source(Some(source.colour(c)));
-            lat.reset(boundaries[c]);
-            lat.run(&sopts, &mut |_, _| {}).map_err(solve_err)?;
-            let f = |s: [usize; 3], k: usize| lat.f(s[0], s[1], s[2], k);
-            for (i, shell) in shells.iter().enumerate() {
-                if let Some(faces) = shell {
-                    let sides: Vec<&ShellFace> = faces.iter().filter(|f| f.axis != 1).collect();
-                    let top: Vec<&ShellFace> =
-                        faces.iter().filter(|f| f.axis == 1 && f.high).collect();
-                    let (m, measured) = class_inflow(&f, &sides);
-                    let (t, _) = class_inflow(&f, &top);
-                    inflow[i][c] = (m, measured, t[0]);
-                }
-            }
-            progress(c + 1, 3);
+        let inflow = coarse.solve(env, env.diffuse_boundaries(), true, true, &mut |c| {
+            progress(c, 3)
+        })?;
+        Ok(ForestLight {
+            dims: coarse.dims,
+            origin: coarse.origin.to_array(),
+            cell: coarse.cell,
+            weights: coarse.weights(&inflow, env, free),
+            free,
+        })
+    }
+
+    /// No coarse grid: every instance keeps the free weights.
+    fn alone(instances: usize, free: PartWeights) -> ForestLight {
+        ForestLight {
+            dims: Dims::new(3, 3, 3).expect("valid"),
+            origin: [0.0; 3],
+            cell: 1.0,
+            weights: vec![free; instances],
+            free,
         }
-        let to_sun = Vec3::from_array(env.sun_travel.map(|v| -v as f32)).normalize_or_zero();
-        let kappa: [Vec<f64>; 3] = std::array::from_fn(|c| light::extinction(&grid, &medium, c));
-        let unit_sky = light::sky_boundaries([1.0; 3])[0];
-        let top_unit: f64 = (1..Q)
-            .filter(|&k| class(k) == 0)
-            .map(|k| unit_sky.values[k] as f64)
-            .sum();
-        let weights: Vec<PartWeights> = fine
-            .iter()
-            .zip(&inflow)
-            .map(|(p, m)| {
-                let Some(p) = p else {
-                    return free;
+    }
+}
+
+/// The forest grid relit (issue 27, docs/relight.md): the coarse grid solved once per linear
+/// part of its light, a unit sun along each of the lattice directions a sun above the horizon
+/// travels along ([`crate::relight::physical::SUN_DIRECTIONS`]), a unit sky and a unit ground,
+/// and each instance's measures of every part kept. [`ForestBases::light`] combines them for
+/// any sun, sky and ground (the sun's parts by the barycentric weights of the polyhedron face
+/// its direction crosses, 004 §3.1) and marches the sun's transmittance: a [`ForestLight`]
+/// without an LB solve. At a lattice direction it is [`ForestLight::solve`]'s up to rounding
+/// (the coarse LB is linear; tested); between them the sun's parts are interpolated.
+pub struct ForestBases {
+    coarse: Option<Coarse>,
+    instances: usize,
+    /// Per part (the sun's directions, then sky and ground), per instance, its inflows.
+    parts: Vec<Vec<Inflow>>,
+    /// The ground's albedo the parts were solved with (their floors).
+    ground_albedo: Option<[f64; 3]>,
+}
+
+impl ForestBases {
+    /// Coarse solves: one per sun direction and colour, a unit sky's and a unit ground's.
+    pub const SOLVES: usize = 3 * (crate::relight::physical::SUN_PARTS + 2);
+
+    /// Solves the parts over `instances` with the ground's albedo `ground_albedo` (`None`:
+    /// no ground). `progress(done, total)` after each coarse solve.
+    pub fn solve(
+        instances: &[ForestInstance],
+        ground_albedo: Option<[f64; 3]>,
+        ground_y: f32,
+        opts: &GlobalGridOptions,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<ForestBases, LightingError> {
+        let coarse = Coarse::new(instances, ground_y, opts)?;
+        let mut parts = Vec::new();
+        if let Some(coarse) = &coarse {
+            let zero = [sylva_lb::Boundary { values: [0.0; Q] }; 3];
+            let mut done = 0;
+            let mut step = |_: usize| {
+                done += 1;
+                progress(done, Self::SOLVES)
+            };
+            for &j in &crate::relight::physical::SUN_DIRECTIONS {
+                let env = Environment {
+                    sun_travel: sylva_lb::lattice::unit(j),
+                    sun_irradiance: [1.0; 3],
+                    sky_radiance: [0.0; 3],
+                    ground_albedo,
                 };
-                let fits: [(f64, f64); 3] =
-                    std::array::from_fn(|c| fit_sky_ground(m[c].0, &m[c].1));
-                // Through the top only downward directions enter: a unit sky's sum there.
-                let top: [f32; 3] = std::array::from_fn(|c| (m[c].2 / top_unit) as f32);
-                let sun = if to_sun.y > 0.0 {
-                    sun_transmittance(&p.world, dims, origin, cell, &kappa, to_sun)
-                } else {
-                    Vec3::ZERO
-                };
-                PartWeights {
-                    sun,
-                    sky_top: Vec3::from_array(top),
-                    sky: Vec3::from_array(fits.map(|f| f.0.max(0.0) as f32)),
-                    ground: Vec3::from_array(fits.map(|f| f.1.max(0.0) as f32)),
-                }
+                parts.push(coarse.solve(&env, zero, true, true, &mut step)?);
+            }
+            let sky = Environment {
+                sun_travel: [0.0, -1.0, 0.0],
+                sun_irradiance: [0.0; 3],
+                sky_radiance: [1.0; 3],
+                ground_albedo,
+            };
+            parts.push(coarse.solve(
+                &sky,
+                light::sky_boundaries([1.0; 3]),
+                true,
+                false,
+                &mut step,
+            )?);
+            parts.push(coarse.solve(
+                &sky,
+                light::ground_boundaries([1.0; 3]),
+                false,
+                false,
+                &mut step,
+            )?);
+        }
+        Ok(ForestBases {
+            coarse,
+            instances: instances.len(),
+            parts,
+            ground_albedo,
+        })
+    }
+
+    /// The forest's light under `env` (its ground albedo must be the one solved with): each
+    /// instance's weights, no LB solve. The sun's parts are weighted by the barycentric
+    /// weights of the polyhedron face its direction crosses; a sun below the horizon lights
+    /// nothing.
+    pub fn light(&self, env: &Environment) -> Result<ForestLight, LightingError> {
+        env.validate().map_err(LightingError::Illumination)?;
+        if env.ground_albedo != self.ground_albedo {
+            return Err(LightingError::Global(format!(
+                "the forest's parts were solved over a ground of albedo {:?}, not {:?}",
+                self.ground_albedo, env.ground_albedo
+            )));
+        }
+        let free = free_weights(env);
+        let Some(coarse) = &self.coarse else {
+            return Ok(ForestLight::alone(self.instances, free));
+        };
+        let sun = crate::relight::physical::sun_part_weights(env.sun_travel)?;
+        let (sky, ground) = (env.sky_radiance, env.ground_radiance());
+        let n = crate::relight::physical::SUN_PARTS;
+        let inflow: Vec<Inflow> = (0..self.instances)
+            .map(|i| {
+                std::array::from_fn(|c| {
+                    let mut m = [0.0f64; 3];
+                    let mut t = 0.0f64;
+                    let mut add = |part: &Inflow, w: f64| {
+                        for (m, v) in m.iter_mut().zip(part[c].0) {
+                            *m += w * v;
+                        }
+                        t += w * part[c].1;
+                    };
+                    for &(k, w) in &sun {
+                        add(&self.parts[k][i], w * env.sun_irradiance[c]);
+                    }
+                    add(&self.parts[n][i], sky[c]);
+                    add(&self.parts[n + 1][i], ground[c]);
+                    (m, t)
+                })
             })
             .collect();
         Ok(ForestLight {
-            dims,
-            origin: origin.to_array(),
-            cell,
-            weights,
+            dims: coarse.dims,
+            origin: coarse.origin.to_array(),
+            cell: coarse.cell,
+            weights: coarse.weights(&inflow, env, free),
             free,
         })
     }

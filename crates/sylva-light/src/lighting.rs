@@ -225,9 +225,40 @@ impl Illumination {
 /// against: the LB value of the open sky's light (`2 L_sky`), and what the bottom shell
 /// holds besides its floor's emission.
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct OpenField {
+pub(crate) struct OpenField {
     sky: Vec3,
     bottom: Vec3,
+}
+
+/// The free field of the physical light under `env`: the LB value of the open sky's light,
+/// and the bottom shell's on its directions other than upward (the diffuse boundary).
+pub(crate) fn open_field(env: &Environment) -> OpenField {
+    let total = |b: &[Boundary; 3], keep: &dyn Fn(usize) -> bool| {
+        Vec3::from_array(std::array::from_fn(|c| {
+            (1..sylva_lb::lattice::Q)
+                .filter(|&m| keep(m))
+                .map(|m| b[c].values[m] as f64)
+                .sum::<f64>() as f32
+        }))
+    };
+    let up = |m: usize| sylva_lb::lattice::C[m][1] == 1;
+    OpenField {
+        sky: total(&light::sky_boundaries(env.sky_radiance), &|_| true),
+        bottom: total(&env.diffuse_boundaries(), &|m| !up(m)),
+    }
+}
+
+/// [`ModelLighting::ground_sky`] of the physical light from its values at the floor and at
+/// the lowest interior layer above a ground point.
+pub(crate) fn physical_ground_sky(floor: Vec3, lowest: Vec3, open: &OpenField) -> Vec3 {
+    let ground = (floor - open.bottom).max(Vec3::ZERO);
+    let sky = open.sky * 0.5;
+    Vec3::select(
+        sky.cmpgt(Vec3::ZERO),
+        ((lowest - 2.0 * ground) * 0.5 / sky.max(Vec3::splat(f32::MIN_POSITIVE)))
+            .clamp(Vec3::ZERO, Vec3::ONE),
+        Vec3::ONE,
+    )
 }
 
 /// One model's LB light with its placement in model space: the physical light's scattered,
@@ -372,22 +403,8 @@ impl ModelLighting {
 
     /// A physical-light grid as stored (LB units), lit by `env`.
     fn physical(grid: &LightingGrid, env: &Environment) -> ModelLighting {
-        let total = |b: &[Boundary; 3], keep: &dyn Fn(usize) -> bool| {
-            Vec3::from_array(std::array::from_fn(|c| {
-                (1..sylva_lb::lattice::Q)
-                    .filter(|&m| keep(m))
-                    .map(|m| b[c].values[m] as f64)
-                    .sum::<f64>() as f32
-            }))
-        };
-        let up = |m: usize| sylva_lb::lattice::C[m][1] == 1;
-        // The bottom shell holds the diffuse boundary on its other directions.
-        let bottom = total(&env.diffuse_boundaries(), &|m| !up(m));
         ModelLighting {
-            open: Some(OpenField {
-                sky: total(&light::sky_boundaries(env.sky_radiance), &|_| true),
-                bottom,
-            }),
+            open: Some(open_field(env)),
             ..Self::scaled(grid, 1.0)
         }
     }
@@ -413,14 +430,7 @@ impl ModelLighting {
                 let origin = Vec3::from_array(self.placement.origin());
                 let floor = self.sample(Vec3::new(p.x, origin.y, p.z));
                 let lowest = self.sample(Vec3::new(p.x, origin.y + self.cell().y, p.z));
-                let ground = (floor - open.bottom).max(Vec3::ZERO);
-                let sky = open.sky * 0.5;
-                Vec3::select(
-                    sky.cmpgt(Vec3::ZERO),
-                    ((lowest - 2.0 * ground) * 0.5 / sky.max(Vec3::splat(f32::MIN_POSITIVE)))
-                        .clamp(Vec3::ZERO, Vec3::ONE),
-                    Vec3::ONE,
-                )
+                physical_ground_sky(floor, lowest, open)
             }
         }
     }
@@ -1504,6 +1514,22 @@ impl<'a> PartsPlan<'a> {
         self.plan.dims()
     }
 
+    /// The medium the parts are solved with.
+    pub fn medium(&self) -> &MediumParams {
+        &self.medium
+    }
+
+    /// Part `k`'s name in reports: [`PARTS`]`[k]`, the sun's with its direction.
+    pub fn part_name(&self, k: usize) -> String {
+        match k {
+            0 => {
+                let t = self.env.sun_travel;
+                format!("sun along ({:.2}, {:.2}, {:.2})", t[0], t[1], t[2])
+            }
+            _ => PARTS.get(k).copied().unwrap_or("unknown").to_string(),
+        }
+    }
+
     /// Part `k`'s cache key.
     pub fn key(&self, k: usize) -> CacheKey {
         self.keys[k]
@@ -1629,13 +1655,23 @@ impl<'a> PartsPlan<'a> {
         solver: &dyn LbSolver,
         solve: &mut dyn FnMut(usize) -> Result<LightingGrid, LightingError>,
     ) -> Result<CachedParts, LightingError> {
+        self.cached_some(&[0, 1, 2, 3], solver, solve)
+    }
+
+    /// [`PartsPlan::cached_parts`] of the parts `wanted` alone (their grids in that order).
+    pub fn cached_some(
+        &self,
+        wanted: &[usize],
+        solver: &dyn LbSolver,
+        solve: &mut dyn FnMut(usize) -> Result<LightingGrid, LightingError>,
+    ) -> Result<CachedParts, LightingError> {
         let mut parts = CachedParts {
-            grids: Vec::with_capacity(PARTS.len()),
+            grids: Vec::with_capacity(wanted.len()),
             source: LightingSource::Cached,
             path: None,
             cache_warning: None,
         };
-        for k in 0..PARTS.len() {
+        for &k in wanted {
             let CachedGrid {
                 grid,
                 source,

@@ -148,128 +148,25 @@ pub fn light_forest(
         })
         .collect::<Result<Vec<_>, _>>()?;
 
-    // The root: the parts its cache lacks (model × 4 + part), to every process.
-    let count = plans.len() * PARTS.len();
-    let jobs: Vec<usize> = from_root(
-        runner,
-        "the light parts to solve",
-        || {
-            Ok::<_, PipelineError>(
-                (0..count)
-                    .filter(|&j| !plans[j / PARTS.len()].is_cached(j % PARTS.len()))
-                    .collect(),
-            )
-        },
-        |jobs: &Vec<usize>| {
-            let mut w = Writer::default();
-            w.u64s(&jobs.iter().map(|&j| j as u64).collect::<Vec<_>>());
-            w.0
-        },
-        |data| {
-            let mut r = Reader::new(data, "light parts to solve");
-            let jobs = r.indices(count)?;
-            r.end()?;
-            Ok(jobs)
-        },
-    )?;
-    let outcome = run_jobs_with_bar(
-        runner,
-        "LB light parts",
-        jobs.len(),
-        &mut |j| {
-            let (m, k) = (jobs[j] / PARTS.len(), jobs[j] % PARTS.len());
-            let plan = &plans[m];
-            let name = &scene.models[m].name;
-            let _span =
-                (!several).then(|| tracing::info_span!(stage::LB_MODEL, model = %name).entered());
-            if !several {
-                progress.start(&format!("LB {name} ({} part)", PARTS[k]), 3);
-            }
-            let grid = plan.solve(k, lb.solver, &mut |c, step, max| {
-                if !several {
-                    progress.set((c * max + step) as u64, 3 * max as u64)
-                }
-            });
-            if !several {
-                progress.finish();
-            }
-            let mut w = Writer::default();
-            for c in &grid.map_err(|e| lighting_err(m, e))?.colours {
-                w.f32s(c);
-            }
-            Ok(w.0)
-        },
-        progress,
-    );
-    let outcome = outcome?;
-
-    // The root: each part from its cache or the jobs, stored; every model's parts to every
-    // process.
-    let mut solved: Vec<Option<(Vec<f32>, f64)>> = (0..count).map(|_| None).collect();
-    if let Some(results) = outcome {
-        for (&j, done) in jobs.iter().zip(results) {
-            let sites = plans[j / PARTS.len()].dims().sites();
-            let mut r = Reader::new(&done.bytes, "a light part");
-            solved[j] = Some((r.f32s(3 * sites)?, done.seconds));
-            r.end()?;
-        }
-    }
+    let wanted: Vec<PlanParts> = plans
+        .into_iter()
+        .enumerate()
+        .map(|(model, plan)| PlanParts {
+            model,
+            plan,
+            parts: (0..PARTS.len()).collect(),
+        })
+        .collect();
+    let solved = solve_light_parts(scene, lb, &wanted, runner, progress)?;
     let mut cached = 0;
-    let mut lighting = Vec::with_capacity(plans.len());
-    let mut fine = Vec::with_capacity(plans.len());
-    for (m, plan) in plans.into_iter().enumerate() {
-        let t = Instant::now();
-        let mut report = None;
-        let grids = from_root(
-            runner,
-            "a model's light parts",
-            || {
-                let mut seconds = 0.0;
-                let parts = plan
-                    .cached_parts(lb.solver, &mut |k| {
-                        let (values, s) = solved[m * PARTS.len() + k].take().ok_or_else(|| {
-                            LightingError::Global(format!(
-                                "the {} part was neither in the cache nor solved",
-                                PARTS[k]
-                            ))
-                        })?;
-                        seconds += s;
-                        plan.grid_from(values)
-                    })
-                    .map_err(|e| lighting_err(m, e))?;
-                report = Some(LightingReport {
-                    source: parts.source,
-                    seconds: seconds + t.elapsed().as_secs_f64(),
-                    path: parts.path,
-                    dims: plan.dims(),
-                    cache_warning: parts.cache_warning,
-                });
-                Ok::<_, PipelineError>(parts.grids)
-            },
-            |grids: &Vec<LightingGrid>| {
-                let mut w = Writer::default();
-                for c in grids.iter().flat_map(|g| &g.colours) {
-                    w.f32s(c);
-                }
-                w.0
-            },
-            |data| {
-                let mut r = Reader::new(data, "a model's light parts");
-                let grids = (0..PARTS.len())
-                    .map(|_| {
-                        let values = r.f32s(3 * plan.dims().sites())?;
-                        plan.grid_from(values).map_err(|e| lighting_err(m, e))
-                    })
-                    .collect::<Result<Vec<_>, PipelineError>>()?;
-                r.end()?;
-                Ok(grids)
-            },
-        )?;
+    let mut lighting = Vec::with_capacity(wanted.len());
+    let mut fine = Vec::with_capacity(wanted.len());
+    for (w, (grids, report)) in wanted.into_iter().zip(solved) {
         if let Some(report) = report {
             cached += (report.source == LightingSource::Cached) as usize;
-            progress.model_lit(&scene.models[m], &report);
+            progress.model_lit(&scene.models[w.model], &report);
         }
-        let (l, density, medium) = plan.assemble(&grids);
+        let (l, density, medium) = w.plan.assemble(&grids);
         lighting.push(l);
         fine.push((density, medium));
     }
@@ -304,4 +201,159 @@ pub fn light_forest(
         cache_warning: None,
     });
     Ok((lighting, cached, forest))
+}
+
+/// A plan's wanted parts, in its order, and (at the root) what its report says of them.
+pub(crate) type SolvedParts = (Vec<LightingGrid>, Option<LightingReport>);
+
+/// A model's light-parts plan and the parts wanted of it.
+pub(crate) struct PlanParts<'a> {
+    pub model: usize,
+    pub plan: PartsPlan<'a>,
+    pub parts: Vec<usize>,
+}
+
+/// The parts each plan wants (each from the root's cache when it can, else solved as jobs
+/// through `runner` and stored at the root), on every process: per plan its grids in its
+/// order, and at the root what its report says of them (`None` elsewhere).
+pub(crate) fn solve_light_parts(
+    scene: &Scene,
+    lb: &LbPlan,
+    plans: &[PlanParts],
+    runner: &dyn Runner,
+    progress: &dyn Progress,
+) -> Result<Vec<SolvedParts>, PipelineError> {
+    let several = runner.processes() > 1;
+    let lighting_err = |k: usize, source| PipelineError::Lighting {
+        model: scene.models[k].name.clone(),
+        source,
+    };
+    // Every (plan, part), in order.
+    let all: Vec<(usize, usize)> = plans
+        .iter()
+        .enumerate()
+        .flat_map(|(p, w)| w.parts.iter().map(move |&k| (p, k)))
+        .collect();
+    // The root: the parts its cache lacks, to every process.
+    let jobs: Vec<usize> = from_root(
+        runner,
+        "the light parts to solve",
+        || {
+            Ok::<_, PipelineError>(
+                (0..all.len())
+                    .filter(|&j| !plans[all[j].0].plan.is_cached(all[j].1))
+                    .collect(),
+            )
+        },
+        |jobs: &Vec<usize>| {
+            let mut w = Writer::default();
+            w.u64s(&jobs.iter().map(|&j| j as u64).collect::<Vec<_>>());
+            w.0
+        },
+        |data| {
+            let mut r = Reader::new(data, "light parts to solve");
+            let jobs = r.indices(all.len())?;
+            r.end()?;
+            Ok(jobs)
+        },
+    )?;
+    let outcome = run_jobs_with_bar(
+        runner,
+        "LB light parts",
+        jobs.len(),
+        &mut |j| {
+            let (p, k) = all[jobs[j]];
+            let w = &plans[p];
+            let name = &scene.models[w.model].name;
+            let _span =
+                (!several).then(|| tracing::info_span!(stage::LB_MODEL, model = %name).entered());
+            if !several {
+                progress.start(&format!("LB {name} ({} part)", w.plan.part_name(k)), 3);
+            }
+            let grid = w.plan.solve(k, lb.solver, &mut |c, step, max| {
+                if !several {
+                    progress.set((c * max + step) as u64, 3 * max as u64)
+                }
+            });
+            if !several {
+                progress.finish();
+            }
+            let mut out = Writer::default();
+            for c in &grid.map_err(|e| lighting_err(w.model, e))?.colours {
+                out.f32s(c);
+            }
+            Ok(out.0)
+        },
+        progress,
+    );
+    let outcome = outcome?;
+
+    // The root: each part from its cache or the jobs, stored; every plan's parts to every
+    // process.
+    let mut solved: Vec<Option<(Vec<f32>, f64)>> = (0..all.len()).map(|_| None).collect();
+    if let Some(results) = outcome {
+        for (&j, done) in jobs.iter().zip(results) {
+            let sites = plans[all[j].0].plan.dims().sites();
+            let mut r = Reader::new(&done.bytes, "a light part");
+            solved[j] = Some((r.f32s(3 * sites)?, done.seconds));
+            r.end()?;
+        }
+    }
+    let mut out = Vec::with_capacity(plans.len());
+    let mut first = 0;
+    for w in plans {
+        let t = Instant::now();
+        let mut report = None;
+        let plan = &w.plan;
+        let base = first;
+        first += w.parts.len();
+        let grids = from_root(
+            runner,
+            "a model's light parts",
+            || {
+                let mut seconds = 0.0;
+                let parts = plan
+                    .cached_some(&w.parts, lb.solver, &mut |k| {
+                        let at = base + w.parts.iter().position(|&q| q == k).expect("wanted");
+                        let (values, s) = solved[at].take().ok_or_else(|| {
+                            LightingError::Global(format!(
+                                "the {} part was neither in the cache nor solved",
+                                plan.part_name(k)
+                            ))
+                        })?;
+                        seconds += s;
+                        plan.grid_from(values)
+                    })
+                    .map_err(|e| lighting_err(w.model, e))?;
+                report = Some(LightingReport {
+                    source: parts.source,
+                    seconds: seconds + t.elapsed().as_secs_f64(),
+                    path: parts.path,
+                    dims: plan.dims(),
+                    cache_warning: parts.cache_warning,
+                });
+                Ok::<_, PipelineError>(parts.grids)
+            },
+            |grids: &Vec<LightingGrid>| {
+                let mut out = Writer::default();
+                for c in grids.iter().flat_map(|g| &g.colours) {
+                    out.f32s(c);
+                }
+                out.0
+            },
+            |data| {
+                let mut r = Reader::new(data, "a model's light parts");
+                let grids = (0..w.parts.len())
+                    .map(|_| {
+                        let values = r.f32s(3 * plan.dims().sites())?;
+                        plan.grid_from(values).map_err(|e| lighting_err(w.model, e))
+                    })
+                    .collect::<Result<Vec<_>, PipelineError>>()?;
+                r.end()?;
+                Ok(grids)
+            },
+        )?;
+        out.push((grids, report));
+    }
+    Ok(out)
 }

@@ -47,11 +47,13 @@ pub mod forest;
 pub mod frame;
 mod jobs;
 pub mod models;
+pub mod physical;
 
 pub use bases::precompute_relighting;
 pub use forest::{forest_densities, light_forest, uses_forest, ForestDensities};
 pub use frame::{RankWork, SplitFrame, UnitLayout};
 pub use models::light_models;
+pub use physical::{precompute_physical, PhysicalRelighting};
 pub use sylva_core::jobs::{Local, Runner};
 
 use std::path::{Path, PathBuf};
@@ -78,7 +80,8 @@ use sylva_light::media::{prepare_medium, Media, MediumSolve};
 pub use sylva_light::progress::{Progress, Silent};
 use sylva_light::relight::{
     BasisCacheOptions, BasisPlan, GlobalGridOptions, GlobalInstance, GlobalLight, GlobalReport,
-    ModelBasis, RelitIllumination, RelitLight, StoredBasis, SunWeights, GLOBAL_EXTENSION,
+    ModelBasis, PhysicalRelitLight, RelitIllumination, RelitLight, StoredBasis, SunWeights,
+    GLOBAL_EXTENSION,
 };
 use sylva_render::gpu_frame::{FrameError, GpuFrame};
 use sylva_render::output::{encode_exr, encode_png, OutputError};
@@ -123,6 +126,12 @@ pub enum PipelineError {
     #[error("medium '{medium}'")]
     Medium {
         medium: String,
+        #[source]
+        source: LightingError,
+    },
+    #[error("relighting scene {scene}")]
+    Relit {
+        scene: String,
         #[source]
         source: LightingError,
     },
@@ -467,6 +476,9 @@ pub struct PreparedScene {
     gpu_shading_note: Option<&'static str>,
     /// Per-instance light from base solutions, when the scene was prepared with them.
     pub relit: Option<RelitLight>,
+    /// The physical light relit from its base solutions, when the scene was prepared with
+    /// them (a relight plan on the physical light).
+    pub physical: Option<PhysicalRelitLight>,
     /// The stored fields not in use: the uncompressed bases while the compressed ones are,
     /// and the other way round ([`PreparedScene::use_uncompressed`]).
     spare_bases: Vec<Option<StoredBasis>>,
@@ -572,20 +584,36 @@ impl PreparedScene {
             ..*lb
         });
         let mut relit_parts = None;
-        if let (Some(lb), Some(plan)) = (&lb, &opts.relight) {
-            relit_parts = precompute_relighting(
-                &scene,
-                lb,
-                plan,
-                runner,
-                RelightingAt::Everywhere,
-                progress,
-            )?;
+        let mut physical = None;
+        match (&lb, &opts.relight) {
+            (Some(lb), Some(plan)) if lb.light == Light::Physical => {
+                check_physical_plan(plan)?;
+                physical = precompute_physical(
+                    &scene,
+                    lb,
+                    plan.basis,
+                    opts.forest.as_ref(),
+                    runner,
+                    progress,
+                )?;
+            }
+            (Some(lb), Some(plan)) => {
+                relit_parts = precompute_relighting(
+                    &scene,
+                    lb,
+                    plan,
+                    runner,
+                    RelightingAt::Everywhere,
+                    progress,
+                )?;
+            }
+            _ => {}
         }
         let mut forest = None;
-        let (lighting, cached) = match (&lb, &relit_parts) {
-            (_, Some(parts)) => (none(), parts.cached),
-            (Some(lb), None) if uses_forest(&scene, lb.light, opts.forest.as_ref()) => {
+        let (lighting, cached) = match (&lb, &relit_parts, &physical) {
+            (_, Some(parts), _) => (none(), parts.cached),
+            (_, _, Some(p)) => (none(), p.cached),
+            (Some(lb), None, None) if uses_forest(&scene, lb.light, opts.forest.as_ref()) => {
                 let gopts = opts.forest.expect("uses_forest checks it");
                 let densities = forest_densities(&scene, lb, &gopts)?;
                 let (lit, cached, f) =
@@ -593,11 +621,11 @@ impl PreparedScene {
                 forest = Some(f);
                 (lit.into_iter().map(Some).collect(), cached)
             }
-            (Some(lb), None) => {
+            (Some(lb), None, None) => {
                 let (lit, cached) = light_models(&scene, lb, runner, progress)?;
                 (lit.into_iter().map(Some).collect(), cached)
             }
-            (None, None) => (none(), 0),
+            (None, _, _) => (none(), 0),
         };
         let mut prepared = Self::build(
             scene,
@@ -606,6 +634,7 @@ impl PreparedScene {
             lighting,
             cached,
             relit_parts,
+            physical,
             forest.as_ref(),
             progress,
         )?;
@@ -662,6 +691,7 @@ impl PreparedScene {
         lighting: Vec<Option<ModelLighting>>,
         lb_models_cached: usize,
         relit_parts: Option<Relighting>,
+        physical: Option<PhysicalRelighting>,
         forest: Option<&ForestLight>,
         progress: &dyn Progress,
     ) -> Result<PreparedScene, PipelineError> {
@@ -696,12 +726,29 @@ impl PreparedScene {
             }
             None => (None, Vec::new()),
         };
+        let physical = match physical {
+            Some(p) => Some(
+                PhysicalRelitLight::new(
+                    p.bases,
+                    &scene.models,
+                    tracer.cpu().accel.instances(),
+                    p.forest,
+                    illumination(&scene, to_sun, shading.sun_irradiance),
+                )
+                .map_err(|source| PipelineError::Relit {
+                    scene: scene.name.clone(),
+                    source,
+                })?,
+            ),
+            None => None,
+        };
         // The frame kernel shades with the light's device side; the media and a light without
         // one say why they cannot be shaded there (the GPU still answers their ray queries).
         let gpu_on = tracer.gpu().is_some() && opts.shade_on_gpu;
-        let indirect: &dyn IndirectLight = match &relit {
-            Some(r) => r,
-            None => &light,
+        let indirect: &dyn IndirectLight = match (&relit, &physical) {
+            (Some(r), _) => r,
+            (_, Some(p)) => p,
+            _ => &light,
         };
         let device = media.device().and_then(|()| indirect.device());
         let gpu_shading_note = match &device {
@@ -728,6 +775,7 @@ impl PreparedScene {
             light,
             media,
             relit,
+            physical,
             spare_bases,
             uncompressed: false,
             shadows: opts.shadows,
@@ -742,9 +790,10 @@ impl PreparedScene {
     /// The indirect light frames use: the relit light when there is one, else the per-sun
     /// grids.
     pub fn indirect(&self) -> &dyn IndirectLight {
-        match &self.relit {
-            Some(r) => r,
-            None => &self.light,
+        match (&self.relit, &self.physical) {
+            (Some(r), _) => r,
+            (_, Some(p)) => p,
+            _ => &self.light,
         }
     }
 
@@ -768,6 +817,17 @@ impl PreparedScene {
                 if let Some(f) = &self.gpu_frame {
                     f.relight(&*r)?;
                 }
+            }
+            None if self.physical.is_some() => {
+                let p = self.physical.as_mut().expect("checked");
+                let ill = Illumination {
+                    sun_to: to_sun,
+                    ..p.illumination()
+                };
+                p.relight(ill).map_err(|source| PipelineError::Relit {
+                    scene: self.scene.name.clone(),
+                    source,
+                })?;
             }
             None if (0..self.scene.models.len()).any(|m| self.light.model(m).is_some()) => {
                 return Err(PipelineError::NeedsBasis);
@@ -962,6 +1022,28 @@ impl PreparedScene {
     pub fn lighting_bytes(&self) -> u64 {
         self.indirect().memory_bytes() + self.media.memory_bytes()
     }
+}
+
+/// What a relight plan may ask of the physical light: its sun's parts are weighed by the
+/// polyhedron face (the exact weights are the paper light's boundary sun's) and its sky is
+/// the scene's (the paper light's ambient `B_0` has no meaning there).
+fn check_physical_plan(plan: &RelightPlan) -> Result<(), PipelineError> {
+    if plan.sun != SunWeights::ThreeBasis {
+        return Err(PipelineError::Shading(format!(
+            "--sun-weights {}: the physical light's sun parts are weighed by the face its \
+             direction crosses (three-basis); the exact weights are the paper light's \
+             (--light paper)",
+            plan.sun.name()
+        )));
+    }
+    if plan.ambient != 0.0 {
+        return Err(PipelineError::Shading(format!(
+            "--ambient {}: the physical light's sky is the scene's own (sky_color); the \
+             ambient base solution is the paper light's (--light paper)",
+            plan.ambient
+        )));
+    }
+    Ok(())
 }
 
 /// The lighting options of `lb` for `scene` and, per model, how its basis is made and kept

@@ -1,15 +1,19 @@
-//! `sylva basis SCENE`: precomputes every model's 19 base solutions (paper 004 §3.1: 54
-//! solves per model, `B_0` summed), compresses and caches them, and the scene's coarse global
-//! grid; afterwards `sylva render` and `sylva relight` move the sun with no LB solve. Under
-//! `mpirun` the solves are jobs handed out across the ranks (`sylva_pipeline::bases`); rank 0
-//! alone prints and writes the cache, which holds what one process writes.
+//! `sylva basis SCENE`: precomputes every model's base solutions and caches them; afterwards
+//! `sylva relight` (and `sylva render --basis always`) move the sun with no LB solve. The
+//! physical light (the default): per model 13 sun parts and 3 diffuse parts, 16 solves
+//! (`sylva_pipeline::physical`). The paper light (`--light paper`): 19 base solutions (paper
+//! 004 §3.1: 54 solves per model, `B_0` summed), compressed, and the scene's coarse global
+//! grid. Under `mpirun` the solves are jobs handed out across the ranks; rank 0 alone prints
+//! and writes the cache, which holds what one process writes.
 
 use std::time::Instant;
 
 use anyhow::Result;
 use clap::Args;
 use sylva_light::{Progress, Silent};
-use sylva_pipeline::{load_scene, precompute_relighting, LbPlan, RelightingAt, Runner};
+use sylva_pipeline::{
+    load_scene, precompute_physical, precompute_relighting, BasisUse, LbPlan, RelightingAt, Runner,
+};
 
 use super::progress::{Bars, Report};
 use super::render::{report_line, FrameArgs};
@@ -35,13 +39,24 @@ pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
     let t0 = Instant::now();
     let root = runner.is_root();
     let scene = load_scene(&a.frame.scene, None)?;
-    // Base solutions are the paper light's (004's boundary solves): basis sets it.
     let light = a.frame.light_for(true)?;
+    let physical = light == "physical";
     let plan = a
         .frame
         .relight_plan(true, a.keep_raw, light)?
         .expect("forced plans exist");
     let grid = a.frame.lb_grid.unwrap_or(scene.lb.grid as usize);
+    if a.list_jobs && physical {
+        if root {
+            println!("model\tpart");
+            for m in 0..scene.models.len() {
+                for part in 0..sylva_light::relight::physical::PARTS {
+                    println!("{m}\t{part}");
+                }
+            }
+        }
+        return Ok(());
+    }
     if a.list_jobs {
         if !root {
             return Ok(());
@@ -73,7 +88,11 @@ pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
         solver: &*solver,
         grid: a.frame.lb_grid,
         cache_dir: (!a.frame.no_cache).then_some(a.frame.cache_dir.as_path()),
-        light: sylva_light::Light::Paper,
+        light: if physical {
+            sylva_light::Light::Physical
+        } else {
+            sylva_light::Light::Paper
+        },
     };
     let progress = Bars::new(|r: Report| {
         let (line, warning) = report_line(r);
@@ -83,6 +102,36 @@ pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
         println!("{line}");
     });
     let progress: &dyn Progress = if root { &progress } else { &Silent };
+    if physical {
+        let forest = a.frame.forest_grid(sylva_light::Light::Physical)?;
+        let done = precompute_physical(
+            &scene,
+            &lb,
+            BasisUse::Always,
+            forest.as_ref(),
+            runner,
+            progress,
+        )?;
+        let Some(done) = done.filter(|_| root) else {
+            return Ok(());
+        };
+        let bytes: u64 = done.bases.iter().flatten().map(|b| b.bytes()).sum();
+        println!(
+            "{} of {} models from the cache; physical bases {} in all ({} parts per model, \
+             uncompressed){}; {:.1} s",
+            done.cached,
+            scene.models.len(),
+            sylva_core::format_bytes(bytes),
+            sylva_light::relight::physical::PARTS,
+            if done.forest.is_some() {
+                ", forest grid parts solved"
+            } else {
+                ""
+            },
+            t0.elapsed().as_secs_f64()
+        );
+        return Ok(());
+    }
     // Only the root needs the sets: it prints their size.
     let done = precompute_relighting(&scene, &lb, &plan, runner, RelightingAt::Root, progress)?;
     if !root {

@@ -1,6 +1,6 @@
-//! `sylva bench relight SCENE`: 004 Table 1 on this machine (`sylva_pipeline::bench::relight`):
-//! relit frame times over a sequence of suns against the static frame, the base solutions'
-//! cost and the image error of their compression.
+//! `sylva bench relight SCENE`: 004 Table 1 on this machine (`sylva_pipeline::bench`): relit
+//! frame times over a sequence of suns against the static frame; for the paper light
+//! (`--light paper`) also the base solutions' cost and the image error of their compression.
 
 use std::time::Instant;
 
@@ -54,6 +54,15 @@ pub fn run(a: BenchRelightArgs) -> Result<()> {
         seed: a.frame.seed,
     };
     let pb = bench_bar(a.json, plan.frames() as usize, "bench relight");
+    if p.scene.physical.is_some() {
+        let mut report = bench::relight_physical(&mut p.scene, plan, &|| pb.inc(1))?;
+        pb.finish_and_clear();
+        report.prepare_seconds = prepare_seconds;
+        if a.json {
+            return emit(&format!("{}\n", super::output::pretty_json(&report)?));
+        }
+        return emit(&report.to_string());
+    }
     let mut report = bench::relight(&mut p.scene, &p.basis, plan, &|| pb.inc(1))?;
     pb.finish_and_clear();
     report.codec = a.frame.codec.clone();

@@ -173,25 +173,24 @@ pub struct FrameArgs {
 }
 
 impl FrameArgs {
-    /// The light model's name: `--light`, by default physical, or paper for a command that
-    /// relights (`relights`), whose base solutions are the paper light's; another light
-    /// there is an error, not the paper's bases shaded as that light.
+    /// The light model's name: `--light`, by default physical. A command that relights
+    /// (`relights`) moves the physical light or the paper light; the SPP light has no base
+    /// solutions (an error, not another light's bases shaded as it).
     pub fn light_for(&self, relights: bool) -> Result<&str> {
         match (self.light.as_deref(), relights) {
-            (None, true) | (Some("paper"), true) => Ok("paper"),
-            (Some(l), true) => bail!(
-                "--light {l}: this command relights from base solutions, which are the paper \
-                 light's (004's boundary solves); the {l} light has none yet (docs/relight.md): \
-                 use --light paper, the default here"
+            (Some("spp"), true) => bail!(
+                "--light spp: this command relights from base solutions, and the SPP light has \
+                 none (docs/relight.md): use the physical light (the default) or --light paper"
             ),
-            (l, false) => Ok(l.unwrap_or("physical")),
+            (l, _) => Ok(l.unwrap_or("physical")),
         }
     }
 
     /// The relighting plan these options ask for under light `light` (`None`: per-sun LB
     /// light). `force`: base solutions whatever `--basis` says (`auto` then solves missing
     /// ones); `keep_raw`: keep the uncompressed bases too. Base solutions are the paper
-    /// light's: `--basis always` with another light is an error, `auto` solves for the sun.
+    /// light's and the physical light's: `--basis always` with the SPP light is an error;
+    /// `auto` on the physical light solves for the sun (exact at that sun: docs/relight.md).
     pub fn relight_plan(
         &self,
         force: bool,
@@ -204,9 +203,9 @@ impl FrameArgs {
                 bail!("--basis never: this command relights from base solutions")
             }
             (BasisArg::Never, false) => return Ok(None),
-            (BasisArg::Always, false) if !paper => bail!(
-                "--basis always needs --light paper: base solutions are the paper light's \
-                 (004's boundary solves); the {light} light has none yet (docs/relight.md)"
+            (BasisArg::Always, false) if light == "spp" => bail!(
+                "--basis always: the SPP light has no base solutions (docs/relight.md); use the \
+                 physical light (the default) or --light paper"
             ),
             (BasisArg::Auto, false) if !paper => return Ok(None),
             (BasisArg::Auto, false) => BasisUse::IfCached,
@@ -556,6 +555,15 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
             _ => String::new(),
         }
     ));
+    if let Some(p) = &scene.physical {
+        say(format!(
+            "LB light: the physical light relit from its base solutions ({} sun parts and 3 \
+             diffuse parts per model, forest grid {}), shadows {}",
+            sylva_light::relight::physical::SUN_PARTS,
+            if p.has_forest() { "relit" } else { "off" },
+            scene.shadows().name()
+        ));
+    }
     if let Some(r) = &scene.relit {
         let ill = r.illumination();
         say(format!(

@@ -11,10 +11,14 @@
 //!   scales it gives ([`GlobalLight`]).
 //! * [`light`]: [`RelitLight`], the [`crate::IndirectLight`] that combines each instance's
 //!   base solutions for the current sun.
+//! * [`physical`]: the physical light relit: per model its 13 sun parts and 3 diffuse parts
+//!   ([`physical::PhysicalBasis`]), and [`physical::PhysicalRelitLight`], which weighs them
+//!   per instance for the current sun (with the forest grid's relit weights).
 
 pub mod basis_cache;
 pub mod global;
 pub mod light;
+pub mod physical;
 pub mod weights;
 
 pub use basis_cache::{
@@ -26,6 +30,7 @@ pub use global::{
     GLOBAL_EXTENSION,
 };
 pub use light::{ProjectedLight, RelitLight, StoredBasis};
+pub use physical::{PhysicalBasis, PhysicalRelitLight};
 pub use weights::{RelitIllumination, SunWeights};
 
 /// The 24 sun positions of 004 Table 1's sequence: over 90° about the zenith, along the

@@ -6,7 +6,9 @@ pub mod scaling;
 mod spp;
 mod trace;
 
-pub use relight::{relight, RelightBench, RelightBenchPlan};
+pub use relight::{
+    relight, relight_physical, PhysicalRelightBench, RelightBench, RelightBenchPlan,
+};
 pub use spp::{spp, PaperScene, SppBench};
 pub use trace::{
     measure_frames, tile_times, FrameMeasure, RankSplit, ScalingModel, ScalingRow, SplitSummary,

@@ -159,58 +159,9 @@ pub fn relight(
         )
     };
     prepared.use_uncompressed(false)?;
-    // Rendered at the scene's sun (the one its grids were made for), kd-tree shadows.
-    let static_frame = |p: &PreparedScene| -> Result<Frame, PipelineError> {
-        Ok(p.renderer_with(&static_light).render(&settings, &|_| {})?)
-    };
-    static_frame(prepared)?;
-    tick();
-    let mut static_runs = Vec::new();
-
-    // Relit frames: per sun both shadow methods back to back (their order alternating), so
-    // a pair sees the same load; the static frame once per pass.
-    let methods = [ShadowMethod::KdTree, ShadowMethod::SunGrid];
-    let mut times = vec![vec![Vec::new(); suns.len()]; 2];
-    let mut relight_times = vec![Vec::new(); 2];
-    let mut pair_ratios = Vec::new();
-    for run in 0..=plan.runs {
-        prepared.set_sun(to_sun)?;
-        let t = Instant::now();
-        static_frame(prepared)?;
-        if run > 0 {
-            static_runs.push(t.elapsed().as_secs_f64());
-        }
-        tick();
-        for (k, &sun) in suns.iter().enumerate() {
-            let mut pair = [0.0; 2];
-            for i in 0..2 {
-                let mi = (i + k + run as usize) % 2;
-                prepared.set_shadows(methods[mi]);
-                let t0 = Instant::now();
-                prepared.set_sun(sun)?;
-                let t1 = Instant::now();
-                prepared.render(&settings, &Silent)?;
-                pair[mi] = t0.elapsed().as_secs_f64();
-                if run > 0 {
-                    times[mi][k].push(pair[mi]);
-                    relight_times[mi].push((t1 - t0).as_secs_f64());
-                }
-                tick();
-            }
-            if run > 0 {
-                pair_ratios.push(pair[1] / pair[0]);
-            }
-        }
-    }
-    let frame_kd = mean_of_medians(&times[0]);
-    let frame_grid = mean_of_medians(&times[1]);
-    let static_seconds = median(static_runs);
-    let frame_seconds = if plan.shadows == ShadowMethod::KdTree {
-        frame_kd
-    } else {
-        frame_grid
-    };
-    let relight_seconds = median(relight_times.concat());
+    let t = time_frames(prepared, &static_light, &suns, &settings, plan, tick)?;
+    let (frame_kd, frame_grid, static_seconds) = (t.kd, t.grid, t.static_seconds);
+    let frame_seconds = t.chosen(plan.shadows);
 
     // Image RMSE, compressed against uncompressed bases, over the sequence: tone-mapped
     // sRGB in [0, 1] with the uncompressed frame's exposure (and linear, for reference).
@@ -258,8 +209,8 @@ pub fn relight(
         frame_seconds,
         frame_seconds_kd: frame_kd,
         frame_seconds_grid: frame_grid,
-        grid_over_kd: median(pair_ratios),
-        relight_seconds,
+        grid_over_kd: t.grid_over_kd,
+        relight_seconds: t.relight_seconds,
         static_frame_seconds: static_seconds,
         ratio_to_static: frame_seconds / static_seconds,
         basis_seconds,
@@ -324,6 +275,203 @@ impl fmt::Display for RelightBench {
             f,
             "image RMSE compressed vs uncompressed: {:.5} (tone-mapped sRGB, [0, 1]); linear {:.5} (mean {:.4})",
             self.rmse, self.rmse_linear, self.mean_linear
+        )
+    }
+}
+
+/// Frame times over `suns` ([`time_frames`]).
+struct Timings {
+    kd: f64,
+    grid: f64,
+    grid_over_kd: f64,
+    relight_seconds: f64,
+    static_seconds: f64,
+}
+
+impl Timings {
+    fn chosen(&self, shadows: ShadowMethod) -> f64 {
+        match shadows {
+            ShadowMethod::KdTree => self.kd,
+            ShadowMethod::SunGrid => self.grid,
+        }
+    }
+}
+
+/// The relit frame per sun with both shadow methods back to back (their order alternating,
+/// so a pair sees the same load) and the static frame (`static_light` at the scene's sun,
+/// kd-tree shadows) once per pass, over one untimed and `plan.runs` timed passes.
+fn time_frames(
+    prepared: &mut PreparedScene,
+    static_light: &dyn sylva_light::IndirectLight,
+    suns: &[glam::Vec3],
+    settings: &sylva_render::RenderSettings,
+    plan: RelightBenchPlan,
+    tick: &dyn Fn(),
+) -> Result<Timings, PipelineError> {
+    let to_sun = prepared.to_sun;
+    let static_frame = |p: &PreparedScene| -> Result<Frame, PipelineError> {
+        Ok(p.renderer_with(static_light).render(settings, &|_| {})?)
+    };
+    static_frame(prepared)?;
+    tick();
+    let mut static_runs = Vec::new();
+    let methods = [ShadowMethod::KdTree, ShadowMethod::SunGrid];
+    let mut times = vec![vec![Vec::new(); suns.len()]; 2];
+    let mut relight_times = vec![Vec::new(); 2];
+    let mut pair_ratios = Vec::new();
+    for run in 0..=plan.runs {
+        prepared.set_sun(to_sun)?;
+        let t = Instant::now();
+        static_frame(prepared)?;
+        if run > 0 {
+            static_runs.push(t.elapsed().as_secs_f64());
+        }
+        tick();
+        for (k, &sun) in suns.iter().enumerate() {
+            let mut pair = [0.0; 2];
+            for i in 0..2 {
+                let mi = (i + k + run as usize) % 2;
+                prepared.set_shadows(methods[mi]);
+                let t0 = Instant::now();
+                prepared.set_sun(sun)?;
+                let t1 = Instant::now();
+                prepared.render(settings, &Silent)?;
+                pair[mi] = t0.elapsed().as_secs_f64();
+                if run > 0 {
+                    times[mi][k].push(pair[mi]);
+                    relight_times[mi].push((t1 - t0).as_secs_f64());
+                }
+                tick();
+            }
+            if run > 0 {
+                pair_ratios.push(pair[1] / pair[0]);
+            }
+        }
+    }
+    prepared.set_sun(to_sun)?;
+    Ok(Timings {
+        kd: mean_of_medians(&times[0]),
+        grid: mean_of_medians(&times[1]),
+        grid_over_kd: median(pair_ratios),
+        relight_seconds: median(relight_times.concat()),
+        static_seconds: median(static_runs),
+    })
+}
+
+/// `sylva bench relight`'s report on the physical light relit from its base solutions.
+#[derive(Debug, Clone, Serialize)]
+pub struct PhysicalRelightBench {
+    pub scene: String,
+    pub light: &'static str,
+    pub width: u32,
+    pub height: u32,
+    pub rays_per_pixel: u32,
+    pub gather_rays: u32,
+    pub suns: usize,
+    pub runs: u32,
+    pub threads: usize,
+    pub forest_grid: bool,
+    pub shadows: &'static str,
+    /// Mean over the suns of the per-sun medians, with the chosen shadows.
+    pub frame_seconds: f64,
+    pub frame_seconds_kd: f64,
+    pub frame_seconds_grid: f64,
+    pub grid_over_kd: f64,
+    /// Relighting alone (moving the sun: the forest's weights and every instance's terms).
+    pub relight_seconds: f64,
+    /// The per-sun light's frame (one grid of four parts per model), same run.
+    pub static_frame_seconds: f64,
+    pub ratio_to_static: f64,
+    /// Bytes of the models' bases (16 parts, f32, uncompressed).
+    pub basis_bytes: u64,
+    /// Loading, solving or reading the bases and building the scene.
+    pub prepare_seconds: f64,
+    pub peak_rss_bytes: Option<u64>,
+    pub device: &'static str,
+}
+
+/// Measures the physical light relit on `prepared` (prepared with its base solutions): the
+/// frame time over `plan.suns` suns against the per-sun light's frame, at 1 ray per pixel.
+/// `prepare_seconds` is the caller's to fill in.
+pub fn relight_physical(
+    prepared: &mut PreparedScene,
+    plan: RelightBenchPlan,
+    tick: &dyn Fn(),
+) -> Result<PhysicalRelightBench, PipelineError> {
+    let (w, h) = plan.size;
+    let camera = prepared.camera(w, h);
+    let settings = prepared.settings(camera, 1, plan.seed);
+    let suns = sun_path(plan.suns, prepared.scene.sun.azimuth_deg());
+    let p = prepared
+        .physical
+        .as_ref()
+        .ok_or(PipelineError::NeedsBasis)?;
+    let static_light = p.static_light(
+        &prepared.scene.models,
+        prepared.tracer.cpu().accel.instances(),
+    );
+    let basis_bytes = (0..prepared.scene.models.len())
+        .filter_map(|m| p.model(m))
+        .map(|b| b.bytes())
+        .sum();
+    let forest_grid = p.has_forest();
+    let t = time_frames(prepared, &static_light, &suns, &settings, plan, tick)?;
+    let frame_seconds = t.chosen(plan.shadows);
+    Ok(PhysicalRelightBench {
+        scene: prepared.scene.name.clone(),
+        light: "physical",
+        width: w,
+        height: h,
+        rays_per_pixel: 1,
+        gather_rays: prepared.shading.gather_rays,
+        suns: suns.len(),
+        runs: plan.runs,
+        threads: rayon::current_num_threads(),
+        forest_grid,
+        shadows: plan.shadows.name(),
+        frame_seconds,
+        frame_seconds_kd: t.kd,
+        frame_seconds_grid: t.grid,
+        grid_over_kd: t.grid_over_kd,
+        relight_seconds: t.relight_seconds,
+        static_frame_seconds: t.static_seconds,
+        ratio_to_static: frame_seconds / t.static_seconds,
+        basis_bytes,
+        prepare_seconds: 0.0,
+        peak_rss_bytes: peak_rss_bytes(),
+        device: prepared.tracer.device(),
+    })
+}
+
+impl fmt::Display for PhysicalRelightBench {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "{} (physical light) at {}x{}, 1 ray/pixel, {} gather rays, {} threads; {} suns over 90° about the zenith, forest grid {}; medians of {} runs per sun",
+            self.scene,
+            self.width,
+            self.height,
+            self.gather_rays,
+            self.threads,
+            self.suns,
+            if self.forest_grid { "relit" } else { "off" },
+            self.runs
+        )?;
+        writeln!(
+            f,
+            "relit frame (mean over the suns): {:.3} s with kd-tree shadows, {:.3} s with the sun grid (relighting itself {:.4} s)",
+            self.frame_seconds_kd, self.frame_seconds_grid, self.relight_seconds
+        )?;
+        writeln!(
+            f,
+            "static frame (per-sun light, same run): {:.3} s; relit/static {:.2}",
+            self.static_frame_seconds, self.ratio_to_static
+        )?;
+        writeln!(
+            f,
+            "base solutions: {} (16 parts per model, uncompressed); prepared in {:.1} s",
+            format_bytes(self.basis_bytes),
+            self.prepare_seconds
         )
     }
 }

@@ -29,7 +29,7 @@ fn opts() -> LightingOptions {
 }
 
 /// The `shade` scene's models as parts: (density, medium) per model.
-fn shade_parts() -> (sylva_geom::Scene, Vec<(DensityGrid, MediumParams)>) {
+pub(crate) fn shade_parts() -> (sylva_geom::Scene, Vec<(DensityGrid, MediumParams)>) {
     let scene = load_scene("shade", None).unwrap();
     let illum = scene_illumination(&scene);
     let fine = scene
@@ -44,7 +44,7 @@ fn shade_parts() -> (sylva_geom::Scene, Vec<(DensityGrid, MediumParams)>) {
     (scene, fine)
 }
 
-fn instances<'a>(
+pub(crate) fn instances<'a>(
     scene: &sylva_geom::Scene,
     fine: &'a [(DensityGrid, MediumParams)],
     which: &[usize],

@@ -7,5 +7,6 @@ mod distributed;
 mod forest;
 mod gpu;
 mod media;
+mod physical;
 mod relight;
 mod render;

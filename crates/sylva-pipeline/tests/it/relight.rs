@@ -69,7 +69,7 @@ fn scene_from(dir: &Path, name: &str, toml: &str) -> Scene {
 
 /// The LB solver, counting its solves.
 #[derive(Default)]
-struct Counting(AtomicUsize);
+pub(crate) struct Counting(pub(crate) AtomicUsize);
 
 impl LbSolver for Counting {
     fn solve_lighting_rgb(
@@ -355,10 +355,10 @@ fn only_moving_the_sun_solves_nothing() {
 }
 
 #[test]
-fn the_physical_light_refuses_base_solutions_before_any_solve() {
-    // The stored bases are the paper light's boundary solves; the physical light would need
-    // scattered, sky and ground bases (docs/relight.md), so asking for bases under it is an
-    // error, never the paper's bases shaded as physical light.
+fn the_physical_light_refuses_the_exact_weights_before_any_solve() {
+    // The exact weights are exact for the paper light's boundary sun; the physical light's
+    // sun parts are weighed by the face the sun crosses (docs/relight.md): asking for them is
+    // an error before any solve, never a silently different light.
     let dir = tempfile::tempdir().unwrap();
     let solver = Counting::default();
     let opts = PrepareOptions {
@@ -375,8 +375,8 @@ fn the_physical_light_refuses_base_solutions_before_any_solve() {
     };
     let e = PreparedScene::new(rotated_roses(dir.path(), 0.0), &opts, &Silent)
         .err()
-        .expect("bases under the physical light are refused");
-    assert!(matches!(e, PipelineError::BasisLight("physical")), "{e}");
+        .expect("exact weights under the physical light are refused");
+    assert!(matches!(e, PipelineError::Shading(_)), "{e}");
     assert!(e.to_string().contains("--light paper"), "{e}");
     assert_eq!(solver.0.load(Ordering::SeqCst), 0, "nothing solved");
 }

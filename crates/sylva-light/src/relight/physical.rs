@@ -1,0 +1,432 @@
+//! The physical light relit (issue 27, docs/relight.md): the default light moved with the
+//! sun, no LB solve per sun.
+//!
+//! A model's physical light is linear in its sources (docs/light.md, "Forests"): the sun's
+//! part `S` (its first collisions and the sunlit floor), a unit sky's through the top face
+//! `D_top` and through the sides `D_side`, a unit ground's `G`. Only `S` depends on the sun's
+//! direction. Per model, [`PhysicalBasis`] holds `S_j` for a unit sun travelling along each
+//! lattice direction `j` that a sun above the horizon can travel along
+//! ([`SUN_DIRECTIONS`]: the 13 with `c_y ≤ 0`; the polyhedron faces such a direction crosses
+//! have only these as vertices) beside the three diffuse parts: 16 parts, solved once.
+//!
+//! Per instance and sun, the sun's direction in the instance's model space (its rotation
+//! included) picks the polyhedron face it crosses, and its barycentric weights weigh the
+//! face's three `S_j` (004 §3.1); times the sun's irradiance and the forest's transmittance
+//! `τ`; the diffuse parts take the forest grid's weights ([`crate::forest::ForestBases`],
+//! relit the same way) or, for a lone model, the sky's radiance and the open ground's. At a
+//! lattice direction this is the direct solve up to rounding (tested); between them the
+//! sun's first-collision pattern is interpolated, the error docs/relight.md measures.
+//!
+//! The exact weights of the paper light (`max(0, n_j · d)`) are not used: they are exact for
+//! a boundary sun, while the physical sun enters as its first collisions along the exact
+//! direction, which no lattice direction's solve holds.
+
+use glam::{Affine3A, Vec3};
+use sylva_geom::{Aabb, Model};
+use sylva_lb::lattice::{C, Q};
+use sylva_lb::relight::{face_hit, Footprint, Placement, RelightError};
+use sylva_lb::{Bounds, Dims, LightingGrid};
+use sylva_trace::TraceInstance;
+
+use crate::device::{DeviceLight, NoDevice};
+use crate::forest::{free_weights, ForestBases};
+use crate::indirect::{ground_shade, GroundIndex, IndirectLight, ModelGridLight};
+use crate::lighting::{
+    open_field, physical_environment, physical_ground_sky, Illumination, LightingError,
+    ModelLighting, OpenField, PartWeights,
+};
+
+/// The sun's parts per model: one per lattice direction with `c_y ≤ 0`.
+pub const SUN_PARTS: usize = 13;
+/// Parts per model: the sun's, then `D_top`, `D_side`, `G`.
+pub const PARTS: usize = SUN_PARTS + 3;
+/// The lattice directions (1..=18) a sun above the horizon travels along, lattice order.
+pub const SUN_DIRECTIONS: [usize; SUN_PARTS] = sun_directions();
+
+const fn sun_directions() -> [usize; SUN_PARTS] {
+    let mut out = [0; SUN_PARTS];
+    let (mut n, mut k) = (0, 1);
+    while k < Q {
+        if C[k][1] <= 0 {
+            out[n] = k;
+            n += 1;
+        }
+        k += 1;
+    }
+    out
+}
+
+/// The part (index into [`SUN_DIRECTIONS`]) solved with the sun straight down, whose plan
+/// also solves the diffuse parts.
+pub fn overhead_part() -> usize {
+    SUN_DIRECTIONS
+        .iter()
+        .position(|&k| C[k] == [0, -1, 0])
+        .expect("the lattice has a downward direction")
+}
+
+/// The illumination sun part `part` is solved under: a unit sun travelling along its lattice
+/// direction, `scene`'s sky and ground (the floor's albedo).
+pub fn sun_part_illumination(scene: &Illumination, part: usize) -> Illumination {
+    let d = sylva_lb::lattice::unit(SUN_DIRECTIONS[part]);
+    Illumination {
+        sun_to: -Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32),
+        sun: Vec3::ONE,
+        ..*scene
+    }
+}
+
+/// The sun's parts and their weights for sunlight travelling along `travel` (any length): the
+/// polyhedron face it crosses, its barycentric weights (004 §3.1), as indices into
+/// [`SUN_DIRECTIONS`]. Empty when the sun is below the horizon (`travel` upward).
+pub fn sun_part_weights(travel: [f64; 3]) -> Result<Vec<(usize, f64)>, LightingError> {
+    let hit = face_hit(travel).map_err(|e| LightingError::Relight(RelightError::from(e)))?;
+    if travel[1] > 0.0 {
+        return Ok(Vec::new());
+    }
+    let mut out = Vec::with_capacity(3);
+    for (&v, &w) in hit.vertices.iter().zip(&hit.weights) {
+        if w <= 0.0 {
+            continue;
+        }
+        match SUN_DIRECTIONS.iter().position(|&k| k == v) {
+            Some(part) => out.push((part, w)),
+            // A face of a sun at the horizon may touch an upward direction with weight ~0.
+            None if w < 1e-9 => {}
+            None => {
+                return Err(LightingError::Illumination(format!(
+                    "sun travelling along {travel:?}: lattice direction {v} has no sun part"
+                )))
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// One model's physical light as its [`PARTS`] linear parts, per site and colour.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PhysicalBasis {
+    dims: Dims,
+    bounds: Bounds,
+    placement: Placement,
+    /// Per site: the sun's parts ([`SUN_DIRECTIONS`] order, a unit sun each), then a unit
+    /// sky's through the top, through the sides, a unit ground's; RGB each.
+    values: Vec<[[f32; 3]; PARTS]>,
+}
+
+/// A combination of a model's parts: `(part, weight per colour)`, zero terms left out.
+pub type PartTerms = Vec<(usize, Vec3)>;
+
+impl PhysicalBasis {
+    /// From the sun's parts (one grid per [`SUN_DIRECTIONS`] entry, a unit sun) and the
+    /// diffuse ones as solved (`sky` through every face, `ground`, `skytop` through the top:
+    /// `crate::lighting::PARTS` 1..3); all on one grid.
+    pub fn new(
+        sun: &[LightingGrid],
+        sky: &LightingGrid,
+        ground: &LightingGrid,
+        skytop: &LightingGrid,
+    ) -> Result<PhysicalBasis, LightingError> {
+        if sun.len() != SUN_PARTS {
+            return Err(LightingError::Illumination(format!(
+                "{} sun parts, not {SUN_PARTS}",
+                sun.len()
+            )));
+        }
+        let side = sylva_lb::light::subtract(sky, skytop);
+        let grids: Vec<&LightingGrid> = sun.iter().chain([skytop, &side, ground]).collect();
+        let (dims, bounds) = (sky.dims, sky.bounds);
+        if let Some(g) = grids.iter().find(|g| g.dims != dims || g.bounds != bounds) {
+            return Err(LightingError::Illumination(format!(
+                "a light part on a {} grid beside a {dims} grid",
+                g.dims
+            )));
+        }
+        let values = (0..dims.sites())
+            .map(|i| std::array::from_fn(|k| std::array::from_fn(|c| grids[k].colours[c][i])))
+            .collect();
+        Ok(PhysicalBasis {
+            dims,
+            bounds,
+            placement: Placement::new(dims, bounds),
+            values,
+        })
+    }
+
+    pub fn dims(&self) -> Dims {
+        self.dims
+    }
+
+    pub fn placement(&self) -> &Placement {
+        &self.placement
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> u64 {
+        (self.values.len() * std::mem::size_of::<[[f32; 3]; PARTS]>()) as u64
+    }
+
+    /// Bytes a basis on `dims` holds.
+    pub fn memory_needed(dims: Dims) -> u64 {
+        dims.sites() as u64 * std::mem::size_of::<[[f32; 3]; PARTS]>() as u64
+    }
+
+    /// `Σ w ⊙ part` at model-space point `p` (trilinear, clamped to the grid).
+    #[inline]
+    pub fn sample(&self, p: Vec3, terms: &[(usize, Vec3)]) -> Vec3 {
+        let fp = Footprint::at(self.dims, self.placement.grid_coords(p.to_array()));
+        let (sites, wt) = (fp.sites(self.dims), fp.weights());
+        let mut out = Vec3::ZERO;
+        for k in 0..8 {
+            let v = &self.values[sites[k]];
+            let mut site = Vec3::ZERO;
+            for &(part, w) in terms {
+                site += Vec3::from_array(v[part]) * w;
+            }
+            out += site * wt[k];
+        }
+        out
+    }
+}
+
+/// An instance's combination of its model's parts: the sun's parts of the face its
+/// direction (`travel`, in the model's space) crosses, times the sun's `irradiance` and the
+/// forest's `w.sun`; the diffuse parts by `w`'s sky and ground weights.
+pub fn instance_terms(
+    travel: [f64; 3],
+    irradiance: Vec3,
+    w: &PartWeights,
+) -> Result<PartTerms, LightingError> {
+    let mut terms: PartTerms = sun_part_weights(travel)?
+        .into_iter()
+        .map(|(part, b)| (part, w.sun * irradiance * b as f32))
+        .collect();
+    terms.extend([
+        (SUN_PARTS, w.sky_top),
+        (SUN_PARTS + 1, w.sky),
+        (SUN_PARTS + 2, w.ground),
+    ]);
+    terms.retain(|(_, w)| *w != Vec3::ZERO);
+    Ok(terms)
+}
+
+/// Per instance: its model, world → model, its terms for the plants and for the ground.
+#[derive(Debug, Clone)]
+struct InstanceLight {
+    model: u32,
+    to_model: Affine3A,
+    terms: PartTerms,
+    /// Under the free weights (the model's light alone), as the per-sun grids' ground
+    /// lookup reads its model's grid.
+    ground: PartTerms,
+}
+
+/// The physical light of every instance for the current sun from its model's
+/// [`PhysicalBasis`], weighed by the forest grid's relit weights ([`ForestBases`]) when
+/// there is a forest. Moving the sun ([`PhysicalRelitLight::relight`]) makes the weights
+/// again: no LB solve.
+pub struct PhysicalRelitLight {
+    models: Vec<Option<PhysicalBasis>>,
+    model_bounds: Vec<Aabb>,
+    instances: Vec<InstanceLight>,
+    placed: Vec<(u32, Affine3A)>,
+    ground_index: GroundIndex,
+    forest: Option<ForestBases>,
+    illumination: Illumination,
+    /// Per instance, its part weights for the current sun (the forest's, or the free ones).
+    weights: Vec<PartWeights>,
+    open: OpenField,
+}
+
+impl PhysicalRelitLight {
+    /// `bases[m]` is model `m`'s basis (`None`: no indirect light on it); `instances` as
+    /// traced; `forest` the forest grid's parts over these instances, if any. Lit by
+    /// `illumination` (world frame) at once.
+    pub fn new(
+        bases: Vec<Option<PhysicalBasis>>,
+        models: &[Model],
+        instances: &[TraceInstance],
+        forest: Option<ForestBases>,
+        illumination: Illumination,
+    ) -> Result<PhysicalRelitLight, LightingError> {
+        if bases.len() != models.len() {
+            return Err(LightingError::Illumination(format!(
+                "{} bases for {} models",
+                bases.len(),
+                models.len()
+            )));
+        }
+        let ground_index = if bases.iter().any(Option::is_some) {
+            GroundIndex::new(instances)
+        } else {
+            GroundIndex::default()
+        };
+        let env = physical_environment(&illumination)?;
+        let mut light = PhysicalRelitLight {
+            models: bases,
+            model_bounds: models.iter().map(|m| m.bounds).collect(),
+            instances: instances
+                .iter()
+                .map(|i| InstanceLight {
+                    model: i.model,
+                    to_model: i.to_model,
+                    terms: Vec::new(),
+                    ground: Vec::new(),
+                })
+                .collect(),
+            placed: instances.iter().map(|i| (i.model, i.to_model)).collect(),
+            ground_index,
+            forest,
+            illumination,
+            weights: Vec::new(),
+            open: open_field(&env),
+        };
+        light.relight(illumination)?;
+        Ok(light)
+    }
+
+    /// Lights every instance under `illumination` (world frame; its sun above the horizon):
+    /// the forest's weights combined for its sun, each instance's terms for the sun in its
+    /// model space. No LB solve.
+    pub fn relight(&mut self, illumination: Illumination) -> Result<(), LightingError> {
+        let env = physical_environment(&illumination)?;
+        if env.sun_travel[1] > 0.0 {
+            return Err(LightingError::Illumination(
+                "the sun is below the horizon: nothing to relight with".into(),
+            ));
+        }
+        let free = free_weights(&env);
+        self.weights = match &self.forest {
+            Some(f) => f.light(&env)?.weights,
+            None => vec![free; self.instances.len()],
+        };
+        if self.weights.len() != self.instances.len() {
+            return Err(LightingError::Global(format!(
+                "the forest grid was solved for {} instances, the scene has {}",
+                self.weights.len(),
+                self.instances.len()
+            )));
+        }
+        let travel = Vec3::from_array(env.sun_travel.map(|v| v as f32));
+        for (inst, w) in self.instances.iter_mut().zip(&self.weights) {
+            let t = inst
+                .to_model
+                .transform_vector3(travel)
+                .as_dvec3()
+                .to_array();
+            inst.terms = instance_terms(t, illumination.sun, w)?;
+            inst.ground = instance_terms(t, illumination.sun, &free)?;
+        }
+        self.open = open_field(&env);
+        self.illumination = illumination;
+        Ok(())
+    }
+
+    pub fn illumination(&self) -> Illumination {
+        self.illumination
+    }
+
+    /// Whether the forest grid weighs the instances.
+    pub fn has_forest(&self) -> bool {
+        self.forest.is_some()
+    }
+
+    /// Per instance, its part weights for the current sun.
+    pub fn weights(&self) -> &[PartWeights] {
+        &self.weights
+    }
+
+    /// The per-sun light of the current sun as the scene would be lit without bases: per
+    /// model one grid of its four parts (the sun's for the sun in the world frame, as a
+    /// per-sun solve takes it), weighed per instance as the forest grid says. For measuring
+    /// what relighting costs per frame against the static light (`sylva bench relight`).
+    pub fn static_light(&self, models: &[Model], instances: &[TraceInstance]) -> ModelGridLight {
+        let env = physical_environment(&self.illumination).expect("relit with it");
+        let travel = env.sun_travel;
+        let sun = sun_part_weights(travel).unwrap_or_default();
+        let e = self.illumination.sun;
+        let lighting = self
+            .models
+            .iter()
+            .map(|b| {
+                let b = b.as_ref()?;
+                let grid = |f: &dyn Fn(&[[f32; 3]; PARTS]) -> Vec3| LightingGrid {
+                    dims: b.dims,
+                    bounds: b.bounds,
+                    colours: std::array::from_fn(|c| b.values.iter().map(|v| f(v)[c]).collect()),
+                };
+                let s = grid(&|v| {
+                    sun.iter()
+                        .map(|&(k, w)| Vec3::from_array(v[k]) * e * w as f32)
+                        .sum()
+                });
+                let part = |k: usize| grid(&|v| Vec3::from_array(v[SUN_PARTS + k]));
+                let (top, side, ground) = (part(0), part(1), part(2));
+                Some(ModelLighting::physical_parts(
+                    [&s, &top, &side, &ground],
+                    &env,
+                ))
+            })
+            .collect();
+        let light = ModelGridLight::new(lighting, models, instances);
+        match &self.forest {
+            Some(_) => light.with_instance_weights(self.weights.clone()),
+            None => light,
+        }
+    }
+
+    /// Model `m`'s basis.
+    pub fn model(&self, m: usize) -> Option<&PhysicalBasis> {
+        self.models.get(m).and_then(Option::as_ref)
+    }
+
+    /// The light of instance `instance` at model-space point `p` (`None`: no basis).
+    #[inline]
+    pub fn sample_instance(&self, instance: usize, p: Vec3) -> Option<Vec3> {
+        let inst = self.instances.get(instance)?;
+        let basis = self.models[inst.model as usize].as_ref()?;
+        Some(basis.sample(p, &inst.terms))
+    }
+}
+
+impl IndirectLight for PhysicalRelitLight {
+    fn plant(&self, instance: u32, placed: &TraceInstance, world: Vec3) -> Option<Vec3> {
+        self.sample_instance(instance as usize, placed.to_model.transform_point3(world))
+    }
+
+    /// As the per-sun grids' ([`crate::lighting::ModelLighting::ground_sky`]): the share of
+    /// the open sky's light under each tree from its grid's two lowest layers, the model's
+    /// light alone.
+    fn ground_sky(&self, point: Vec3) -> Vec3 {
+        ground_shade(
+            &self.ground_index,
+            &self.placed,
+            &self.model_bounds,
+            point,
+            |i, model, pm| {
+                let basis = self.models[model as usize].as_ref()?;
+                let terms = &self.instances[i].ground;
+                let origin = Vec3::from_array(basis.placement.origin());
+                let inv = Vec3::from_array(basis.placement.inv_cell());
+                let cell_y = if inv.y > 0.0 { 1.0 / inv.y } else { 0.0 };
+                let floor = basis.sample(Vec3::new(pm.x, origin.y, pm.z), terms);
+                let lowest = basis.sample(Vec3::new(pm.x, origin.y + cell_y, pm.z), terms);
+                Some(physical_ground_sky(floor, lowest, &self.open))
+            },
+        )
+    }
+
+    fn memory_bytes(&self) -> u64 {
+        self.models.iter().flatten().map(PhysicalBasis::bytes).sum()
+    }
+
+    fn gatherable(&self) -> bool {
+        true
+    }
+
+    fn device(&self) -> Result<&dyn DeviceLight, NoDevice> {
+        Err(NoDevice(
+            "the relit physical light has no GPU side yet: its frames are shaded on the CPU",
+        ))
+    }
+}

@@ -1,0 +1,245 @@
+//! The physical light relit (issue 27, docs/relight.md): at a lattice direction the relit
+//! light is the light solved for that sun (the forest grid's weights and whole frames, final
+//! gather included), moving the sun solves nothing, and the sun's parts interpolate between
+//! lattice directions.
+
+use std::sync::atomic::Ordering;
+
+use glam::Vec3;
+use sylva_core::Sun;
+use sylva_lb::lattice::unit;
+use sylva_lb::light::Environment;
+use sylva_lb::{CpuSolver, LbSolver};
+use sylva_light::forest::{ForestBases, ForestLight};
+use sylva_light::lighting::{physical_environment, PartWeights};
+use sylva_light::relight::physical::{sun_part_weights, SUN_DIRECTIONS};
+use sylva_light::relight::{GlobalGridOptions, SunWeights};
+use sylva_light::{Light, Silent};
+use sylva_pipeline::{
+    load_scene, scene_illumination, BasisUse, LbPlan, PrepareOptions, PreparedScene, RelightPlan,
+};
+
+use crate::forest::{instances, shade_parts};
+use crate::relight::Counting;
+
+const GRID: usize = 24;
+const FOREST: GlobalGridOptions = GlobalGridOptions { sites: 32 };
+
+/// The lattice direction `c` as a sun (towards it).
+fn lattice_sun(c: [i32; 3]) -> Vec3 {
+    let k = SUN_DIRECTIONS
+        .iter()
+        .copied()
+        .find(|&k| sylva_lb::lattice::C[k] == c)
+        .expect("a sun direction");
+    let d = unit(k);
+    -Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32)
+}
+
+fn close(a: Vec3, b: Vec3, scale: f32) -> bool {
+    (a - b).abs().max_element() <= 2e-4 * scale.max(1e-3)
+}
+
+fn weights_close(a: &PartWeights, b: &PartWeights) -> bool {
+    let scale = [a.sun, a.sky_top, a.sky, a.ground]
+        .iter()
+        .map(|v| v.max_element())
+        .fold(0.0f32, f32::max);
+    close(a.sun, b.sun, scale)
+        && close(a.sky_top, b.sky_top, scale)
+        && close(a.sky, b.sky, scale)
+        && close(a.ground, b.ground, scale)
+}
+
+#[test]
+fn sun_parts_are_the_face_of_a_sun_above_the_horizon() {
+    assert_eq!(SUN_DIRECTIONS.len(), 13);
+    for elevation in [0.5f64, 10.0, 35.0, 60.0, 89.0] {
+        for azimuth in [0.0f64, 20.0, 45.0, 133.0, 271.0] {
+            let sun = Sun::from_angles(elevation, azimuth).unwrap().to_sun();
+            let w = sun_part_weights([-sun.x, -sun.y, -sun.z]).unwrap();
+            let total: f64 = w.iter().map(|x| x.1).sum();
+            assert!((total - 1.0).abs() < 1e-9, "{elevation} {azimuth}: {w:?}");
+            assert!(w.len() <= 3 && w.iter().all(|&(p, x)| p < 13 && x > 0.0));
+        }
+    }
+    // A lattice direction is its own part; below the horizon there is none.
+    let w = sun_part_weights([1.0, -1.0, 0.0]).unwrap();
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(sun_part_weights([0.3, 0.5, 0.1]).unwrap().is_empty());
+}
+
+#[test]
+fn the_forest_relit_at_a_lattice_sun_is_the_forest_solved_for_it() {
+    let (scene, fine) = shade_parts();
+    let insts = instances(&scene, &fine, &[0, 1, 2]);
+    let base = physical_environment(&scene_illumination(&scene)).unwrap();
+    let bases =
+        ForestBases::solve(&insts, base.ground_albedo, 0.0, &FOREST, &mut |_, _| {}).unwrap();
+    for c in [[0, -1, 0], [-1, -1, 0], [0, -1, 1], [1, 0, 0]] {
+        let to_sun = lattice_sun(c);
+        let env = Environment {
+            sun_travel: (-to_sun).as_dvec3().to_array(),
+            ..base
+        };
+        let solved = ForestLight::solve(&insts, &env, 0.0, &FOREST, &mut |_, _| {}).unwrap();
+        let relit = bases.light(&env).unwrap();
+        assert_eq!(solved.dims, relit.dims);
+        for (i, (a, b)) in solved.weights.iter().zip(&relit.weights).enumerate() {
+            assert!(
+                weights_close(a, b),
+                "{c:?} instance {i}: solved {a:?} relit {b:?}"
+            );
+        }
+    }
+    // Between lattice directions the weights lie within what the face's corners give.
+    let env = Environment {
+        sun_travel: [-0.5, -0.8, -0.3],
+        ..base
+    };
+    let relit = bases.light(&env).unwrap();
+    for w in &relit.weights {
+        assert!(
+            w.sun.min_element() >= 0.0 && w.sun.max_element() <= 1.0 + 1e-4,
+            "{w:?}"
+        );
+    }
+    // A ground other than the one solved with is refused.
+    let other = Environment {
+        ground_albedo: Some([0.5; 3]),
+        ..env
+    };
+    assert!(bases.light(&other).is_err());
+}
+
+fn prepare(scene: &sylva_geom::Scene, solver: &dyn LbSolver, relight: bool) -> PreparedScene {
+    PreparedScene::new(
+        scene.clone(),
+        &PrepareOptions {
+            lb: Some(LbPlan {
+                solver,
+                grid: Some(GRID),
+                cache_dir: None,
+                light: Light::Physical,
+            }),
+            light: Light::Physical,
+            forest: Some(FOREST),
+            gather_rays: 2,
+            relight: relight.then(|| RelightPlan {
+                basis: BasisUse::Always,
+                sun: SunWeights::ThreeBasis,
+                ambient: 0.0,
+                ..RelightPlan::default()
+            }),
+            largest_frame: Some((40, 30, 1)),
+            ..PrepareOptions::default()
+        },
+        &Silent,
+    )
+    .unwrap()
+}
+
+/// Sum of every pixel's light, and the largest difference between two frames' pixels.
+fn compare(a: &sylva_render::Frame, b: &sylva_render::Frame) -> (f32, f32) {
+    let total = |r: &sylva_render::Radiance| r.local + r.indirect + r.sky;
+    let peak = a
+        .pixels
+        .iter()
+        .map(|p| total(p).max_element())
+        .fold(0.0f32, f32::max);
+    let worst = a
+        .pixels
+        .iter()
+        .zip(&b.pixels)
+        .map(|(p, q)| (total(p) - total(q)).abs().max_element())
+        .fold(0.0f32, f32::max);
+    (peak, worst)
+}
+
+#[test]
+fn relit_at_a_lattice_sun_the_frame_is_the_solved_one_and_moving_the_sun_solves_nothing() {
+    let mut scene = load_scene("shade", None).unwrap();
+    // The per-sun light solves each model for the world's sun; the relit light turns it into
+    // each instance's frame. Unrotated instances see the same sun in both.
+    for i in &mut scene.instances {
+        i.rotation_deg = 0.0;
+    }
+    let to_sun = lattice_sun([-1, -1, 0]);
+    scene.sun = Sun::from_direction(to_sun.x as f64, to_sun.y as f64, to_sun.z as f64).unwrap();
+    let solved = prepare(&scene, &CpuSolver, false);
+    let counting = Counting::default();
+    let mut relit = prepare(&scene, &counting, true);
+    assert!(relit.physical.is_some() && solved.physical.is_none());
+    let solves = counting.0.load(Ordering::SeqCst);
+    // 13 sun parts and 3 diffuse ones per model (their colours in one solve each).
+    assert_eq!(solves, 2 * 16);
+
+    let frame = |p: &PreparedScene| {
+        let camera = p.camera(40, 30);
+        p.render(&p.settings(camera, 1, 7), &Silent).unwrap()
+    };
+    let (a, b) = (frame(&solved), frame(&relit));
+    let (peak, worst) = compare(&a, &b);
+    assert!(peak > 0.0);
+    assert!(
+        worst <= 1e-3 * peak,
+        "relit differs by {worst} (peak {peak})"
+    );
+    // The plants' LB light took part: it is not all direct sunlight.
+    let indirect: f32 = b.pixels.iter().map(|p| p.indirect.max_element()).sum();
+    assert!(indirect > 0.0);
+
+    // The sun moves: no solve, and the light follows it (lower sun, less light).
+    for (elevation, azimuth) in [(35.0, 20.0), (15.0, 200.0), (60.0, 90.0)] {
+        let s = Sun::from_angles(elevation, azimuth).unwrap().to_sun();
+        relit
+            .set_sun(Vec3::new(s.x as f32, s.y as f32, s.z as f32))
+            .unwrap();
+        let f = frame(&relit);
+        assert!(f.pixels.iter().all(|p| (p.local + p.indirect).is_finite()));
+    }
+    assert_eq!(
+        counting.0.load(Ordering::SeqCst),
+        solves,
+        "moving the sun solved"
+    );
+    // Back at the lattice sun: the first frame again.
+    relit.set_sun(to_sun).unwrap();
+    let (_, again) = compare(&b, &frame(&relit));
+    assert!(again <= 1e-6 * peak, "{again}");
+    // Below the horizon: refused, not lit from below.
+    assert!(relit.set_sun(Vec3::new(0.3, -0.5, 0.1)).is_err());
+}
+
+#[test]
+fn the_physical_light_takes_no_exact_weights_and_no_ambient() {
+    let scene = load_scene("shade", None).unwrap();
+    for plan in [
+        RelightPlan {
+            sun: SunWeights::Exact,
+            ..RelightPlan::default()
+        },
+        RelightPlan {
+            ambient: 0.3,
+            ..RelightPlan::default()
+        },
+    ] {
+        let err = PreparedScene::new(
+            scene.clone(),
+            &PrepareOptions {
+                lb: Some(LbPlan {
+                    solver: &CpuSolver,
+                    grid: Some(GRID),
+                    cache_dir: None,
+                    light: Light::Physical,
+                }),
+                relight: Some(plan),
+                ..PrepareOptions::default()
+            },
+            &Silent,
+        )
+        .err()
+        .expect("refused");
+        assert!(err.to_string().contains("paper light"), "{err}");
+    }
+}
