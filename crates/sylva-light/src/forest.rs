@@ -558,7 +558,8 @@ impl ForestLight {
     /// Lays the coarse grid over `instances` (ground at `ground_y`), resamples their fine
     /// grids into it, solves it per colour under `env` (sky and open ground on the shell, the
     /// forest-shadowed ground as its floor, the sun's first collisions as its source) and
-    /// measures each instance's weights. `progress(done, 3)` after each colour.
+    /// measures each instance's weights. `progress(done, total)` after every LB step (three
+    /// colours of `SolveOptions::papers` steps each).
     pub fn solve(
         instances: &[ForestInstance],
         env: &Environment,
@@ -616,7 +617,11 @@ impl ForestLight {
             lat.set_floor(floor.as_ref().map(|f| f.radiance[c].clone()));
             lat.set_source(Some(source.colour(c)));
             lat.reset(boundaries[c]);
-            lat.run(&sopts, &mut |_, _| {}).map_err(solve_err)?;
+            let steps = sopts.max_steps;
+            lat.run(&sopts, &mut |step, _| {
+                progress(c * steps + step.min(steps), 3 * steps)
+            })
+            .map_err(solve_err)?;
             let f = |s: [usize; 3], k: usize| lat.f(s[0], s[1], s[2], k);
             for (i, shell) in shells.iter().enumerate() {
                 if let Some(faces) = shell {
@@ -628,7 +633,7 @@ impl ForestLight {
                     inflow[i][c] = (m, measured, t[0]);
                 }
             }
-            progress(c + 1, 3);
+            progress((c + 1) * steps, 3 * steps);
         }
         let to_sun = Vec3::from_array(env.sun_travel.map(|v| -v as f32)).normalize_or_zero();
         let kappa: [Vec<f64>; 3] = std::array::from_fn(|c| light::extinction(&grid, &medium, c));
