@@ -12,15 +12,24 @@ use sylva_light::{Progress, Silent};
 use sylva_pipeline::{load_scene, precompute_relighting, LbPlan, RelightingAt, Runner};
 
 use super::progress::{Bars, Report};
-use super::render::{report_line, FrameArgs};
+use super::render::{
+    costly_grid_warning, relight_light, relight_plan, report_line, BasisArg, GridArgs, LbArgs,
+    RelightLightArg, RelitArgs, SCENE_HELP,
+};
 
+/// What `sylva basis` uses: the scene, the LB grid, cache and solver (`--device gpu` solves
+/// on the GPU), the compression (`--codec`, `--basis-precision`) and the global grid
+/// (`--no-global`, `--global-grid`). Nothing of a frame: those options are refused.
 #[derive(Args, Debug)]
 pub struct BasisArgs {
-    /// The scene, the LB grid and cache, the solver (`--device gpu` solves on the GPU), the
-    /// compression (`--codec`, `--basis-precision`) and the global grid (`--no-global`,
-    /// `--global-grid`); view options are ignored.
+    #[arg(default_value = "demo", help = SCENE_HELP)]
+    pub scene: String,
     #[command(flatten)]
-    pub frame: FrameArgs,
+    pub light: RelightLightArg,
+    #[command(flatten)]
+    pub lb: LbArgs,
+    #[command(flatten)]
+    pub grid: GridArgs,
     /// Also keep each model's uncompressed basis in the cache (57 × 4 bytes per site), which
     /// `sylva bench relight` measures compression against.
     #[arg(long)]
@@ -34,14 +43,20 @@ pub struct BasisArgs {
 pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
     let t0 = Instant::now();
     let root = runner.is_root();
-    let scene = load_scene(&a.frame.scene, None)?;
     // Base solutions are the paper light's (004's boundary solves): basis sets it.
-    let light = a.frame.light_for(true)?;
-    let plan = a
-        .frame
-        .relight_plan(true, a.keep_raw, light)?
-        .expect("forced plans exist");
-    let grid = a.frame.lb_grid.unwrap_or(scene.lb.grid as usize);
+    let light = relight_light(a.light.light.as_deref())?;
+    let scene = load_scene(&a.scene, None)?;
+    // The plan's sun weights and ambient are the frames' business, not the solves'.
+    let plan = relight_plan(
+        BasisArg::Auto,
+        &RelitArgs::default(),
+        &a.grid,
+        true,
+        a.keep_raw,
+        light,
+    )?
+    .expect("forced plans exist");
+    let grid = a.lb.lb_grid.unwrap_or(scene.lb.grid as usize);
     if a.list_jobs {
         if !root {
             return Ok(());
@@ -67,12 +82,18 @@ pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
         scene.instances.len(),
         scene.lb.preset
     ));
-    let solver = super::device::open_solver(a.frame.device, a.frame.precision)?;
+    if let (Some(w), true) = (
+        costly_grid_warning(&scene, Some(&plan), None, sylva_light::Light::Paper)?,
+        root,
+    ) {
+        eprintln!("{w}");
+    }
+    let solver = super::device::open_solver(a.lb.device, a.lb.precision)?;
     say(format!("LB solver: {}", solver.describe()));
     let lb = LbPlan {
         solver: &*solver,
-        grid: a.frame.lb_grid,
-        cache_dir: (!a.frame.no_cache).then_some(a.frame.cache_dir.as_path()),
+        grid: a.lb.lb_grid,
+        cache_dir: (!a.lb.no_cache).then_some(a.lb.cache_dir.as_path()),
         light: sylva_light::Light::Paper,
     };
     let progress = Bars::new(|r: Report| {
