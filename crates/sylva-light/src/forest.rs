@@ -643,13 +643,16 @@ impl Coarse {
         floor: Option<&sylva_lb::solver::Floor>,
         source: Option<&sylva_lb::solver::VolumeSource>,
         out: &mut [Inflow],
+        step: &mut dyn FnMut(usize),
     ) -> Result<(), LightingError> {
         let sopts = SolveOptions::papers(self.dims);
         let mut lat = Lattice::new(&self.grid, &self.medium, c, boundary).map_err(solve_err)?;
         lat.set_floor(floor.map(|f| f.radiance[c].clone()));
         lat.set_source(source.map(|s| s.colour(c)));
         lat.reset(boundary);
-        lat.run(&sopts, &mut |_, _| {}).map_err(solve_err)?;
+        let steps = sopts.max_steps;
+        lat.run(&sopts, &mut |s, _| step(s.min(steps)))
+            .map_err(solve_err)?;
         let f = |s: [usize; 3], k: usize| lat.f(s[0], s[1], s[2], k);
         for (i, shell) in self.shells.iter().enumerate() {
             if let Some(faces) = shell {
@@ -663,8 +666,14 @@ impl Coarse {
         Ok(())
     }
 
+    /// LB steps of one coarse solve of one colour.
+    fn steps(&self) -> usize {
+        SolveOptions::papers(self.dims).max_steps
+    }
+
     /// Solves all three colours of one coarse light (`env`'s floor with `floor`, its sun's
     /// first collisions with `sun`, `boundaries` on the shell); the inflows per instance.
+    /// `progress(done)` after every LB step, counting this light's steps (3 × [`Coarse::steps`]).
     fn solve(
         &self,
         env: &Environment,
@@ -697,9 +706,17 @@ impl Coarse {
             false => None,
         };
         let mut inflow = vec![[([0.0f64; 3], 0.0f64); 3]; self.shells.len()];
+        let steps = self.steps();
         for (c, &boundary) in boundaries.iter().enumerate() {
-            self.solve_colour(c, boundary, floor.as_ref(), source.as_ref(), &mut inflow)?;
-            progress(c + 1);
+            self.solve_colour(
+                c,
+                boundary,
+                floor.as_ref(),
+                source.as_ref(),
+                &mut inflow,
+                &mut |s| progress(c * steps + s),
+            )?;
+            progress((c + 1) * steps);
         }
         Ok(inflow)
     }
@@ -747,7 +764,8 @@ impl ForestLight {
     /// Lays the coarse grid over `instances` (ground at `ground_y`), resamples their fine
     /// grids into it, solves it per colour under `env` (sky and open ground on the shell, the
     /// forest-shadowed ground as its floor, the sun's first collisions as its source) and
-    /// measures each instance's weights. `progress(done, 3)` after each colour.
+    /// measures each instance's weights. `progress(done, total)` after every LB step (three
+    /// colours of `SolveOptions::papers` steps each).
     pub fn solve(
         instances: &[ForestInstance],
         env: &Environment,
@@ -760,8 +778,9 @@ impl ForestLight {
         let Some(coarse) = Coarse::new(instances, ground_y, opts)? else {
             return Ok(ForestLight::alone(instances.len(), free));
         };
-        let inflow = coarse.solve(env, env.diffuse_boundaries(), true, true, &mut |c| {
-            progress(c, 3)
+        let total = 3 * coarse.steps();
+        let inflow = coarse.solve(env, env.diffuse_boundaries(), true, true, &mut |done| {
+            progress(done, total)
         })?;
         Ok(ForestLight {
             dims: coarse.dims,
@@ -806,7 +825,7 @@ impl ForestBases {
     pub const SOLVES: usize = 3 * (crate::relight::physical::SUN_PARTS + 2);
 
     /// Solves the parts over `instances` with the ground's albedo `ground_albedo` (`None`:
-    /// no ground). `progress(done, total)` after each coarse solve.
+    /// no ground). `progress(done, total)` after every LB step.
     pub fn solve(
         instances: &[ForestInstance],
         ground_albedo: Option<[f64; 3]>,
@@ -818,40 +837,36 @@ impl ForestBases {
         let mut parts = Vec::new();
         if let Some(coarse) = &coarse {
             let zero = [sylva_lb::Boundary { values: [0.0; Q] }; 3];
-            let mut done = 0;
-            let mut step = |_: usize| {
-                done += 1;
-                progress(done, Self::SOLVES)
-            };
-            for &j in &crate::relight::physical::SUN_DIRECTIONS {
-                let env = Environment {
-                    sun_travel: sylva_lb::lattice::unit(j),
-                    sun_irradiance: [1.0; 3],
-                    sky_radiance: [0.0; 3],
-                    ground_albedo,
-                };
-                parts.push(coarse.solve(&env, zero, true, true, &mut step)?);
-            }
             let sky = Environment {
                 sun_travel: [0.0, -1.0, 0.0],
                 sun_irradiance: [0.0; 3],
                 sky_radiance: [1.0; 3],
                 ground_albedo,
             };
-            parts.push(coarse.solve(
-                &sky,
-                light::sky_boundaries([1.0; 3]),
-                true,
-                false,
-                &mut step,
-            )?);
-            parts.push(coarse.solve(
-                &sky,
-                light::ground_boundaries([1.0; 3]),
-                false,
-                false,
-                &mut step,
-            )?);
+            // The lights: a unit sun along each direction, a unit sky, a unit ground.
+            let mut lights: Vec<(Environment, [sylva_lb::Boundary; 3], bool, bool)> =
+                crate::relight::physical::SUN_DIRECTIONS
+                    .iter()
+                    .map(|&j| {
+                        let env = Environment {
+                            sun_travel: sylva_lb::lattice::unit(j),
+                            sun_irradiance: [1.0; 3],
+                            sky_radiance: [0.0; 3],
+                            ground_albedo,
+                        };
+                        (env, zero, true, true)
+                    })
+                    .collect();
+            lights.push((sky, light::sky_boundaries([1.0; 3]), true, false));
+            lights.push((sky, light::ground_boundaries([1.0; 3]), false, false));
+            // Progress after every LB step over all of them.
+            let per_light = 3 * coarse.steps();
+            let total = lights.len() * per_light;
+            for (k, (env, boundaries, floor, sun)) in lights.into_iter().enumerate() {
+                parts.push(coarse.solve(&env, boundaries, floor, sun, &mut |done| {
+                    progress(k * per_light + done, total)
+                })?);
+            }
         }
         Ok(ForestBases {
             coarse,

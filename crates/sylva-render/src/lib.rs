@@ -19,6 +19,7 @@ pub mod gather;
 pub mod gpu_frame;
 pub mod output;
 pub mod render;
+pub mod sequence;
 pub mod shade;
 pub mod stages;
 pub mod tonemap;

@@ -48,6 +48,28 @@ pub fn log_average_luminance(pixels: &[[f32; 3]]) -> f32 {
     (sum / pixels.len() as f64).exp() as f32
 }
 
+/// What [`ToneMap::measure`] needs of a sequence of images, gathered one image at a time so
+/// a sequence too large for memory gets one exposure.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ToneAccumulator {
+    log_sum: f64,
+    count: u64,
+    max_luminance: f32,
+}
+
+impl ToneAccumulator {
+    /// Adds an image's pixels (in the order of the sequence: the sum is the one a single
+    /// pass over all of them makes).
+    pub fn add(&mut self, pixels: &[[f32; 3]]) {
+        for p in pixels {
+            let l = luminance(*p);
+            self.log_sum += (LOG_DELTA + l.max(0.0) as f64).ln();
+            self.max_luminance = self.max_luminance.max(l);
+        }
+        self.count += pixels.len() as u64;
+    }
+}
+
 impl ToneMap {
     /// Checks the parameters: a clear message rather than a black or NaN image.
     pub fn validate(&self) -> Result<(), String> {
@@ -73,6 +95,23 @@ impl ToneMap {
                 .fold(0.0f32, f32::max)
                 .max(f32::MIN_POSITIVE)
         });
+        ToneStats { log_average, white }
+    }
+
+    /// [`ToneMap::measure`] of the pixels `acc` was given, image by image, without holding
+    /// them: the same statistics as measuring them all at once.
+    pub fn measure_accumulated(&self, acc: &ToneAccumulator) -> ToneStats {
+        let log_average = if acc.count == 0 {
+            0.0
+        } else {
+            (acc.log_sum / acc.count as f64).exp() as f32
+        };
+        let scale = self.scale(log_average);
+        // Scaling by a positive factor keeps the order of luminances (rounding is monotonic):
+        // the brightest scaled pixel is the brightest pixel scaled.
+        let white = self
+            .white
+            .unwrap_or_else(|| (acc.max_luminance * scale).max(f32::MIN_POSITIVE));
         ToneStats { log_average, white }
     }
 
@@ -120,6 +159,34 @@ pub fn srgb8(rgb: [f32; 3]) -> [u8; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn accumulated_statistics_are_those_of_all_pixels_at_once() {
+        let images: Vec<Vec<[f32; 3]>> = (0..4)
+            .map(|k| {
+                (0..50)
+                    .map(|i| {
+                        let v = ((i * 7 + k * 13) % 23) as f32 * 0.37;
+                        [v, 0.5 * v + k as f32, if i == 3 { f32::NAN } else { 0.1 }]
+                    })
+                    .collect()
+            })
+            .collect();
+        let all: Vec<[f32; 3]> = images.iter().flatten().copied().collect();
+        for tm in [
+            ToneMap::default(),
+            ToneMap {
+                key: 0.3,
+                white: Some(2.0),
+            },
+        ] {
+            let mut acc = ToneAccumulator::default();
+            for im in &images {
+                acc.add(im);
+            }
+            assert_eq!(tm.measure_accumulated(&acc), tm.measure(&all));
+        }
+    }
 
     fn close(a: f32, b: f32, tol: f32) -> bool {
         (a - b).abs() <= tol * b.abs().max(1e-6)

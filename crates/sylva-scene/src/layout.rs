@@ -63,6 +63,10 @@ pub enum LayoutError {
     EmptyArea { min: [f32; 2], max: [f32; 2] },
     #[error("{what} must be a finite number ≥ 0, got {value}")]
     Invalid { what: &'static str, value: f64 },
+    /// A generator that would place nothing: an empty scene rendered without a word is a
+    /// mistake, not a request.
+    #[error("{amount} places no instance: give it at least one, or remove the generator")]
+    NoInstance { amount: String },
     #[error("{requested} instances is more than the limit of {limit}")]
     TooMany { requested: f64, limit: usize },
     #[error("could place only {placed} of {requested} instances {spacing} m apart in a {area:.0} m² area; lower the count or the spacing")]
@@ -173,6 +177,18 @@ pub fn scatter(
             (d * a.square_metres()).round()
         }
     };
+    if requested < 1.0 {
+        return Err(LayoutError::NoInstance {
+            amount: match spec.amount {
+                Amount::Count(n) => format!("count = {n}"),
+                Amount::PerSquareMetre(d) => format!(
+                    "density = {d} over {:.0} m² ({:.2} instances, rounded to 0)",
+                    a.square_metres(),
+                    d * a.square_metres()
+                ),
+            },
+        });
+    }
     if requested > MAX_GENERATED as f64 {
         return Err(LayoutError::TooMany {
             requested,
@@ -277,6 +293,20 @@ mod tests {
         let mut s = spec(0, 1.0, 4);
         s.amount = Amount::PerSquareMetre(0.05); // 50 × 20 m² → 50
         assert_eq!(scatter(&s, &mut Occupancy::new(1.0)).unwrap().len(), 50);
+    }
+
+    #[test]
+    fn a_generator_that_places_nothing_is_an_error() {
+        let e = scatter(&spec(0, 1.0, 4), &mut Occupancy::new(1.0)).unwrap_err();
+        assert!(matches!(e, LayoutError::NoInstance { .. }), "{e}");
+        assert!(
+            e.to_string().contains("count = 0 places no instance"),
+            "{e}"
+        );
+        let mut s = spec(0, 1.0, 4);
+        s.amount = Amount::PerSquareMetre(0.0001); // 1000 m² → 0.1, rounded to 0
+        let e = scatter(&s, &mut Occupancy::new(1.0)).unwrap_err();
+        assert!(e.to_string().contains("places no instance"), "{e}");
     }
 
     #[test]

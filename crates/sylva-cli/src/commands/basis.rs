@@ -1,30 +1,41 @@
 //! `sylva basis SCENE`: precomputes every model's base solutions and caches them; afterwards
 //! `sylva relight` (and `sylva render --basis always`) move the sun with no LB solve. The
-//! physical light (the default): per model 13 sun parts and 3 diffuse parts, 16 solves
-//! (`sylva_pipeline::physical`). The paper light (`--light paper`): 19 base solutions (paper
-//! 004 §3.1: 54 solves per model, `B_0` summed), compressed, and the scene's coarse global
-//! grid. Under `mpirun` the solves are jobs handed out across the ranks; rank 0 alone prints
-//! and writes the cache, which holds what one process writes.
+//! physical light (the default): per model 13 sun parts and 3 diffuse parts, 16 solves, and
+//! with several instances the forest grid's parts (`sylva_pipeline::physical`). The paper
+//! light (`--light paper`): 19 base solutions (paper 004 §3.1: 54 solves per model, `B_0`
+//! summed), compressed, and the scene's coarse global grid. Under `mpirun` the solves are jobs
+//! handed out across the ranks; rank 0 alone prints and writes the cache, which holds what one
+//! process writes.
 
 use std::time::Instant;
 
 use anyhow::Result;
 use clap::Args;
+use sylva_light::relight::GlobalGridOptions;
 use sylva_light::{Progress, Silent};
 use sylva_pipeline::{
     load_scene, precompute_physical, precompute_relighting, BasisUse, LbPlan, RelightingAt, Runner,
 };
 
 use super::progress::{Bars, Report};
-use super::render::{report_line, FrameArgs};
+use super::render::{
+    costly_grid_warning, relight_light, relight_plan, report_line, BasisArg, GridArgs, LbArgs,
+    RelightLightArg, RelitArgs, SCENE_HELP,
+};
 
+/// What `sylva basis` uses: the scene, the LB grid, cache and solver (`--device gpu` solves
+/// on the GPU), the compression (`--codec`, `--basis-precision`) and the global grid
+/// (`--no-global`, `--global-grid`). Nothing of a frame: those options are refused.
 #[derive(Args, Debug)]
 pub struct BasisArgs {
-    /// The scene, the LB grid and cache, the solver (`--device gpu` solves on the GPU), the
-    /// compression (`--codec`, `--basis-precision`) and the global grid (`--no-global`,
-    /// `--global-grid`); view options are ignored.
+    #[arg(default_value = "demo", help = SCENE_HELP)]
+    pub scene: String,
     #[command(flatten)]
-    pub frame: FrameArgs,
+    pub light: RelightLightArg,
+    #[command(flatten)]
+    pub lb: LbArgs,
+    #[command(flatten)]
+    pub grid: GridArgs,
     /// Also keep each model's uncompressed basis in the cache (57 × 4 bytes per site), which
     /// `sylva bench relight` measures compression against.
     #[arg(long)]
@@ -38,14 +49,20 @@ pub struct BasisArgs {
 pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
     let t0 = Instant::now();
     let root = runner.is_root();
-    let scene = load_scene(&a.frame.scene, None)?;
-    let light = a.frame.light_for(true)?;
+    let light = relight_light(a.light.light.as_deref())?;
     let physical = light == "physical";
-    let plan = a
-        .frame
-        .relight_plan(true, a.keep_raw, light)?
-        .expect("forced plans exist");
-    let grid = a.frame.lb_grid.unwrap_or(scene.lb.grid as usize);
+    let scene = load_scene(&a.scene, None)?;
+    // The plan's sun weights and ambient are the frames' business, not the solves'.
+    let plan = relight_plan(
+        BasisArg::Auto,
+        &RelitArgs::default(),
+        &a.grid,
+        true,
+        a.keep_raw,
+        light,
+    )?
+    .expect("forced plans exist");
+    let grid = a.lb.lb_grid.unwrap_or(scene.lb.grid as usize);
     if a.list_jobs && physical {
         if root {
             println!("model\tpart");
@@ -82,17 +99,28 @@ pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
         scene.instances.len(),
         scene.lb.preset
     ));
-    let solver = super::device::open_solver(a.frame.device, a.frame.precision)?;
+    let (light, forest) = match physical {
+        true => (
+            sylva_light::Light::Physical,
+            (!a.grid.no_global).then_some(GlobalGridOptions {
+                sites: a.grid.global_grid,
+            }),
+        ),
+        false => (sylva_light::Light::Paper, None),
+    };
+    if let (Some(w), true) = (
+        costly_grid_warning(&scene, Some(&plan), forest.as_ref(), light)?,
+        root,
+    ) {
+        eprintln!("{w}");
+    }
+    let solver = super::device::open_solver(a.lb.device, a.lb.precision)?;
     say(format!("LB solver: {}", solver.describe()));
     let lb = LbPlan {
         solver: &*solver,
-        grid: a.frame.lb_grid,
-        cache_dir: (!a.frame.no_cache).then_some(a.frame.cache_dir.as_path()),
-        light: if physical {
-            sylva_light::Light::Physical
-        } else {
-            sylva_light::Light::Paper
-        },
+        grid: a.lb.lb_grid,
+        cache_dir: (!a.lb.no_cache).then_some(a.lb.cache_dir.as_path()),
+        light,
     };
     let progress = Bars::new(|r: Report| {
         let (line, warning) = report_line(r);
@@ -103,7 +131,6 @@ pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
     });
     let progress: &dyn Progress = if root { &progress } else { &Silent };
     if physical {
-        let forest = a.frame.forest_grid(sylva_light::Light::Physical)?;
         let done = precompute_physical(
             &scene,
             &lb,
@@ -115,6 +142,12 @@ pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
         let Some(done) = done.filter(|_| root) else {
             return Ok(());
         };
+        if runner.processes() > 1 {
+            say(format!(
+                "MPI: base solutions solved across {} ranks",
+                runner.processes()
+            ));
+        }
         let bytes: u64 = done.bases.iter().flatten().map(|b| b.bytes()).sum();
         println!(
             "{} of {} models from the cache; physical bases {} in all ({} parts per model, \

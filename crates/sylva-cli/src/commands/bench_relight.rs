@@ -29,7 +29,7 @@ pub struct BenchRelightArgs {
 
 impl BenchRelightArgs {
     /// Base solutions, the uncompressed ones kept for the RMSE.
-    fn request(&self) -> PrepareRequest {
+    fn request(&self) -> PrepareRequest<'static> {
         PrepareRequest {
             need_lb: true,
             rays_per_pixel: Some(1),
@@ -51,7 +51,7 @@ pub fn run(a: BenchRelightArgs) -> Result<()> {
         runs: a.runs,
         shadows: a.frame.shadow_method(),
         size: (p.width, p.height),
-        seed: a.frame.seed,
+        seed: a.frame.view.seed,
     };
     let pb = bench_bar(a.json, plan.frames() as usize, "bench relight");
     if p.scene.physical.is_some() {
@@ -65,7 +65,7 @@ pub fn run(a: BenchRelightArgs) -> Result<()> {
     }
     let mut report = bench::relight(&mut p.scene, &p.basis, plan, &|| pb.inc(1))?;
     pb.finish_and_clear();
-    report.codec = a.frame.codec.clone();
+    report.codec = a.frame.grid.codec.clone();
     report.prepare_seconds = prepare_seconds;
     if a.json {
         return emit(&format!("{}\n", super::output::pretty_json(&report)?));

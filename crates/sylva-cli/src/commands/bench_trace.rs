@@ -32,7 +32,7 @@ pub struct BenchTraceArgs {
 }
 
 impl BenchTraceArgs {
-    fn request(&self) -> PrepareRequest {
+    fn request(&self) -> PrepareRequest<'static> {
         PrepareRequest {
             need_lb: !self.no_lb,
             rays_per_pixel: Some(4),
@@ -77,7 +77,7 @@ pub fn run(a: BenchTraceArgs, runner: &dyn Runner) -> Result<()> {
     };
     let mut measures = Vec::new();
     for rpp in [1u32, 4] {
-        let settings = p.settings(camera, rpp, a.frame.seed);
+        let settings = p.settings(camera, rpp, a.frame.view.seed);
         measures.extend(bench::measure_frames(
             &settings, a.runs, !several, &mut frame,
         )?);
@@ -87,7 +87,7 @@ pub fn run(a: BenchTraceArgs, runner: &dyn Runner) -> Result<()> {
     };
     let scaling = match a.tile_costs {
         true => {
-            let times = bench::tile_times(p, &p.settings(camera, 1, a.frame.seed), a.runs)?;
+            let times = bench::tile_times(p, &p.settings(camera, 1, a.frame.view.seed), a.runs)?;
             let costs = TileCosts {
                 columns: times.columns,
                 rows: times.rows,

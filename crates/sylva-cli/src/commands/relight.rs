@@ -5,32 +5,48 @@
 //! base solutions are solved across the ranks and every frame is rendered across them
 //! (`PreparedScene::render_split`); rank 0 writes the images, the same as one process's.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::Args;
 use sylva_light::relight::sun_path;
 use sylva_light::Silent;
 use sylva_pipeline::Runner;
-use sylva_render::output::{encode_apng, encode_png};
-use sylva_render::tonemap::srgb8;
+use sylva_render::sequence::Sequence;
 use sylva_render::{mean_luminance, Mode, ToneMap};
 
 use super::progress::bar;
-use super::render::{prepare, FrameArgs, PrepareRequest};
+use super::render::{
+    prepare, relight_light, FrameArgs, GridArgs, LbArgs, PrepareRequest, RelightLightArg,
+    RelitArgs, RenderLightArgs, SunArgs, ViewArgs, SCENE_HELP,
+};
 
+/// What `sylva relight` uses: the frame's view, the LB grid and solver, how the bases
+/// combine, the global grid and the sequence. The sun moves along its path (`--path-azimuth`),
+/// so `--sun`, `--elevation` and `--azimuth` are refused, as are the options of lights without
+/// base solutions (`--gather-rays`) and `--basis` (relighting always uses them).
 #[derive(Args, Debug)]
 pub struct RelightArgs {
+    #[arg(default_value = "demo", help = SCENE_HELP)]
+    pub scene: String,
     #[command(flatten)]
-    pub frame: FrameArgs,
+    pub view: ViewArgs,
+    #[command(flatten)]
+    pub light: RelightLightArg,
+    #[command(flatten)]
+    pub lb: LbArgs,
+    #[command(flatten)]
+    pub relit: RelitArgs,
+    #[command(flatten)]
+    pub grid: GridArgs,
     /// Sun positions, evenly spaced over 90° about the zenith (004 Table 1: 24).
     #[arg(long, default_value_t = 24, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub suns: u32,
     /// Azimuth of the sun's path in degrees (from +x towards +z): the sun rises from 45°
     /// elevation opposite it, passes the zenith and sets to 45° at it. Default: the scene's
     /// sun azimuth.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub path_azimuth: Option<f64>,
     /// Output directory (default sylva-out/relight-<scene>): frame-00.png, … and
     /// <scene>.png, the animated PNG.
@@ -50,8 +66,67 @@ pub struct RelightArgs {
     pub white: Option<f32>,
 }
 
+impl RelightArgs {
+    /// The frame options `prepare` reads: these, with the scene's sun (the path replaces it)
+    /// and the paper light's settings.
+    fn frame(&self) -> FrameArgs {
+        FrameArgs {
+            scene: self.scene.clone(),
+            view: self.view.clone(),
+            sun: SunArgs::default(),
+            light: RenderLightArgs {
+                light: self.light.light.clone(),
+                ..RenderLightArgs::default()
+            },
+            lb: self.lb.clone(),
+            relit: self.relit.clone(),
+            grid: self.grid.clone(),
+        }
+    }
+}
+
+/// `path`, or its nearest ancestor that exists (`.` at the last): where a file under `path`
+/// would take its disk space from.
+fn nearest_existing(path: &Path) -> PathBuf {
+    let mut p = path;
+    loop {
+        if p.is_dir() {
+            return p.to_path_buf();
+        }
+        match p.parent() {
+            Some(d) if !d.as_os_str().is_empty() => p = d,
+            _ => return PathBuf::from("."),
+        }
+    }
+}
+
+/// Refuses a sequence whose frames, PNGs and animation would not fit on the disk under `dir`
+/// (frames are held there, not in memory, until the sequence's one exposure is known).
+fn check_disk(dir: &Path, width: u32, height: u32, frames: usize) -> Result<()> {
+    let needed = Sequence::disk_bytes(width, height, frames);
+    let at = nearest_existing(dir);
+    if let Some(free) = sylva_io::export::available_disk_bytes(&at) {
+        if needed + needed / 100 > free {
+            bail!(
+                "{frames} frames of {width}x{height} need up to {} on disk under {} (the linear \
+                 frames held there for the sequence's one exposure, {} each, then the PNGs and \
+                 the animation), but only {} is free: ask for fewer --suns or a smaller \
+                 --width/--height",
+                sylva_core::format_bytes(needed),
+                at.display(),
+                sylva_core::format_bytes(width as u64 * height as u64 * 12),
+                sylva_core::format_bytes(free)
+            );
+        }
+    }
+    Ok(())
+}
+
 pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
     let root = runner.is_root();
+    // The physical and the paper light have base solutions: another is refused before the
+    // scene loads.
+    relight_light(a.light.light.as_deref())?;
     if let Some(r) = a.rpp {
         let range = sylva_core::limits::RAYS_PER_PIXEL;
         if !range.contains(&r) {
@@ -80,13 +155,28 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
         // (the frame names are checked in full below, once the scene is known).
         sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&[dir.join("frame-00.png")])?;
     }
+    // The disk the sequence needs is checked once the image size is known, before any LB
+    // work; memory holds one frame at a time (and the one read back at the end).
+    let disk_dir = a
+        .output
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("sylva-out"));
+    let frames = a.suns as usize;
+    let check = |w: u32, h: u32| {
+        if root {
+            check_disk(&disk_dir, w, h, frames)
+        } else {
+            Ok(())
+        }
+    };
     let p = prepare(
-        &a.frame,
+        &a.frame(),
         PrepareRequest {
             need_lb: true,
             rays_per_pixel: a.rpp,
-            output_images: 1,
+            output_images: 2,
             force_basis: true,
+            check_size: Some(&check),
             ..PrepareRequest::default()
         },
         runner,
@@ -94,7 +184,7 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
     let mut prepared = p.scene;
     let rpp = a.rpp.unwrap_or(prepared.scene.camera.rays_per_pixel);
     let camera = prepared.camera(p.width, p.height);
-    let settings = prepared.settings(camera, rpp, a.frame.seed);
+    let settings = prepared.settings(camera, rpp, a.view.seed);
     let azimuth = a
         .path_azimuth
         .unwrap_or_else(|| prepared.scene.sun.azimuth_deg());
@@ -115,9 +205,19 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
         sylva_core::file_stem(&prepared.scene.name, "scene")
     ));
     let mut outputs = sylva_core::OutputSet::new::<&std::path::Path>(&[]);
+    // Rank 0 keeps the frames, on disk (an unnamed file the system removes however this
+    // ends) until the sequence's exposure is known.
+    let mut sequence = None;
     if root {
         outputs.plan(&frame_paths)?;
         outputs.plan(&[&anim])?;
+        sequence = Some(Sequence::new(
+            &nearest_existing(&dir),
+            p.width,
+            p.height,
+            suns.len(),
+            tm,
+        )?);
         println!(
             "{} suns over 90° about the zenith, path azimuth {azimuth:.1}°; {}x{} at {rpp} rays/pixel{}",
             suns.len(),
@@ -134,8 +234,8 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
     } else {
         indicatif::ProgressBar::hidden()
     };
-    let mut frames = Vec::with_capacity(suns.len());
     let mut times = Vec::with_capacity(suns.len());
+    let mut luminance = (0.0, 0.0);
     for (k, &sun) in suns.iter().enumerate() {
         let t0 = Instant::now();
         prepared.set_sun(sun)?;
@@ -161,35 +261,31 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
             )
         });
         times.push(relight + render);
-        frames.push(frame.compose(Mode::Full));
+        let hdr = frame.compose(Mode::Full);
+        drop(frame);
+        let y = mean_luminance(&hdr);
+        if k == 0 {
+            luminance.0 = y;
+        }
+        luminance.1 = y;
+        if let Some(s) = sequence.as_mut() {
+            s.push(&hdr)?;
+        }
         pb.inc(1);
     }
     pb.finish_and_clear();
-    if !root {
+    let Some(sequence) = sequence else {
         return Ok(());
-    }
-    // One exposure for the sequence: measured over every frame's pixels together.
-    let all: Vec<[f32; 3]> = frames.iter().flatten().copied().collect();
-    let stats = tm.measure(&all);
-    drop(all);
-    std::fs::create_dir_all(&dir)
-        .with_context(|| format!("cannot create the output directory {}", dir.display()))?;
-    let mut ldr = Vec::with_capacity(frames.len());
-    for (hdr, path) in frames.iter().zip(&frame_paths) {
-        let px: Vec<[u8; 3]> = tm.apply_with(hdr, stats).into_iter().map(srgb8).collect();
-        outputs.write_bytes(path, &encode_png(path, p.width, p.height, &px)?)?;
-        ldr.push(px);
-    }
-    let bytes = encode_apng(&anim, p.width, p.height, &ldr, a.delay_ms)?;
-    outputs.write_bytes(&anim, &bytes)?;
+    };
+    sequence.finish(&mut outputs, &frame_paths, &anim, a.delay_ms)?;
     outputs.commit()?;
     let mean = times.iter().sum::<f64>() / times.len() as f64;
     let mut sorted = times.clone();
     sorted.sort_by(f64::total_cmp);
     println!(
         "wrote {} frames (frame-00.png … frame-{:02}.png) and the animation {} to {}",
-        frames.len(),
-        frames.len() - 1,
+        times.len(),
+        times.len() - 1,
         anim.file_name().unwrap_or_default().to_string_lossy(),
         dir.display()
     );
@@ -198,8 +294,8 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
         sorted[sorted.len() / 2],
         sorted[0],
         sorted[sorted.len() - 1],
-        mean_luminance(&frames[0]),
-        mean_luminance(&frames[frames.len() - 1])
+        luminance.0,
+        luminance.1
     );
     Ok(())
 }

@@ -64,13 +64,18 @@ pub enum BasisPrecisionArg {
     Packed,
 }
 
-/// Options shared by `sylva render` and `sylva bench trace`: what the frame looks like.
+/// The help of every command's SCENE argument.
+pub const SCENE_HELP: &str = "Scene file (.toml) or built-in scene name (demo, beech, catalpa, \
+     canopy, shade, cloud, teapot, demo_cloud; `sylva scene list`).";
+
+/// The help of `--light` for the commands that relight (`basis`, `relight`).
+const RELIGHT_LIGHT_HELP: &str = "Light model: physical (the default: per model 13 sun parts \
+     and 3 diffuse parts, moved with the sun) or paper (004's 19 boundary bases, compressed); \
+     spp has no base solutions (docs/relight.md).";
+
+/// How the frame is traced and shaded, whatever the light: `render`, `relight`, the benches.
 #[derive(Args, Debug, Clone)]
-pub struct FrameArgs {
-    /// Scene file (.toml) or built-in scene name (demo, beech, catalpa, canopy, shade, cloud,
-    /// teapot, demo_cloud; `sylva scene list`).
-    #[arg(default_value = "demo")]
-    pub scene: String,
+pub struct ViewArgs {
     /// Image width in pixels (default: the scene camera's; with only --width or --height the
     /// other follows the scene's aspect ratio).
     #[arg(long)]
@@ -78,6 +83,30 @@ pub struct FrameArgs {
     /// Image height in pixels (default: the scene camera's).
     #[arg(long)]
     pub height: Option<u32>,
+    /// Short-stack entries of the kd-tree traversal (000 Fig. 1 uses 5).
+    #[arg(long, default_value_t = sylva_trace::DEFAULT_STACK_SIZE)]
+    pub stack: usize,
+    /// Scale of the indirect light: the LB light and the traced sky (1: as computed).
+    #[arg(long, default_value_t = ShadingParams::default().indirect)]
+    pub indirect: f32,
+    /// Paper light: sky light on the ground as a fraction of the sun's.
+    #[arg(long, default_value_t = ShadingParams::default().sky_ambient)]
+    pub sky_ambient: f32,
+    /// Seed of the sub-pixel jitter (rays per pixel other than 1 and 4).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// On a GPU, trace the rays there but shade on the CPU (default: the whole frame in one
+    /// GPU kernel).
+    #[arg(long)]
+    pub cpu_shading: bool,
+    /// Shadow rays through the sun-aligned grid (004 §4.1) or the top-level kd-tree.
+    #[arg(long, value_enum, default_value = "grid")]
+    pub shadows: ShadowsArg,
+}
+
+/// Where the sun is (`render` and the benches; `relight` moves it along its path).
+#[derive(Args, Debug, Clone, Default)]
+pub struct SunArgs {
     /// Sun direction (vector towards the sun, x,y,z with y up); default: the scene's sun.
     #[arg(long, conflicts_with_all = ["elevation", "azimuth"])]
     pub sun: Option<String>,
@@ -88,9 +117,12 @@ pub struct FrameArgs {
     /// Sun azimuth in degrees from +x towards +z (default 30 when only --elevation is given).
     #[arg(long, allow_negative_numbers = true)]
     pub azimuth: Option<f64>,
-    /// Short-stack entries of the kd-tree traversal (000 Fig. 1 uses 5).
-    #[arg(long, default_value_t = sylva_trace::DEFAULT_STACK_SIZE)]
-    pub stack: usize,
+}
+
+/// The light's options that only `render` (and the benches) use: the other lights' final
+/// gather and the choice of base solutions.
+#[derive(Args, Debug, Clone)]
+pub struct RenderLightArgs {
     /// Light model: physical (one material model for renderer, LB and export: exact direct
     /// sun plus the LB's scattered, sky and ground light; docs/light.md), paper (000: the
     /// preset's LB total light, specular highlights; its images used --indirect 0.5) or spp
@@ -100,9 +132,6 @@ pub struct FrameArgs {
     /// [default: physical; paper for the commands that relight: basis, relight, bench relight]
     #[arg(long, value_parser = ["physical", "paper", "spp"])]
     pub light: Option<String>,
-    /// Scale of the indirect light: the LB light and the traced sky (1: as computed).
-    #[arg(long, default_value_t = ShadingParams::default().indirect)]
-    pub indirect: f32,
     /// Physical light: final-gather rays per camera sample on a plant, 0 to 256: the light
     /// arriving at a leaf is traced one bounce (sky, ground, other leaves lit by the sun and
     /// their LB light); 0 takes the LB light at the leaf itself, several times faster and less
@@ -114,9 +143,35 @@ pub struct FrameArgs {
         value_parser = clap::value_parser!(u32).range(0..=i64::from(sylva_render::gather::MAX_GATHER_RAYS))
     )]
     pub gather_rays: u32,
-    /// Paper light: sky light on the ground as a fraction of the sun's.
-    #[arg(long, default_value_t = ShadingParams::default().sky_ambient)]
-    pub sky_ambient: f32,
+    /// LB light from base solutions (always: the physical light's 16 parts per model or,
+    /// with --light paper, 004's bases), solved for the sun (never), or (auto) solved for the
+    /// sun under the physical light, the paper light's bases when all are cached.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub basis: BasisArg,
+}
+
+impl Default for RenderLightArgs {
+    /// What `basis` and `relight` render with: their light is set by [`relight_light`].
+    fn default() -> Self {
+        RenderLightArgs {
+            light: None,
+            gather_rays: ShadingParams::default().gather_rays,
+            basis: BasisArg::Auto,
+        }
+    }
+}
+
+/// `--light` of the commands that relight: the physical light (the default) or the paper
+/// light; the SPP light, which has no base solutions, is refused with the reason.
+#[derive(Args, Debug, Clone, Default)]
+pub struct RelightLightArg {
+    #[arg(long, value_parser = ["physical", "paper", "spp"], help = RELIGHT_LIGHT_HELP)]
+    pub light: Option<String>,
+}
+
+/// The LB solves: grid, cache and solver.
+#[derive(Args, Debug, Clone)]
+pub struct LbArgs {
     /// LB grid sites along each model's longest edge, 4 to 2048 (default: the scene's [lb]
     /// grid).
     #[arg(long)]
@@ -127,9 +182,6 @@ pub struct FrameArgs {
     /// Compute LB lighting without reading or writing the cache.
     #[arg(long)]
     pub no_cache: bool,
-    /// Seed of the sub-pixel jitter (rays per pixel other than 1 and 4).
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
     /// Where the LB lighting is solved and the rays are traced: cpu, gpu (the best adapter,
     /// a software one such as lavapipe included) or auto (a hardware GPU if present, else the
     /// CPU). LB cache entries are kept per device.
@@ -138,31 +190,45 @@ pub struct FrameArgs {
     /// GPU state storage of the LB solve: f32, or f16 (half the memory traffic).
     #[arg(long, value_enum, default_value = "f32")]
     pub precision: super::device::PrecisionArg,
-    /// On a GPU, trace the rays there but shade on the CPU (default: the whole frame in one
-    /// GPU kernel).
-    #[arg(long)]
-    pub cpu_shading: bool,
-    /// LB light from base solutions (always), solved for the sun (never), or base solutions
-    /// when all are cached (auto). Base solutions are the paper light's: --light paper.
-    #[arg(long, value_enum, default_value = "auto")]
-    pub basis: BasisArg,
+}
+
+/// How relit light is combined for a sun (frames from base solutions).
+#[derive(Args, Debug, Clone)]
+pub struct RelitArgs {
     /// How base solutions combine for the sun: three (004's polyhedron face) or exact.
     #[arg(long, value_enum, default_value = "three")]
     pub sun_weights: SunWeightsArg,
     /// Ambient light from the ambient base solution, as a fraction of unobstructed sunlight.
     #[arg(long, default_value_t = 0.0)]
     pub ambient: f64,
+}
+
+impl Default for RelitArgs {
+    /// What `sylva basis` plans with: it combines nothing (the defaults of the flags).
+    fn default() -> Self {
+        RelitArgs {
+            sun_weights: SunWeightsArg::Three,
+            ambient: 0.0,
+        }
+    }
+}
+
+/// The coarse grid over a forest, and how base solutions are stored.
+#[derive(Args, Debug, Clone)]
+pub struct GridArgs {
     /// Without the coarse global grid (instances do not shade each other's indirect light):
     /// the paper light's relighting grid and the physical light's forest grid.
     #[arg(long)]
     pub no_global: bool,
     /// Sites of the coarse global grid (relighting) or forest grid (physical light) along the
     /// forest's longest edge, 16 to 512.
-    #[arg(long, default_value_t = GlobalGridOptions::default().sites)]
+    #[arg(
+        long,
+        default_value_t = GlobalGridOptions::default().sites,
+        value_parser = parse_global_grid,
+        conflicts_with = "no_global"
+    )]
     pub global_grid: usize,
-    /// Shadow rays through the sun-aligned grid (004 §4.1) or the top-level kd-tree.
-    #[arg(long, value_enum, default_value = "grid")]
-    pub shadows: ShadowsArg,
     /// Compression of cached base solutions: colour:T (per-basis colour decorrelation +
     /// Haar), haar:T, pca:K or pcahaar:K:T.
     #[arg(long, default_value = "colour:0.004")]
@@ -172,88 +238,174 @@ pub struct FrameArgs {
     pub basis_precision: BasisPrecisionArg,
 }
 
+/// `--global-grid N`: sites of a coarse grid, in the range the library accepts.
+fn parse_global_grid(s: &str) -> Result<usize, String> {
+    let sites: usize = s
+        .parse()
+        .map_err(|_| format!("'{s}' is not a number of sites"))?;
+    GlobalGridOptions { sites }.validate()?;
+    Ok(sites)
+}
+
+/// Options of `sylva render` and the benches: what the frame looks like.
+#[derive(Args, Debug, Clone)]
+pub struct FrameArgs {
+    #[arg(default_value = "demo", help = SCENE_HELP)]
+    pub scene: String,
+    #[command(flatten)]
+    pub view: ViewArgs,
+    #[command(flatten)]
+    pub sun: SunArgs,
+    #[command(flatten)]
+    pub light: RenderLightArgs,
+    #[command(flatten)]
+    pub lb: LbArgs,
+    #[command(flatten)]
+    pub relit: RelitArgs,
+    #[command(flatten)]
+    pub grid: GridArgs,
+}
+
+/// The light model's name for a command that relights from base solutions: the physical
+/// light by default, or the paper light; the SPP light has none (an error, not another
+/// light's bases shaded as it).
+pub fn relight_light(light: Option<&str>) -> Result<&'static str> {
+    match light {
+        None | Some("physical") => Ok("physical"),
+        Some("paper") => Ok("paper"),
+        Some(l) => bail!(
+            "--light {l}: this command relights from base solutions, and the {l} light has \
+             none (docs/relight.md): use the physical light (the default) or --light paper"
+        ),
+    }
+}
+
+/// The relighting plan of these options under light `light` (`None`: per-sun LB light).
+/// `basis`: `--basis`; `force`: base solutions whatever it says (`auto` then solves missing
+/// ones); `keep_raw`: keep the uncompressed bases too. The physical and the paper light have
+/// base solutions (`--basis always` with the SPP light is an error); `auto` on the physical
+/// light solves for the sun (exact at that sun: docs/relight.md).
+pub fn relight_plan(
+    basis: BasisArg,
+    relit: &RelitArgs,
+    grid: &GridArgs,
+    force: bool,
+    keep_raw: bool,
+    light: &str,
+) -> Result<Option<RelightPlan>> {
+    let paper = light == "paper";
+    let basis = match (basis, force) {
+        (BasisArg::Never, true) => {
+            bail!("--basis never: this command relights from base solutions")
+        }
+        (BasisArg::Never, false) => return Ok(None),
+        (BasisArg::Always, false) if light == "spp" => bail!(
+            "--basis always: the SPP light has no base solutions (docs/relight.md); use the \
+             physical light (the default) or --light paper"
+        ),
+        (BasisArg::Auto, false) if !paper => return Ok(None),
+        (BasisArg::Auto, false) => BasisUse::IfCached,
+        _ => BasisUse::Always,
+    };
+    if !(relit.ambient.is_finite() && relit.ambient >= 0.0) {
+        bail!("--ambient {}: must be a finite number ≥ 0", relit.ambient);
+    }
+    let global = (!grid.no_global).then_some(GlobalGridOptions {
+        sites: grid.global_grid,
+    });
+    if let Some(g) = &global {
+        g.validate()
+            .map_err(|e| anyhow::anyhow!("--global-grid: {e}"))?;
+    }
+    let codec = Codec::parse(&grid.codec).map_err(|e| anyhow::anyhow!("--codec: {e}"))?;
+    let target = CompressTarget {
+        precision: match grid.basis_precision {
+            BasisPrecisionArg::F16 => Precision::F16,
+            BasisPrecisionArg::F32 => Precision::F32,
+            BasisPrecisionArg::Packed => Precision::Packed,
+        },
+        ..CompressTarget::new(codec)
+    };
+    target
+        .validate()
+        .map_err(|e| anyhow::anyhow!("--codec/--basis-precision: {e}"))?;
+    Ok(Some(RelightPlan {
+        basis,
+        sun: match relit.sun_weights {
+            SunWeightsArg::Three => SunWeights::ThreeBasis,
+            SunWeightsArg::Exact => SunWeights::Exact,
+        },
+        ambient: relit.ambient,
+        global,
+        target,
+        keep_raw,
+    }))
+}
+
+/// A warning line before a coarse grid (`plan`'s relighting grid, or the physical light's
+/// forest grid `forest`) whose solves cost far more than the default's, if `scene` will solve
+/// one; `None` otherwise.
+pub fn costly_grid_warning(
+    scene: &sylva_geom::Scene,
+    plan: Option<&RelightPlan>,
+    forest: Option<&GlobalGridOptions>,
+    light: Light,
+) -> Result<Option<String>> {
+    let physical_bases = plan.is_some() && light == Light::Physical;
+    let (grid, solves) = match (plan.and_then(|p| p.global.as_ref()), forest) {
+        // The physical light's forest grid parts: 13 sun directions, a sky and a ground.
+        (_, Some(g)) if physical_bases && sylva_pipeline::uses_forest(scene, light, Some(g)) => {
+            (g, 3 * (sylva_light::relight::physical::SUN_PARTS + 2))
+        }
+        (_, None) if physical_bases => return Ok(None),
+        (Some(g), _) => (g, sylva_lb::relight::BASES - 1),
+        (None, Some(g)) if sylva_pipeline::uses_forest(scene, light, Some(g)) => (g, 3),
+        _ => return Ok(None),
+    };
+    let b = scene.instance_bounds();
+    if b.is_empty() {
+        return Ok(None);
+    }
+    grid.cost_warning(b.max - b.min, solves)
+        .map_err(|e| anyhow::anyhow!("--global-grid: {e}"))
+        .map(|w| w.map(|w| format!("warning: {w}, where it is not cached")))
+}
+
 impl FrameArgs {
-    /// The light model's name: `--light`, by default physical. A command that relights
-    /// (`relights`) moves the physical light or the paper light; the SPP light has no base
-    /// solutions (an error, not another light's bases shaded as it).
+    /// The light model's name: `--light`, by default physical ([`relight_light`] for a
+    /// command that relights).
     pub fn light_for(&self, relights: bool) -> Result<&str> {
-        match (self.light.as_deref(), relights) {
-            (Some("spp"), true) => bail!(
-                "--light spp: this command relights from base solutions, and the SPP light has \
-                 none (docs/relight.md): use the physical light (the default) or --light paper"
-            ),
-            (l, _) => Ok(l.unwrap_or("physical")),
+        match (self.light.light.as_deref(), relights) {
+            (l, true) => relight_light(l),
+            (l, false) => Ok(l.unwrap_or("physical")),
         }
     }
 
-    /// The relighting plan these options ask for under light `light` (`None`: per-sun LB
-    /// light). `force`: base solutions whatever `--basis` says (`auto` then solves missing
-    /// ones); `keep_raw`: keep the uncompressed bases too. Base solutions are the paper
-    /// light's and the physical light's: `--basis always` with the SPP light is an error;
-    /// `auto` on the physical light solves for the sun (exact at that sun: docs/relight.md).
+    /// [`relight_plan`] of these options.
     pub fn relight_plan(
         &self,
         force: bool,
         keep_raw: bool,
         light: &str,
     ) -> Result<Option<RelightPlan>> {
-        let paper = light == "paper";
-        let basis = match (self.basis, force) {
-            (BasisArg::Never, true) => {
-                bail!("--basis never: this command relights from base solutions")
-            }
-            (BasisArg::Never, false) => return Ok(None),
-            (BasisArg::Always, false) if light == "spp" => bail!(
-                "--basis always: the SPP light has no base solutions (docs/relight.md); use the \
-                 physical light (the default) or --light paper"
-            ),
-            (BasisArg::Auto, false) if !paper => return Ok(None),
-            (BasisArg::Auto, false) => BasisUse::IfCached,
-            _ => BasisUse::Always,
-        };
-        if !(self.ambient.is_finite() && self.ambient >= 0.0) {
-            bail!("--ambient {}: must be a finite number ≥ 0", self.ambient);
-        }
-        let global = (!self.no_global).then_some(GlobalGridOptions {
-            sites: self.global_grid,
-        });
-        if let Some(g) = &global {
-            g.validate()
-                .map_err(|e| anyhow::anyhow!("--global-grid: {e}"))?;
-        }
-        let codec = Codec::parse(&self.codec).map_err(|e| anyhow::anyhow!("--codec: {e}"))?;
-        let target = CompressTarget {
-            precision: match self.basis_precision {
-                BasisPrecisionArg::F16 => Precision::F16,
-                BasisPrecisionArg::F32 => Precision::F32,
-                BasisPrecisionArg::Packed => Precision::Packed,
-            },
-            ..CompressTarget::new(codec)
-        };
-        target
-            .validate()
-            .map_err(|e| anyhow::anyhow!("--codec/--basis-precision: {e}"))?;
-        Ok(Some(RelightPlan {
-            basis,
-            sun: match self.sun_weights {
-                SunWeightsArg::Three => SunWeights::ThreeBasis,
-                SunWeightsArg::Exact => SunWeights::Exact,
-            },
-            ambient: self.ambient,
-            global,
-            target,
+        relight_plan(
+            self.light.basis,
+            &self.relit,
+            &self.grid,
+            force,
             keep_raw,
-        }))
+            light,
+        )
     }
 
     /// The physical light's coarse forest grid (`--global-grid`, off with `--no-global`);
     /// `None` for other lights.
     pub fn forest_grid(&self, light: Light) -> Result<Option<GlobalGridOptions>> {
-        if self.no_global || light != Light::Physical {
+        if self.grid.no_global || light != Light::Physical {
             return Ok(None);
         }
         let g = GlobalGridOptions {
-            sites: self.global_grid,
+            sites: self.grid.global_grid,
         };
         g.validate()
             .map_err(|e| anyhow::anyhow!("--global-grid: {e}"))?;
@@ -261,7 +413,7 @@ impl FrameArgs {
     }
 
     pub fn shadow_method(&self) -> ShadowMethod {
-        match self.shadows {
+        match self.view.shadows {
             ShadowsArg::Kd => ShadowMethod::KdTree,
             ShadowsArg::Grid => ShadowMethod::SunGrid,
         }
@@ -414,8 +566,8 @@ pub enum Say {
 }
 
 /// What a command asks of [`prepare`] besides the frame options, built from its arguments.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct PrepareRequest {
+#[derive(Clone, Copy, Default)]
+pub struct PrepareRequest<'a> {
     /// Light the models with the LB (else the local light only: no LB work).
     pub need_lb: bool,
     /// The most rays per pixel a frame will use (default: the scene camera's); the frame's
@@ -431,6 +583,9 @@ pub struct PrepareRequest {
     pub keep_raw: bool,
     /// Print the forest grid's weights of every instance (`render --forest-weights`).
     pub instance_weights: bool,
+    /// A check of the command's own, given the image size once the scene is known, before
+    /// any LB or kd-tree work (`relight`: the disk its frames need).
+    pub check_size: Option<&'a dyn Fn(u32, u32) -> Result<()>>,
 }
 
 /// Loads the scene, lights every model (from the cache when it can) and builds its
@@ -445,6 +600,7 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
         force_basis,
         keep_raw,
         instance_weights,
+        check_size,
     } = req;
     let root = runner.is_root();
     // Machine-readable runs keep stdout for their JSON.
@@ -456,19 +612,22 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
             eprintln!("{s}")
         }
     };
-    let sun = (a.sun.is_some() || a.elevation.is_some() || a.azimuth.is_some())
-        .then(|| super::lb::parse_sun(a.sun.as_deref(), a.elevation, a.azimuth))
+    let sun = (a.sun.sun.is_some() || a.sun.elevation.is_some() || a.sun.azimuth.is_some())
+        .then(|| super::lb::parse_sun(a.sun.sun.as_deref(), a.sun.elevation, a.sun.azimuth))
         .transpose()?;
-    if !(1..=sylva_trace::MAX_DEPTH).contains(&a.stack) {
+    if !(1..=sylva_trace::MAX_DEPTH).contains(&a.view.stack) {
         bail!(
             "--stack {}: the short stack holds 1 to {} entries",
-            a.stack,
+            a.view.stack,
             sylva_trace::MAX_DEPTH
         );
     }
     let scene = load_scene(&a.scene, sun)?;
-    let (width, height) = resolution(a.width, a.height, &scene.camera)?;
+    let (width, height) = resolution(a.view.width, a.view.height, &scene.camera)?;
     let rays_per_pixel = rays_per_pixel.unwrap_or(scene.camera.rays_per_pixel);
+    if let Some(check) = check_size {
+        check(width, height)?;
+    }
     say(format!(
         "scene {}: {} models, {} instances, {} instanced triangles, {} media; {width}x{height}; sun elevation {:.1}° azimuth {:.1}°",
         scene.name,
@@ -479,9 +638,9 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
         scene.sun.elevation_deg(),
         scene.sun.azimuth_deg()
     ));
-    let gpu = super::device::open_gpu(a.device)?;
+    let gpu = super::device::open_gpu(a.lb.device)?;
     let solver: Option<Box<dyn LbSolver>> = if need_lb {
-        let solver = super::device::solver_for(gpu.as_ref(), a.device, a.precision)?;
+        let solver = super::device::solver_for(gpu.as_ref(), a.lb.device, a.lb.precision)?;
         say(format!("LB solver: {}", solver.describe()));
         Some(solver)
     } else {
@@ -502,23 +661,35 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
         runner,
         lb: solver.as_deref().map(|solver| LbPlan {
             solver,
-            grid: a.lb_grid,
-            cache_dir: (!a.no_cache).then_some(a.cache_dir.as_path()),
+            grid: a.lb.lb_grid,
+            cache_dir: (!a.lb.no_cache).then_some(a.lb.cache_dir.as_path()),
             light,
         }),
-        traversal: TraversalConfig::with_stack(a.stack),
+        traversal: TraversalConfig::with_stack(a.view.stack),
         trace_gpu: gpu.as_ref(),
-        shade_on_gpu: !a.cpu_shading,
+        shade_on_gpu: !a.view.cpu_shading,
         light,
-        indirect: a.indirect,
-        sky_ambient: a.sky_ambient,
-        gather_rays: a.gather_rays,
+        indirect: a.view.indirect,
+        sky_ambient: a.view.sky_ambient,
+        gather_rays: a.light.gather_rays,
         largest_frame: Some((width, height, rays_per_pixel)),
         output_images,
         relight,
         shadows: a.shadow_method(),
         forest: a.forest_grid(light)?,
     };
+    // Before any LB work: a coarse grid far costlier than the default's says so.
+    if let (Some(w), true) = (
+        costly_grid_warning(
+            &scene,
+            opts.relight.as_ref(),
+            opts.forest.as_ref().filter(|_| need_lb),
+            light,
+        )?,
+        root,
+    ) {
+        eprintln!("{w}");
+    }
     let basis = Mutex::new(Vec::new());
     let progress = Bars::new(|r: Report| {
         if let Report::Basis(_, b) = &r {
@@ -660,7 +831,7 @@ pub fn run(a: RenderArgs, runner: &dyn Runner) -> Result<()> {
     let clock = super::stage_clock();
     clock.reset();
     let t_all = Instant::now();
-    let spp = a.frame.light.as_deref() == Some("spp");
+    let spp = a.frame.light.light.as_deref() == Some("spp");
     if spp && runner.processes() > 1 {
         bail!("--light spp renders in one process: run it without mpirun");
     }
@@ -678,7 +849,7 @@ pub fn run(a: RenderArgs, runner: &dyn Runner) -> Result<()> {
     let prepared = &p.scene;
     let rpp = a.rpp.unwrap_or(prepared.scene.camera.rays_per_pixel);
     let camera = prepared.camera(p.width, p.height);
-    let settings = prepared.settings(camera, rpp, a.frame.seed);
+    let settings = prepared.settings(camera, rpp, a.frame.view.seed);
     let bars = Bars::new(|_: Report| {});
     let mut spp_seconds = None;
     let (frame, split) = if spp {

@@ -347,3 +347,193 @@ fn negative_counts_and_repeated_causes() {
         );
     }
 }
+
+/// Two dogroses side by side, small grids and image: quick to render.
+const TWO_ROSES: &str = r#"
+name = "roses"
+
+[[models]]
+name = "rose"
+species = "dogrose"
+
+[[instances]]
+model = "rose"
+position = [0.0, 0.0, 0.0]
+
+[[instances]]
+model = "rose"
+position = [1.6, 0.0, 0.8]
+
+[ground]
+size = [20.0, 20.0]
+
+[camera]
+position = [0.5, 2.5, -6.0]
+look_at = [0.5, 0.7, 0.0]
+fov = 40.0
+resolution = [40, 32]
+
+[lb]
+grid = 12
+"#;
+
+/// Issue 31 item 2: a sequence the disk cannot hold is refused once the image size is known,
+/// before any LB solve or frame, and writes nothing; frames no longer pile up in memory.
+#[test]
+fn a_relit_sequence_too_large_for_the_disk_is_refused_before_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("roses.toml");
+    fs::write(&scene, TWO_ROSES).unwrap();
+    let (seq, cache) = (dir.path().join("seq"), dir.path().join("cache"));
+    let t = std::time::Instant::now();
+    // 1000 frames of 16384² need 4.8 TB (12 bytes a pixel held until the exposure is
+    // known, 3 each for the PNG and the animation).
+    let args = [
+        "relight",
+        scene.to_str().unwrap(),
+        "--suns",
+        "1000",
+        "--width",
+        "16384",
+        "--height",
+        "16384",
+        "--device",
+        "cpu",
+        "-o",
+        seq.to_str().unwrap(),
+        "--cache-dir",
+        cache.to_str().unwrap(),
+    ];
+    let (ok, stdout, stderr) = sylva(&args);
+    assert!(!ok, "{stdout}");
+    assert!(
+        stderr.contains("1000 frames of 16384x16384 need up to 4.4 TiB on disk")
+            && stderr.contains("fewer --suns"),
+        "{stderr}"
+    );
+    assert!(
+        !stdout.contains("LB") && !stdout.contains("frame"),
+        "{stdout}"
+    );
+    assert!(
+        !seq.exists() && !cache.exists(),
+        "work began or files were written"
+    );
+    assert!(t.elapsed().as_secs() < 60, "not refused up front");
+}
+
+/// Issue 31 item 4: a coarse grid far costlier than the default's says so before any LB
+/// work; the default says nothing.
+#[test]
+fn a_costly_global_grid_is_announced_before_it_starts() {
+    use std::io::{BufRead, BufReader};
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("roses.toml");
+    fs::write(&scene, TWO_ROSES).unwrap();
+    let cache = dir.path().join("cache");
+    let out = dir.path().join("r.png");
+    let base = [
+        "render",
+        scene.to_str().unwrap(),
+        "--device",
+        "cpu",
+        "--cache-dir",
+        cache.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ];
+    // 512 sites: thousands of times the default's cost. The warning comes first; the run is
+    // stopped there.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_sylva"))
+        .args(base)
+        .args(["--global-grid", "512"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut warning = None;
+    for line in BufReader::new(child.stderr.take().unwrap()).lines() {
+        let line = line.unwrap();
+        if line.contains("--global-grid 512") {
+            warning = Some(line);
+            break;
+        }
+    }
+    // Still at work (the solves it announced) or ended: stop it either way.
+    let _ = child.kill();
+    let _ = child.wait();
+    let w = warning.expect("a warning before the solves");
+    assert!(
+        w.starts_with("warning: --global-grid 512: the coarse grid (")
+            && w.contains("× the default's (64 sites)"),
+        "{w}"
+    );
+    // The default grid: no warning, and the render runs to the end.
+    let (ok, stdout, stderr) = sylva(&base);
+    assert!(ok, "{stdout}{stderr}");
+    assert!(!stderr.contains("the default's"), "{stderr}");
+    assert!(stdout.contains("forest grid"), "{stdout}");
+}
+
+/// Issue 31 item 9: a generator that places nothing is an error naming the file, the line and
+/// the model, not an empty image; `basis` and `relight` refuse the options they do not use.
+#[test]
+fn silent_no_ops_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("empty.toml");
+    fs::write(
+        &scene,
+        "[[models]]\nname = \"rose\"\nspecies = \"dogrose\"\n\n[[instances]]\nmodel = \"rose\"\n\
+         count = 0\narea = { min = [0.0, 0.0], max = [10.0, 10.0] }\n",
+    )
+    .unwrap();
+    let out = dir.path().join("e.png");
+    let s = scene.to_str().unwrap();
+    let (ok, _, stderr) = sylva(&["render", s, "-o", out.to_str().unwrap()]);
+    assert!(!ok && !out.exists(), "an empty scene rendered: {stderr}");
+    assert!(
+        stderr.contains("empty.toml: line 5: instances of 'rose': count = 0 places no instance"),
+        "{stderr}"
+    );
+    let (ok, _, stderr) = sylva(&["scene", "info", s]);
+    assert!(
+        !ok && stderr.contains("count = 0 places no instance"),
+        "{stderr}"
+    );
+
+    // Options of a frame or of other lights: not options of these commands at all.
+    for (command, option, value) in [
+        ("basis", "--gather-rays", Some("999")),
+        ("basis", "--width", Some("100")),
+        ("basis", "--elevation", Some("30")),
+        ("basis", "--seed", Some("3")),
+        ("basis", "--shadows", Some("kd")),
+        ("basis", "--sun-weights", Some("exact")),
+        ("basis", "--ambient", Some("0.5")),
+        ("basis", "--basis", Some("always")),
+        ("basis", "--cpu-shading", None),
+        ("relight", "--gather-rays", Some("8")),
+        ("relight", "--azimuth", Some("30")),
+        ("relight", "--sun", Some("0,1,0")),
+        ("relight", "--basis", Some("never")),
+    ] {
+        let mut args = vec![command, "demo", option];
+        args.extend(value);
+        let (ok, _, stderr) = sylva(&args);
+        assert!(!ok, "{args:?}");
+        assert!(
+            stderr.contains(&format!("unexpected argument '{option}'")),
+            "{args:?}: {stderr}"
+        );
+    }
+    // A grid size out of range, or with the grid turned off, is refused whatever the light.
+    for args in [
+        &["relight", "demo", "--global-grid", "0"][..],
+        &["render", "demo", "--light", "spp", "--global-grid", "0"],
+        &["basis", "demo", "--no-global", "--global-grid", "32"],
+    ] {
+        let (ok, _, stderr) = sylva(args);
+        assert!(!ok, "{args:?}");
+        assert!(stderr.contains("--global-grid"), "{args:?}: {stderr}");
+    }
+}

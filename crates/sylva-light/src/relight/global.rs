@@ -76,6 +76,10 @@ impl Default for GlobalGridOptions {
     }
 }
 
+/// A coarse grid whose solves cost more than this many times the default grid's is announced
+/// before it starts (the default takes seconds; 512 sites, about 4000 times as long).
+pub const COSTLY_OVER_DEFAULT: f64 = 20.0;
+
 impl GlobalGridOptions {
     pub fn validate(&self) -> Result<(), String> {
         if !(16..=512).contains(&self.sites) {
@@ -85,6 +89,52 @@ impl GlobalGridOptions {
             ));
         }
         Ok(())
+    }
+
+    /// The coarse grid over a forest whose instances span `extent` (the size of their world
+    /// box, metres).
+    pub fn dims_over(&self, extent: Vec3) -> Result<Dims, String> {
+        self.validate()?;
+        let forest = Aabb {
+            min: Vec3::ZERO,
+            max: extent.max(Vec3::ZERO),
+        };
+        layout(&[forest], self).map(|(dims, _, _)| dims)
+    }
+
+    /// Site updates of one LB solve of that grid: its sites × its steps (the papers' run
+    /// length, twice the longest edge). Every solve of the grid (3 colours for the forest
+    /// grid, 18 base solutions for relighting's) costs this much.
+    pub fn solve_updates(&self, extent: Vec3) -> Result<u64, String> {
+        let dims = self.dims_over(extent)?;
+        Ok(dims.sites() as u64 * SolveOptions::papers(dims).max_steps as u64)
+    }
+
+    /// How many times the default grid's solves these cost over the same forest.
+    pub fn cost_over_default(&self, extent: Vec3) -> Result<f64, String> {
+        let default = GlobalGridOptions::default().solve_updates(extent)?;
+        Ok(self.solve_updates(extent)? as f64 / default.max(1) as f64)
+    }
+
+    /// A line to show before a grid that costs more than [`COSTLY_OVER_DEFAULT`] times the
+    /// default's starts (`None` below that): its size and cost.
+    pub fn cost_warning(&self, extent: Vec3, solves: usize) -> Result<Option<String>, String> {
+        let ratio = self.cost_over_default(extent)?;
+        if ratio <= COSTLY_OVER_DEFAULT {
+            return Ok(None);
+        }
+        let dims = self.dims_over(extent)?;
+        let updates = self.solve_updates(extent)? as f64 * solves as f64;
+        Ok(Some(format!(
+            "--global-grid {}: the coarse grid ({dims}, {} solves of {} steps, {:.1} G site \
+             updates) costs about {ratio:.0}× the default's ({} sites): expect it to take \
+             {ratio:.0} times as long (Ctrl-C stops it)",
+            self.sites,
+            solves,
+            SolveOptions::papers(dims).max_steps,
+            updates / 1e9,
+            GlobalGridOptions::default().sites,
+        )))
     }
 }
 
@@ -461,7 +511,7 @@ fn shell_inflow(lattice: &Lattice, faces: &[ShellFace]) -> f32 {
 impl GlobalLight {
     /// Lays the coarse grid over `instances`, resamples their fine grids into it, solves its
     /// 18 base solutions (luminance, CPU) and measures each instance's inflow under each.
-    /// `progress(done, 18)` after each solve.
+    /// `progress(done, total)` after every LB step of its 18 solves.
     // Base solutions index the inflow table's columns while instances run over its rows.
     #[allow(clippy::needless_range_loop)]
     pub fn solve(
@@ -508,14 +558,18 @@ impl GlobalLight {
                         .map_err(|e| LightingError::Global(format!("coarse solve: {e}")))?,
                 ),
             };
-            lat.run(&solve, &mut |_, _| {})
-                .map_err(|e| LightingError::Global(format!("coarse solve: {e}")))?;
+            let steps = solve.max_steps;
+            let total = (BASES - 1) * steps;
+            lat.run(&solve, &mut |step, _| {
+                progress((j - 1) * steps + step.min(steps), total)
+            })
+            .map_err(|e| LightingError::Global(format!("coarse solve: {e}")))?;
             for (i, shell) in shells.iter().enumerate() {
                 if let Some(faces) = shell {
                     inflow[i][j] = shell_inflow(lat, faces);
                 }
             }
-            progress(j, BASES - 1);
+            progress(j * steps, total);
         }
         for (i, shell) in shells.iter().enumerate() {
             if shell.is_some() {
@@ -648,4 +702,38 @@ pub struct GlobalReport {
     pub path: Option<std::path::PathBuf>,
     /// Why the solved grid could not be cached (it is good, only not kept).
     pub cache_warning: Option<String>,
+}
+
+#[cfg(test)]
+mod cost_tests {
+    use super::*;
+
+    // Two trees side by side: 12 m by 8 m tall by 6 m.
+    const FOREST: Vec3 = Vec3::new(12.0, 8.0, 6.0);
+
+    #[test]
+    fn the_default_costs_one_default_and_512_thousands() {
+        let g = |sites| GlobalGridOptions { sites };
+        assert_eq!(g(64).cost_over_default(FOREST).unwrap(), 1.0);
+        // Sites grow with the cube of the edge and steps with the edge: about (512/64)⁴.
+        let r = g(512).cost_over_default(FOREST).unwrap();
+        assert!((2500.0..6000.0).contains(&r), "{r}");
+        let r = g(32).cost_over_default(FOREST).unwrap();
+        assert!(r < 0.1, "{r}");
+        assert!(g(8).cost_over_default(FOREST).is_err(), "out of range");
+    }
+
+    #[test]
+    fn only_a_grid_far_above_the_default_s_cost_warns() {
+        let g = |sites| GlobalGridOptions { sites };
+        assert_eq!(g(64).cost_warning(FOREST, 3).unwrap(), None);
+        assert_eq!(g(96).cost_warning(FOREST, 3).unwrap(), None, "about 5×");
+        let w = g(512).cost_warning(FOREST, 3).unwrap().expect("a warning");
+        assert!(
+            w.starts_with("--global-grid 512: the coarse grid (512×")
+                && w.contains("× the default's (64 sites)")
+                && w.contains("3 solves of 1024 steps"),
+            "{w}"
+        );
+    }
 }

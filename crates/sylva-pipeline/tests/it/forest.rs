@@ -101,14 +101,21 @@ fn a_lone_tree_keeps_its_light() {
     let (scene, fine) = shade_parts();
     let env = physical_environment(&scene_illumination(&scene)).unwrap();
     let free = free_weights(&env);
+    let mut reports = Vec::new();
     let g = ForestLight::solve(
         &instances(&scene, &fine, &[2]),
         &env,
         0.0,
         &GlobalGridOptions { sites: 32 },
-        &mut |_, _| {},
+        &mut |done, total| reports.push((done, total)),
     )
     .unwrap();
+    // Progress comes with every LB step (a long solve moves its bar), in order, to the end.
+    assert!(reports.len() > 3 * 32, "{} reports", reports.len());
+    assert!(reports
+        .windows(2)
+        .all(|w| w[0].0 <= w[1].0 && w[0].1 == w[1].1));
+    assert_eq!(reports.last().map(|r| r.0), reports.last().map(|r| r.1));
     let w = g.weights[0];
     let r = |a: Vec3, b: Vec3| y(a) / y(b);
     assert!((y(w.sun) - 1.0).abs() < 0.02, "sun {}", y(w.sun));
