@@ -346,6 +346,9 @@ impl FromStr for UtcOffset {
             Some(b'-') => (-1, &t[1..]),
             _ => return Err(bad()),
         };
+        if !rest.is_ascii() {
+            return Err(bad());
+        }
         let (h, m) = match rest.split_once(':') {
             Some((h, m)) => (h, m),
             None if rest.len() == 4 => rest.split_at(2),
@@ -994,7 +997,9 @@ mod tests {
             "-07:00".parse::<UtcOffset>().unwrap().to_string(),
             "UTC-07:00"
         );
-        for bad in ["02:00", "+15:00", "-13:00", "+02:60", "+", "+2h", "UTC+2"] {
+        for bad in [
+            "02:00", "+15:00", "-13:00", "+02:60", "+", "+2h", "UTC+2", "+1é2",
+        ] {
             assert!(bad.parse::<UtcOffset>().is_err(), "{bad}");
         }
 
@@ -1021,6 +1026,69 @@ mod tests {
                 "{bad}"
             );
         }
+    }
+
+    proptest::proptest! {
+        /// Any text is a value or an error, never a panic (`+1é2` once split a character).
+        #[test]
+        fn parsers_never_panic(text in "\\PC{0,12}", ascii in "[-+:0-9hmsZ]{0,8}") {
+            for t in [&text, &ascii] {
+                let _ = t.parse::<Date>();
+                let _ = t.parse::<ClockTime>();
+                let _ = t.parse::<UtcOffset>();
+                let _ = t.parse::<Step>();
+            }
+        }
+
+        /// What is written reads back as itself.
+        #[test]
+        fn values_round_trip_through_their_text(
+            secs in 0u32..86_400,
+            offset_min in -12 * 60i32..=14 * 60,
+            step in 1u32..86_400,
+        ) {
+            let t = ClockTime(secs);
+            proptest::prop_assert_eq!(t.to_string().parse::<ClockTime>().unwrap(), t);
+            let o = UtcOffset(offset_min * 60);
+            let text = o.to_string();
+            proptest::prop_assert_eq!(text["UTC".len()..].parse::<UtcOffset>().unwrap(), o);
+            let s = Step(step);
+            proptest::prop_assert_eq!(s.to_string().parse::<Step>().unwrap(), s);
+        }
+    }
+
+    /// Day by day from 1896 to 2104 (leap years, 1900 and 2100 not, 2000 yes), the day count
+    /// grows by one, and every date reads back from its text.
+    #[test]
+    fn calendar_days_count_one_by_one() {
+        let mut d = date("1896-01-01");
+        let mut k = d.days_since_epoch();
+        assert_eq!(k, -27_028);
+        while d != date("2105-01-01") {
+            d = if d.day < days_in_month(d.year, d.month) {
+                Date {
+                    day: d.day + 1,
+                    ..d
+                }
+            } else if d.month < 12 {
+                Date {
+                    month: d.month + 1,
+                    day: 1,
+                    ..d
+                }
+            } else {
+                Date {
+                    year: d.year + 1,
+                    month: 1,
+                    day: 1,
+                }
+            };
+            k += 1;
+            assert_eq!(d.days_since_epoch(), k, "{d}");
+            assert_eq!(d.to_string().parse::<Date>().unwrap(), d);
+        }
+        assert_eq!(days_in_month(1900, 2), 28);
+        assert_eq!(days_in_month(2000, 2), 29);
     }
 
     #[test]
