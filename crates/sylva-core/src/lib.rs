@@ -4,7 +4,8 @@
 //! * A [`Sun`] is given by the unit vector pointing *towards* the sun (the `L` of `N·L`);
 //!   light travels along its negation, [`Sun::travel`].
 //! * Elevation is measured in degrees above the horizon, azimuth in degrees from +x towards
-//!   +z (so azimuth 90° puts the sun over +z).
+//!   +z (so azimuth 90° puts the sun over +z). North is -z and east +x: a compass azimuth
+//!   `A` is the world azimuth `A - 90°`; [`solar`] places the sun by date, time and place.
 //! * Files are written atomically with [`atomic_write`]: a temporary file beside the target,
 //!   then a rename, so a crash never leaves a half-written cache or image.
 //! * A command's output files are written together with an [`OutputSet`]: all or none
@@ -36,6 +37,7 @@ pub mod measure;
 mod memory;
 mod names;
 mod rng;
+pub mod solar;
 mod sun;
 pub mod wire;
 

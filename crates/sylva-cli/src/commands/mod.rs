@@ -65,6 +65,7 @@ pub mod scene;
 pub mod species;
 pub mod spp;
 pub mod spp_trees;
+pub mod sun_time;
 pub mod voxelize;
 
 #[cfg(test)]

@@ -1,7 +1,9 @@
 //! `sylva relight SCENE --suns 24`: 004 Table 1's sequence. The sun moves over 90° about the
 //! zenith; each frame relights every instance from its model's base solutions (no LB solve)
 //! and renders. Numbered PNGs and an animated PNG, tone mapped with one exposure for the
-//! whole sequence so frames compare, and the time of every frame. Under `mpirun` the missing
+//! whole sequence so frames compare, and the time of every frame. With `--lat --lon --date`
+//! the suns are instead the sun's path over that day (`sylva_core::solar`: one frame per
+//! `--step`, named by its clock time, the night's left out). Under `mpirun` the missing
 //! base solutions are solved across the ranks and every frame is rendered across them
 //! (`PreparedScene::render_split`); rank 0 writes the images, the same as one process's.
 
@@ -21,6 +23,7 @@ use super::render::{
     prepare, relight_light, FrameArgs, GridArgs, LbArgs, PrepareRequest, RelightLightArg,
     RelitArgs, RenderLightArgs, SunArgs, ViewArgs, SCENE_HELP,
 };
+use super::sun_time::SunDayArgs;
 
 /// What `sylva relight` uses: the frame's view, the LB grid and solver, how the bases
 /// combine, the global grid and the sequence. The sun moves along its path (`--path-azimuth`),
@@ -40,6 +43,10 @@ pub struct RelightArgs {
     pub relit: RelitArgs,
     #[command(flatten)]
     pub grid: GridArgs,
+    /// The sun's path over a day at a place (--lat, --lon, --date, --from, --to, --step,
+    /// --utc-offset), in place of 004's sequence.
+    #[command(flatten)]
+    pub day: SunDayArgs,
     /// Sun positions, evenly spaced over 90° about the zenith (004 Table 1: 24).
     #[arg(long, default_value_t = 24, value_parser = clap::value_parser!(u32).range(1..=1000))]
     pub suns: u32,
@@ -48,8 +55,8 @@ pub struct RelightArgs {
     /// sun azimuth.
     #[arg(long, allow_negative_numbers = true)]
     pub path_azimuth: Option<f64>,
-    /// Output directory (default sylva-out/relight-<scene>): frame-00.png, … and
-    /// <scene>.png, the animated PNG.
+    /// Output directory (default sylva-out/relight-<scene>): frame-00.png, … (with --date
+    /// frame-HHMM.png by clock time, frame-0530.png) and <scene>.png, the animated PNG.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// Rays per pixel (default: the scene camera's).
@@ -150,6 +157,12 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
         white: a.white,
     };
     tm.validate().map_err(anyhow::Error::msg)?;
+    // The day's path, its night left out, before any work (a sun that never rises is an
+    // error).
+    let day = match a.day.path()? {
+        Some(path) => Some((path, path.day()?)),
+        None => None,
+    };
     if let (Some(dir), true) = (&a.output, root) {
         // A folder that is a file or takes no files fails now, not after the basis solves
         // (the frame names are checked in full below, once the scene is known).
@@ -161,7 +174,7 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
         .output
         .clone()
         .unwrap_or_else(|| PathBuf::from("sylva-out"));
-    let frames = a.suns as usize;
+    let frames = day.as_ref().map_or(a.suns as usize, |(_, d)| d.up.len());
     let check = |w: u32, h: u32| {
         if root {
             check_disk(&disk_dir, w, h, frames)
@@ -188,7 +201,19 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
     let azimuth = a
         .path_azimuth
         .unwrap_or_else(|| prepared.scene.sun.azimuth_deg());
-    let suns = sun_path(a.suns as usize, azimuth);
+    // Per frame: the sun, and the file name's label (the clock time on a day's path).
+    let (suns, labels): (Vec<_>, Vec<String>) = match &day {
+        Some((_, d)) => {
+            d.up.iter()
+                .map(|s| (s.sun.to_sun().as_vec3(), s.time.compact(d.has_seconds())))
+                .unzip()
+        }
+        None => {
+            let suns = sun_path(a.suns as usize, azimuth);
+            let labels = (0..suns.len()).map(|k| format!("{k:02}")).collect();
+            (suns, labels)
+        }
+    };
     // The frames and the animation replace their old versions together (or none do), and
     // bad output names fail before the long work.
     let dir = a.output.clone().unwrap_or_else(|| {
@@ -197,8 +222,9 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
             sylva_core::file_stem(&prepared.scene.name, "scene")
         ))
     });
-    let frame_paths: Vec<PathBuf> = (0..suns.len())
-        .map(|k| dir.join(format!("frame-{k:02}.png")))
+    let frame_paths: Vec<PathBuf> = labels
+        .iter()
+        .map(|l| dir.join(format!("frame-{l}.png")))
         .collect();
     let anim = dir.join(format!(
         "{}.png",
@@ -218,8 +244,20 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
             suns.len(),
             tm,
         )?);
+        let path = match &day {
+            Some((path, _)) => format!(
+                "from {} to {} every {} at {} on {} ({}): the day's path (north -z, east +x)",
+                path.from(),
+                path.to(),
+                path.step(),
+                path.place(),
+                path.date(),
+                path.offset()
+            ),
+            None => format!("over 90° about the zenith, path azimuth {azimuth:.1}°"),
+        };
         println!(
-            "{} suns over 90° about the zenith, path azimuth {azimuth:.1}°; {}x{} at {rpp} rays/pixel{}",
+            "{} suns {path}; {}x{} at {rpp} rays/pixel{}",
             suns.len(),
             p.width,
             p.height,
@@ -228,6 +266,9 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
                 n => format!(", {n} MPI ranks"),
             }
         );
+    }
+    if let (Some(note), true) = (day.as_ref().and_then(|(_, d)| d.night_note()), root) {
+        println!("note: {note}");
     }
     let pb = if root {
         bar(suns.len() as u64, "relight")
@@ -247,11 +288,20 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
         let frame = frame.frame;
         let t2 = Instant::now();
         let (relight, render) = ((t1 - t0).as_secs_f64(), (t2 - t1).as_secs_f64());
+        let at = match &day {
+            Some((_, d)) => format!(
+                " at {}: sun elevation {:5.1}° azimuth {:5.1}° from north",
+                d.up[k].time, d.up[k].angles.elevation_deg, d.up[k].angles.azimuth_deg
+            ),
+            None => format!(
+                ": sun elevation {:5.1}° azimuth {:5.1}°",
+                sun.y.asin().to_degrees(),
+                sun.z.atan2(sun.x).to_degrees().rem_euclid(360.0)
+            ),
+        };
         pb.suspend(|| {
             println!(
-                "  frame {k:2}: sun elevation {:5.1}° azimuth {:5.1}°: {:.3} s (relight {:.4} s, render {:.3} s: primary {:.3}, shadow {:.3}, shading {:.3})",
-                sun.y.asin().to_degrees(),
-                sun.z.atan2(sun.x).to_degrees().rem_euclid(360.0),
+                "  frame {k:2}{at}: {:.3} s (relight {:.4} s, render {:.3} s: primary {:.3}, shadow {:.3}, shading {:.3})",
                 relight + render,
                 relight,
                 render,
@@ -282,11 +332,18 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
     let mean = times.iter().sum::<f64>() / times.len() as f64;
     let mut sorted = times.clone();
     sorted.sort_by(f64::total_cmp);
+    let name = |p: &PathBuf| {
+        p.file_name()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .to_string()
+    };
     println!(
-        "wrote {} frames (frame-00.png … frame-{:02}.png) and the animation {} to {}",
+        "wrote {} frames ({} … {}) and the animation {} to {}",
         times.len(),
-        times.len() - 1,
-        anim.file_name().unwrap_or_default().to_string_lossy(),
+        name(&frame_paths[0]),
+        name(&frame_paths[frame_paths.len() - 1]),
+        name(&anim),
         dir.display()
     );
     println!(

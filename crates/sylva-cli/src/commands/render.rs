@@ -8,6 +8,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
+use sylva_core::Sun;
 use sylva_lb::relight::{Codec, CompressTarget, Precision};
 use sylva_lb::LbSolver;
 use sylva_light::lighting::{Light, LightingSource};
@@ -22,6 +23,7 @@ use sylva_spp::trees::system::{SppLight, SppSystem, SystemConfig};
 use sylva_trace::TraversalConfig;
 
 use super::progress::{Bars, Report};
+use super::sun_time::SunTimeArgs;
 
 /// Whether the LB light of plants comes from base solutions (paper 004). Base solutions are
 /// the paper light's (004's sun-only boundary solves; docs/relight.md).
@@ -521,6 +523,9 @@ pub fn report_line(r: Report) -> (String, Option<String>) {
 pub struct RenderArgs {
     #[command(flatten)]
     pub frame: FrameArgs,
+    /// The sun of a date, time and place (--lat, --lon, --date, --time, --utc-offset).
+    #[command(flatten)]
+    pub sun_time: SunTimeArgs,
     /// Output PNG (8-bit sRGB, tone mapped). Default: sylva-out/<scene>.png; with one mode the
     /// name as given, with several (--mode all) every mode adds -<mode>, full included.
     #[arg(short, long)]
@@ -586,6 +591,8 @@ pub struct PrepareRequest<'a> {
     /// A check of the command's own, given the image size once the scene is known, before
     /// any LB or kd-tree work (`relight`: the disk its frames need).
     pub check_size: Option<&'a dyn Fn(u32, u32) -> Result<()>>,
+    /// The sun, in place of the one `FrameArgs` and the scene give (`render --date`).
+    pub sun: Option<Sun>,
 }
 
 /// Loads the scene, lights every model (from the cache when it can) and builds its
@@ -601,6 +608,7 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
         keep_raw,
         instance_weights,
         check_size,
+        sun,
     } = req;
     let root = runner.is_root();
     // Machine-readable runs keep stdout for their JSON.
@@ -612,9 +620,12 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
             eprintln!("{s}")
         }
     };
-    let sun = (a.sun.sun.is_some() || a.sun.elevation.is_some() || a.sun.azimuth.is_some())
-        .then(|| super::lb::parse_sun(a.sun.sun.as_deref(), a.sun.elevation, a.sun.azimuth))
-        .transpose()?;
+    let sun = match sun {
+        Some(sun) => Some(sun),
+        None => (a.sun.sun.is_some() || a.sun.elevation.is_some() || a.sun.azimuth.is_some())
+            .then(|| super::lb::parse_sun(a.sun.sun.as_deref(), a.sun.elevation, a.sun.azimuth))
+            .transpose()?,
+    };
     if !(1..=sylva_trace::MAX_DEPTH).contains(&a.view.stack) {
         bail!(
             "--stack {}: the short stack holds 1 to {} entries",
@@ -828,6 +839,23 @@ pub fn run(a: RenderArgs, runner: &dyn Runner) -> Result<()> {
         // Named twice or an input: refused now, not after the render.
         sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&image_paths(o, &modes, a.hdr))?;
     }
+    // The sun of a moment: placed (or refused: below the horizon) before any work.
+    let moment = a.sun_time.moment()?;
+    let sun = match &moment {
+        Some(m) => {
+            let (sun, angles) = m.sun()?;
+            if runner.is_root() {
+                println!(
+                    "sun at {m}: elevation {:.1}°, azimuth {:.1}° from north (world azimuth {:.1}°: north -z, east +x)",
+                    angles.elevation_deg,
+                    angles.azimuth_deg,
+                    sun.azimuth_deg()
+                );
+            }
+            Some(sun)
+        }
+        None => None,
+    };
     let clock = super::stage_clock();
     clock.reset();
     let t_all = Instant::now();
@@ -842,6 +870,7 @@ pub fn run(a: RenderArgs, runner: &dyn Runner) -> Result<()> {
             rays_per_pixel: a.rpp,
             output_images: modes.len(),
             instance_weights: a.forest_weights,
+            sun,
             ..PrepareRequest::default()
         },
         runner,

@@ -537,3 +537,165 @@ fn silent_no_ops_are_refused() {
         assert!(stderr.contains("--global-grid"), "{args:?}: {stderr}");
     }
 }
+
+/// Issue 27: the sun of a date, time and place. Every bad request is one line on stderr,
+/// before any work: nothing written, no cache made.
+#[test]
+fn the_sun_of_a_bad_date_time_or_place_is_refused_with_nothing_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let out = out.to_str().unwrap();
+    let png = dir.path().join("r.png");
+    let png = png.to_str().unwrap();
+    let cache = dir.path().join("cache");
+    let cache = cache.to_str().unwrap();
+    let day = |extra: &[&'static str]| {
+        let mut a = vec!["relight", "demo", "--lat", "48.1", "--lon", "11.6"];
+        a.extend(["--date", "2026-06-21"]);
+        a.extend(extra.iter().copied());
+        a
+    };
+    let cases: Vec<(Vec<&str>, &str)> =
+        vec![
+        (
+            vec!["relight", "demo", "--lat", "91", "--lon", "11.6", "--date", "2026-06-21"],
+            "--lat: latitude 91°: degrees north of the equator, -90 to 90",
+        ),
+        (
+            vec!["relight", "demo", "--lat", "48.1", "--lon", "200", "--date", "2026-06-21"],
+            "--lon: longitude 200°: degrees east of Greenwich, -180 to 180",
+        ),
+        (
+            vec!["relight", "demo", "--lat", "48.1", "--lon", "11.6", "--date", "2026-02-30"],
+            "--date: date '2026-02-30' does not exist: February 2026 has 28 days",
+        ),
+        (day(&["--step", "0"]), "--step: step '0': the sun needs a step longer than zero"),
+        (day(&["--step", "15"]), "--step: step '15': expected hours, minutes and seconds"),
+        (
+            day(&["--from", "21:00", "--to", "05:00"]),
+            "the path starts at 21:00, after it ends at 05:00",
+        ),
+        (day(&["--from", "25:00"]), "--from: time '25:00': expected a local clock time"),
+        (day(&["--utc-offset", "+15:00"]), "--utc-offset: UTC offset '+15:00'"),
+        (day(&["--step", "1m"]), "1440 suns from 00:00 to 23:59 every 1m: at most 1000"),
+        (
+            vec!["relight", "demo", "--lat", "80", "--lon", "15", "--date", "2026-12-21"],
+            "the sun never rises above the horizon at 80.0°N on 2026-12-21 between 00:00 and 23:59",
+        ),
+        (
+            vec![
+                "render", "demo", "--lat", "48.1", "--lon", "11.6", "--date", "2026-06-21",
+                "--time", "23:30", "--utc-offset", "+02:00",
+            ],
+            "° below the horizon at 48.1°N 11.6°E on 2026-06-21 at 23:30 (UTC+02:00)",
+        ),
+    ];
+    for (mut args, want) in cases {
+        args.extend(["-o", if args[0] == "render" { png } else { out }]);
+        args.extend(["--cache-dir", cache]);
+        let (ok, stdout, stderr) = sylva(&args);
+        assert!(!ok, "{args:?} should fail: {stdout}");
+        assert!(stderr.contains(want), "{args:?}: {stderr}");
+        assert_eq!(stderr.lines().count(), 1, "one line: {stderr}");
+        assert_eq!(
+            fs::read_dir(dir.path()).unwrap().count(),
+            0,
+            "{args:?} wrote something"
+        );
+    }
+    // The ways to give a sun exclude each other, and the place needs all its parts (clap).
+    for (args, want) in [
+        (
+            &[
+                "relight",
+                "demo",
+                "--suns",
+                "4",
+                "--lat",
+                "1",
+                "--lon",
+                "2",
+                "--date",
+                "2026-06-21",
+            ][..],
+            "cannot be used with",
+        ),
+        (
+            &[
+                "relight",
+                "demo",
+                "--path-azimuth",
+                "30",
+                "--lat",
+                "1",
+                "--lon",
+                "2",
+                "--date",
+                "2026-06-21",
+            ],
+            "cannot be used with",
+        ),
+        (
+            &[
+                "render",
+                "demo",
+                "--sun",
+                "0,1,0",
+                "--lat",
+                "1",
+                "--lon",
+                "2",
+                "--date",
+                "2026-06-21",
+                "--time",
+                "12:00",
+            ],
+            "cannot be used with",
+        ),
+        (
+            &[
+                "render",
+                "demo",
+                "--elevation",
+                "30",
+                "--lat",
+                "1",
+                "--lon",
+                "2",
+                "--date",
+                "2026-06-21",
+                "--time",
+                "12:00",
+            ],
+            "cannot be used with",
+        ),
+        (&["relight", "demo", "--lat", "48.1"], "--lon <LON>"),
+        (&["relight", "demo", "--step", "15m"], "--date <DATE>"),
+        (
+            &[
+                "render",
+                "demo",
+                "--lat",
+                "1",
+                "--lon",
+                "2",
+                "--date",
+                "2026-06-21",
+            ],
+            "--time <TIME>",
+        ),
+        (&["render", "demo", "--time", "12:00"], "--date <DATE>"),
+        (
+            &["render", "demo", "--from", "12:00"],
+            "unexpected argument '--from'",
+        ),
+        (
+            &["relight", "demo", "--time", "12:00"],
+            "unexpected argument '--time'",
+        ),
+    ] {
+        let (ok, stdout, stderr) = sylva(args);
+        assert!(!ok, "{args:?} should fail: {stdout}");
+        assert!(stderr.contains(want), "{args:?}: {stderr}");
+    }
+}

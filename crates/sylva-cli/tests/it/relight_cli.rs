@@ -231,3 +231,68 @@ fn the_physical_light_moves_with_the_sun_from_its_bases() {
     let (ok, _, stderr) = sylva(&["relight", scene, "--sun-weights", "exact"]);
     assert!(!ok && stderr.contains("paper light"), "{stderr}");
 }
+
+/// Issue 27: `relight --lat --lon --date`: the sun's path over a day, one frame per step
+/// named by its clock time, the night's frames left out with one note.
+#[test]
+fn relight_follows_the_sun_over_a_day() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("roses.toml");
+    fs::write(&scene, SCENE).unwrap();
+    let cache = dir.path().join("cache");
+    let seq = dir.path().join("day");
+    // Munich on midsummer's day at UTC+01:00: sunrise 04:13, sunset 20:17.
+    let args = [
+        "relight",
+        scene.to_str().unwrap(),
+        "--lat",
+        "48.1",
+        "--lon",
+        "11.6",
+        "--date",
+        "2026-06-21",
+        "--from",
+        "03:00",
+        "--to",
+        "21:30",
+        "--step",
+        "3h",
+        "--width",
+        "32",
+        "--height",
+        "24",
+        "--cache-dir",
+        cache.to_str().unwrap(),
+        "--global-grid",
+        "24",
+        "-o",
+        seq.to_str().unwrap(),
+    ];
+    let (ok, stdout, stderr) = sylva(&args);
+    assert!(ok, "{stdout}{stderr}");
+    assert!(
+        stdout.contains(
+            "5 suns from 03:00 to 21:30 every 3h at 48.1°N 11.6°E on 2026-06-21 (UTC+01:00)"
+        ),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("note: 2 of 7 suns left out, below the horizon: 03:00, 21:00"),
+        "{stdout}"
+    );
+    assert_eq!(stdout.matches("  frame ").count(), 5, "{stdout}");
+    assert!(
+        stdout.contains("  frame  2 at 12:00: sun elevation"),
+        "{stdout}"
+    );
+    for t in ["0600", "0900", "1200", "1500", "1800"] {
+        let f = image::open(seq.join(format!("frame-{t}.png"))).unwrap();
+        assert_eq!((f.width(), f.height()), (32, 24));
+    }
+    assert!(!seq.join("frame-0300.png").exists() && !seq.join("frame-00.png").exists());
+    assert!(seq.join("roses.png").is_file());
+    assert!(
+        stdout.contains("wrote 5 frames (frame-0600.png … frame-1800.png)"),
+        "{stdout}"
+    );
+}

@@ -214,3 +214,60 @@ fn a_build_without_mpi_refuses_to_render_under_mpirun() {
         );
     }
 }
+
+/// Issue 27: `render --lat --lon --date --time` places the sun (north -z, east +x), the
+/// clock at `--utc-offset` (default: the longitude's zone).
+#[test]
+fn render_places_the_sun_by_date_time_and_place() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write_scene(dir.path());
+    let out = dir.path().join("noon.png");
+    let render = |extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            &scene,
+            "--mode",
+            "local",
+            "--no-cache",
+            "--width",
+            "32",
+            "--height",
+            "24",
+            "-o",
+            out.to_str().unwrap(),
+            "--lat",
+            "48.1",
+            "--lon",
+            "11.6",
+            "--date",
+            "2026-06-21",
+        ];
+        args.extend(extra);
+        let (ok, stdout, stderr) = sylva(&args);
+        assert!(ok, "{stdout}{stderr}");
+        stdout
+    };
+    // Munich's solar noon, 12:14 at UTC+01:00 (its longitude's zone): the sun due south,
+    // 65.3° up, over +z (world azimuth 90°).
+    let noon = render(&["--time", "12:14"]);
+    assert!(
+        noon.contains("sun at 48.1°N 11.6°E on 2026-06-21 at 12:14 (UTC+01:00): elevation 65.3°"),
+        "{noon}"
+    );
+    let world = |s: &str| -> f64 {
+        let at = s.find("; sun elevation").unwrap();
+        let tail = &s[at..];
+        let az = tail.find("azimuth ").unwrap() + "azimuth ".len();
+        tail[az..].split('°').next().unwrap().parse().unwrap()
+    };
+    assert!((world(&noon) - 90.0).abs() < 1.0, "{noon}");
+    // One mode other than full: its name is added.
+    assert!(image::open(dir.path().join("noon-local.png")).is_ok());
+    // The same moment on summer time's clock.
+    let same = render(&["--time", "13:14", "--utc-offset", "+02:00"]);
+    assert!(same.contains("(UTC+02:00): elevation 65.3°"), "{same}");
+    // 08:00: the morning sun in the east (world azimuth near 0°, +x).
+    let morning = render(&["--time", "08:00"]);
+    let az = world(&morning);
+    assert!(!(60.0..300.0).contains(&az), "{morning}");
+}
