@@ -805,7 +805,7 @@ impl ForestLight {
 
 /// The forest grid relit (issue 27, docs/relight.md): the coarse grid solved once per linear
 /// part of its light, a unit sun along each of the lattice directions a sun above the horizon
-/// travels along ([`crate::relight::physical::SUN_DIRECTIONS`]), a unit sky and a unit ground,
+/// travels along ([`crate::relight::sun_parts::SUN_DIRECTIONS`]), a unit sky and a unit ground,
 /// and each instance's measures of every part kept. [`ForestBases::light`] combines them for
 /// any sun, sky and ground (the sun's parts by the barycentric weights of the polyhedron face
 /// its direction crosses, 004 §3.1) and marches the sun's transmittance: a [`ForestLight`]
@@ -822,7 +822,7 @@ pub struct ForestBases {
 
 impl ForestBases {
     /// Coarse solves: one per sun direction and colour, a unit sky's and a unit ground's.
-    pub const SOLVES: usize = 3 * (crate::relight::physical::SUN_PARTS + 2);
+    pub const SOLVES: usize = 3 * (crate::relight::sun_parts::SUN_PARTS + 2);
 
     /// Solves the parts over `instances` with the ground's albedo `ground_albedo` (`None`:
     /// no ground). `progress(done, total)` after every LB step.
@@ -845,7 +845,7 @@ impl ForestBases {
             };
             // The lights: a unit sun along each direction, a unit sky, a unit ground.
             let mut lights: Vec<(Environment, [sylva_lb::Boundary; 3], bool, bool)> =
-                crate::relight::physical::SUN_DIRECTIONS
+                crate::relight::sun_parts::SUN_DIRECTIONS
                     .iter()
                     .map(|&j| {
                         let env = Environment {
@@ -892,9 +892,9 @@ impl ForestBases {
         let Some(coarse) = &self.coarse else {
             return Ok(ForestLight::alone(self.instances, free));
         };
-        let sun = crate::relight::physical::sun_part_weights(env.sun_travel)?;
+        let sun = crate::relight::sun_parts::sun_part_weights(env.sun_travel)?;
         let (sky, ground) = (env.sky_radiance, env.ground_radiance());
-        let n = crate::relight::physical::SUN_PARTS;
+        let n = crate::relight::sun_parts::SUN_PARTS;
         let inflow: Vec<Inflow> = (0..self.instances)
             .map(|i| {
                 std::array::from_fn(|c| {

@@ -19,6 +19,7 @@ pub mod basis_cache;
 pub mod global;
 pub mod light;
 pub mod physical;
+pub mod sun_parts;
 pub mod weights;
 
 pub use basis_cache::{

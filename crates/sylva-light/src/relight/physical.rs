@@ -23,11 +23,11 @@
 
 use glam::{Affine3A, Vec3};
 use sylva_geom::{Aabb, Model};
-use sylva_lb::lattice::{C, Q};
-use sylva_lb::relight::{face_hit, Footprint, Placement, RelightError};
+use sylva_lb::relight::{Footprint, Placement};
 use sylva_lb::{Bounds, Dims, LightingGrid};
 use sylva_trace::TraceInstance;
 
+pub use super::sun_parts::{overhead_part, sun_part_weights, SUN_DIRECTIONS, SUN_PARTS};
 use crate::device::{DeviceLight, NoDevice};
 use crate::forest::{free_weights, ForestBases};
 use crate::indirect::{ground_shade, GroundIndex, IndirectLight, ModelGridLight};
@@ -36,34 +36,8 @@ use crate::lighting::{
     ModelLighting, OpenField, PartWeights,
 };
 
-/// The sun's parts per model: one per lattice direction with `c_y ≤ 0`.
-pub const SUN_PARTS: usize = 13;
 /// Parts per model: the sun's, then `D_top`, `D_side`, `G`.
 pub const PARTS: usize = SUN_PARTS + 3;
-/// The lattice directions (1..=18) a sun above the horizon travels along, lattice order.
-pub const SUN_DIRECTIONS: [usize; SUN_PARTS] = sun_directions();
-
-const fn sun_directions() -> [usize; SUN_PARTS] {
-    let mut out = [0; SUN_PARTS];
-    let (mut n, mut k) = (0, 1);
-    while k < Q {
-        if C[k][1] <= 0 {
-            out[n] = k;
-            n += 1;
-        }
-        k += 1;
-    }
-    out
-}
-
-/// The part (index into [`SUN_DIRECTIONS`]) solved with the sun straight down, whose plan
-/// also solves the diffuse parts.
-pub fn overhead_part() -> usize {
-    SUN_DIRECTIONS
-        .iter()
-        .position(|&k| C[k] == [0, -1, 0])
-        .expect("the lattice has a downward direction")
-}
 
 /// The illumination sun part `part` is solved under: a unit sun travelling along its lattice
 /// direction, `scene`'s sky and ground (the floor's albedo).
@@ -74,33 +48,6 @@ pub fn sun_part_illumination(scene: &Illumination, part: usize) -> Illumination 
         sun: Vec3::ONE,
         ..*scene
     }
-}
-
-/// The sun's parts and their weights for sunlight travelling along `travel` (any length): the
-/// polyhedron face it crosses, its barycentric weights (004 §3.1), as indices into
-/// [`SUN_DIRECTIONS`]. Empty when the sun is below the horizon (`travel` upward).
-pub fn sun_part_weights(travel: [f64; 3]) -> Result<Vec<(usize, f64)>, LightingError> {
-    let hit = face_hit(travel).map_err(|e| LightingError::Relight(RelightError::from(e)))?;
-    if travel[1] > 0.0 {
-        return Ok(Vec::new());
-    }
-    let mut out = Vec::with_capacity(3);
-    for (&v, &w) in hit.vertices.iter().zip(&hit.weights) {
-        if w <= 0.0 {
-            continue;
-        }
-        match SUN_DIRECTIONS.iter().position(|&k| k == v) {
-            Some(part) => out.push((part, w)),
-            // A face of a sun at the horizon may touch an upward direction with weight ~0.
-            None if w < 1e-9 => {}
-            None => {
-                return Err(LightingError::Illumination(format!(
-                    "sun travelling along {travel:?}: lattice direction {v} has no sun part"
-                )))
-            }
-        }
-    }
-    Ok(out)
 }
 
 /// One model's physical light as its [`PARTS`] linear parts, per site and colour.
