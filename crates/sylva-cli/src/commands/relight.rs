@@ -27,8 +27,8 @@ use super::sun_time::SunDayArgs;
 
 /// What `sylva relight` uses: the frame's view, the LB grid and solver, how the bases
 /// combine, the global grid and the sequence. The sun moves along its path (`--path-azimuth`),
-/// so `--sun`, `--elevation` and `--azimuth` are refused, as are the options of lights without
-/// base solutions (`--gather-rays`) and `--basis` (relighting always uses them).
+/// so `--sun`, `--elevation` and `--azimuth` are refused, as is `--basis` (relighting always
+/// uses them).
 #[derive(Args, Debug)]
 pub struct RelightArgs {
     #[arg(default_value = "demo", help = SCENE_HELP)]
@@ -71,6 +71,15 @@ pub struct RelightArgs {
     /// Reinhard white point (default: the sequence's brightest pixel).
     #[arg(long)]
     pub white: Option<f32>,
+    /// Physical light: final-gather rays per camera sample on a plant, 0 to 256 (0: the LB
+    /// light at the leaf itself, several times faster; docs/light.md, "The final gather").
+    #[arg(
+        long,
+        default_value_t = sylva_render::ShadingParams::default().gather_rays,
+        allow_negative_numbers = true,
+        value_parser = clap::value_parser!(u32).range(0..=i64::from(sylva_render::gather::MAX_GATHER_RAYS))
+    )]
+    pub gather_rays: u32,
 }
 
 impl RelightArgs {
@@ -83,6 +92,7 @@ impl RelightArgs {
             sun: SunArgs::default(),
             light: RenderLightArgs {
                 light: self.light.light.clone(),
+                gather_rays: self.gather_rays,
                 ..RenderLightArgs::default()
             },
             lb: self.lb.clone(),

@@ -512,7 +512,6 @@ fn silent_no_ops_are_refused() {
         ("basis", "--ambient", Some("0.5")),
         ("basis", "--basis", Some("always")),
         ("basis", "--cpu-shading", None),
-        ("relight", "--gather-rays", Some("8")),
         ("relight", "--azimuth", Some("30")),
         ("relight", "--sun", Some("0,1,0")),
         ("relight", "--basis", Some("never")),
