@@ -25,15 +25,15 @@ use sylva_trace::TraversalConfig;
 use super::progress::{Bars, Report};
 use super::sun_time::SunTimeArgs;
 
-/// Whether the LB light of plants comes from base solutions (paper 004). Base solutions are
-/// the paper light's (004's sun-only boundary solves; docs/relight.md).
+/// Whether the LB light of plants comes from base solutions (paper 004): the physical light's
+/// (13 sun parts and 3 diffuse parts per model) or, with --light paper, 004's (docs/relight.md).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum BasisArg {
     /// Under --light paper, base solutions when every model's are cached (`sylva basis`),
     /// else solved for the sun; other lights solve for the sun.
     Auto,
     /// Base solutions, solved and cached where missing (paper 004: any sun, rotated
-    /// instances lit correctly, the coarse global grid); --light paper only.
+    /// instances lit correctly, the forest or global grid relit); not the SPP light.
     Always,
     /// Solved for the scene's sun per model (paper 000), cached per sun.
     Never,
@@ -663,8 +663,10 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
         "spp" => Light::Paper,
         l => Light::parse(l).context("--light")?,
     };
-    let relight = if need_lb {
+    // The SPP light needs no LB, but `--basis always` with it is still refused, not ignored.
+    let relight = if need_lb || a.light.basis == BasisArg::Always {
         a.relight_plan(force_basis, keep_raw, light_name)?
+            .filter(|_| need_lb)
     } else {
         None
     };

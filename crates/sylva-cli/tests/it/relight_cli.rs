@@ -236,7 +236,12 @@ fn the_physical_light_moves_with_the_sun_from_its_bases() {
         assert!(v[key].as_f64().is_some_and(|x| x > 0.0), "{key}: {stdout}");
     }
 
-    // What the physical light does not take.
+    // What the physical light does not take, and the SPP light has no bases.
+    let (ok, _, stderr) = sylva(&["render", scene, "--light", "spp", "--basis", "always"]);
+    assert!(
+        !ok && stderr.contains("SPP light has no base solutions"),
+        "{stderr}"
+    );
     let (ok, _, stderr) = sylva(&["relight", scene, "--sun-weights", "exact"]);
     assert!(!ok && stderr.contains("paper light"), "{stderr}");
 }
