@@ -572,6 +572,8 @@ struct Coarse {
     shells: Vec<Option<Vec<ShellFace>>>,
     /// Per instance, the side faces' lattice directions measured (the same in every solve).
     measured: Vec<[bool; Q]>,
+    /// The coarse medium's extinction per colour, which the sun's transmittance marches.
+    kappa: [Vec<f64>; 3],
 }
 
 fn solve_err(e: sylva_lb::SolveError) -> LightingError {
@@ -626,11 +628,12 @@ impl Coarse {
             dims,
             origin,
             cell,
-            grid,
-            medium,
             boxes: fine.iter().map(|p| p.as_ref().map(|p| p.world)).collect(),
             shells,
             measured,
+            kappa: std::array::from_fn(|c| light::extinction(&grid, &medium, c)),
+            grid,
+            medium,
         }))
     }
 
@@ -725,8 +728,6 @@ impl Coarse {
     /// sun's transmittance marched towards `env`'s sun through the coarse extinction).
     fn weights(&self, inflow: &[Inflow], env: &Environment, free: PartWeights) -> Vec<PartWeights> {
         let to_sun = Vec3::from_array(env.sun_travel.map(|v| -v as f32)).normalize_or_zero();
-        let kappa: [Vec<f64>; 3] =
-            std::array::from_fn(|c| light::extinction(&self.grid, &self.medium, c));
         let unit_sky = light::sky_boundaries([1.0; 3])[0];
         let top_unit: f64 = (1..Q)
             .filter(|&k| class(k) == 0)
@@ -745,7 +746,14 @@ impl Coarse {
                 // Through the top only downward directions enter: a unit sky's sum there.
                 let top: [f32; 3] = std::array::from_fn(|c| (m[c].1 / top_unit) as f32);
                 let sun = if to_sun.y > 0.0 {
-                    sun_transmittance(world, self.dims, self.origin, self.cell, &kappa, to_sun)
+                    sun_transmittance(
+                        world,
+                        self.dims,
+                        self.origin,
+                        self.cell,
+                        &self.kappa,
+                        to_sun,
+                    )
                 } else {
                     Vec3::ZERO
                 };

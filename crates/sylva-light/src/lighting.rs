@@ -526,6 +526,21 @@ pub enum LightingSource {
     Recomputed { reason: String },
 }
 
+impl LightingSource {
+    /// What several entries read or solved together report: a bad entry's reason first,
+    /// else computed if any was, else cached.
+    pub fn merge(self, other: LightingSource) -> LightingSource {
+        match (self, other) {
+            (r @ LightingSource::Recomputed { .. }, _) => r,
+            (_, r @ LightingSource::Recomputed { .. }) => r,
+            (LightingSource::Computed, _) | (_, LightingSource::Computed) => {
+                LightingSource::Computed
+            }
+            _ => LightingSource::Cached,
+        }
+    }
+}
+
 /// What [`model_lighting`] did.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LightingReport {
@@ -1679,14 +1694,7 @@ impl<'a> PartsPlan<'a> {
                 cache_warning,
             } = self.cached(k, solver, || solve(k))?;
             parts.cache_warning = parts.cache_warning.or(cache_warning);
-            parts.source = match (parts.source, source) {
-                (r @ LightingSource::Recomputed { .. }, _) => r,
-                (_, r @ LightingSource::Recomputed { .. }) => r,
-                (LightingSource::Computed, _) | (_, LightingSource::Computed) => {
-                    LightingSource::Computed
-                }
-                _ => LightingSource::Cached,
-            };
+            parts.source = parts.source.merge(source);
             parts.path = parts.path.or(path);
             parts.grids.push(grid);
         }

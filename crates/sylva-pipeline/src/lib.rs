@@ -147,9 +147,8 @@ pub enum PipelineError {
     )]
     NeedsBasis,
     #[error(
-        "relighting from base solutions is the paper light's (their boundary solves are 004's, \
-         sun only); --light {0} has no base solutions yet (docs/relight.md): use --light paper, \
-         or solve for the sun without bases"
+        "--light {0}: these base solutions are the paper light's (004's boundary solves); the \
+         physical light's are its light parts (precompute_physical, docs/relight.md)"
     )]
     BasisLight(&'static str),
     #[error(transparent)]

@@ -99,6 +99,8 @@ pub fn precompute_physical(
     // parts (they do not depend on the sun).
     let overhead = overhead_part();
     let mut plans = Vec::with_capacity(scene.models.len() * SUN_PARTS);
+    // Per model, the medium its parts are solved with (the forest grid mixes them).
+    let mut media = Vec::with_capacity(scene.models.len());
     for (k, model) in scene.models.iter().enumerate() {
         let mopts = opts.for_model(scene, k);
         for part in 0..SUN_PARTS {
@@ -111,6 +113,9 @@ pub fn precompute_physical(
                 shades[k].as_ref(),
             )
             .map_err(|e| lighting_err(k, e))?;
+            if part == 0 {
+                media.push(plan.medium().clone());
+            }
             plans.push(PlanParts {
                 model: k,
                 plan,
@@ -156,14 +161,7 @@ pub fn precompute_physical(
                 Some(mut acc) => {
                     acc.seconds += r.seconds;
                     acc.cache_warning = acc.cache_warning.or(r.cache_warning);
-                    acc.source = match (acc.source, r.source) {
-                        (a @ LightingSource::Recomputed { .. }, _) => a,
-                        (_, b @ LightingSource::Recomputed { .. }) => b,
-                        (LightingSource::Computed, _) | (_, LightingSource::Computed) => {
-                            LightingSource::Computed
-                        }
-                        _ => LightingSource::Cached,
-                    };
+                    acc.source = acc.source.merge(r.source);
                     acc
                 }
             });
@@ -196,16 +194,12 @@ pub fn precompute_physical(
     // The forest grid's parts: every process solves them (deterministic, and small).
     let forest = match (in_forest, forest) {
         (true, Some(gopts)) => {
-            let fine: Vec<_> = own
-                .iter()
-                .zip(&plans.iter().step_by(SUN_PARTS).collect::<Vec<_>>())
-                .map(|(d, w)| (d, w.plan.medium().clone()))
-                .collect();
+            let fine: Vec<_> = own.iter().zip(&media).collect();
             let instances: Vec<ForestInstance> = scene
                 .instances
                 .iter()
                 .map(|i| {
-                    let (d, m) = &fine[i.model as usize];
+                    let (d, m) = fine[i.model as usize];
                     ForestInstance {
                         model: Some((d, m)),
                         to_world: i.transform(),
