@@ -36,6 +36,9 @@ ALLOWED = {
     "sylva-pipeline": {"sylva-core", "sylva-geom", "sylva-grid", "sylva-lb", "sylva-voxel",
                        "sylva-scene", "sylva-trace", "sylva-trace-gpu", "sylva-wgpu",
                        "sylva-light", "sylva-render", "sylva-spp"},
+    # The viewer serves frames of a prepared scene: the pipeline's, nothing the pipeline hides.
+    "sylva-view": {"sylva-core", "sylva-geom", "sylva-lb", "sylva-light", "sylva-render",
+                   "sylva-pipeline"},
     "sylva-fuzz": {"sylva-core", "sylva-geom", "sylva-grid", "sylva-grow", "sylva-io",
                    "sylva-lb", "sylva-scene"},
     "sylva-testkit": None,  # dev-only: anything

@@ -64,6 +64,10 @@ enum Command {
     /// `bench scene` (generation and scene building), `bench voxelize`, `bench trace`
     /// (acceleration build and frame time), `bench spp`, `bench relight` (moving the sun).
     Bench(commands::bench::BenchArgs),
+    /// The forest in a browser: drag the sun (or set date, time and place), orbit, pan and
+    /// zoom; the light follows with no LB solve, e.g. `sylva view catalpa` then open the
+    /// printed URL (docs/view.md; a remote machine through an SSH tunnel).
+    View(commands::view::ViewCommandArgs),
 }
 
 /// Whether `command` runs across MPI ranks, and its name for messages.
@@ -78,6 +82,7 @@ fn distributed(command: &Command) -> Result<(), &'static str> {
         Command::Lb(_) => Err("lb"),
         Command::Spp(_) => Err("spp"),
         Command::Export(_) => Err("export"),
+        Command::View(_) => Err("view"),
     }
 }
 
@@ -95,6 +100,7 @@ fn run(command: Command, runner: &dyn sylva_core::jobs::Runner) -> anyhow::Resul
         Command::Render(a) => commands::render::run(a, runner),
         Command::Basis(a) => commands::basis::run(a, runner),
         Command::Relight(a) => commands::relight::run(a, runner),
+        Command::View(a) => commands::view::run(a),
     }
 }
 

@@ -55,6 +55,7 @@ impl LbSolver for GpuSolver {
         opts: &SolveOptions,
         progress: &mut dyn FnMut(usize, usize, f64),
     ) -> Result<(LightingGrid, Vec<SolveReport>), LbSolverError> {
+        sylva_lb::count_solve();
         Ok(solve_lighting_gpu(
             &self.ctx,
             grid,

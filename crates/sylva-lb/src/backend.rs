@@ -15,6 +15,19 @@ use crate::{DensityGrid, LightingGrid, MediumParams};
 /// The colours of a medium: R, G, B.
 pub const COLOURS: usize = 3;
 
+static SOLVES_STARTED: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// Three-colour solves begun in this process, on any backend: what `sylva view` shows to
+/// prove that moving the sun solves nothing.
+pub fn solves_started() -> u64 {
+    SOLVES_STARTED.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// Counts one solve; every [`LbSolver`] implementation calls it as its solve begins.
+pub fn count_solve() {
+    SOLVES_STARTED.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+}
+
 /// Why a backend could not solve: the solver's own checks, or the device's failure.
 #[derive(Debug, thiserror::Error)]
 pub enum LbSolverError {
@@ -144,6 +157,7 @@ impl LbSolver for CpuSolver {
         opts: &SolveOptions,
         progress: &mut dyn FnMut(usize, usize, f64),
     ) -> Result<(LightingGrid, Vec<SolveReport>), LbSolverError> {
+        count_solve();
         Ok(solve_lighting_rgb(
             grid, medium, boundaries, floor, source, opts, progress,
         )?)

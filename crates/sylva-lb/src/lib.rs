@@ -29,7 +29,7 @@ pub mod relight;
 pub mod shapes;
 pub mod solver;
 
-pub use backend::{CpuSolver, LbBenchmark, LbSolver, LbSolverError};
+pub use backend::{count_solve, solves_started, CpuSolver, LbBenchmark, LbSolver, LbSolverError};
 pub use grid::{Bounds, DensityGrid, Dims, GridError, LightingGrid, RawElement};
 pub use grid_file::{Element, GridFile, GridFileError, GridKind};
 pub use params::{ColourParams, MediumParams, ParamError, Preset};

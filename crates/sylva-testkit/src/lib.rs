@@ -1,9 +1,10 @@
 //! Test-only helpers shared by sylva's crates (a dev-dependency, never published).
 //!
-//! A test that needs a GPU or `mpirun` and finds none must not pass in silence. Through
-//! [`missing`] it either fails, when the run demands the back end (`SYLVA_REQUIRE_GPU=1`,
-//! `SYLVA_REQUIRE_MPI=1`: CI sets both), or prints a `SKIPPED` line that `cargo test` shows
-//! (libtest keeps a passing test's `eprintln!` to itself).
+//! A test that needs a GPU, `mpirun` or a browser and finds none must not pass in silence.
+//! Through [`missing`] it either fails, when the run demands the back end
+//! (`SYLVA_REQUIRE_GPU=1`, `SYLVA_REQUIRE_MPI=1`, `SYLVA_REQUIRE_BROWSER=1`: CI sets all
+//! three), or prints a `SKIPPED` line that `cargo test` shows (libtest keeps a passing test's
+//! `eprintln!` to itself).
 //!
 //! Also the fixtures that tests of several crates build by hand: the board of the render tests
 //! ([`write_board`]), a folder's files for bit-for-bit comparisons ([`files_by_name`], and with
@@ -32,6 +33,8 @@ pub enum Need {
     Gpu,
     /// `mpirun`, and a build with the `mpi` feature.
     Mpi,
+    /// Chromium and its WebDriver (`chromedriver`), for the viewer's browser test.
+    Browser,
 }
 
 impl Need {
@@ -40,6 +43,7 @@ impl Need {
         match self {
             Need::Gpu => "SYLVA_REQUIRE_GPU",
             Need::Mpi => "SYLVA_REQUIRE_MPI",
+            Need::Browser => "SYLVA_REQUIRE_BROWSER",
         }
     }
 

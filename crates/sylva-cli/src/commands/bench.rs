@@ -43,6 +43,10 @@ enum BenchCommand {
     /// compression (default scene: demo; 004 measured catalpa and canopy). Under the paper
     /// light, whose base solutions these are.
     Relight(super::bench_relight::BenchRelightArgs),
+    /// The viewer (`sylva view`) driven as the page drives it: input-to-frame latency and
+    /// frames per second while the sun is dragged, and the refined frame's delay after the
+    /// last input (default scene: demo, 512x512).
+    View(super::view::BenchViewArgs),
 }
 
 #[derive(Args)]
@@ -89,6 +93,7 @@ pub fn run(args: BenchArgs, runner: &dyn sylva_pipeline::Runner) -> Result<()> {
         BenchCommand::Trace(a) => super::bench_trace::run(a, runner),
         BenchCommand::Spp(a) => super::bench_spp::run(a),
         BenchCommand::Relight(a) => super::bench_relight::run(a),
+        BenchCommand::View(a) => super::view::bench(a),
     }
 }
 

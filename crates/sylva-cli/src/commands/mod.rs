@@ -66,6 +66,7 @@ pub mod species;
 pub mod spp;
 pub mod spp_trees;
 pub mod sun_time;
+pub mod view;
 pub mod voxelize;
 
 #[cfg(test)]

@@ -593,6 +593,8 @@ pub struct PrepareRequest<'a> {
     pub check_size: Option<&'a dyn Fn(u32, u32) -> Result<()>>,
     /// The sun, in place of the one `FrameArgs` and the scene give (`render --date`).
     pub sun: Option<Sun>,
+    /// Also hands every line printed to this (`view`: the page shows the preparation).
+    pub echo: Option<&'a (dyn Fn(String) + Sync)>,
 }
 
 /// Loads the scene, lights every model (from the cache when it can) and builds its
@@ -609,10 +611,14 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
         instance_weights,
         check_size,
         sun,
+        echo,
     } = req;
     let root = runner.is_root();
     // Machine-readable runs keep stdout for their JSON.
     let say = |s: String| {
+        if let Some(echo) = echo {
+            echo(s.clone());
+        }
         if !root {
         } else if to == Say::Stdout {
             println!("{s}")

@@ -14,4 +14,6 @@ mod relight_cli;
 mod render_cli;
 mod scene_cli;
 mod spp_cli;
+mod view_browser;
+mod view_cli;
 mod voxelize_cli;

@@ -1,0 +1,257 @@
+//! `sylva view SCENE`: the forest in a browser, the sun dragged over it (`sylva_view`). The
+//! scene is prepared with its base solutions (solved with progress if missing: the page
+//! shows the lines too) while the server already answers; the URL with its token is
+//! printed. `sylva bench view` drives the same server as the page does and measures it.
+
+use std::path::PathBuf;
+
+use anyhow::{anyhow, Result};
+use clap::Args;
+use sylva_pipeline::Local;
+use sylva_view::{ReadyScene, ServeOptions, Server, WorkerOptions};
+
+use super::render::{
+    prepare, relight_light, FrameArgs, GridArgs, LbArgs, PrepareRequest, RelightLightArg,
+    RelitArgs, RenderLightArgs, Say, SunArgs, ViewArgs, SCENE_HELP,
+};
+
+/// What `sylva view` and `sylva bench view` share: the scene and how it is lit and shown.
+#[derive(Args, Debug, Clone)]
+pub struct ViewSceneArgs {
+    #[arg(default_value = "demo", help = SCENE_HELP)]
+    pub scene: String,
+    #[command(flatten)]
+    pub view: ViewArgs,
+    #[command(flatten)]
+    pub light: RelightLightArg,
+    #[command(flatten)]
+    pub lb: LbArgs,
+    #[command(flatten)]
+    pub relit: RelitArgs,
+    #[command(flatten)]
+    pub grid: GridArgs,
+    /// Final-gather rays per sample of the refined frames, 0 to 256 (the page changes it).
+    #[arg(
+        long,
+        default_value_t = sylva_render::ShadingParams::default().gather_rays,
+        allow_negative_numbers = true,
+        value_parser = clap::value_parser!(u32).range(0..=i64::from(sylva_render::gather::MAX_GATHER_RAYS))
+    )]
+    pub gather_rays: u32,
+    /// Samples per pixel a refined frame accumulates once input stops (1 to 1024).
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub samples: u32,
+    /// The most pixels of a frame a page may ask for (1024 to 16777216).
+    #[arg(long, default_value_t = 1920 * 1200, value_parser = clap::value_parser!(u64).range(1024..=16_777_216))]
+    pub max_pixels: u64,
+}
+
+impl ViewSceneArgs {
+    fn frame(&self) -> FrameArgs {
+        FrameArgs {
+            scene: self.scene.clone(),
+            view: self.view.clone(),
+            sun: SunArgs::default(),
+            light: RenderLightArgs {
+                light: self.light.light.clone(),
+                gather_rays: self.gather_rays,
+                ..RenderLightArgs::default()
+            },
+            lb: self.lb.clone(),
+            relit: self.relit.clone(),
+            grid: self.grid.clone(),
+        }
+    }
+
+    fn worker(&self, output_dir: PathBuf) -> WorkerOptions {
+        WorkerOptions {
+            max_pixels: self.max_pixels,
+            max_samples: self.samples,
+            output_dir,
+            ..WorkerOptions::default()
+        }
+    }
+
+    /// Prepares the scene with its base solutions (the sun moves without an LB solve),
+    /// telling `status` what it does.
+    fn prepare(
+        self,
+        say: Say,
+        status: &(dyn Fn(String) + Sync),
+        lat: f64,
+        lon: f64,
+    ) -> Result<ReadyScene, String> {
+        let p = prepare(
+            &self.frame(),
+            PrepareRequest {
+                need_lb: true,
+                rays_per_pixel: Some(2),
+                output_images: 1,
+                say,
+                force_basis: true,
+                echo: Some(status),
+                ..PrepareRequest::default()
+            },
+            &Local,
+        )
+        .map_err(|e| super::error_report("", &e).trim_end().to_string())?;
+        let light = match (&p.scene.physical, &p.scene.relit) {
+            (Some(_), _) => "the physical light, relit from its base solutions",
+            (_, Some(_)) => "the paper light, relit from its base solutions",
+            _ => "the local light (no LB light)",
+        };
+        Ok(ReadyScene {
+            width: p.width,
+            height: p.height,
+            light: light.into(),
+            scene: p.scene,
+            lat,
+            lon,
+        })
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct ViewCommandArgs {
+    #[command(flatten)]
+    pub scene: ViewSceneArgs,
+    /// Address to listen on. Anything but a loopback address lets other machines reach the
+    /// viewer (they still need the URL's token); to view a remote machine, prefer an SSH
+    /// tunnel (README: Viewer).
+    #[arg(long, default_value = "127.0.0.1")]
+    pub host: String,
+    /// Port to listen on (0: any free port).
+    #[arg(long, default_value_t = 8080)]
+    pub port: u16,
+    /// Where "save PNG/EXR" writes (default sylva-out).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Latitude the page's time-of-day control starts from (degrees, north positive).
+    #[arg(long, default_value_t = 48.1, allow_negative_numbers = true)]
+    pub lat: f64,
+    /// Longitude the page's time-of-day control starts from (degrees, east positive).
+    #[arg(long, default_value_t = 11.6, allow_negative_numbers = true)]
+    pub lon: f64,
+}
+
+/// Whether `host` is a loopback address (or `localhost`).
+fn loopback(host: &str) -> bool {
+    host.eq_ignore_ascii_case("localhost")
+        || host
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback())
+}
+
+pub fn run(a: ViewCommandArgs) -> Result<()> {
+    relight_light(a.scene.light.light.as_deref())?;
+    sylva_core::solar::Place::new(a.lat, a.lon).map_err(|e| anyhow!("--lat/--lon: {e}"))?;
+    let output = a
+        .output
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("sylva-out"));
+    if output.exists() && !output.is_dir() {
+        return Err(anyhow!(
+            "--output {}: not a folder (saved frames go there)",
+            output.display()
+        ));
+    }
+    if !loopback(&a.host) {
+        eprintln!(
+            "warning: listening on {}: other machines can reach the viewer (they need the \
+             URL's token); an SSH tunnel to 127.0.0.1 keeps it private (README: Viewer)",
+            a.host
+        );
+    }
+    let opts = ServeOptions {
+        host: a.host.clone(),
+        port: a.port,
+        token: None,
+        worker: a.scene.worker(output),
+    };
+    let (scene, lat, lon) = (a.scene, a.lat, a.lon);
+    let server = Server::start(opts, move |status| {
+        scene.prepare(Say::Stdout, status, lat, lon)
+    })
+    .map_err(|e| match e {
+        sylva_view::ViewError::Bind { .. } => {
+            anyhow!("{e} (--port picks another port; 0 any free one)")
+        }
+        e => e.into(),
+    })?;
+    let shown = if a.host == "0.0.0.0" || a.host == "::" {
+        "127.0.0.1"
+    } else {
+        a.host.as_str()
+    };
+    println!(
+        "sylva view: open {} (Ctrl-C stops the server)",
+        server.url(shown)
+    );
+    // Ctrl-C marks the process interrupted instead of ending it, so the server closes its
+    // pages and a frame being saved is finished or removed (sylva_core::interrupt).
+    let _staging = sylva_core::interrupt::StagingGuard::new();
+    server.run_until(sylva_core::interrupt::interrupted)?;
+    println!("sylva view: stopped");
+    Ok(())
+}
+
+#[derive(Args, Debug)]
+pub struct BenchViewArgs {
+    #[command(flatten)]
+    pub scene: ViewSceneArgs,
+    /// Seconds of dragging the sun per run.
+    #[arg(long, default_value_t = 5.0)]
+    pub drag_seconds: f64,
+    /// Drags measured, each followed by its refined frame.
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub runs: u32,
+    /// Sun elevation while dragging (degrees).
+    #[arg(long, default_value_t = 40.0)]
+    pub sun_elevation: f64,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn bench(a: BenchViewArgs) -> Result<()> {
+    relight_light(a.scene.light.light.as_deref())?;
+    if !(a.drag_seconds.is_finite() && (0.1..=600.0).contains(&a.drag_seconds)) {
+        return Err(anyhow!("--drag-seconds {}: 0.1 to 600", a.drag_seconds));
+    }
+    if !(a.sun_elevation > 0.0 && a.sun_elevation <= 90.0) {
+        return Err(anyhow!("--sun-elevation {}: (0, 90]", a.sun_elevation));
+    }
+    let size = (
+        a.scene.view.width.unwrap_or(512),
+        a.scene.view.height.unwrap_or(512),
+    );
+    let gather_rays = a.scene.gather_rays;
+    let say = if a.json { Say::Stderr } else { Say::Stdout };
+    let opts = ServeOptions {
+        host: "127.0.0.1".into(),
+        port: 0,
+        token: None,
+        worker: a.scene.worker(std::env::temp_dir()),
+    };
+    let scene = a.scene;
+    let mut server = Server::start(opts, move |status| scene.prepare(say, status, 48.1, 11.6))?;
+    server.wait_ready()?;
+    let plan = sylva_view::bench::ViewBenchPlan {
+        width: size.0,
+        height: size.1,
+        drag_seconds: a.drag_seconds,
+        sweep_deg: 60.0,
+        elevation_deg: a.sun_elevation,
+        gather_rays,
+        runs: a.runs,
+        timeout: std::time::Duration::from_secs(120),
+    };
+    let report = sylva_view::bench::run(server.addr(), server.token(), &plan)?;
+    server.shutdown();
+    if a.json {
+        println!("{}", super::output::pretty_json(&report)?);
+    } else {
+        print!("{report}");
+    }
+    Ok(())
+}
