@@ -94,7 +94,8 @@ async function onFrame(buffer) {
   while (state.frameTimes.length && now - state.frameTimes[0] > 1000) state.frameTimes.shift();
   state.sunShown = { elevation: header.sun_elevation, azimuth: header.sun_azimuth };
   $("stat-fps").textContent = `${state.frameTimes.length} fps`;
-  $("stat-ms").textContent = `${header.render_ms.toFixed(0)} ms`;
+  const ms = header.render_ms;
+  $("stat-ms").textContent = ms < 10000 ? `${ms.toFixed(0)} ms` : `${(ms / 1000).toFixed(1)} s`;
   $("stat-samples").textContent = `${header.samples} spp${header.refined ? "" : " preview"}`;
   $("stat-size").textContent = `${header.width}×${header.height}`;
   $("stat-solves").textContent = `LB solves ${header.lb_solves}`;

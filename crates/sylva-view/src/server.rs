@@ -299,7 +299,11 @@ fn hello(ready: &ReadyScene, opts: &WorkerOptions) -> Hello {
         sun_moves: s.physical.is_some()
             || s.relit.is_some()
             || (0..s.scene.models.len()).all(|m| s.light.model(m).is_none()),
-        device: s.tracer.describe(),
+        // The adapter's name alone: the tracer's full description is a paragraph.
+        device: match s.tracer.adapter() {
+            Some(a) => format!("GPU {a}"),
+            None => s.tracer.describe(),
+        },
         lat: ready.lat,
         lon: ready.lon,
     }
