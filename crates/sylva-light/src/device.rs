@@ -223,9 +223,15 @@ mod tests {
         packed: PackedLight,
         sun: SunWords,
         kind: DeviceKind,
+        /// The frame shades with the physical light (shade.wgsl: `tables.z == PHYSICAL`).
+        physical: bool,
     }
 
     fn upload(light: &dyn IndirectLight) -> Device {
+        upload_as(light, false)
+    }
+
+    fn upload_as(light: &dyn IndirectLight, physical: bool) -> Device {
         let d = light.device().expect("a device side");
         let mut pool = vec![0xdead_beef; BEFORE];
         let packed = d.pack(&mut pool);
@@ -242,6 +248,7 @@ mod tests {
             packed,
             sun,
             kind: d.kind(),
+            physical,
         }
     }
 
@@ -320,7 +327,11 @@ mod tests {
                 self.sun.words[8 * i as usize],
                 self.sun.words[8 * i as usize + 1],
             );
-            let mut out = self.sun_v3(8 * i + 2);
+            self.relit_terms(g, first, count, self.sun_v3(8 * i + 2), p)
+        }
+
+        fn relit_terms(&self, g: u32, first: u32, count: u32, constant: Vec3, p: Vec3) -> Vec3 {
+            let mut out = constant;
             let kind = self.w(g + RELIT_KIND as u32);
             let term_w = |term: u32| self.sun_v3(term + 1);
             if kind == 0 {
@@ -393,28 +404,51 @@ mod tests {
         /// `instance_ground_sky`, the physical branch where the record has a free field.
         fn instance_ground_sky(&self, g: u32, i: u32, pm: Vec3) -> Vec3 {
             let luminance = |c: Vec3| sylva_core::colour::luminance(c.to_array());
+            let origin = self.v3(g + 4);
+            let inv_cell_y = self.f(g + 8);
+            let cell_y = if inv_cell_y > 0.0 {
+                1.0 / inv_cell_y
+            } else {
+                0.0
+            };
+            let share = |floor: Vec3, lowest: Vec3, sky: Vec3, bottom: Vec3| {
+                let ground = (floor - bottom).max(Vec3::ZERO);
+                let sky = sky * 0.5;
+                let share = (lowest - 2.0 * ground) * 0.5 / sky.max(Vec3::splat(f32::MIN_POSITIVE));
+                Vec3::select(
+                    sky.cmpgt(Vec3::ZERO),
+                    share.clamp(Vec3::ZERO, Vec3::ONE),
+                    Vec3::ONE,
+                )
+            };
+            if self.kind == DeviceKind::Relit && self.physical {
+                // relit_physical_ground_sky: the ground terms and the open field.
+                let e = 8 * i as usize;
+                let (first, count, open) = (
+                    self.sun.words[e + 5],
+                    self.sun.words[e + 6],
+                    self.sun.words[e + 7],
+                );
+                let (sky, bottom) = (self.sun_v3(open), self.sun_v3(open + 3));
+                let floor =
+                    self.relit_terms(g, first, count, Vec3::ZERO, Vec3::new(pm.x, origin.y, pm.z));
+                let lowest = self.relit_terms(
+                    g,
+                    first,
+                    count,
+                    Vec3::ZERO,
+                    Vec3::new(pm.x, origin.y + cell_y, pm.z),
+                );
+                return share(floor, lowest, sky, bottom);
+            }
             if self.kind == DeviceKind::Relit {
                 return Vec3::splat(luminance(self.relit_sample(g, i, pm)) / self.sun.free_space);
             }
             if self.w(g + LIGHT_OPEN as u32) == 1 {
-                let origin = self.v3(g + 4);
-                let inv_cell_y = self.f(g + 8);
-                let cell_y = if inv_cell_y > 0.0 {
-                    1.0 / inv_cell_y
-                } else {
-                    0.0
-                };
                 let (sky, bottom) = (self.v3(g + LIGHT_OPEN as u32 + 1), self.v3(g + 23));
                 let floor = self.lighting_sample(g, Vec3::new(pm.x, origin.y, pm.z));
                 let lowest = self.lighting_sample(g, Vec3::new(pm.x, origin.y + cell_y, pm.z));
-                let ground = (floor - bottom).max(Vec3::ZERO);
-                let sky = sky * 0.5;
-                let share = (lowest - 2.0 * ground) * 0.5 / sky.max(Vec3::splat(f32::MIN_POSITIVE));
-                return Vec3::select(
-                    sky.cmpgt(Vec3::ZERO),
-                    share.clamp(Vec3::ZERO, Vec3::ONE),
-                    Vec3::ONE,
-                );
+                return share(floor, lowest, sky, bottom);
             }
             Vec3::splat(luminance(self.lighting_sample(g, pm)).clamp(0.0, 1.0))
         }
@@ -626,7 +660,16 @@ mod tests {
 
     /// The device words give the CPU's light at every point and the CPU's ground shade.
     fn agrees(light: &dyn IndirectLight, placed: &[TraceInstance], tol: f32) -> Device {
-        let dev = upload(light);
+        agrees_as(light, placed, tol, false)
+    }
+
+    fn agrees_as(
+        light: &dyn IndirectLight,
+        placed: &[TraceInstance],
+        tol: f32,
+        physical: bool,
+    ) -> Device {
+        let dev = upload_as(light, physical);
         let mut lit = 0;
         for (i, world) in points(placed) {
             let inst = &placed[i as usize];
@@ -792,5 +835,52 @@ mod tests {
             assert_ne!(moved.sun.words, dev.sun.words);
             agrees(&light, &placed, 2e-5);
         }
+    }
+
+    #[test]
+    fn the_physical_light_relit_reads_back_as_the_cpu_combines_it() {
+        use crate::relight::physical::{PhysicalBasis, PhysicalRelitLight, SUN_PARTS};
+        let (plate, bounds) = model();
+        let models = [plate.clone(), plate];
+        let placed = instances(models[0].bounds);
+        // Dim parts, so that the ground under the trees is in shade.
+        let dim = |mut g: LightingGrid| {
+            g.colours.iter_mut().flatten().for_each(|v| *v *= 0.01);
+            g
+        };
+        let sun: Vec<LightingGrid> = (0..SUN_PARTS).map(|k| dim(grid(k + 1, bounds))).collect();
+        let (sky, ground) = (dim(grid(20, bounds)), dim(grid(21, bounds)));
+        // The sky through the top is part of the sky through every face.
+        let mut skytop = dim(grid(22, bounds));
+        for (t, s) in skytop.colours.iter_mut().zip(&sky.colours) {
+            for (t, s) in t.iter_mut().zip(s) {
+                *t = 0.4 * s;
+            }
+        }
+        let basis = PhysicalBasis::new(&sun, &sky, &ground, &skytop).unwrap();
+        let lit = |sun_to: Vec3| Illumination {
+            sun_to,
+            sun: Vec3::new(1.0, 0.95, 0.9),
+            sky: Vec3::new(0.2, 0.25, 0.35),
+            ground: Some(Vec3::splat(0.2)),
+        };
+        let mut light = PhysicalRelitLight::new(
+            vec![Some(basis), None],
+            &models,
+            &placed,
+            None,
+            lit(Vec3::new(0.3, 0.8, -0.2)),
+        )
+        .unwrap();
+        let dev = agrees_as(&light, &placed, 1e-5, true);
+        assert_eq!(dev.kind, DeviceKind::Relit);
+        let g = dev.packed.records[0];
+        assert_eq!(dev.w(g + RELIT_KIND as u32), 0, "every field at every site");
+        assert_eq!(dev.packed.records[1], NONE);
+        // The sun moves: the new sun words alone give the new light and ground.
+        light.relight(lit(Vec3::new(-0.5, 0.6, 0.4))).unwrap();
+        let moved = agrees_as(&light, &placed, 1e-5, true);
+        assert_eq!(moved.pool, dev.pool, "the pool stays when the sun moves");
+        assert_ne!(moved.sun.words, dev.sun.words);
     }
 }

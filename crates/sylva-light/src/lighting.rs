@@ -226,8 +226,8 @@ impl Illumination {
 /// holds besides its floor's emission.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct OpenField {
-    sky: Vec3,
-    bottom: Vec3,
+    pub(crate) sky: Vec3,
+    pub(crate) bottom: Vec3,
 }
 
 /// The free field of the physical light under `env`: the LB value of the open sky's light,

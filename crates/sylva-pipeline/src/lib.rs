@@ -827,6 +827,9 @@ impl PreparedScene {
                     scene: self.scene.name.clone(),
                     source,
                 })?;
+                if let Some(f) = &self.gpu_frame {
+                    f.relight(&*p)?;
+                }
             }
             None if (0..self.scene.models.len()).any(|m| self.light.model(m).is_some()) => {
                 return Err(PipelineError::NeedsBasis);

@@ -409,10 +409,15 @@ fn haar_kernel(o: vec3<u32>, t: vec3<f32>) -> array<f32, 64> {
 // footprint's kernel). The instance's entry in the relit words: first term, term count,
 // constant (3); each term: field, weight (3); terms sorted by field.
 fn relit_sample(g: u32, i: u32, p: vec3<f32>) -> vec3<f32> {
-    let first = relit_word_at(8u * i);
-    let count = relit_word_at(8u * i + 1u);
-    var out = vec3<f32>(bitcast<f32>(relit_word_at(8u * i + 2u)), bitcast<f32>(relit_word_at(8u * i + 3u)),
+    let constant = vec3<f32>(bitcast<f32>(relit_word_at(8u * i + 2u)), bitcast<f32>(relit_word_at(8u * i + 3u)),
         bitcast<f32>(relit_word_at(8u * i + 4u)));
+    return relit_terms(g, relit_word_at(8u * i), relit_word_at(8u * i + 1u), constant, p);
+}
+
+// `constant` + Σ the `count` terms from `first` in the relit words, at model-space point p of
+// relit record g.
+fn relit_terms(g: u32, first: u32, count: u32, constant: vec3<f32>, p: vec3<f32>) -> vec3<f32> {
+    var out = constant;
     let kind = shade_word_at(g + RELIT_KIND);
     if (kind == RELIT_FIELDS) {
         let fields = shade_word_at(g + 3u);
@@ -527,6 +532,34 @@ fn physical_ground_sky(g: u32, p: vec3<f32>) -> vec3<f32> {
     let open_bottom = word_vec3(g + LIGHT_OPEN + 4u);
     let floor_ = lighting_sample(g, vec3<f32>(p.x, origin.y, p.z));
     let lowest = lighting_sample(g, vec3<f32>(p.x, origin.y + cell_y, p.z));
+    return ground_share(floor_, lowest, open_sky, open_bottom);
+}
+
+// PhysicalRelitLight::ground_sky at model-space point p of instance i: as physical_ground_sky,
+// the two lowest layers from the instance's ground terms, the open field from the relit words.
+fn relit_physical_ground_sky(g: u32, i: u32, p: vec3<f32>) -> vec3<f32> {
+    let origin = word_vec3(g + 4u);
+    let inv_cell_y = word_f(g + 8u);
+    var cell_y = 0.0;
+    if (inv_cell_y > 0.0) {
+        cell_y = 1.0 / inv_cell_y;
+    }
+    let first = relit_word_at(8u * i + 5u);
+    let count = relit_word_at(8u * i + 6u);
+    let open = relit_word_at(8u * i + 7u);
+    let open_sky = vec3<f32>(bitcast<f32>(relit_word_at(open)), bitcast<f32>(relit_word_at(open + 1u)),
+        bitcast<f32>(relit_word_at(open + 2u)));
+    let open_bottom = vec3<f32>(bitcast<f32>(relit_word_at(open + 3u)), bitcast<f32>(relit_word_at(open + 4u)),
+        bitcast<f32>(relit_word_at(open + 5u)));
+    let zero = vec3<f32>(0.0, 0.0, 0.0);
+    let floor_ = relit_terms(g, first, count, zero, vec3<f32>(p.x, origin.y, p.z));
+    let lowest = relit_terms(g, first, count, zero, vec3<f32>(p.x, origin.y + cell_y, p.z));
+    return ground_share(floor_, lowest, open_sky, open_bottom);
+}
+
+// lighting::physical_ground_sky: from the floor's and the lowest layer's light and the open
+// field, the share of the open sky's light reaching the ground.
+fn ground_share(floor_: vec3<f32>, lowest: vec3<f32>, open_sky: vec3<f32>, open_bottom: vec3<f32>) -> vec3<f32> {
     let ground = fmax3(floor_ - open_bottom, vec3<f32>(0.0, 0.0, 0.0));
     let sky = open_sky * 0.5;
     let share = (lowest - 2.0 * ground) * 0.5 / fmax3(sky, vec3<f32>(1.17549435e-38, 1.17549435e-38, 1.17549435e-38));
@@ -538,6 +571,9 @@ fn physical_ground_sky(g: u32, p: vec3<f32>) -> vec3<f32> {
 // point pm (1 in free space): ModelLighting::ground_sky, or the relit light's luminance over
 // its free-space value.
 fn instance_ground_sky(g: u32, i: u32, pm: vec3<f32>) -> vec3<f32> {
+    if (shading.tables.w == RELIT && shading.tables.z == PHYSICAL) {
+        return relit_physical_ground_sky(g, i, pm);
+    }
     if (shading.tables.w == RELIT) {
         let l = luminance(relit_sample(g, i, pm)) / shading.k2.w;
         return vec3<f32>(l, l, l);

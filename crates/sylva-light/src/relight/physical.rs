@@ -28,7 +28,10 @@ use sylva_lb::{Bounds, Dims, LightingGrid};
 use sylva_trace::TraceInstance;
 
 pub use super::sun_parts::{overhead_part, sun_part_weights, SUN_DIRECTIONS, SUN_PARTS};
-use crate::device::{DeviceLight, NoDevice};
+use crate::device::{
+    DeviceKind, DeviceLight, NoDevice, PackedLight, Packer, SunWords, LIGHT_HEADER, NONE,
+    RELIT_ENTRY, RELIT_TERM,
+};
 use crate::forest::{free_weights, ForestBases};
 use crate::indirect::{ground_shade, GroundIndex, IndirectLight, ModelGridLight};
 use crate::lighting::{
@@ -372,8 +375,136 @@ impl IndirectLight for PhysicalRelitLight {
     }
 
     fn device(&self) -> Result<&dyn DeviceLight, NoDevice> {
-        Err(NoDevice(
-            "the relit physical light has no GPU side yet: its frames are shaded on the CPU",
-        ))
+        Ok(self)
+    }
+}
+
+impl PhysicalBasis {
+    /// Words of its relit record: the header, then every field at every site.
+    fn device_words(&self) -> u64 {
+        LIGHT_HEADER as u64 + (3 * PARTS * self.dims.sites()) as u64
+    }
+
+    /// A relit record of kind 0 (every field at every site, field `3 part + colour`, site
+    /// after site), the paper light's uncompressed layout: shade.wgsl's `relit_terms` reads
+    /// both. `bounds`: the model's. Returns where it starts.
+    fn pack(&self, p: &mut Packer, bounds: Aabb) -> u32 {
+        let mut extra = [0u32; 9];
+        extra[1] = (3 * PARTS) as u32;
+        extra[2] = self.dims.sites() as u32;
+        let start = p.light_header(
+            self.dims,
+            (
+                Vec3::from_array(self.placement.origin()),
+                Vec3::from_array(self.placement.inv_cell()),
+            ),
+            bounds,
+            extra,
+        );
+        for field in 0..3 * PARTS {
+            let (part, colour) = (field / 3, field % 3);
+            p.words
+                .extend(self.values.iter().map(|v| v[part][colour].to_bits()));
+        }
+        start
+    }
+}
+
+/// `terms` over the device's scalar fields (`3 part + colour`): a part's weight per colour
+/// becomes a term per colour, its weight on that colour alone.
+fn field_terms(terms: &PartTerms, words: &mut Vec<u32>) -> u32 {
+    let mut n = 0;
+    for &(part, w) in terms {
+        for c in 0..3 {
+            if w[c] != 0.0 {
+                let mut only = [0.0f32; 3];
+                only[c] = w[c];
+                words.push((3 * part + c) as u32);
+                words.extend(only.map(f32::to_bits));
+                n += 1;
+            }
+        }
+    }
+    n
+}
+
+/// The GPU side: the kernel's relit lookup (`relit_sample`) over kind-0 records, with the
+/// physical light's ground (shade.wgsl `relit_physical_ground_sky`: the share of the open
+/// sky's light under a tree from its grid's two lowest layers, as [`IndirectLight::ground_sky`]
+/// here). Parity: `device::tests` unpacks the words as the shader reads them; the pipeline's
+/// GPU tests compare whole frames.
+impl DeviceLight for PhysicalRelitLight {
+    fn kind(&self) -> DeviceKind {
+        DeviceKind::Relit
+    }
+
+    fn pool_words(&self) -> u64 {
+        let records: u64 = self
+            .models
+            .iter()
+            .flatten()
+            .map(PhysicalBasis::device_words)
+            .sum();
+        records + self.ground_index.words()
+    }
+
+    fn pack(&self, pool: &mut Vec<u32>) -> PackedLight {
+        let mut p = Packer::new(pool);
+        let records = self
+            .models
+            .iter()
+            .zip(&self.model_bounds)
+            .map(|(b, &bounds)| b.as_ref().map_or(NONE, |b| b.pack(&mut p, bounds)))
+            .collect();
+        PackedLight {
+            records,
+            ground: self.ground_index.pack(pool),
+        }
+    }
+
+    /// Per instance an entry: its plants' terms (first, count), no constant, its ground's
+    /// terms (first, count) and where the open field (sky, bottom: 6 words) is; the open
+    /// field once after the entries, then the terms (field, weight per colour).
+    fn sun_words(&self) -> SunWords {
+        let n = self.instances.len();
+        let mut words = vec![0u32; RELIT_ENTRY * n];
+        let open = words.len() as u32;
+        words.extend(self.open.sky.to_array().map(f32::to_bits));
+        words.extend(self.open.bottom.to_array().map(f32::to_bits));
+        for (i, inst) in self.instances.iter().enumerate() {
+            let e = RELIT_ENTRY * i;
+            words[e + 7] = open;
+            if self.models[inst.model as usize].is_none() {
+                continue;
+            }
+            let first = words.len() as u32;
+            let count = field_terms(&inst.terms, &mut words);
+            let ground_first = words.len() as u32;
+            let ground_count = field_terms(&inst.ground, &mut words);
+            words[e] = first;
+            words[e + 1] = count;
+            words[e + 5] = ground_first;
+            words[e + 6] = ground_count;
+        }
+        SunWords {
+            words,
+            // The physical ground reads its open field, not a free-space luminance.
+            free_space: 1.0,
+        }
+    }
+
+    /// Every part of every instance's model in every colour, twice (plants and ground),
+    /// and the open field.
+    fn sun_capacity(&self) -> usize {
+        self.instances
+            .iter()
+            .map(|inst| {
+                RELIT_ENTRY
+                    + self.models[inst.model as usize]
+                        .as_ref()
+                        .map_or(0, |_| 2 * RELIT_TERM * 3 * PARTS)
+            })
+            .sum::<usize>()
+            + 6
     }
 }

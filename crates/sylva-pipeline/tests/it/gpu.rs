@@ -387,6 +387,62 @@ fn relit_light_is_shaded_on_the_gpu_as_on_the_cpu() {
     frames_agree(&ctx, &cpu, &gpu, tight, "relit, exact weights, ambient 0.3");
 }
 
+/// The scene under the physical light relit from its base solutions, with the final gather.
+fn prepare_physical_relit(dir: &Path, gpu: Option<&GpuContext>, forest: bool) -> PreparedScene {
+    let path = dir.join("roses.toml");
+    std::fs::write(&path, SCENE).unwrap();
+    let scene = load_scene(path.to_str().unwrap(), None).unwrap();
+    let opts = PrepareOptions {
+        lb: Some(LbPlan {
+            solver: &CpuSolver,
+            light: Light::Physical,
+            grid: None,
+            cache_dir: Some(&dir.join("cache")),
+        }),
+        trace_gpu: gpu,
+        shade_on_gpu: true,
+        light: Light::Physical,
+        gather_rays: 2,
+        relight: Some(RelightPlan {
+            basis: BasisUse::Always,
+            sun: SunWeights::ThreeBasis,
+            ambient: 0.0,
+            ..RelightPlan::default()
+        }),
+        forest: forest.then_some(sylva_light::relight::GlobalGridOptions { sites: 24 }),
+        ..PrepareOptions::default()
+    };
+    PreparedScene::new(scene, &opts, &Silent).unwrap()
+}
+
+#[test]
+fn the_physical_light_relit_is_shaded_on_the_gpu_as_on_the_cpu() {
+    let Some(ctx) = context() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    // With the forest grid: its relit weights are in each instance's terms.
+    let mut cpu = prepare_physical_relit(dir.path(), None, true);
+    let mut gpu = prepare_physical_relit(dir.path(), Some(&ctx), true);
+    assert!(gpu.physical.is_some() && gpu.gpu_frame.is_some());
+    assert!(gpu.gpu_shading_note().is_none());
+    assert_eq!(gpu.indirect().device().unwrap().kind(), DeviceKind::Relit);
+    for sun in [
+        glam::Vec3::new(0.3, 0.8, -0.2),
+        glam::Vec3::new(-0.5, 0.6, 0.4),
+    ] {
+        // The sun moves: the kernel gets each instance's new terms, no LB solve; the final
+        // gather's rays read the relit light where they land.
+        cpu.set_sun(sun).unwrap();
+        gpu.set_sun(sun).unwrap();
+        frames_agree(
+            &ctx,
+            &cpu,
+            &gpu,
+            (1e-4, 1e-3),
+            &format!("physical relit, sun {sun}"),
+        );
+    }
+}
+
 #[test]
 fn every_stored_form_of_the_bases_is_read_on_the_gpu_as_on_the_cpu() {
     // The recommended codec stores packed Haar coefficients (the test above); the others
