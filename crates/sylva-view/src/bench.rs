@@ -47,6 +47,9 @@ pub struct ViewBenchReport {
     pub latency_p95_ms: f64,
     /// Preview frames received per second of dragging (median over runs).
     pub fps: f64,
+    /// Median time the server took to move the sun per preview, and to render it.
+    pub relight_ms: f64,
+    pub preview_render_ms: f64,
     /// Median preview size (pixels wide) and JPEG bytes.
     pub preview_width: u32,
     pub preview_bytes: usize,
@@ -67,10 +70,12 @@ impl std::fmt::Display for ViewBenchReport {
         writeln!(
             f,
             "  dragging: input to frame median {:.1} ms, p95 {:.1} ms; {:.1} frames/s \
-             (previews {} px wide, {} bytes)",
+             (the sun moved in {:.1} ms, previews rendered in {:.1} ms, {} px wide, {} bytes)",
             self.latency_median_ms,
             self.latency_p95_ms,
             self.fps,
+            self.relight_ms,
+            self.preview_render_ms,
             self.preview_width,
             self.preview_bytes
         )?;
@@ -209,6 +214,7 @@ async fn drive(
     };
     let (mut latencies, mut fps, mut refined_ms) = (Vec::new(), Vec::new(), Vec::new());
     let (mut widths, mut preview_bytes, mut refined_bytes) = (Vec::new(), Vec::new(), 0);
+    let (mut relight_ms, mut render_ms) = (Vec::new(), Vec::new());
     let mut lb_solves = 0;
     let mut azimuth = 0.0;
     for _ in 0..plan.runs {
@@ -227,6 +233,8 @@ async fn drive(
                 if h.seq == last.seq && !h.refined {
                     latencies.push(sent.elapsed().as_secs_f64() * 1e3);
                     widths.push(h.width as f64);
+                    relight_ms.push(h.relight_ms);
+                    render_ms.push(h.render_ms);
                     preview_bytes.push(bytes as f64);
                     frames += 1;
                     break;
@@ -266,6 +274,8 @@ async fn drive(
         latency_median_ms: median(&mut latencies.clone()),
         latency_p95_ms: percentile(&mut latencies, 0.95),
         fps: median(&mut fps),
+        relight_ms: median(&mut relight_ms),
+        preview_render_ms: median(&mut render_ms),
         preview_width: median(&mut widths) as u32,
         preview_bytes: median(&mut preview_bytes) as usize,
         refined_ms: median(&mut refined_ms),

@@ -276,6 +276,9 @@ pub struct FrameHeader {
     /// Milliseconds rendering this pass (the refined frame: all its passes so far).
     pub render_ms: f64,
     pub encode_ms: f64,
+    /// Milliseconds the last move of the sun took (no LB solve: the relit light's weights
+    /// and the sun grid).
+    pub relight_ms: f64,
     pub sun_elevation: f64,
     pub sun_azimuth: f64,
     /// LB solves since the scene was prepared (moving the sun solves nothing: 0).

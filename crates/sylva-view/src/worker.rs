@@ -270,6 +270,8 @@ pub struct Worker {
     solves_at_start: u64,
     round: usize,
     saved: u32,
+    /// How long the last move of the sun took (the relit light's weights, the sun grid).
+    relight_seconds: f64,
 }
 
 impl Worker {
@@ -282,6 +284,7 @@ impl Worker {
             solves_at_start: sylva_lb::solves_started(),
             round: 0,
             saved: 0,
+            relight_seconds: 0.0,
         }
     }
 
@@ -435,7 +438,10 @@ impl Worker {
         if (self.scene.to_sun - to_sun).length() < 1e-7 {
             return Ok(());
         }
-        self.scene.set_sun(to_sun).map_err(|e| format!("sun: {e}"))
+        let t = Instant::now();
+        let moved = self.scene.set_sun(to_sun).map_err(|e| format!("sun: {e}"));
+        self.relight_seconds = t.elapsed().as_secs_f64();
+        moved
     }
 
     /// One refinement pass for the page: full size and gather, rendered in strips so newer
@@ -546,6 +552,7 @@ impl Worker {
             samples,
             render_ms: seconds * 1e3,
             encode_ms: t.elapsed().as_secs_f64() * 1e3,
+            relight_ms: self.relight_seconds * 1e3,
             sun_elevation: page.view.sun.elevation,
             sun_azimuth: page.view.sun.azimuth,
             lb_solves: sylva_lb::solves_started() - self.solves_at_start,

@@ -183,6 +183,7 @@ fn messages_parse_strictly_and_frames_round_trip() {
         samples: 5,
         render_ms: 1.5,
         encode_ms: 0.25,
+        relight_ms: 0.5,
         sun_elevation: 30.0,
         sun_azimuth: 90.0,
         lb_solves: 0,
