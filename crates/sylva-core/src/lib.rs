@@ -39,6 +39,7 @@ mod names;
 mod rng;
 pub mod solar;
 mod sun;
+mod text;
 pub mod wire;
 
 pub use atomic::{atomic_write, atomic_write_with, OutputError, OutputSet};
@@ -48,4 +49,5 @@ pub use input::{open_file, protect_input, read_file, read_text_file, resolve_ins
 pub use memory::{available_memory_bytes, check_memory, format_bytes, MemoryError};
 pub use names::file_stem;
 pub use rng::SplitMix64;
-pub use sun::{Sun, SunError};
+pub use sun::{Sun, SunError, SunFlagError};
+pub use text::thousands;

@@ -6,11 +6,10 @@ use std::time::Instant;
 
 use anyhow::Result;
 use clap::Args;
-use sylva_core::format_bytes;
+use sylva_core::{format_bytes, thousands};
 use sylva_io::export::{self, mitsuba, obj, Format};
 
 use super::progress::bar;
-use super::scene::thousands;
 
 #[derive(Args)]
 pub struct ExportArgs {

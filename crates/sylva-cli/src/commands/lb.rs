@@ -6,13 +6,12 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use sylva_core::Sun;
-use sylva_lb::grid_file::{read_header_verified, GridKind};
+use sylva_geom::params::MediumOverrides;
+use sylva_grid::info::{read_raw, GridInfo};
 use sylva_lb::preview::lighting_preview_png;
+use sylva_lb::report::SolvedGrid;
 use sylva_lb::shapes::Shape;
-use sylva_lb::{
-    Boundary, ColourParams, DensityGrid, Dims, Element, GridFile, MediumParams, Preset, RawElement,
-    SolveOptions,
-};
+use sylva_lb::{Boundary, DensityGrid, Dims, Element, GridFile, RawElement, SolveOptions};
 use sylva_scene::model_source::{load_scene_model, scene_model_preset};
 use sylva_scene::SceneDesc;
 
@@ -153,72 +152,17 @@ pub fn run(args: LbArgs) -> Result<()> {
     }
 }
 
-/// Parses "v" or "r,g,b" into three values.
-fn per_colour(name: &str, s: &str) -> Result<[f64; 3]> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|p| p.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .with_context(|| {
-            format!("--{name} '{s}': expected a number or three comma-separated numbers")
-        })?;
-    match v.as_slice() {
-        [a] => Ok([*a; 3]),
-        [r, g, b] => Ok([*r, *g, *b]),
-        _ => bail!(
-            "--{name} '{s}': expected one value or three (R,G,B), got {}",
-            v.len()
-        ),
-    }
-}
-
-pub fn parse_sun(sun: Option<&str>, elevation: Option<f64>, azimuth: Option<f64>) -> Result<Sun> {
-    Ok(match (sun, elevation, azimuth) {
-        (Some(v), _, _) => Sun::parse_vector(v).context("--sun")?,
-        (None, None, None) => Sun::default(),
-        (None, e, a) => {
-            // Above the zenith is a typing error (the help's range); below the horizon the
-            // pipeline explains why the sun must be up.
-            if let Some(e) = e.filter(|e| e.is_nan() || *e > 90.0) {
-                anyhow::bail!("--elevation {e}: degrees above the horizon, 0 to 90");
-            }
-            Sun::from_angles(e.unwrap_or(50.0), a.unwrap_or(30.0))
-                .context("--elevation/--azimuth")?
-        }
-    })
-}
-
-fn medium(a: &SolveArgs, preset: &str) -> Result<MediumParams> {
-    let mut m = Preset::parse(preset)?.params();
-    if let Some(s) = &a.sigma_a {
-        let v = per_colour("sigma-a", s)?;
-        for (colour, value) in m.colours.iter_mut().zip(v) {
-            colour.sigma_a = value;
-            // σ_s follows σ_a as in 000 (σ_s = 1 - σ_a) unless given too.
-            if a.sigma_s.is_none() {
-                colour.sigma_s = 1.0 - value;
-            }
+impl From<&SolveArgs> for MediumOverrides {
+    fn from(a: &SolveArgs) -> MediumOverrides {
+        MediumOverrides {
+            sigma_a: a.sigma_a.clone(),
+            sigma_s: a.sigma_s.clone(),
+            g: a.g.clone(),
+            keep_f0: a.keep_f0,
+            brown_keeps_f0: a.brown_keeps_f0,
+            brown_threshold: a.brown_threshold,
         }
     }
-    if let Some(s) = &a.sigma_s {
-        for (colour, value) in m.colours.iter_mut().zip(per_colour("sigma-s", s)?) {
-            colour.sigma_s = value;
-        }
-    }
-    if let Some(s) = &a.g {
-        for (colour, value) in m.colours.iter_mut().zip(per_colour("g", s)?) {
-            colour.g = value;
-        }
-    }
-    if a.keep_f0 {
-        m.zero_f0_on_green = false;
-    }
-    if a.brown_keeps_f0 {
-        m.zero_f0_on_brown = false;
-    }
-    m.brown_threshold = a.brown_threshold;
-    m.validate()?;
-    Ok(m)
 }
 
 fn parse_dims(s: &str, what: &str) -> Result<Dims> {
@@ -279,7 +223,11 @@ fn load_source(a: &SolveArgs, scene: Option<&SceneDesc>) -> Result<(DensityGrid,
     }
     if let Some(path) = &a.source.raw {
         let dims = parse_dims(a.raw_dims.as_deref().unwrap_or_default(), "--raw-dims")?;
-        return Ok((read_raw(path, dims, &a.raw_type)?, "raw".into()));
+        let element = match a.raw_type.as_str() {
+            "f32" => RawElement::F32,
+            _ => RawElement::U8,
+        };
+        return Ok((read_raw(path, dims, element)?, "raw".into()));
     }
     let shape_name = a.source.shape.as_deref().unwrap_or("crown");
     let Some(shape) = Shape::parse(shape_name) else {
@@ -290,25 +238,6 @@ fn load_source(a: &SolveArgs, scene: Option<&SceneDesc>) -> Result<(DensityGrid,
     Ok((shape.grid(dims), shape.name().into()))
 }
 
-fn read_raw(path: &Path, dims: Dims, ty: &str) -> Result<DensityGrid> {
-    let element = if ty == "f32" {
-        RawElement::F32
-    } else {
-        RawElement::U8
-    };
-    let want = (dims.sites() * element.size()) as u64;
-    // A regular file of exactly the bytes the grid needs, checked before it is read.
-    let (_, size) = sylva_core::open_file(path, u64::MAX, "raw grid files")?;
-    if size != want {
-        bail!(
-            "{}: a {dims} grid of {ty} needs {want} bytes, the file has {size}",
-            path.display()
-        );
-    }
-    let bytes = sylva_core::read_file(path, want, "raw grid files")?;
-    DensityGrid::from_raw(dims, &bytes, element).with_context(|| format!("{}", path.display()))
-}
-
 fn solve(a: SolveArgs) -> Result<()> {
     // The scene file is read first (cheap): its [lb] preset decides the parameters.
     let scene = a.source.scene.as_deref().map(SceneDesc::load).transpose()?;
@@ -317,8 +246,8 @@ fn solve(a: SolveArgs) -> Result<()> {
         (None, Some(s)) => scene_model_preset(s, a.scene_model.as_deref())?,
         (None, None) => "leaf".to_string(),
     };
-    let m = medium(&a, &preset)?;
-    let sun = parse_sun(a.sun.as_deref(), a.elevation, a.azimuth)?;
+    let m = MediumOverrides::from(&a).apply(&preset)?;
+    let sun = Sun::from_flags(a.sun.as_deref(), a.elevation, a.azimuth)?;
     if !(a.intensity.is_finite() && a.intensity > 0.0) {
         bail!("--intensity {} must be a positive number", a.intensity);
     }
@@ -337,17 +266,7 @@ fn solve(a: SolveArgs) -> Result<()> {
     let (grid, name) = load_source(&a, scene.as_ref())?;
     let dims = grid.dims;
     let load_s = t0.elapsed().as_secs_f64();
-    let opts = match (a.steps, a.tolerance) {
-        (Some(s), t) => SolveOptions {
-            max_steps: s,
-            tolerance: t,
-        },
-        (None, None) => SolveOptions::papers(dims),
-        (None, Some(t)) => SolveOptions {
-            max_steps: 10 * dims.longest_edge(),
-            tolerance: Some(t),
-        },
-    };
+    let opts = SolveOptions::for_run(a.steps, a.tolerance, dims);
     let output = a
         .output
         .clone()
@@ -398,50 +317,16 @@ fn solve(a: SolveArgs) -> Result<()> {
     )?;
     pb.finish_and_clear();
     let solve_s = t1.elapsed().as_secs_f64();
-    for (c, r) in reports.iter().enumerate() {
-        let p: &ColourParams = &m.colours[c];
-        println!(
-            "  {:>5}: σ_a {:.3} σ_s {:.3} g {:+.3}: {} steps, stop: {}, final residual {:.2e}, {:.2} s, {:.0} MLUPS",
-            sylva_lb::params::COLOUR_NAMES[c],
-            p.sigma_a,
-            p.sigma_s,
-            p.g,
-            r.steps,
-            r.stop,
-            r.residual,
-            r.seconds,
-            r.mlups(dims)
-        );
-    }
-    let metadata = vec![
-        ("source".to_string(), name.clone()),
-        ("preset".to_string(), preset.clone()),
-        (
-            "sun_to".to_string(),
-            format!(
-                "{:.6},{:.6},{:.6}",
-                sun.to_sun().x,
-                sun.to_sun().y,
-                sun.to_sun().z
-            ),
-        ),
-        (
-            "params".to_string(),
-            m.colours
-                .iter()
-                .map(|c| format!("{}/{}/{}", c.sigma_a, c.sigma_s, c.g))
-                .collect::<Vec<_>>()
-                .join(" "),
-        ),
-        (
-            "steps".to_string(),
-            reports
-                .iter()
-                .map(|r| r.steps.to_string())
-                .collect::<Vec<_>>()
-                .join(","),
-        ),
-    ];
+    let solved = SolvedGrid {
+        source: &name,
+        preset: &preset,
+        medium: &m,
+        sun: &sun,
+        dims,
+        reports: &reports,
+    };
+    print!("{solved}");
+    let metadata = solved.metadata();
     let element = if a.f16 { Element::F16 } else { Element::F32 };
     GridFile::from_lighting(&lighting, element, metadata).write_into(&mut outputs, &output)?;
     let preview = lighting_preview_png(&lighting)
@@ -458,50 +343,6 @@ fn solve(a: SolveArgs) -> Result<()> {
 }
 
 fn info(path: &Path) -> Result<()> {
-    let header = read_header_verified(path)?;
-    println!("{}", path.display());
-    println!("  kind:      {} grid", header.kind.name());
-    println!(
-        "  size:      {} ({} sites)",
-        header.dims,
-        header.dims.sites()
-    );
-    println!("  element:   {}", header.element.name());
-    println!(
-        "  bounds:    ({}, {}, {}) .. ({}, {}, {})",
-        header.bounds.min[0],
-        header.bounds.min[1],
-        header.bounds.min[2],
-        header.bounds.max[0],
-        header.bounds.max[1],
-        header.bounds.max[2]
-    );
-    println!(
-        "  file:      {} ({}), checksum {:08x} ok",
-        header.file_bytes,
-        sylva_core::format_bytes(header.file_bytes),
-        header.checksum
-    );
-    for (k, v) in &header.metadata {
-        println!("  {k:<10} {v}");
-    }
-    let file = GridFile::read(path)?;
-    for (name, ch) in header.kind.channel_names().iter().zip(&file.channels) {
-        let (mut lo, mut hi, mut sum) = (f32::INFINITY, f32::NEG_INFINITY, 0.0f64);
-        for &v in ch {
-            lo = lo.min(v);
-            hi = hi.max(v);
-            sum += v as f64;
-        }
-        println!(
-            "  {name:<14} min {lo:.5}  max {hi:.5}  mean {:.5}",
-            sum / ch.len() as f64
-        );
-    }
-    if header.kind == GridKind::Density {
-        let g = file.into_density(path)?;
-        let (mean, occupied) = g.occupancy();
-        println!("  occupied:  {occupied} sites, mean density {mean:.5}");
-    }
+    print!("{}", GridInfo::read(path)?);
     Ok(())
 }

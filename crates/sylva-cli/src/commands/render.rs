@@ -623,7 +623,7 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
     let sun = match sun {
         Some(sun) => Some(sun),
         None => (a.sun.sun.is_some() || a.sun.elevation.is_some() || a.sun.azimuth.is_some())
-            .then(|| super::lb::parse_sun(a.sun.sun.as_deref(), a.sun.elevation, a.sun.azimuth))
+            .then(|| Sun::from_flags(a.sun.sun.as_deref(), a.sun.elevation, a.sun.azimuth))
             .transpose()?,
     };
     if !(1..=sylva_trace::MAX_DEPTH).contains(&a.view.stack) {
