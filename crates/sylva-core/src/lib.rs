@@ -42,7 +42,7 @@ mod sun;
 mod text;
 pub mod wire;
 
-pub use atomic::{atomic_write, atomic_write_with, OutputError, OutputSet};
+pub use atomic::{atomic_write, atomic_write_with, companion_path, OutputError, OutputSet};
 pub use colour::{blackbody_rgb, try_blackbody_rgb, SUN_TEMPERATURE_K};
 pub use hash::Fnv64;
 pub use input::{open_file, protect_input, read_file, read_text_file, resolve_inside, InputError};

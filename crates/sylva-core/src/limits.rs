@@ -43,6 +43,17 @@ pub fn describe<T: std::fmt::Display>(r: &RangeInclusive<T>) -> String {
     format!("{} to {}", r.start(), r.end())
 }
 
+/// `--rpp`: rays per pixel in [`RAYS_PER_PIXEL`]; `None` (the scene camera's) passes.
+pub fn check_rays_per_pixel(rpp: Option<u32>) -> Result<(), String> {
+    match rpp {
+        Some(r) if !RAYS_PER_PIXEL.contains(&r) => Err(format!(
+            "--rpp {r}: rays per pixel must be {}",
+            describe(&RAYS_PER_PIXEL)
+        )),
+        _ => Ok(()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -52,5 +63,10 @@ mod tests {
         // A voxelized model's grid must be a valid LB grid along every edge.
         assert!(GRID_EDGE.contains(MODEL_GRID.start()) && GRID_EDGE.contains(MODEL_GRID.end()));
         assert_eq!(describe(&MODEL_GRID), "4 to 2048");
+        assert_eq!(
+            check_rays_per_pixel(Some(0)).unwrap_err(),
+            "--rpp 0: rays per pixel must be 1 to 1024"
+        );
+        assert!(check_rays_per_pixel(Some(1024)).is_ok() && check_rays_per_pixel(None).is_ok());
     }
 }

@@ -233,6 +233,27 @@ impl DensityGrid {
         })
     }
 
+    /// Sites with density > 0 whose wood fraction exceeds `threshold` (brown sites in the LB).
+    pub fn wood_sites(&self, threshold: f32) -> usize {
+        self.density
+            .iter()
+            .zip(&self.wood)
+            .filter(|(&d, &w)| d > 0.0 && w > threshold)
+            .count()
+    }
+
+    /// One line describing the grid: size, occupancy, mean density, brown sites.
+    pub fn summary(&self) -> String {
+        let (mean, occupied) = self.occupancy();
+        format!(
+            "{} grid, {occupied} occupied sites ({:.1} %), mean density {mean:.4} ({:.4} over occupied sites), {} wood sites (wood fraction > 0.5)",
+            self.dims,
+            100.0 * occupied as f64 / self.dims.sites() as f64,
+            mean * self.dims.sites() as f64 / occupied.max(1) as f64,
+            self.wood_sites(0.5)
+        )
+    }
+
     /// Mean density over the grid and number of occupied sites.
     pub fn occupancy(&self) -> (f64, usize) {
         let sum: f64 = self.density.iter().map(|&d| d as f64).sum();

@@ -47,13 +47,21 @@ pub mod forest;
 pub mod frame;
 mod jobs;
 pub mod models;
+pub mod options;
 pub mod physical;
+pub mod report;
+pub mod sequence;
+pub mod spp;
 
 pub use bases::precompute_relighting;
 pub use forest::{forest_densities, light_forest, uses_forest, ForestDensities};
 pub use frame::{RankWork, SplitFrame, UnitLayout};
 pub use models::light_models;
+pub use options::{
+    costly_grid_warning, relight_light, BasisChoice, LightChoice, LightSettings, OptionError,
+};
 pub use physical::{precompute_physical, PhysicalRelighting};
+pub use report::{basis_jobs, scene_line, written_line, RenderSummary};
 pub use sylva_core::jobs::{Local, Runner};
 
 use std::path::{Path, PathBuf};
@@ -163,6 +171,10 @@ pub enum PipelineError {
     GpuFailed(String),
     #[error(transparent)]
     Gpu(#[from] sylva_wgpu::GpuError),
+    #[error("the plane-parallel light (003 §5)")]
+    SppLight(#[source] sylva_spp::trees::TreeError),
+    #[error(transparent)]
+    Spp(#[from] sylva_spp::trees::TreeError),
     /// A job, the processes running them or the data between them failed.
     #[error(transparent)]
     Jobs(#[from] sylva_core::jobs::JobError),

@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
-use sylva_core::Sun;
+use sylva_core::{companion_path, OutputSet, Sun};
 use sylva_geom::params::MediumOverrides;
 use sylva_grid::info::{read_raw, GridInfo};
 use sylva_lb::preview::lighting_preview_png;
@@ -192,11 +192,7 @@ fn load_source(a: &SolveArgs, scene: Option<&SceneDesc>) -> Result<(DensityGrid,
     if let Some(spec) = &a.source.model {
         let n = model_grid_n(a.grid.as_deref().unwrap_or("128"))?;
         let v = super::voxelize::load_and_voxelize(spec, n, true, a.occupancy.into())?;
-        println!(
-            "voxelized {}: {}",
-            v.name,
-            super::voxelize::summary(&v.grid)
-        );
+        println!("voxelized {}: {}", v.name, v.grid.summary());
         return Ok((v.grid, sylva_core::file_stem(&v.name, "model")));
     }
     if let Some(scene) = scene {
@@ -207,7 +203,7 @@ fn load_source(a: &SolveArgs, scene: Option<&SceneDesc>) -> Result<(DensityGrid,
         let model = load_scene_model(scene, a.scene_model.as_deref())?;
         let spec = format!("{}: {}", scene.name, model.name);
         let v = super::voxelize::voxelize_model(&model, &spec, n, true, a.occupancy.into())?;
-        println!("voxelized {spec}: {}", super::voxelize::summary(&v.grid));
+        println!("voxelized {spec}: {}", v.grid.summary());
         return Ok((
             v.grid,
             sylva_core::file_stem(&format!("{}-{}", scene.name, model.name), "model"),
@@ -253,15 +249,7 @@ fn solve(a: SolveArgs) -> Result<()> {
     }
     // Outputs named on the command line are checked (writable, not a directory) before the
     // grid is built; default names wait for the grid's name.
-    let early: Vec<PathBuf> = match (&a.output, &a.png) {
-        (Some(o), p) => vec![
-            o.clone(),
-            p.clone().unwrap_or_else(|| o.with_extension("png")),
-        ],
-        (None, Some(p)) => vec![p.clone()],
-        (None, None) => Vec::new(),
-    };
-    sylva_core::OutputSet::new::<&Path>(&[]).plan(&early)?;
+    OutputSet::check_named(a.output.as_deref(), a.png.as_deref(), "png")?;
     let t0 = Instant::now();
     let (grid, name) = load_source(&a, scene.as_ref())?;
     let dims = grid.dims;
@@ -271,17 +259,14 @@ fn solve(a: SolveArgs) -> Result<()> {
         .output
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("sylva-out/lb-{name}.sgrid")));
-    let png = a
-        .png
-        .clone()
-        .unwrap_or_else(|| output.with_extension("png"));
+    let png = companion_path(&output, a.png.as_deref(), "png");
     // Inputs are protected (--input and --raw here; scene and model files as they are read),
     // and the grid and its preview are checked against each other, before the solve.
     let inputs: Vec<&Path> = [a.source.input.as_deref(), a.source.raw.as_deref()]
         .into_iter()
         .flatten()
         .collect();
-    let mut outputs = sylva_core::OutputSet::new(&inputs);
+    let mut outputs = OutputSet::new(&inputs);
     outputs.plan(&[&output, &png])?;
     let (mean, occupied) = grid.occupancy();
     let d = sun.travel();
