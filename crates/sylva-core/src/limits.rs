@@ -43,6 +43,14 @@ pub fn describe<T: std::fmt::Display>(r: &RangeInclusive<T>) -> String {
     format!("{} to {}", r.start(), r.end())
 }
 
+/// `--threads`: a worker thread count in [`THREADS`] (signed, so `-1` gets this message).
+pub fn check_threads(n: i64) -> Result<usize, String> {
+    match usize::try_from(n) {
+        Ok(k) if THREADS.contains(&k) => Ok(k),
+        _ => Err(format!("--threads {n}: must be {}", describe(&THREADS))),
+    }
+}
+
 /// `--rpp`: rays per pixel in [`RAYS_PER_PIXEL`]; `None` (the scene camera's) passes.
 pub fn check_rays_per_pixel(rpp: Option<u32>) -> Result<(), String> {
     match rpp {
@@ -68,5 +76,10 @@ mod tests {
             "--rpp 0: rays per pixel must be 1 to 1024"
         );
         assert!(check_rays_per_pixel(Some(1024)).is_ok() && check_rays_per_pixel(None).is_ok());
+        assert_eq!(
+            check_threads(-1).unwrap_err(),
+            "--threads -1: must be 1 to 256"
+        );
+        assert_eq!(check_threads(256), Ok(256));
     }
 }

@@ -194,6 +194,17 @@ pub enum RelightingAt {
     Everywhere,
 }
 
+/// A scene by file or built-in name ([`load_scene`]), or else one tree of a built-in species
+/// (`sylva spp trees red_maple`, `sylva bench spp`).
+pub fn load_scene_or_species(name: &str) -> Result<Scene, PipelineError> {
+    match load_scene(name, None) {
+        Err(PipelineError::Scene(SceneError::NotFound(_))) => {
+            Ok(sylva_scene::builtin_scenes::species_scene(name)?)
+        }
+        other => other,
+    }
+}
+
 /// Loads a scene file or built-in scene by name and builds it; `sun` replaces its sun.
 pub fn load_scene(name_or_path: &str, sun: Option<Sun>) -> Result<Scene, PipelineError> {
     let _span = tracing::info_span!(stage::SCENE_BUILD).entered();
@@ -1336,6 +1347,25 @@ pub fn image_paths(base: &Path, modes: &[Mode], hdr: bool) -> Vec<PathBuf> {
         paths.push(png);
     }
     paths
+}
+
+/// Refuses an image name `path` that is not a PNG (a render writes PNGs, and with `--hdr`
+/// an EXR beside each).
+pub fn check_png_name(path: &Path) -> Result<(), OptionError> {
+    let ext = path.extension().map(|e| e.to_ascii_lowercase());
+    if ext.as_deref() != Some(std::ffi::OsStr::new("png")) {
+        return Err(OptionError(format!(
+            "{}: the output is a PNG file (name it .png; --hdr adds an .exr beside it)",
+            path.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Checks the files [`write_images`] will write from `base` before the render: none named
+/// twice, none an input, each writable.
+pub fn plan_images(base: &Path, modes: &[Mode], hdr: bool) -> Result<(), sylva_core::OutputError> {
+    sylva_core::OutputSet::new::<&Path>(&[]).plan(&image_paths(base, modes, hdr))
 }
 
 /// Writes each mode's PNG (named by [`mode_path`] from `base`) and, with `hdr`, its EXR

@@ -15,9 +15,9 @@ use sylva_light::relight::{BasisReport, GlobalGridOptions, SunWeights};
 use sylva_light::report::LightEvent;
 use sylva_light::{Progress, Silent};
 use sylva_pipeline::{
-    costly_grid_warning, image_paths, load_scene, resolution, scene_line, tone_map_modes,
-    write_images, written_line, BasisChoice, LbPlan, LightSettings, PrepareOptions, PreparedScene,
-    RenderSummary, Runner, ShadowMethod,
+    check_png_name, costly_grid_warning, load_scene, plan_images, resolution, scene_line,
+    tone_map_modes, write_images, written_line, BasisChoice, LbPlan, LightSettings, PrepareOptions,
+    PreparedScene, RenderSummary, Runner, ShadowMethod,
 };
 use sylva_render::{Mode, ShadingParams, ToneMap};
 use sylva_trace::TraversalConfig;
@@ -510,30 +510,23 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
 }
 
 pub fn run(a: RenderArgs, runner: &dyn Runner) -> Result<()> {
-    let modes: Vec<Mode> = match a.mode.as_str() {
-        "all" => Mode::ALL.to_vec(),
-        m => vec![Mode::parse(m)
-            .with_context(|| format!("--mode '{m}': expected full, local, ambient, lb or all"))?],
-    };
+    let modes = Mode::parse_set(&a.mode).with_context(|| {
+        format!(
+            "--mode '{}': expected full, local, ambient, lb or all",
+            a.mode
+        )
+    })?;
     let tm = ToneMap {
         key: a.key,
         white: a.white,
     };
     tm.validate().map_err(anyhow::Error::msg)?;
-    if let Some(o) = &a.output {
-        let ext = o.extension().map(|e| e.to_ascii_lowercase());
-        if ext.as_deref() != Some(std::ffi::OsStr::new("png")) {
-            bail!(
-                "{}: the output is a PNG file (name it .png; --hdr adds an .exr beside it)",
-                o.display()
-            );
-        }
-    }
+    a.output.as_deref().map(check_png_name).transpose()?;
     sylva_core::limits::check_rays_per_pixel(a.rpp).map_err(anyhow::Error::msg)?;
-    if let Some(o) = &a.output {
-        // Named twice or an input: refused now, not after the render.
-        sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&image_paths(o, &modes, a.hdr))?;
-    }
+    // Named twice or an input: refused now, not after the render.
+    (a.output.as_deref())
+        .map(|o| plan_images(o, &modes, a.hdr))
+        .transpose()?;
     // The sun of a moment: placed (or refused: below the horizon) before any work.
     let moment = a.sun_time.moment()?;
     let sun = match &moment {
