@@ -486,6 +486,17 @@ pub struct SolarAngles {
 }
 
 impl SolarAngles {
+    /// One line on the sun `sun` (these angles) at moment `at`: its compass angles and its
+    /// world azimuth.
+    pub fn describe(&self, at: &SolarTime, sun: &Sun) -> String {
+        format!(
+            "sun at {at}: elevation {:.1}°, azimuth {:.1}° from north (world azimuth {:.1}°: north -z, east +x)",
+            self.elevation_deg,
+            self.azimuth_deg,
+            sun.azimuth_deg()
+        )
+    }
+
     /// sylva's sun for these angles (north = -z, east = +x). Below the horizon too: the
     /// renderer refuses such a sun, [`SolarTime::sun`] explains it first.
     pub fn sun(&self) -> Result<Sun, SunError> {

@@ -96,6 +96,17 @@ impl Sun {
         })
     }
 
+    /// [`Sun::from_flags`] when any of the flags is given, else `None` (the scene's sun).
+    pub fn given(
+        sun: Option<&str>,
+        elevation: Option<f64>,
+        azimuth: Option<f64>,
+    ) -> Result<Option<Sun>, SunFlagError> {
+        let any = sun.is_some() || elevation.is_some() || azimuth.is_some();
+        any.then(|| Sun::from_flags(sun, elevation, azimuth))
+            .transpose()
+    }
+
     /// Unit vector towards the sun.
     pub fn to_sun(&self) -> DVec3 {
         self.to_sun
@@ -146,10 +157,13 @@ mod tests {
     #[test]
     fn flags_give_the_sun_or_name_the_bad_flag() {
         let s = Sun::from_flags(None, Some(20.0), None).unwrap();
+        let s20 = s;
         assert!((s.elevation_deg() - 20.0).abs() < 1e-9 && (s.azimuth_deg() - 30.0).abs() < 1e-9);
         let s = Sun::from_flags(None, None, Some(100.0)).unwrap();
         assert!((s.elevation_deg() - 50.0).abs() < 1e-9 && (s.azimuth_deg() - 100.0).abs() < 1e-9);
         assert_eq!(Sun::from_flags(None, None, None).unwrap(), Sun::default());
+        assert_eq!(Sun::given(None, None, None), Ok(None));
+        assert_eq!(Sun::given(None, Some(20.0), None), Ok(Some(s20)));
         let s = Sun::from_flags(Some("0,1,0"), None, None).unwrap();
         assert!((s.to_sun() - DVec3::Y).length() < 1e-12);
         assert_eq!(

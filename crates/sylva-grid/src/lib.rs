@@ -15,5 +15,5 @@ pub mod grid_file;
 pub mod info;
 pub mod lattice;
 
-pub use grid::{Bounds, DensityGrid, Dims, GridError, LightingGrid, RawElement};
+pub use grid::{Bounds, DensityGrid, Dims, DimsFlagError, GridError, LightingGrid, RawElement};
 pub use grid_file::{Element, GridFile, GridFileError, GridKind};

@@ -61,7 +61,7 @@ pub use options::{
     costly_grid_warning, relight_light, BasisChoice, LightChoice, LightSettings, OptionError,
 };
 pub use physical::{precompute_physical, PhysicalRelighting};
-pub use report::{basis_jobs, scene_line, written_line, RenderSummary};
+pub use report::{basis_jobs, basis_scene_line, scene_line, written_line, RenderSummary};
 pub use sylva_core::jobs::{Local, Runner};
 
 use std::path::{Path, PathBuf};

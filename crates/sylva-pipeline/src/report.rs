@@ -101,6 +101,17 @@ impl SplitFrame {
     }
 }
 
+/// The scene whose base solutions `sylva basis` precomputes, on `grid` sites per model.
+pub fn basis_scene_line(scene: &Scene, grid: usize) -> String {
+    format!(
+        "scene {}: {} models, {} instances; LB grid {grid}, preset {}",
+        scene.name,
+        scene.models.len(),
+        scene.instances.len(),
+        scene.lb.preset
+    )
+}
+
 /// The independent solve jobs of `scene`'s base solutions, a tab-separated line each after a
 /// header, to `line`: per model the physical light's parts, or (`physical` false) the paper
 /// light's (model, base solution, colour) with models on `grid` sites: the work list a

@@ -144,8 +144,8 @@ impl fmt::Display for SceneInfo {
             writeln!(o)?;
             writeln!(
                 o,
-                "  {:<18} {:<18} {:>9} {:>11} {:>11} {:>11}  {}",
-                "model", "species", "instances", "triangles", "leaf", "wood", "preset"
+                "  {:<18} {:<18} {:>9} {:>11} {:>11} {:>11}  preset",
+                "model", "species", "instances", "triangles", "leaf", "wood"
             )?;
         }
         for m in &stats.models {

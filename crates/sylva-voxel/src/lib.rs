@@ -88,6 +88,36 @@ impl Default for VoxelizeOptions {
     }
 }
 
+/// A model grid given on the command line (`--grid N`) refused.
+#[derive(Debug, Error, PartialEq)]
+pub enum GridFlagError {
+    #[error("--grid '{text}': a model's grid is one number, the sites along its longest edge")]
+    NotANumber {
+        text: String,
+        #[source]
+        source: std::num::ParseIntError,
+    },
+    #[error(
+        "--grid {0}: a model's grid must be {MIN_GRID} to {MAX_GRID} sites along its longest edge"
+    )]
+    Range(usize),
+}
+
+/// `--grid N`: sites along a model's longest edge, [`MIN_GRID`] to [`MAX_GRID`].
+pub fn parse_grid_flag(text: &str) -> Result<usize, GridFlagError> {
+    let n: usize = text
+        .trim()
+        .parse()
+        .map_err(|source| GridFlagError::NotANumber {
+            text: text.to_string(),
+            source,
+        })?;
+    if !(MIN_GRID..=MAX_GRID).contains(&n) {
+        return Err(GridFlagError::Range(n));
+    }
+    Ok(n)
+}
+
 #[derive(Debug, Error)]
 pub enum VoxelizeError {
     #[error("model '{0}' has no triangles: nothing to voxelize")]

@@ -14,8 +14,8 @@ use clap::Args;
 use sylva_light::report::LightEvent;
 use sylva_light::{Light, Progress, Silent};
 use sylva_pipeline::{
-    basis_jobs, costly_grid_warning, load_scene, precompute_physical, precompute_relighting,
-    BasisUse, LbPlan, RelightingAt, Runner,
+    basis_jobs, basis_scene_line, costly_grid_warning, load_scene, precompute_physical,
+    precompute_relighting, BasisUse, LbPlan, RelightingAt, Runner,
 };
 
 use super::progress::Bars;
@@ -74,13 +74,7 @@ pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
             println!("{s}")
         }
     };
-    say(format!(
-        "scene {}: {} models, {} instances; LB grid {grid}, preset {}",
-        scene.name,
-        scene.models.len(),
-        scene.instances.len(),
-        scene.lb.preset
-    ));
+    say(basis_scene_line(&scene, grid));
     let light = if physical {
         Light::Physical
     } else {

@@ -7,7 +7,7 @@ use sylva_pipeline::bench::{self, TraceRun};
 use sylva_pipeline::Runner;
 use sylva_render::stage;
 
-use super::output::emit;
+use super::output::emit_report;
 use super::render::{prepare, FrameArgs, PrepareRequest, Say};
 
 #[derive(clap::Args, Debug)]
@@ -62,8 +62,5 @@ pub fn run(a: BenchTraceArgs, runner: &dyn Runner) -> Result<()> {
     let Some(report) = bench else {
         return Ok(()); // rank 0 reports
     };
-    if a.json {
-        return emit(&format!("{}\n", super::output::pretty_json(&report)?));
-    }
-    emit(&report.to_string())
+    emit_report(&report, a.json)
 }

@@ -3,17 +3,17 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
 use sylva_core::{companion_path, OutputSet, Sun};
 use sylva_geom::params::MediumOverrides;
 use sylva_grid::info::{read_raw, GridInfo};
-use sylva_lb::preview::lighting_preview_png;
-use sylva_lb::report::SolvedGrid;
+use sylva_lb::report::{lighting_line, SolvedGrid};
 use sylva_lb::shapes::Shape;
 use sylva_lb::{Boundary, DensityGrid, Dims, Element, GridFile, RawElement, SolveOptions};
 use sylva_scene::model_source::{load_scene_model, scene_model_preset};
 use sylva_scene::SceneDesc;
+use sylva_voxel::parse_grid_flag;
 
 use super::progress::bar;
 
@@ -165,39 +165,17 @@ impl From<&SolveArgs> for MediumOverrides {
     }
 }
 
-fn parse_dims(s: &str, what: &str) -> Result<Dims> {
-    match Dims::parse(s) {
-        Some(d) => Ok(d.with_context(|| format!("{what} '{s}'"))?),
-        None => bail!("{what} '{s}': expected N or NXxNYxNZ, e.g. 128 or 256x128x128"),
-    }
-}
-
-/// `--grid` as the N of a model grid.
-fn model_grid_n(grid: &str) -> Result<usize> {
-    let n: usize = grid.trim().parse().with_context(|| {
-        format!("--grid '{grid}': a model's grid is one number, the sites along its longest edge")
-    })?;
-    let range = sylva_core::limits::MODEL_GRID;
-    if !range.contains(&n) {
-        bail!(
-            "--grid {n}: a model's grid must be {} sites along its longest edge",
-            sylva_core::limits::describe(&range)
-        );
-    }
-    Ok(n)
-}
-
 /// Loads the medium and names it for default output paths.
 fn load_source(a: &SolveArgs, scene: Option<&SceneDesc>) -> Result<(DensityGrid, String)> {
     if let Some(spec) = &a.source.model {
-        let n = model_grid_n(a.grid.as_deref().unwrap_or("128"))?;
+        let n = parse_grid_flag(a.grid.as_deref().unwrap_or("128"))?;
         let v = super::voxelize::load_and_voxelize(spec, n, true, a.occupancy.into())?;
         println!("voxelized {}: {}", v.name, v.grid.summary());
         return Ok((v.grid, sylva_core::file_stem(&v.name, "model")));
     }
     if let Some(scene) = scene {
         let n = match &a.grid {
-            Some(g) => model_grid_n(g)?,
+            Some(g) => parse_grid_flag(g)?,
             None => scene.lb.grid as usize,
         };
         let model = load_scene_model(scene, a.scene_model.as_deref())?;
@@ -218,18 +196,15 @@ fn load_source(a: &SolveArgs, scene: Option<&SceneDesc>) -> Result<(DensityGrid,
         return Ok((grid, name));
     }
     if let Some(path) = &a.source.raw {
-        let dims = parse_dims(a.raw_dims.as_deref().unwrap_or_default(), "--raw-dims")?;
+        let dims = Dims::parse_flag(a.raw_dims.as_deref().unwrap_or_default(), "--raw-dims")?;
         let element = match a.raw_type.as_str() {
             "f32" => RawElement::F32,
             _ => RawElement::U8,
         };
         return Ok((read_raw(path, dims, element)?, "raw".into()));
     }
-    let shape_name = a.source.shape.as_deref().unwrap_or("crown");
-    let Some(shape) = Shape::parse(shape_name) else {
-        bail!("unknown shape '{shape_name}': expected sphere, cube or crown");
-    };
-    let dims = parse_dims(a.grid.as_deref().unwrap_or("128"), "--grid")?;
+    let shape = Shape::named(a.source.shape.as_deref().unwrap_or("crown"))?;
+    let dims = Dims::parse_flag(a.grid.as_deref().unwrap_or("128"), "--grid")?;
     sylva_lb::solver::check_solve_memory(dims)?;
     Ok((shape.grid(dims), shape.name().into()))
 }
@@ -268,14 +243,8 @@ fn solve(a: SolveArgs) -> Result<()> {
         .collect();
     let mut outputs = OutputSet::new(&inputs);
     outputs.plan(&[&output, &png])?;
-    let (mean, occupied) = grid.occupancy();
+    println!("{}", lighting_line(&name, &grid, &preset, &sun));
     let d = sun.travel();
-    println!(
-        "lighting {name}: {dims} grid, {occupied} occupied sites (mean density {mean:.4}), preset {}, sun elevation {:.1}° azimuth {:.1}°",
-        preset,
-        sun.elevation_deg(),
-        sun.azimuth_deg()
-    );
     let backend = super::device::open_solver(a.device, a.precision)?;
     let pb = bar(3 * opts.max_steps as u64, "LB solve");
     let mut last_colour = usize::MAX;
@@ -311,12 +280,8 @@ fn solve(a: SolveArgs) -> Result<()> {
         reports: &reports,
     };
     print!("{solved}");
-    let metadata = solved.metadata();
     let element = if a.f16 { Element::F16 } else { Element::F32 };
-    GridFile::from_lighting(&lighting, element, metadata).write_into(&mut outputs, &output)?;
-    let preview = lighting_preview_png(&lighting)
-        .with_context(|| format!("cannot encode the preview {}", png.display()))?;
-    outputs.write_bytes(&png, &preview)?;
+    solved.write(&lighting, element, &mut outputs, &output, &png)?;
     outputs.commit()?;
     println!(
         "total {:.2} s (setup {load_s:.2} s, solve {solve_s:.2} s, {})",

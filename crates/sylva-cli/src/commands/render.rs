@@ -423,17 +423,9 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
     };
     let sun = match sun {
         Some(sun) => Some(sun),
-        None => (a.sun.sun.is_some() || a.sun.elevation.is_some() || a.sun.azimuth.is_some())
-            .then(|| Sun::from_flags(a.sun.sun.as_deref(), a.sun.elevation, a.sun.azimuth))
-            .transpose()?,
+        None => Sun::given(a.sun.sun.as_deref(), a.sun.elevation, a.sun.azimuth)?,
     };
-    if !(1..=sylva_trace::MAX_DEPTH).contains(&a.view.stack) {
-        bail!(
-            "--stack {}: the short stack holds 1 to {} entries",
-            a.view.stack,
-            sylva_trace::MAX_DEPTH
-        );
-    }
+    let traversal = TraversalConfig::checked(a.view.stack).map_err(anyhow::Error::msg)?;
     let scene = load_scene(&a.scene, sun)?;
     let (width, height) = resolution(a.view.width, a.view.height, &scene.camera)?;
     let rays_per_pixel = rays_per_pixel.unwrap_or(scene.camera.rays_per_pixel);
@@ -459,7 +451,7 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
             cache_dir: (!a.lb.no_cache).then_some(a.lb.cache_dir.as_path()),
             light,
         }),
-        traversal: TraversalConfig::with_stack(a.view.stack),
+        traversal,
         trace_gpu: gpu.as_ref(),
         shade_on_gpu: !a.view.cpu_shading,
         light,
@@ -533,12 +525,7 @@ pub fn run(a: RenderArgs, runner: &dyn Runner) -> Result<()> {
         Some(m) => {
             let (sun, angles) = m.sun()?;
             if runner.is_root() {
-                println!(
-                    "sun at {m}: elevation {:.1}°, azimuth {:.1}° from north (world azimuth {:.1}°: north -z, east +x)",
-                    angles.elevation_deg,
-                    angles.azimuth_deg,
-                    sun.azimuth_deg()
-                );
+                println!("{}", angles.describe(m, &sun));
             }
             Some(sun)
         }

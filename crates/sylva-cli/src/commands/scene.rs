@@ -1,6 +1,6 @@
 //! `sylva scene info|list`: what a scene holds.
 
-use super::output::{emit, pretty_json};
+use super::output::{emit, emit_report};
 use anyhow::Context;
 use sylva_scene::builtin_scenes;
 use sylva_scene::{SceneDesc, SceneInfo};
@@ -57,8 +57,5 @@ pub fn run(args: SceneArgs) -> anyhow::Result<()> {
 fn info(name: &str, json: bool) -> anyhow::Result<()> {
     let scene = SceneDesc::load(name)?.build()?;
     let info = SceneInfo::of(&scene);
-    if json {
-        return emit(&format!("{}\n", pretty_json(&info)?));
-    }
-    emit(&info.to_string())
+    emit_report(&info, json)
 }

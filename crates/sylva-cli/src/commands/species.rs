@@ -1,6 +1,6 @@
 //! `sylva species list|show`: the built-in species and Arbaro files.
 
-use super::output::{emit, pretty_json};
+use super::output::{emit, emit_report};
 use sylva_grow::arbaro;
 use sylva_grow::sheet::{resolve, SpeciesSheet, SpeciesTable};
 
@@ -35,10 +35,7 @@ pub fn run(args: SpeciesArgs) -> anyhow::Result<()> {
     match args.command {
         SpeciesCommand::List { json } => {
             let table = SpeciesTable::builtin()?;
-            if json {
-                return emit(&format!("{}\n", pretty_json(&table)?));
-            }
-            emit(&table.to_string())
+            emit_report(&table, json)
         }
         SpeciesCommand::Show { name, json, xml } => {
             let s = resolve(&name)?;
@@ -46,10 +43,7 @@ pub fn run(args: SpeciesArgs) -> anyhow::Result<()> {
                 return emit(&arbaro::to_xml(&s.name, &s.params));
             }
             let sheet = SpeciesSheet::of(&s)?;
-            if json {
-                return emit(&format!("{}\n", pretty_json(&sheet)?));
-            }
-            emit(&sheet.to_string())
+            emit_report(&sheet, json)
         }
     }
 }

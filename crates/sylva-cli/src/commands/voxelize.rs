@@ -9,6 +9,7 @@ use clap::Args;
 use sylva_core::{companion_path, OutputSet};
 use sylva_geom::Model;
 use sylva_lb::preview::density_preview_png;
+use sylva_lb::report::write_with_preview;
 use sylva_lb::{DensityGrid, Element, GridFile};
 use sylva_voxel::{cell_size, grid_metadata, voxelize, Occupancy, VoxelizeOptions, DEFAULT_GRID};
 
@@ -146,10 +147,8 @@ pub fn run(a: VoxelizeArgs) -> Result<()> {
     }
     let mut outputs = OutputSet::new::<&std::path::Path>(&[]);
     outputs.plan(&[&output, &png])?;
-    file.write_into(&mut outputs, &output)?;
-    let preview = density_preview_png(&v.grid)
-        .with_context(|| format!("cannot encode the preview {}", png.display()))?;
-    outputs.write_bytes(&png, &preview)?;
+    let preview = density_preview_png(&v.grid);
+    write_with_preview(&file, preview, &mut outputs, &output, &png)?;
     outputs.commit()?;
     let b = v.grid.bounds;
     println!("voxelized {name}: {} triangles", v.triangles);
