@@ -117,19 +117,14 @@ fn main() -> std::process::ExitCode {
     // Ctrl-C while outputs are written removes the temporaries and replaces nothing.
     sylva_core::interrupt::install();
     let cli = Cli::parse();
-    let mut threads = None;
-    if let Some(n) = cli.threads {
-        let range = sylva_core::limits::THREADS;
-        match usize::try_from(n) {
-            Ok(k) if range.contains(&k) => threads = Some(k),
-            _ => {
-                return commands::finish(Err(anyhow::anyhow!(
-                    "--threads {n}: must be {}",
-                    sylva_core::limits::describe(&range)
-                )))
-            }
-        }
-    }
+    let threads = match cli
+        .threads
+        .map(sylva_core::limits::check_threads)
+        .transpose()
+    {
+        Ok(t) => t,
+        Err(e) => return commands::finish(Err(anyhow::anyhow!(e))),
+    };
     // One of several processes started by mpirun: the command must split its work.
     let ranks = sylva_mpi::launch::launched_size().filter(|&n| n > 1);
     if let Some(n) = ranks {
@@ -149,9 +144,8 @@ fn main() -> std::process::ExitCode {
     }
     // Under mpirun, the ranks on one machine share its cores unless told otherwise.
     let threads = threads.or_else(|| {
-        let local = sylva_mpi::launch::local_size().filter(|_| ranks.is_some())?;
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        Some((cores / local.max(1)).clamp(1, *sylva_core::limits::THREADS.end()))
+        sylva_mpi::launch::shared_threads(ranks, sylva_mpi::launch::local_size(), cores)
     });
     if let Some(n) = threads {
         if let Err(e) = rayon::ThreadPoolBuilder::new()

@@ -96,6 +96,11 @@ pub enum OutputError {
     Io { path: PathBuf, source: io::Error },
 }
 
+/// `companion`, or else `file` with extension `ext` (a grid's preview beside it).
+pub fn companion_path(file: &Path, companion: Option<&Path>, ext: &str) -> PathBuf {
+    companion.map_or_else(|| file.with_extension(ext), Path::to_path_buf)
+}
+
 /// The output files of one command: checked up front against each other and against the
 /// command's inputs, written one by one to temporary files, and renamed into place together
 /// by [`OutputSet::commit`]. Dropped without a commit (an error, Ctrl-C), it removes its
@@ -234,6 +239,22 @@ impl OutputSet {
         self.write(path, |w| w.write_all(bytes))
     }
 
+    /// Checks, before the work, the outputs a command line names: a file and its companion
+    /// (by default the file with extension `ext`: a grid's preview PNG), or the companion
+    /// alone. Names the work chooses wait for it; nothing is kept planned.
+    pub fn check_named(
+        file: Option<&Path>,
+        companion: Option<&Path>,
+        ext: &str,
+    ) -> Result<(), OutputError> {
+        let named: Vec<PathBuf> = match (file, companion) {
+            (Some(f), c) => vec![f.to_path_buf(), companion_path(f, c, ext)],
+            (None, Some(c)) => vec![c.to_path_buf()],
+            (None, None) => Vec::new(),
+        };
+        OutputSet::new::<&Path>(&[]).plan(&named)
+    }
+
     /// Renames every written file into place (unless the process was interrupted: then none)
     /// and returns their paths in the order written.
     pub fn commit(mut self) -> Result<Vec<PathBuf>, OutputError> {
@@ -344,6 +365,25 @@ mod tests {
         assert_eq!(set.commit().unwrap(), vec![a.clone(), b.clone()]);
         assert_eq!(fs::read(&b).unwrap(), b"new b");
         assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 2);
+    }
+
+    /// A file and its companion are checked together: the default companion differs by its
+    /// extension, a companion named as the file itself is refused, and nothing is written.
+    #[test]
+    fn named_outputs_and_their_companions_are_checked_before_the_work() {
+        let dir = tempfile::tempdir().unwrap();
+        let grid = dir.path().join("g.sgrid");
+        assert_eq!(companion_path(&grid, None, "png"), dir.path().join("g.png"));
+        OutputSet::check_named(Some(&grid), None, "png").unwrap();
+        let e = OutputSet::check_named(Some(&grid), Some(&grid), "png").unwrap_err();
+        assert!(matches!(e, OutputError::Duplicate(_)), "{e}");
+        let e = OutputSet::check_named(None, Some(dir.path()), "png").unwrap_err();
+        assert!(
+            e.to_string().contains(&dir.path().display().to_string()),
+            "{e}"
+        );
+        OutputSet::check_named(None, None, "png").unwrap();
+        assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 0);
     }
 
     #[test]

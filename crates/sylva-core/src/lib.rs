@@ -39,13 +39,15 @@ mod names;
 mod rng;
 pub mod solar;
 mod sun;
+mod text;
 pub mod wire;
 
-pub use atomic::{atomic_write, atomic_write_with, OutputError, OutputSet};
+pub use atomic::{atomic_write, atomic_write_with, companion_path, OutputError, OutputSet};
 pub use colour::{blackbody_rgb, try_blackbody_rgb, SUN_TEMPERATURE_K};
 pub use hash::Fnv64;
 pub use input::{open_file, protect_input, read_file, read_text_file, resolve_inside, InputError};
 pub use memory::{available_memory_bytes, check_memory, format_bytes, MemoryError};
 pub use names::file_stem;
 pub use rng::SplitMix64;
-pub use sun::{Sun, SunError};
+pub use sun::{Sun, SunError, SunFlagError};
+pub use text::thousands;

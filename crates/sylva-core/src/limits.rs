@@ -43,6 +43,25 @@ pub fn describe<T: std::fmt::Display>(r: &RangeInclusive<T>) -> String {
     format!("{} to {}", r.start(), r.end())
 }
 
+/// `--threads`: a worker thread count in [`THREADS`] (signed, so `-1` gets this message).
+pub fn check_threads(n: i64) -> Result<usize, String> {
+    match usize::try_from(n) {
+        Ok(k) if THREADS.contains(&k) => Ok(k),
+        _ => Err(format!("--threads {n}: must be {}", describe(&THREADS))),
+    }
+}
+
+/// `--rpp`: rays per pixel in [`RAYS_PER_PIXEL`]; `None` (the scene camera's) passes.
+pub fn check_rays_per_pixel(rpp: Option<u32>) -> Result<(), String> {
+    match rpp {
+        Some(r) if !RAYS_PER_PIXEL.contains(&r) => Err(format!(
+            "--rpp {r}: rays per pixel must be {}",
+            describe(&RAYS_PER_PIXEL)
+        )),
+        _ => Ok(()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -52,5 +71,15 @@ mod tests {
         // A voxelized model's grid must be a valid LB grid along every edge.
         assert!(GRID_EDGE.contains(MODEL_GRID.start()) && GRID_EDGE.contains(MODEL_GRID.end()));
         assert_eq!(describe(&MODEL_GRID), "4 to 2048");
+        assert_eq!(
+            check_rays_per_pixel(Some(0)).unwrap_err(),
+            "--rpp 0: rays per pixel must be 1 to 1024"
+        );
+        assert!(check_rays_per_pixel(Some(1024)).is_ok() && check_rays_per_pixel(None).is_ok());
+        assert_eq!(
+            check_threads(-1).unwrap_err(),
+            "--threads -1: must be 1 to 256"
+        );
+        assert_eq!(check_threads(256), Ok(256));
     }
 }

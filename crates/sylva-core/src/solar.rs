@@ -486,6 +486,17 @@ pub struct SolarAngles {
 }
 
 impl SolarAngles {
+    /// One line on the sun `sun` (these angles) at moment `at`: its compass angles and its
+    /// world azimuth.
+    pub fn describe(&self, at: &SolarTime, sun: &Sun) -> String {
+        format!(
+            "sun at {at}: elevation {:.1}°, azimuth {:.1}° from north (world azimuth {:.1}°: north -z, east +x)",
+            self.elevation_deg,
+            self.azimuth_deg,
+            sun.azimuth_deg()
+        )
+    }
+
     /// sylva's sun for these angles (north = -z, east = +x). Below the horizon too: the
     /// renderer refuses such a sun, [`SolarTime::sun`] explains it first.
     pub fn sun(&self) -> Result<Sun, SunError> {
@@ -749,9 +760,134 @@ impl DayPath {
     }
 }
 
+/// A [`SolarError`] from a command-line flag, named in its message (`--lat: latitude 95°:
+/// ...`); errors of the flags together (a path that ends before it starts) name none.
+#[derive(Debug, PartialEq)]
+pub struct FlagError {
+    pub flag: Option<&'static str>,
+    pub error: SolarError,
+}
+
+impl std::fmt::Display for FlagError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.flag {
+            Some(flag) => write!(f, "--{flag}: {}", self.error),
+            None => write!(f, "{}", self.error),
+        }
+    }
+}
+
+impl std::error::Error for FlagError {}
+
+impl From<SolarError> for FlagError {
+    fn from(error: SolarError) -> FlagError {
+        FlagError { flag: None, error }
+    }
+}
+
+fn flag(flag: &'static str) -> impl Fn(SolarError) -> FlagError {
+    move |error| FlagError {
+        flag: Some(flag),
+        error,
+    }
+}
+
+/// The place and day of the command-line flags `--lat`, `--lon`, `--date` and `--utc-offset`
+/// (default: the zone of the longitude), as given.
+#[derive(Debug, Clone, Copy)]
+pub struct DayFlags<'a> {
+    pub lat: f64,
+    pub lon: f64,
+    pub date: &'a str,
+    pub utc_offset: Option<&'a str>,
+}
+
+impl DayFlags<'_> {
+    fn place_date_offset(&self) -> Result<(Place, Date, UtcOffset), FlagError> {
+        let place = Place::new(self.lat, self.lon).map_err(|e| match e {
+            SolarError::Latitude(_) => flag("lat")(e),
+            _ => flag("lon")(e),
+        })?;
+        let date: Date = self.date.parse().map_err(flag("date"))?;
+        let offset = match self.utc_offset {
+            Some(o) => o.parse().map_err(flag("utc-offset"))?,
+            None => place.zone_offset(),
+        };
+        Ok((place, date, offset))
+    }
+
+    /// The moment of local clock time `time` (`--time`) that day.
+    pub fn moment(&self, time: &str) -> Result<SolarTime, FlagError> {
+        let (place, date, offset) = self.place_date_offset()?;
+        let time: ClockTime = time.parse().map_err(flag("time"))?;
+        Ok(SolarTime {
+            place,
+            date,
+            time,
+            offset,
+        })
+    }
+
+    /// The sun's path that day: `--from` (default 00:00) to `--to` (23:59) every `--step`
+    /// (1h).
+    pub fn path(
+        &self,
+        from: Option<&str>,
+        to: Option<&str>,
+        step: Option<&str>,
+    ) -> Result<SunPath, FlagError> {
+        let (place, date, offset) = self.place_date_offset()?;
+        let from: ClockTime = from.unwrap_or("00:00").parse().map_err(flag("from"))?;
+        let to: ClockTime = to.unwrap_or("23:59").parse().map_err(flag("to"))?;
+        let step: Step = step.unwrap_or("1h").parse().map_err(flag("step"))?;
+        Ok(SunPath::new(place, date, offset, from, to, step)?)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Each flag's error names it; errors of the flags together name none; the offset
+    /// defaults to the longitude's zone and the path to the whole day, hourly.
+    #[test]
+    fn day_flags_name_the_bad_flag() {
+        let day = DayFlags {
+            lat: 48.1,
+            lon: 11.6,
+            date: "2026-06-21",
+            utc_offset: None,
+        };
+        let m = day.moment("14:30").unwrap();
+        assert_eq!(m.offset, munich().zone_offset());
+        let path = day.path(None, None, None).unwrap();
+        assert_eq!(path.count(), 24);
+        let bad = |d: DayFlags, time: &str| day_error(d.moment(time));
+        assert!(bad(DayFlags { lat: 95.0, ..day }, "12:00").starts_with("--lat: latitude 95"));
+        assert!(bad(DayFlags { lon: 200.0, ..day }, "12:00").starts_with("--lon: "));
+        assert!(bad(
+            DayFlags {
+                date: "2026-02-30",
+                ..day
+            },
+            "12:00"
+        )
+        .starts_with("--date: "));
+        let offset = DayFlags {
+            utc_offset: Some("x"),
+            ..day
+        };
+        assert!(bad(offset, "12:00").starts_with("--utc-offset: "));
+        assert!(bad(day, "25:00").starts_with("--time: "));
+        assert!(day_error(day.path(Some("x"), None, None)).starts_with("--from: "));
+        assert!(day_error(day.path(None, None, Some("0m"))).starts_with("--step: "));
+        let late = day_error(day.path(Some("12:00"), Some("11:00"), None));
+        assert!(late.starts_with("the path starts at 12:00"), "{late}");
+    }
+
+    fn day_error<T: std::fmt::Debug>(r: Result<T, FlagError>) -> String {
+        r.unwrap_err().to_string()
+    }
 
     fn munich() -> Place {
         Place::new(48.1, 11.6).unwrap()

@@ -17,6 +17,20 @@ pub enum SunError {
     Parse(String),
 }
 
+/// Why the sun of the command-line flags (`--sun`, `--elevation`, `--azimuth`) was refused;
+/// the message names the flag.
+#[derive(Debug, Error, PartialEq)]
+pub enum SunFlagError {
+    #[error("--sun")]
+    Vector(#[source] SunError),
+    /// Above the zenith is a typing error; below the horizon the pipeline explains why the
+    /// sun must be up.
+    #[error("--elevation {0}: degrees above the horizon, 0 to 90")]
+    AboveZenith(f64),
+    #[error("--elevation/--azimuth")]
+    Angles(#[source] SunError),
+}
+
 /// The sun as an infinitely distant light: the unit vector pointing *towards* it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sun {
@@ -60,6 +74,37 @@ impl Sun {
             [x, y, z] => Sun::from_direction(*x, *y, *z),
             _ => Err(SunError::Parse(s.to_string())),
         }
+    }
+
+    /// The sun the flags give: `--sun X,Y,Z`, or `--elevation` and `--azimuth` (50° and 30°
+    /// where one is missing); none of them: [`Sun::default`].
+    pub fn from_flags(
+        sun: Option<&str>,
+        elevation: Option<f64>,
+        azimuth: Option<f64>,
+    ) -> Result<Sun, SunFlagError> {
+        Ok(match (sun, elevation, azimuth) {
+            (Some(v), _, _) => Sun::parse_vector(v).map_err(SunFlagError::Vector)?,
+            (None, None, None) => Sun::default(),
+            (None, e, a) => {
+                if let Some(e) = e.filter(|e| e.is_nan() || *e > 90.0) {
+                    return Err(SunFlagError::AboveZenith(e));
+                }
+                Sun::from_angles(e.unwrap_or(50.0), a.unwrap_or(30.0))
+                    .map_err(SunFlagError::Angles)?
+            }
+        })
+    }
+
+    /// [`Sun::from_flags`] when any of the flags is given, else `None` (the scene's sun).
+    pub fn given(
+        sun: Option<&str>,
+        elevation: Option<f64>,
+        azimuth: Option<f64>,
+    ) -> Result<Option<Sun>, SunFlagError> {
+        let any = sun.is_some() || elevation.is_some() || azimuth.is_some();
+        any.then(|| Sun::from_flags(sun, elevation, azimuth))
+            .transpose()
     }
 
     /// Unit vector towards the sun.
@@ -106,6 +151,33 @@ mod tests {
         assert!((s.travel() + DVec3::Y).length() < 1e-12);
         let s = Sun::from_angles(0.0, 90.0).unwrap();
         assert!((s.to_sun() - DVec3::Z).length() < 1e-12);
+    }
+
+    /// Each flag alone takes the other's default; the errors name the flag.
+    #[test]
+    fn flags_give_the_sun_or_name_the_bad_flag() {
+        let s = Sun::from_flags(None, Some(20.0), None).unwrap();
+        let s20 = s;
+        assert!((s.elevation_deg() - 20.0).abs() < 1e-9 && (s.azimuth_deg() - 30.0).abs() < 1e-9);
+        let s = Sun::from_flags(None, None, Some(100.0)).unwrap();
+        assert!((s.elevation_deg() - 50.0).abs() < 1e-9 && (s.azimuth_deg() - 100.0).abs() < 1e-9);
+        assert_eq!(Sun::from_flags(None, None, None).unwrap(), Sun::default());
+        assert_eq!(Sun::given(None, None, None), Ok(None));
+        assert_eq!(Sun::given(None, Some(20.0), None), Ok(Some(s20)));
+        let s = Sun::from_flags(Some("0,1,0"), None, None).unwrap();
+        assert!((s.to_sun() - DVec3::Y).length() < 1e-12);
+        assert_eq!(
+            Sun::from_flags(None, Some(95.0), None),
+            Err(SunFlagError::AboveZenith(95.0))
+        );
+        assert!(matches!(
+            Sun::from_flags(Some("1,2"), None, None),
+            Err(SunFlagError::Vector(SunError::Parse(_)))
+        ));
+        assert!(matches!(
+            Sun::from_flags(None, Some(-95.0), None),
+            Err(SunFlagError::Angles(SunError::Elevation(_)))
+        ));
     }
 
     #[test]

@@ -267,6 +267,99 @@ pub fn leaf_params_from_measurements(
     )
 }
 
+/// Changes to a preset's parameters asked for on a command line (`sylva lb solve`): σ_a,
+/// σ_s and g each as one value for every colour or `R,G,B`, and the f_0 and wood switches.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MediumOverrides {
+    /// `--sigma-a`; σ_s follows it as in 000 (σ_s = 1 - σ_a) unless given too.
+    pub sigma_a: Option<String>,
+    /// `--sigma-s`.
+    pub sigma_s: Option<String>,
+    /// `--g`.
+    pub g: Option<String>,
+    /// Keep f_0 on green sites (a conservative medium).
+    pub keep_f0: bool,
+    /// Do not zero f_0 on brown sites.
+    pub brown_keeps_f0: bool,
+    pub brown_threshold: f64,
+}
+
+/// A parameter override that is not one number or three.
+#[derive(Debug, Error, PartialEq)]
+pub enum OverrideError {
+    #[error(transparent)]
+    Param(#[from] ParamError),
+    #[error("--{flag} '{text}': expected a number or three comma-separated numbers")]
+    NotNumbers {
+        flag: &'static str,
+        text: String,
+        #[source]
+        source: std::num::ParseFloatError,
+    },
+    #[error("--{flag} '{text}': expected one value or three (R,G,B), got {count}")]
+    Count {
+        flag: &'static str,
+        text: String,
+        count: usize,
+    },
+}
+
+/// Parses `V` or `R,G,B` (flag `--flag`) into three values.
+pub fn per_colour(flag: &'static str, text: &str) -> Result<[f64; 3], OverrideError> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|source| OverrideError::NotNumbers {
+            flag,
+            text: text.to_string(),
+            source,
+        })?;
+    match v.as_slice() {
+        [a] => Ok([*a; 3]),
+        [r, g, b] => Ok([*r, *g, *b]),
+        _ => Err(OverrideError::Count {
+            flag,
+            text: text.to_string(),
+            count: v.len(),
+        }),
+    }
+}
+
+impl MediumOverrides {
+    /// Preset `preset`'s parameters with these changes, validated.
+    pub fn apply(&self, preset: &str) -> Result<MediumParams, OverrideError> {
+        let mut m = Preset::parse(preset)?.params();
+        if let Some(s) = &self.sigma_a {
+            for (colour, value) in m.colours.iter_mut().zip(per_colour("sigma-a", s)?) {
+                colour.sigma_a = value;
+                if self.sigma_s.is_none() {
+                    colour.sigma_s = 1.0 - value;
+                }
+            }
+        }
+        if let Some(s) = &self.sigma_s {
+            for (colour, value) in m.colours.iter_mut().zip(per_colour("sigma-s", s)?) {
+                colour.sigma_s = value;
+            }
+        }
+        if let Some(s) = &self.g {
+            for (colour, value) in m.colours.iter_mut().zip(per_colour("g", s)?) {
+                colour.g = value;
+            }
+        }
+        if self.keep_f0 {
+            m.zero_f0_on_green = false;
+        }
+        if self.brown_keeps_f0 {
+            m.zero_f0_on_brown = false;
+        }
+        m.brown_threshold = self.brown_threshold;
+        m.validate()?;
+        Ok(m)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -324,5 +417,53 @@ mod tests {
             g_from_forward_backward(0.0, 0.0),
             Err(ParamError::NoScattering)
         );
+    }
+
+    /// σ_s follows σ_a (σ_s = 1 - σ_a) unless given too; per-colour values land per colour;
+    /// a count other than one or three, or a non-number, is refused with the flag named.
+    #[test]
+    fn overrides_change_the_preset_per_colour() {
+        let none = MediumOverrides {
+            sigma_a: None,
+            sigma_s: None,
+            g: None,
+            keep_f0: false,
+            brown_keeps_f0: false,
+            brown_threshold: 0.5,
+        };
+        assert_eq!(none.apply("leaf").unwrap(), Preset::Leaf.params());
+        let a = MediumOverrides {
+            sigma_a: Some("0.2".into()),
+            g: Some("0.1,0.2,0.3".into()),
+            keep_f0: true,
+            ..none.clone()
+        };
+        let m = a.apply("leaf").unwrap();
+        for (c, g) in m.colours.iter().zip([0.1, 0.2, 0.3]) {
+            assert_eq!((c.sigma_a, c.sigma_s, c.g), (0.2, 0.8, g));
+        }
+        assert!(!m.zero_f0_on_green && m.zero_f0_on_brown);
+        let both = MediumOverrides {
+            sigma_s: Some("0.3".into()),
+            ..a.clone()
+        };
+        assert_eq!(both.apply("leaf").unwrap().colours[1].sigma_s, 0.3);
+        let e = per_colour("sigma-a", "1,2").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "--sigma-a '1,2': expected one value or three (R,G,B), got 2"
+        );
+        assert!(matches!(
+            per_colour("g", "x"),
+            Err(OverrideError::NotNumbers { flag: "g", .. })
+        ));
+        let unstable = MediumOverrides {
+            sigma_s: Some("0.9".into()),
+            ..a
+        };
+        assert!(matches!(
+            unstable.apply("leaf"),
+            Err(OverrideError::Param(ParamError::Extinction(_)))
+        ));
     }
 }

@@ -33,6 +33,20 @@ impl RawElement {
     }
 }
 
+/// A grid size given on the command line refused, the flag named.
+#[derive(Debug, Error, PartialEq)]
+pub enum DimsFlagError {
+    #[error("{flag} '{text}'")]
+    Bad {
+        flag: &'static str,
+        text: String,
+        #[source]
+        source: GridError,
+    },
+    #[error("{flag} '{text}': expected N or NXxNYxNZ, e.g. 128 or 256x128x128")]
+    Syntax { flag: &'static str, text: String },
+}
+
 #[derive(Debug, Error, PartialEq)]
 pub enum GridError {
     #[error("grid size {0}×{1}×{2} is invalid: every edge must be between {MIN_EDGE} and {MAX_EDGE} (the outer shell is the boundary, so 3 is the smallest grid with an interior)")]
@@ -91,6 +105,21 @@ impl Dims {
             [n] => Some(Dims::cube(*n)),
             [x, y, z] => Some(Dims::new(*x, *y, *z)),
             _ => None,
+        }
+    }
+
+    /// [`Dims::parse`] of flag `flag`'s value `text`, the flag named in the error.
+    pub fn parse_flag(text: &str, flag: &'static str) -> Result<Dims, DimsFlagError> {
+        match Dims::parse(text) {
+            Some(d) => d.map_err(|source| DimsFlagError::Bad {
+                flag,
+                text: text.to_string(),
+                source,
+            }),
+            None => Err(DimsFlagError::Syntax {
+                flag,
+                text: text.to_string(),
+            }),
         }
     }
 
@@ -231,6 +260,27 @@ impl DensityGrid {
             density,
             wood,
         })
+    }
+
+    /// Sites with density > 0 whose wood fraction exceeds `threshold` (brown sites in the LB).
+    pub fn wood_sites(&self, threshold: f32) -> usize {
+        self.density
+            .iter()
+            .zip(&self.wood)
+            .filter(|(&d, &w)| d > 0.0 && w > threshold)
+            .count()
+    }
+
+    /// One line describing the grid: size, occupancy, mean density, brown sites.
+    pub fn summary(&self) -> String {
+        let (mean, occupied) = self.occupancy();
+        format!(
+            "{} grid, {occupied} occupied sites ({:.1} %), mean density {mean:.4} ({:.4} over occupied sites), {} wood sites (wood fraction > 0.5)",
+            self.dims,
+            100.0 * occupied as f64 / self.dims.sites() as f64,
+            mean * self.dims.sites() as f64 / occupied.max(1) as f64,
+            self.wood_sites(0.5)
+        )
     }
 
     /// Mean density over the grid and number of occupied sites.

@@ -6,11 +6,13 @@
 //!   bark [`textures`]; [`Species::build_model`] gives a [`sylva_geom::Model`].
 //! * [`cloud`]: a cumulus cloud's density grid from a parcel model of convection (002 §3.2.1).
 //! * [`teapot`]: the Newell teapot's 32 Bézier patches, tessellated (002 §3.2.3).
+//! * [`sheet`]: what `sylva species list|show` report about species.
 //! * [`rng`]: the generators' seeded random stream (also the scene layout's).
 
 pub mod arbaro;
 pub mod cloud;
 pub mod rng;
+pub mod sheet;
 pub mod species;
 pub mod teapot;
 pub mod textures;

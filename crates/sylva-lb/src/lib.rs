@@ -26,6 +26,7 @@ pub mod light;
 pub use sylva_geom::params;
 pub mod preview;
 pub mod relight;
+pub mod report;
 pub mod shapes;
 pub mod solver;
 

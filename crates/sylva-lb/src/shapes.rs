@@ -14,6 +14,11 @@ pub enum Shape {
     Crown,
 }
 
+/// A shape name that is none of [`Shape::ALL`].
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("unknown shape '{0}': expected sphere, cube or crown")]
+pub struct UnknownShape(pub String);
+
 impl Shape {
     pub const ALL: [Shape; 3] = [Shape::Sphere, Shape::Cube, Shape::Crown];
 
@@ -23,6 +28,11 @@ impl Shape {
             Shape::Cube => "cube",
             Shape::Crown => "crown",
         }
+    }
+
+    /// [`Shape::parse`], or an error naming the shapes.
+    pub fn named(s: &str) -> Result<Shape, UnknownShape> {
+        Shape::parse(s).ok_or_else(|| UnknownShape(s.to_string()))
     }
 
     pub fn parse(s: &str) -> Option<Shape> {

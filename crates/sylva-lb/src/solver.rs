@@ -221,6 +221,22 @@ impl SolveOptions {
         }
     }
 
+    /// The stop rule of `--steps` and `--tolerance`: the papers' without either; with only a
+    /// tolerance, at most 10 × the longest edge.
+    pub fn for_run(steps: Option<usize>, tolerance: Option<f64>, dims: Dims) -> SolveOptions {
+        match (steps, tolerance) {
+            (Some(s), t) => SolveOptions {
+                max_steps: s,
+                tolerance: t,
+            },
+            (None, None) => SolveOptions::papers(dims),
+            (None, Some(t)) => SolveOptions {
+                max_steps: 10 * dims.longest_edge(),
+                tolerance: Some(t),
+            },
+        }
+    }
+
     fn validate(&self) -> Result<(), SolveError> {
         if self.max_steps == 0 {
             return Err(SolveError::Steps);

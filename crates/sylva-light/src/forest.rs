@@ -933,6 +933,48 @@ impl ForestBases {
     }
 }
 
+impl ForestLight {
+    /// What the forest grid did, for a front end to show: per part (sun, sky through the
+    /// top, through the sides, ground) the range over the instances of its weight's
+    /// luminance over its value in the open; with `per_instance`, a line per instance too.
+    pub fn summary(&self, per_instance: bool) -> String {
+        let y = |v: Vec3| sylva_core::colour::luminance(v.to_array());
+        let range = |part: fn(&PartWeights) -> Vec3| {
+            let free = y(part(&self.free));
+            let (lo, hi) = self
+                .weights
+                .iter()
+                .map(|w| if free > 0.0 { y(part(w)) / free } else { 1.0 })
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), v| {
+                    (a.min(v), b.max(v))
+                });
+            format!("{lo:.2}–{hi:.2}")
+        };
+        let mut lines = vec![format!(
+            "forest grid {}: per instance, of the open's: sun {}, sky through the top {}, \
+             through the sides {}, ground {}",
+            self.dims,
+            range(|w| w.sun),
+            range(|w| w.sky_top),
+            range(|w| w.sky),
+            range(|w| w.ground)
+        )];
+        if per_instance {
+            let free = &self.free;
+            for (i, w) in self.weights.iter().enumerate() {
+                lines.push(format!(
+                    "  instance {i}: sun {:.3} sky top {:.3} sides {:.3} ground {:.3}",
+                    y(w.sun),
+                    y(w.sky_top) / y(free.sky_top).max(f32::MIN_POSITIVE),
+                    y(w.sky) / y(free.sky).max(f32::MIN_POSITIVE),
+                    y(w.ground) / y(free.ground).max(f32::MIN_POSITIVE)
+                ));
+            }
+        }
+        lines.join("\n")
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -15,7 +15,8 @@
 //!   frame kernel reads of it, beside its CPU lookup, or says why it has none ([`NoDevice`]).
 //! * [`media`]: participating media (clouds): their LB light and the volume that carries it
 //!   with the density, which the renderer integrates along rays ([`Media`]).
-//! * [`progress`]: what the long stages report ([`Progress`]).
+//! * [`progress`]: what the long stages report ([`Progress`]); [`report`]: those reports as
+//!   the lines a front end shows.
 //!
 //! May import the leaf crates (core, geom, grid, lb, voxel) and `sylva-trace` for the
 //! instance placements; never the renderer, the scene files or the pipeline.
@@ -27,6 +28,7 @@ pub mod lighting;
 pub mod media;
 pub mod progress;
 pub mod relight;
+pub mod report;
 
 pub use device::{DeviceLight, NoDevice};
 pub use indirect::{IndirectLight, ModelGridLight, NoIndirectLight};

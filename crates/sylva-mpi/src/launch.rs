@@ -24,9 +24,35 @@ pub fn local_size() -> Option<usize> {
     first_count(&LOCAL_SIZE_VARS, &|v| std::env::var(v).ok())
 }
 
+/// The worker threads of each process of a launch of several: the `cores` of this machine
+/// shared among its `local` processes (at least one each, at most
+/// [`sylva_core::limits::THREADS`]' end); `None` when not one of several or the launcher does
+/// not say how many share the machine.
+pub fn shared_threads(
+    launched: Option<usize>,
+    local: Option<usize>,
+    cores: usize,
+) -> Option<usize> {
+    launched.filter(|&n| n > 1)?;
+    let local = local?;
+    Some((cores / local.max(1)).clamp(1, *sylva_core::limits::THREADS.end()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Several processes on one machine share its cores; one process, or an unknown share,
+    /// leaves the thread count alone.
+    #[test]
+    fn ranks_on_one_machine_share_its_cores() {
+        assert_eq!(shared_threads(Some(4), Some(2), 16), Some(8));
+        assert_eq!(shared_threads(Some(4), Some(4), 2), Some(1));
+        assert_eq!(shared_threads(Some(2), Some(1), 1024), Some(256));
+        assert_eq!(shared_threads(Some(1), Some(1), 16), None);
+        assert_eq!(shared_threads(None, Some(2), 16), None);
+        assert_eq!(shared_threads(Some(4), None, 16), None);
+    }
 
     #[test]
     fn counts_come_from_the_first_variable_set() {

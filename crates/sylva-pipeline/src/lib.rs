@@ -47,13 +47,21 @@ pub mod forest;
 pub mod frame;
 mod jobs;
 pub mod models;
+pub mod options;
 pub mod physical;
+pub mod report;
+pub mod sequence;
+pub mod spp;
 
 pub use bases::precompute_relighting;
 pub use forest::{forest_densities, light_forest, uses_forest, ForestDensities};
 pub use frame::{RankWork, SplitFrame, UnitLayout};
 pub use models::light_models;
+pub use options::{
+    costly_grid_warning, relight_light, BasisChoice, LightChoice, LightSettings, OptionError,
+};
 pub use physical::{precompute_physical, PhysicalRelighting};
+pub use report::{basis_jobs, basis_scene_line, scene_line, written_line, RenderSummary};
 pub use sylva_core::jobs::{Local, Runner};
 
 use std::path::{Path, PathBuf};
@@ -163,6 +171,10 @@ pub enum PipelineError {
     GpuFailed(String),
     #[error(transparent)]
     Gpu(#[from] sylva_wgpu::GpuError),
+    #[error("the plane-parallel light (003 §5)")]
+    SppLight(#[source] sylva_spp::trees::TreeError),
+    #[error(transparent)]
+    Spp(#[from] sylva_spp::trees::TreeError),
     /// A job, the processes running them or the data between them failed.
     #[error(transparent)]
     Jobs(#[from] sylva_core::jobs::JobError),
@@ -180,6 +192,17 @@ impl From<sylva_core::wire::WireError> for PipelineError {
 pub enum RelightingAt {
     Root,
     Everywhere,
+}
+
+/// A scene by file or built-in name ([`load_scene`]), or else one tree of a built-in species
+/// (`sylva spp trees red_maple`, `sylva bench spp`).
+pub fn load_scene_or_species(name: &str) -> Result<Scene, PipelineError> {
+    match load_scene(name, None) {
+        Err(PipelineError::Scene(SceneError::NotFound(_))) => {
+            Ok(sylva_scene::builtin_scenes::species_scene(name)?)
+        }
+        other => other,
+    }
 }
 
 /// Loads a scene file or built-in scene by name and builds it; `sun` replaces its sun.
@@ -1327,6 +1350,25 @@ pub fn image_paths(base: &Path, modes: &[Mode], hdr: bool) -> Vec<PathBuf> {
         paths.push(png);
     }
     paths
+}
+
+/// Refuses an image name `path` that is not a PNG (a render writes PNGs, and with `--hdr`
+/// an EXR beside each).
+pub fn check_png_name(path: &Path) -> Result<(), OptionError> {
+    let ext = path.extension().map(|e| e.to_ascii_lowercase());
+    if ext.as_deref() != Some(std::ffi::OsStr::new("png")) {
+        return Err(OptionError(format!(
+            "{}: the output is a PNG file (name it .png; --hdr adds an .exr beside it)",
+            path.display()
+        )));
+    }
+    Ok(())
+}
+
+/// Checks the files [`write_images`] will write from `base` before the render: none named
+/// twice, none an input, each writable.
+pub fn plan_images(base: &Path, modes: &[Mode], hdr: bool) -> Result<(), sylva_core::OutputError> {
+    sylva_core::OutputSet::new::<&Path>(&[]).plan(&image_paths(base, modes, hdr))
 }
 
 /// Writes each mode's PNG (named by [`mode_path`] from `base`) and, with `hdr`, its EXR

@@ -33,6 +33,24 @@ pub enum OutputError {
         path: PathBuf,
         source: std::io::Error,
     },
+    /// A sequence's frames would not fit on the disk.
+    #[error(
+        "{frames} frames of {width}x{height} need up to {} on disk under {} (the linear \
+         frames held there for the sequence's one exposure, {} each, then the PNGs and the \
+         animation), but only {} is free: ask for fewer --suns or a smaller --width/--height",
+        sylva_core::format_bytes(*needed),
+        at.display(),
+        sylva_core::format_bytes(*width as u64 * *height as u64 * 12),
+        sylva_core::format_bytes(*free)
+    )]
+    Disk {
+        at: PathBuf,
+        frames: usize,
+        width: u32,
+        height: u32,
+        needed: u64,
+        free: u64,
+    },
     /// A file of the command's output set (named twice, an input, or not written).
     #[error(transparent)]
     Set(#[from] sylva_core::OutputError),

@@ -52,6 +52,14 @@ pub enum Mode {
 impl Mode {
     pub const ALL: [Mode; 4] = [Mode::Full, Mode::Local, Mode::Ambient, Mode::Lb];
 
+    /// One mode by name, or `all`: the four ([`Mode::ALL`]).
+    pub fn parse_set(s: &str) -> Option<Vec<Mode>> {
+        match s {
+            "all" => Some(Mode::ALL.to_vec()),
+            m => Mode::parse(m).map(|m| vec![m]),
+        }
+    }
+
     pub fn parse(s: &str) -> Option<Mode> {
         Some(match s {
             "full" => Mode::Full,

@@ -25,6 +25,21 @@ fn png_bound(width: u32, height: u32) -> u64 {
     raw + raw / 65535 * 5 + 1024
 }
 
+/// `path`, or its nearest ancestor that exists (`.` at the last): where a file under `path`
+/// would take its disk space from.
+pub fn nearest_existing(path: &Path) -> PathBuf {
+    let mut p = path;
+    loop {
+        if p.is_dir() {
+            return p.to_path_buf();
+        }
+        match p.parent() {
+            Some(d) if !d.as_os_str().is_empty() => p = d,
+            _ => return PathBuf::from("."),
+        }
+    }
+}
+
 /// Frames of one size pushed one by one, written at the end with one exposure.
 pub struct Sequence {
     width: u32,
@@ -52,6 +67,31 @@ impl Sequence {
         let px = width as u64 * height as u64;
         let frames = frames as u64;
         frames * px * HDR_PIXEL + 2 * frames * png_bound(width, height)
+    }
+
+    /// Refuses `frames` frames of `width` × `height` when their [`Sequence::disk_bytes`]
+    /// (with a 1 % margin) exceed `free`, the bytes free on the disk under `at` (`None`:
+    /// unknown, let through): frames are held there, not in memory, until the sequence's one
+    /// exposure is known.
+    pub fn check_disk(
+        at: &Path,
+        free: Option<u64>,
+        width: u32,
+        height: u32,
+        frames: usize,
+    ) -> Result<(), OutputError> {
+        let needed = Sequence::disk_bytes(width, height, frames);
+        match free {
+            Some(free) if needed + needed / 100 > free => Err(OutputError::Disk {
+                at: at.into(),
+                frames,
+                width,
+                height,
+                needed,
+                free,
+            }),
+            _ => Ok(()),
+        }
     }
 
     /// A sequence of `frames` frames, held in an unnamed temporary file in `dir` (an existing
@@ -172,6 +212,25 @@ impl Sequence {
 
 #[cfg(test)]
 mod tests {
+    /// The disk check refuses what does not fit with its margin and lets unknown free space
+    /// through; the space is looked for under the nearest existing folder.
+    #[test]
+    fn disk_check_and_nearest_existing_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let under = dir.path().join("a/b/frame.png");
+        assert_eq!(nearest_existing(&under), dir.path());
+        assert_eq!(
+            nearest_existing(Path::new("no/such/dir")),
+            PathBuf::from(".")
+        );
+        let needed = Sequence::disk_bytes(64, 32, 10);
+        assert!(Sequence::check_disk(dir.path(), None, 64, 32, 10).is_ok());
+        assert!(Sequence::check_disk(dir.path(), Some(2 * needed), 64, 32, 10).is_ok());
+        let e = Sequence::check_disk(dir.path(), Some(needed), 64, 32, 10).unwrap_err();
+        assert!(matches!(e, OutputError::Disk { frames: 10, .. }), "{e}");
+        assert!(e.to_string().contains("ask for fewer --suns"), "{e}");
+    }
+
     use super::*;
     use crate::output::encode_apng;
 

@@ -441,6 +441,13 @@ grid = 128
 preset = "leaf"
 "#;
 
+/// One tree of built-in species `species` at the origin ([`single_tree`]), built.
+pub fn species_scene(species: &str) -> Result<sylva_geom::Scene, crate::SceneError> {
+    let text = single_tree(species)
+        .ok_or_else(|| crate::SceneError::NoSceneOrSpecies(species.to_string()))?;
+    crate::SceneDesc::parse(&text, &format!("species '{species}'"), None)?.build()
+}
+
 /// Scene TOML of one tree of built-in species `species` at the origin (the camera framing a
 /// tree of about 15 m, the LB grid at 128), or `None` when there is no such species: for
 /// commands that study a single tree (`sylva spp trees red_maple`).

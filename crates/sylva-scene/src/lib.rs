@@ -7,14 +7,17 @@
 //! * [`layout`]: the placement generators (scatter with minimum spacing, rotation, scale
 //!   jitter).
 //! * [`builtin_scenes`]: the papers' scenes by name.
+//! * [`info`]: what `sylva scene info` reports about a built scene ([`SceneInfo`]).
 //! * [`model_source`]: a model named on the command line (species name or model file), or
 //!   one model of a scene.
 
 pub mod bench;
 pub mod builtin_scenes;
+pub mod info;
 pub mod layout;
 pub mod model_source;
 pub mod scene;
 
+pub use info::SceneInfo;
 pub use model_source::{load_model, ModelSourceError};
 pub use scene::{load, MediumStats, SceneDesc, SceneError, SceneStats, LB_PRESETS};

@@ -33,6 +33,8 @@ pub enum SceneError {
     Input(#[from] sylva_core::InputError),
     #[error("no scene file '{0}' and no built-in scene of that name (built-in scenes: {builtins})", builtins = builtin_scenes::NAMES.join(", "))]
     NotFound(String),
+    #[error("'{0}' is no scene file, built-in scene or built-in species (scenes: {scenes}; species: {species})", scenes = builtin_scenes::NAMES.join(", "), species = BUILTIN_NAMES.join(", "))]
+    NoSceneOrSpecies(String),
     /// A model file (OBJ, glTF) given where a scene is expected.
     #[error("{}: is a {kind} model, not a scene: scene files are TOML (docs/scenes.md); to use the model, name it in a scene: [[models]] mesh = \"{}\"", path.display(), path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default())]
     ModelNotScene { path: PathBuf, kind: &'static str },
@@ -279,6 +281,16 @@ pub struct MediumDesc {
 }
 
 impl MediumDesc {
+    /// The same medium generated at `dims` sites (its generator's parameters for that grid,
+    /// its seed kept).
+    pub fn at_grid(&self, dims: [usize; 3]) -> MediumDesc {
+        let MediumGenerator::Cumulus(p) = &self.generator;
+        MediumDesc {
+            generator: MediumGenerator::Cumulus(CumulusParams::for_grid(dims, p.seed)),
+            ..self.clone()
+        }
+    }
+
     /// Generates the density and places it.
     pub fn build(&self, origin: &str) -> Result<Medium, SceneError> {
         let MediumGenerator::Cumulus(p) = &self.generator;

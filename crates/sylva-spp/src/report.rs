@@ -56,6 +56,66 @@ fn thickness_json<S: serde::Serializer>(w: &f64, s: S) -> Result<S::Ok, S::Error
     }
 }
 
+/// A slab query from the command line refused, with the flag or value named.
+#[derive(Debug, thiserror::Error)]
+pub enum QueryError {
+    #[error("--thickness must be a number or \"inf\", got {text:?}")]
+    Thickness {
+        text: String,
+        #[source]
+        source: std::num::ParseFloatError,
+    },
+    #[error("polar angles must be in [0, 180] degrees, got {0}")]
+    Polar(f64),
+    #[error(
+        "a horizontal direction (polar angle 90) never meets a face of the slab; pick another angle"
+    )]
+    Horizontal,
+    #[error("azimuths must be finite, got {0}")]
+    Azimuth(f64),
+    #[error(transparent)]
+    Spp(#[from] SppError),
+}
+
+/// `--thickness`: a length, or `inf` (also `infinity`, `∞`) for a half-space.
+pub fn parse_thickness(text: &str) -> Result<f64, QueryError> {
+    match text.trim().to_ascii_lowercase().as_str() {
+        "inf" | "infinity" | "∞" => Ok(f64::INFINITY),
+        other => other
+            .parse::<f64>()
+            .map_err(|source| QueryError::Thickness {
+                text: text.to_string(),
+                source,
+            }),
+    }
+}
+
+/// The reported directions: every polar angle (degrees from the inward normal, 0 to 180,
+/// not 90) at every azimuth (degrees from the plane of incidence), as [`SlabQuery`] holds
+/// them.
+pub fn directions(
+    polar_deg: &[f64],
+    azimuths_deg: &[f64],
+) -> Result<Vec<(f64, f64, Direction)>, QueryError> {
+    let mut directions = Vec::new();
+    for &polar in polar_deg {
+        if !(0.0..=180.0).contains(&polar) {
+            return Err(QueryError::Polar(polar));
+        }
+        if (polar - 90.0).abs() < 1e-6 {
+            return Err(QueryError::Horizontal);
+        }
+        for &azimuth in azimuths_deg {
+            if !azimuth.is_finite() {
+                return Err(QueryError::Azimuth(azimuth));
+            }
+            let d = Direction::new(polar.to_radians().cos(), azimuth.to_radians())?;
+            directions.push((polar, azimuth, d));
+        }
+    }
+    Ok(directions)
+}
+
 /// What [`slab_report`] computes besides the fluxes.
 #[derive(Debug, Clone)]
 pub struct SlabQuery {
@@ -409,6 +469,38 @@ pub fn tree_text(r: &TreeReport, categories: bool) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn thickness_accepts_numbers_and_infinity_and_rejects_junk() {
+        assert_eq!(parse_thickness("2.5").unwrap(), 2.5);
+        assert!(parse_thickness("inf").unwrap().is_infinite());
+        assert!(parse_thickness("thick").is_err());
+    }
+
+    /// Every polar angle at every azimuth, in order; 90°, out-of-range angles and
+    /// non-finite azimuths refused.
+    #[test]
+    fn directions_cross_polar_angles_with_azimuths() {
+        let d = directions(&[0.0, 120.0], &[0.0, 45.0]).unwrap();
+        let angles: Vec<(f64, f64)> = d.iter().map(|&(p, a, _)| (p, a)).collect();
+        assert_eq!(
+            angles,
+            [(0.0, 0.0), (0.0, 45.0), (120.0, 0.0), (120.0, 45.0)]
+        );
+        assert!((d[2].2.mu - 120f64.to_radians().cos()).abs() < 1e-12);
+        assert!(matches!(
+            directions(&[90.0], &[0.0]),
+            Err(QueryError::Horizontal)
+        ));
+        assert!(matches!(
+            directions(&[200.0], &[0.0]),
+            Err(QueryError::Polar(_))
+        ));
+        assert!(matches!(
+            directions(&[0.0], &[f64::NAN]),
+            Err(QueryError::Azimuth(_))
+        ));
+    }
 
     #[test]
     fn slab_report_has_a_row_per_depth_and_direction_and_names_infinity() {

@@ -126,6 +126,17 @@ impl TraversalConfig {
         stack_size: MAX_DEPTH,
     };
 
+    /// `--stack N`: a short stack of 1 to [`MAX_DEPTH`] entries, or the error naming the
+    /// flag.
+    pub fn checked(stack_size: usize) -> Result<TraversalConfig, String> {
+        if !(1..=MAX_DEPTH).contains(&stack_size) {
+            return Err(format!(
+                "--stack {stack_size}: the short stack holds 1 to {MAX_DEPTH} entries"
+            ));
+        }
+        Ok(TraversalConfig::with_stack(stack_size))
+    }
+
     /// `stack_size` clamped to 1..=[`MAX_DEPTH`].
     pub fn with_stack(stack_size: usize) -> TraversalConfig {
         TraversalConfig {

@@ -88,6 +88,36 @@ impl Default for VoxelizeOptions {
     }
 }
 
+/// A model grid given on the command line (`--grid N`) refused.
+#[derive(Debug, Error, PartialEq)]
+pub enum GridFlagError {
+    #[error("--grid '{text}': a model's grid is one number, the sites along its longest edge")]
+    NotANumber {
+        text: String,
+        #[source]
+        source: std::num::ParseIntError,
+    },
+    #[error(
+        "--grid {0}: a model's grid must be {MIN_GRID} to {MAX_GRID} sites along its longest edge"
+    )]
+    Range(usize),
+}
+
+/// `--grid N`: sites along a model's longest edge, [`MIN_GRID`] to [`MAX_GRID`].
+pub fn parse_grid_flag(text: &str) -> Result<usize, GridFlagError> {
+    let n: usize = text
+        .trim()
+        .parse()
+        .map_err(|source| GridFlagError::NotANumber {
+            text: text.to_string(),
+            source,
+        })?;
+    if !(MIN_GRID..=MAX_GRID).contains(&n) {
+        return Err(GridFlagError::Range(n));
+    }
+    Ok(n)
+}
+
 #[derive(Debug, Error)]
 pub enum VoxelizeError {
     #[error("model '{0}' has no triangles: nothing to voxelize")]
@@ -240,6 +270,35 @@ pub fn voxelize(model: &Model, opts: &VoxelizeOptions) -> Result<DensityGrid, Vo
             voxelize_masks(model, &placement, opts.alpha_test)?.to_density_grid()
         }
     }
+}
+
+/// Edge of one cell of `grid` in model units (cells are cubes).
+pub fn cell_size(grid: &DensityGrid) -> f32 {
+    (grid.bounds.max[0] - grid.bounds.min[0]) / (grid.dims.nx - 1) as f32
+}
+
+/// What a density grid file records about how `grid` was made from `model` (named `spec` on
+/// the command line) with `opts`: the model, its source, the grid, triangles, model bounds,
+/// cell size, occupancy and alpha test.
+pub fn grid_metadata(
+    model: &Model,
+    spec: &str,
+    opts: &VoxelizeOptions,
+    grid: &DensityGrid,
+) -> Vec<(String, String)> {
+    let b = model.bounds;
+    let v3 = |v: [f32; 3]| format!("{},{},{}", v[0], v[1], v[2]);
+    vec![
+        ("model".to_string(), model.name.clone()),
+        ("source".to_string(), spec.to_string()),
+        ("grid_n".to_string(), opts.grid.to_string()),
+        ("triangles".to_string(), model.triangle_count().to_string()),
+        ("model_min".to_string(), v3(b.min.to_array())),
+        ("model_max".to_string(), v3(b.max.to_array())),
+        ("cell_size".to_string(), cell_size(grid).to_string()),
+        ("occupancy".to_string(), opts.occupancy.name().to_string()),
+        ("alpha_test".to_string(), opts.alpha_test.to_string()),
+    ]
 }
 
 /// The placement [`voxelize`] uses for `model` with `grid` sites along its longest edge,

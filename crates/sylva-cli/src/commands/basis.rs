@@ -11,16 +11,16 @@ use std::time::Instant;
 
 use anyhow::Result;
 use clap::Args;
-use sylva_light::relight::GlobalGridOptions;
-use sylva_light::{Progress, Silent};
+use sylva_light::report::LightEvent;
+use sylva_light::{Light, Progress, Silent};
 use sylva_pipeline::{
-    load_scene, precompute_physical, precompute_relighting, BasisUse, LbPlan, RelightingAt, Runner,
+    basis_jobs, basis_scene_line, costly_grid_warning, load_scene, precompute_physical,
+    precompute_relighting, BasisUse, LbPlan, RelightingAt, Runner,
 };
 
-use super::progress::{Bars, Report};
+use super::progress::Bars;
 use super::render::{
-    costly_grid_warning, relight_light, relight_plan, report_line, BasisArg, GridArgs, LbArgs,
-    RelightLightArg, RelitArgs, SCENE_HELP,
+    light_settings, say_report, BasisArg, GridArgs, LbArgs, RelightLightArg, RelitArgs, SCENE_HELP,
 };
 
 /// What `sylva basis` uses: the scene, the LB grid, cache and solver (`--device gpu` solves
@@ -49,41 +49,23 @@ pub struct BasisArgs {
 pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
     let t0 = Instant::now();
     let root = runner.is_root();
-    let light = relight_light(a.light.light.as_deref())?;
-    let physical = light == "physical";
-    let scene = load_scene(&a.scene, None)?;
     // The plan's sun weights and ambient are the frames' business, not the solves'.
-    let plan = relight_plan(
+    let settings = light_settings(
+        a.light.light.clone(),
         BasisArg::Auto,
         &RelitArgs::default(),
         &a.grid,
-        true,
-        a.keep_raw,
-        light,
-    )?
-    .expect("forced plans exist");
+    );
+    let light_name = settings.name(true)?;
+    let physical = light_name == "physical";
+    let scene = load_scene(&a.scene, None)?;
+    let plan = settings
+        .plan(true, a.keep_raw, light_name)?
+        .expect("forced plans exist");
     let grid = a.lb.lb_grid.unwrap_or(scene.lb.grid as usize);
-    if a.list_jobs && physical {
-        if root {
-            println!("model\tpart");
-            for m in 0..scene.models.len() {
-                for part in 0..sylva_light::relight::physical::PARTS {
-                    println!("{m}\t{part}");
-                }
-            }
-        }
-        return Ok(());
-    }
     if a.list_jobs {
-        if !root {
-            return Ok(());
-        }
-        println!("model\tbasis\tcolour");
-        for (m, model) in scene.models.iter().enumerate() {
-            let plan = sylva_light::relight::BasisPlan::new(model, grid, scene.model_preset(m))?;
-            for job in plan.jobs() {
-                println!("{m}\t{}\t{}", job.basis, job.colour);
-            }
+        if root {
+            basis_jobs(&scene, physical, grid, &mut |line| println!("{line}"))?;
         }
         return Ok(());
     }
@@ -92,22 +74,13 @@ pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
             println!("{s}")
         }
     };
-    say(format!(
-        "scene {}: {} models, {} instances; LB grid {grid}, preset {}",
-        scene.name,
-        scene.models.len(),
-        scene.instances.len(),
-        scene.lb.preset
-    ));
-    let (light, forest) = match physical {
-        true => (
-            sylva_light::Light::Physical,
-            (!a.grid.no_global).then_some(GlobalGridOptions {
-                sites: a.grid.global_grid,
-            }),
-        ),
-        false => (sylva_light::Light::Paper, None),
+    say(basis_scene_line(&scene, grid));
+    let light = if physical {
+        Light::Physical
+    } else {
+        Light::Paper
     };
+    let forest = settings.forest_grid(light)?;
     if let (Some(w), true) = (
         costly_grid_warning(&scene, Some(&plan), forest.as_ref(), light)?,
         root,
@@ -122,15 +95,10 @@ pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
         cache_dir: (!a.lb.no_cache).then_some(a.lb.cache_dir.as_path()),
         light,
     };
-    let progress = Bars::new(|r: Report| {
-        let (line, warning) = report_line(r);
-        if let Some(w) = warning {
-            eprintln!("{w}");
-        }
-        println!("{line}");
-    });
+    let progress = Bars::new(|r: LightEvent| say_report(&r, true, &|s| println!("{s}")));
     let progress: &dyn Progress = if root { &progress } else { &Silent };
-    if physical {
+    let models = scene.models.len();
+    let summary = if physical {
         let done = precompute_physical(
             &scene,
             &lb,
@@ -139,52 +107,29 @@ pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
             runner,
             progress,
         )?;
-        let Some(done) = done.filter(|_| root) else {
-            return Ok(());
-        };
-        if runner.processes() > 1 {
-            say(format!(
-                "MPI: base solutions solved across {} ranks",
-                runner.processes()
-            ));
-        }
-        let bytes: u64 = done.bases.iter().flatten().map(|b| b.bytes()).sum();
-        println!(
-            "{} of {} models from the cache; physical bases {} in all ({} parts per model, \
-             uncompressed){}; {:.1} s",
-            done.cached,
-            scene.models.len(),
-            sylva_core::format_bytes(bytes),
-            sylva_light::relight::physical::PARTS,
-            if done.forest.is_some() {
-                ", forest grid parts solved"
-            } else {
-                ""
-            },
-            t0.elapsed().as_secs_f64()
-        );
+        done.filter(|_| root)
+            .map(|d| d.summary(models, t0.elapsed().as_secs_f64()))
+    } else {
+        // Only the root needs the sets: it prints their size.
+        let done = precompute_relighting(&scene, &lb, &plan, runner, RelightingAt::Root, progress)?;
+        root.then(|| {
+            let done = done.expect("a forced plan solves what is missing");
+            done.summary(
+                models,
+                &plan.target.codec.name(),
+                t0.elapsed().as_secs_f64(),
+            )
+        })
+    };
+    let Some(summary) = summary else {
         return Ok(());
-    }
-    // Only the root needs the sets: it prints their size.
-    let done = precompute_relighting(&scene, &lb, &plan, runner, RelightingAt::Root, progress)?;
-    if !root {
-        return Ok(());
-    }
-    let done = done.expect("a forced plan solves what is missing");
+    };
     if runner.processes() > 1 {
         say(format!(
             "MPI: base solutions solved across {} ranks",
             runner.processes()
         ));
     }
-    let bytes: u64 = done.compressed.iter().flatten().map(|b| b.bytes()).sum();
-    println!(
-        "{} of {} models from the cache; compressed bases {} in all ({}); {:.1} s",
-        done.cached,
-        scene.models.len(),
-        sylva_core::format_bytes(bytes),
-        plan.target.codec.name(),
-        t0.elapsed().as_secs_f64()
-    );
+    println!("{summary}");
     Ok(())
 }

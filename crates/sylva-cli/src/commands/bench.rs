@@ -3,7 +3,8 @@
 use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
 use sylva_lb::bench::{self, BenchMedium};
-use sylva_lb::{Boundary, DensityGrid, Dims, Preset, SolveOptions};
+use sylva_lb::{Dims, SolveOptions};
+use sylva_pipeline::bench::CloudSolve;
 
 use super::output::{bench_bar, print_report};
 
@@ -124,50 +125,22 @@ fn bench_lb(a: BenchLbArgs) -> Result<()> {
 
 /// The built-in cloud's LB solve, as `sylva render cloud` runs it.
 fn bench_cloud(a: BenchLbArgs) -> Result<()> {
-    let desc = sylva_scene::SceneDesc::load("cloud")?;
-    let mut medium = desc
-        .media
-        .first()
-        .cloned()
-        .expect("the built-in cloud scene has a medium");
-    let sylva_scene::scene::MediumGenerator::Cumulus(params) = &mut medium.generator;
-    if let Some(g) = &a.grid {
-        let dims = parse_grid(g)?;
-        *params =
-            sylva_grow::cloud::CumulusParams::for_grid([dims.nx, dims.ny, dims.nz], params.seed);
-    }
+    let dims = a.grid.as_deref().map(parse_grid).transpose()?;
     if a.repeats == 0 {
         bail!("--repeats must be at least 1");
     }
-    let m = medium.build(&desc.origin)?;
-    let dims = Dims::new(m.dims[0], m.dims[1], m.dims[2])?;
-    let opts = match (a.steps, a.tolerance) {
-        (Some(0), _) => bail!("--steps must be at least 1"),
-        (Some(s), t) => SolveOptions {
-            max_steps: s,
-            tolerance: t,
-        },
-        (None, None) => SolveOptions::papers(dims),
-        (None, Some(t)) => SolveOptions {
-            max_steps: 10 * dims.longest_edge(),
-            tolerance: Some(t),
-        },
-    };
-    let grid = DensityGrid::new(
-        dims,
-        sylva_lb::Bounds::UNIT,
-        m.density.to_vec(),
-        vec![0.0; dims.sites()],
-    )?;
-    let preset = Preset::parse(&m.preset)?.params();
-    let boundary = Boundary::sun(desc.sun.travel().to_array(), 1.0);
+    let cloud = CloudSolve::builtin(dims)?;
+    if a.steps == Some(0) {
+        bail!("--steps must be at least 1");
+    }
+    let opts = SolveOptions::for_run(a.steps, a.tolerance, cloud.grid.dims);
     let backend = super::device::open_solver(a.device, a.precision)?;
     let pb = bench_bar(a.json, opts.max_steps * a.repeats, "bench cloud");
     let b = bench::solve(
         backend.as_ref(),
-        &grid,
-        &preset,
-        boundary,
+        &cloud.grid,
+        &cloud.medium,
+        cloud.boundary,
         &opts,
         a.repeats,
         &mut |s| pb.set_position(s as u64),

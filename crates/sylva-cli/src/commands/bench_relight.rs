@@ -7,8 +7,7 @@ use std::time::Instant;
 use anyhow::Result;
 use sylva_pipeline::bench::{self, RelightBenchPlan};
 
-use super::output::bench_bar;
-use super::output::emit;
+use super::output::{bench_bar, emit_report};
 use super::render::{prepare, FrameArgs, PrepareRequest, Say};
 
 #[derive(clap::Args, Debug)]
@@ -58,17 +57,11 @@ pub fn run(a: BenchRelightArgs) -> Result<()> {
         let mut report = bench::relight_physical(&mut p.scene, plan, &|| pb.inc(1))?;
         pb.finish_and_clear();
         report.prepare_seconds = prepare_seconds;
-        if a.json {
-            return emit(&format!("{}\n", super::output::pretty_json(&report)?));
-        }
-        return emit(&report.to_string());
+        return emit_report(&report, a.json);
     }
     let mut report = bench::relight(&mut p.scene, &p.basis, plan, &|| pb.inc(1))?;
     pb.finish_and_clear();
     report.codec = a.frame.grid.codec.clone();
     report.prepare_seconds = prepare_seconds;
-    if a.json {
-        return emit(&format!("{}\n", super::output::pretty_json(&report)?));
-    }
-    emit(&report.to_string())
+    emit_report(&report, a.json)
 }

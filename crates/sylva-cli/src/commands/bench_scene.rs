@@ -1,6 +1,6 @@
 //! `sylva bench scene`: times generating each built-in species and building a scene.
 
-use super::output::emit;
+use super::output::emit_report;
 
 #[derive(clap::Args)]
 pub struct BenchSceneArgs {
@@ -17,8 +17,5 @@ pub struct BenchSceneArgs {
 
 pub fn run(args: BenchSceneArgs) -> anyhow::Result<()> {
     let b = sylva_scene::bench::scene_build(&args.scene, args.runs)?;
-    if args.json {
-        return emit(&format!("{}\n", super::output::pretty_json(&b)?));
-    }
-    emit(&b.to_string())
+    emit_report(&b, args.json)
 }

@@ -35,7 +35,7 @@ pub struct BenchSppArgs {
 }
 
 pub fn run(a: BenchSppArgs) -> Result<()> {
-    let base = super::spp_trees::load_scene_or_species(&a.scene)?;
+    let base = sylva_pipeline::load_scene_or_species(&a.scene)?;
     let scene = sylva_spp::trees::experiment::repeated(&base, a.repeat, None)?;
     let config = SystemConfig {
         directions: a.directions,

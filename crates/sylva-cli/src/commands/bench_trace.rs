@@ -3,13 +3,11 @@
 //! is `sylva_pipeline::bench`'s.
 
 use anyhow::Result;
-use sylva_light::Silent;
-use sylva_pipeline::bench::scaling::TileCosts;
-use sylva_pipeline::bench::{self, RankSplit, ScalingModel, TimedFrame, TraceBench, TraceRun};
+use sylva_pipeline::bench::{self, TraceRun};
 use sylva_pipeline::Runner;
 use sylva_render::stage;
 
-use super::output::emit;
+use super::output::emit_report;
 use super::render::{prepare, FrameArgs, PrepareRequest, Say};
 
 #[derive(clap::Args, Debug)]
@@ -58,51 +56,11 @@ pub fn run(a: BenchTraceArgs, runner: &dyn Runner) -> Result<()> {
         accel_build_seconds: clock.seconds(stage::ACCEL_BUILD),
         lb_seconds: clock.seconds(stage::LB_PRECOMPUTE),
     };
-    let p = &prepared.scene;
-    let camera = p.camera(prepared.width, prepared.height);
-    // One frame: alone, or across the ranks (`None` on ranks other than 0).
-    let mut frame = |settings: &sylva_render::RenderSettings| -> Result<Option<TimedFrame>> {
-        Ok(p.render_split(runner, settings, &Silent)?
-            .map(|d| TimedFrame {
-                split: several.then(|| RankSplit {
-                    wall_seconds: d.wall_seconds,
-                    units: d.layout.units(),
-                    unit_edge: d.layout.edge,
-                    rank_seconds: d.ranks.iter().map(|w| w.seconds).collect(),
-                    rank_units: d.ranks.iter().map(|w| w.units).collect(),
-                    imbalance: d.imbalance(),
-                }),
-                frame: d.frame,
-            }))
-    };
-    let mut measures = Vec::new();
-    for rpp in [1u32, 4] {
-        let settings = p.settings(camera, rpp, a.frame.view.seed);
-        measures.extend(bench::measure_frames(
-            &settings, a.runs, !several, &mut frame,
-        )?);
-    }
-    let Ok(measures) = <[_; 2]>::try_from(measures) else {
+    let size = (prepared.width, prepared.height);
+    let seed = a.frame.view.seed;
+    let bench = bench::trace(&prepared.scene, size, seed, run, runner, a.tile_costs)?;
+    let Some(report) = bench else {
         return Ok(()); // rank 0 reports
     };
-    let scaling = match a.tile_costs {
-        true => {
-            let times = bench::tile_times(p, &p.settings(camera, 1, a.frame.view.seed), a.runs)?;
-            let costs = TileCosts {
-                columns: times.columns,
-                rows: times.rows,
-                seconds: times.seconds.clone(),
-            };
-            Some(ScalingModel::new(&times, |ranks| {
-                let s = costs.split(ranks);
-                (s.strips, s.on_demand)
-            }))
-        }
-        false => None,
-    };
-    let report = TraceBench::new(p, (prepared.width, prepared.height), measures, run, scaling);
-    if a.json {
-        return emit(&format!("{}\n", super::output::pretty_json(&report)?));
-    }
-    emit(&report.to_string())
+    emit_report(&report, a.json)
 }

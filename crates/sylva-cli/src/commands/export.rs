@@ -6,11 +6,10 @@ use std::time::Instant;
 
 use anyhow::Result;
 use clap::Args;
-use sylva_core::format_bytes;
+use sylva_core::thousands;
 use sylva_io::export::{self, mitsuba, obj, Format};
 
 use super::progress::bar;
-use super::scene::thousands;
 
 #[derive(Args)]
 pub struct ExportArgs {
@@ -124,22 +123,8 @@ pub fn run(args: ExportArgs) -> Result<()> {
         r => r?,
     };
     println!(
-        "wrote {} files, {}, {} triangles, to {} in {:.1} s",
-        written.files.len(),
-        format_bytes(written.bytes),
-        thousands(written.triangles),
-        args.output.display(),
-        t1.elapsed().as_secs_f64()
+        "{}",
+        written.summary(args.format, &args.output, t1.elapsed().as_secs_f64())
     );
-    match args.format {
-        Format::Obj => println!(
-            "  {}",
-            args.output.join(obj::OBJ_FILE).display()
-        ),
-        Format::Mitsuba => println!(
-            "  render: mitsuba -m scalar_rgb -o render.exr {}   (pip install mitsuba; see docs/export.md)",
-            args.output.join(mitsuba::XML_FILE).display()
-        ),
-    }
     Ok(())
 }

@@ -3,18 +3,17 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
-use sylva_core::Sun;
-use sylva_lb::grid_file::{read_header_verified, GridKind};
-use sylva_lb::preview::lighting_preview_png;
+use sylva_core::{companion_path, OutputSet, Sun};
+use sylva_geom::params::MediumOverrides;
+use sylva_grid::info::{read_raw, GridInfo};
+use sylva_lb::report::{lighting_line, SolvedGrid};
 use sylva_lb::shapes::Shape;
-use sylva_lb::{
-    Boundary, ColourParams, DensityGrid, Dims, Element, GridFile, MediumParams, Preset, RawElement,
-    SolveOptions,
-};
+use sylva_lb::{Boundary, DensityGrid, Dims, Element, GridFile, RawElement, SolveOptions};
 use sylva_scene::model_source::{load_scene_model, scene_model_preset};
 use sylva_scene::SceneDesc;
+use sylva_voxel::parse_grid_flag;
 
 use super::progress::bar;
 
@@ -153,117 +152,36 @@ pub fn run(args: LbArgs) -> Result<()> {
     }
 }
 
-/// Parses "v" or "r,g,b" into three values.
-fn per_colour(name: &str, s: &str) -> Result<[f64; 3]> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|p| p.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .with_context(|| {
-            format!("--{name} '{s}': expected a number or three comma-separated numbers")
-        })?;
-    match v.as_slice() {
-        [a] => Ok([*a; 3]),
-        [r, g, b] => Ok([*r, *g, *b]),
-        _ => bail!(
-            "--{name} '{s}': expected one value or three (R,G,B), got {}",
-            v.len()
-        ),
-    }
-}
-
-pub fn parse_sun(sun: Option<&str>, elevation: Option<f64>, azimuth: Option<f64>) -> Result<Sun> {
-    Ok(match (sun, elevation, azimuth) {
-        (Some(v), _, _) => Sun::parse_vector(v).context("--sun")?,
-        (None, None, None) => Sun::default(),
-        (None, e, a) => {
-            // Above the zenith is a typing error (the help's range); below the horizon the
-            // pipeline explains why the sun must be up.
-            if let Some(e) = e.filter(|e| e.is_nan() || *e > 90.0) {
-                anyhow::bail!("--elevation {e}: degrees above the horizon, 0 to 90");
-            }
-            Sun::from_angles(e.unwrap_or(50.0), a.unwrap_or(30.0))
-                .context("--elevation/--azimuth")?
-        }
-    })
-}
-
-fn medium(a: &SolveArgs, preset: &str) -> Result<MediumParams> {
-    let mut m = Preset::parse(preset)?.params();
-    if let Some(s) = &a.sigma_a {
-        let v = per_colour("sigma-a", s)?;
-        for (colour, value) in m.colours.iter_mut().zip(v) {
-            colour.sigma_a = value;
-            // σ_s follows σ_a as in 000 (σ_s = 1 - σ_a) unless given too.
-            if a.sigma_s.is_none() {
-                colour.sigma_s = 1.0 - value;
-            }
+impl From<&SolveArgs> for MediumOverrides {
+    fn from(a: &SolveArgs) -> MediumOverrides {
+        MediumOverrides {
+            sigma_a: a.sigma_a.clone(),
+            sigma_s: a.sigma_s.clone(),
+            g: a.g.clone(),
+            keep_f0: a.keep_f0,
+            brown_keeps_f0: a.brown_keeps_f0,
+            brown_threshold: a.brown_threshold,
         }
     }
-    if let Some(s) = &a.sigma_s {
-        for (colour, value) in m.colours.iter_mut().zip(per_colour("sigma-s", s)?) {
-            colour.sigma_s = value;
-        }
-    }
-    if let Some(s) = &a.g {
-        for (colour, value) in m.colours.iter_mut().zip(per_colour("g", s)?) {
-            colour.g = value;
-        }
-    }
-    if a.keep_f0 {
-        m.zero_f0_on_green = false;
-    }
-    if a.brown_keeps_f0 {
-        m.zero_f0_on_brown = false;
-    }
-    m.brown_threshold = a.brown_threshold;
-    m.validate()?;
-    Ok(m)
-}
-
-fn parse_dims(s: &str, what: &str) -> Result<Dims> {
-    match Dims::parse(s) {
-        Some(d) => Ok(d.with_context(|| format!("{what} '{s}'"))?),
-        None => bail!("{what} '{s}': expected N or NXxNYxNZ, e.g. 128 or 256x128x128"),
-    }
-}
-
-/// `--grid` as the N of a model grid.
-fn model_grid_n(grid: &str) -> Result<usize> {
-    let n: usize = grid.trim().parse().with_context(|| {
-        format!("--grid '{grid}': a model's grid is one number, the sites along its longest edge")
-    })?;
-    let range = sylva_core::limits::MODEL_GRID;
-    if !range.contains(&n) {
-        bail!(
-            "--grid {n}: a model's grid must be {} sites along its longest edge",
-            sylva_core::limits::describe(&range)
-        );
-    }
-    Ok(n)
 }
 
 /// Loads the medium and names it for default output paths.
 fn load_source(a: &SolveArgs, scene: Option<&SceneDesc>) -> Result<(DensityGrid, String)> {
     if let Some(spec) = &a.source.model {
-        let n = model_grid_n(a.grid.as_deref().unwrap_or("128"))?;
+        let n = parse_grid_flag(a.grid.as_deref().unwrap_or("128"))?;
         let v = super::voxelize::load_and_voxelize(spec, n, true, a.occupancy.into())?;
-        println!(
-            "voxelized {}: {}",
-            v.name,
-            super::voxelize::summary(&v.grid)
-        );
+        println!("voxelized {}: {}", v.name, v.grid.summary());
         return Ok((v.grid, sylva_core::file_stem(&v.name, "model")));
     }
     if let Some(scene) = scene {
         let n = match &a.grid {
-            Some(g) => model_grid_n(g)?,
+            Some(g) => parse_grid_flag(g)?,
             None => scene.lb.grid as usize,
         };
         let model = load_scene_model(scene, a.scene_model.as_deref())?;
         let spec = format!("{}: {}", scene.name, model.name);
         let v = super::voxelize::voxelize_model(&model, &spec, n, true, a.occupancy.into())?;
-        println!("voxelized {spec}: {}", super::voxelize::summary(&v.grid));
+        println!("voxelized {spec}: {}", v.grid.summary());
         return Ok((
             v.grid,
             sylva_core::file_stem(&format!("{}-{}", scene.name, model.name), "model"),
@@ -278,35 +196,17 @@ fn load_source(a: &SolveArgs, scene: Option<&SceneDesc>) -> Result<(DensityGrid,
         return Ok((grid, name));
     }
     if let Some(path) = &a.source.raw {
-        let dims = parse_dims(a.raw_dims.as_deref().unwrap_or_default(), "--raw-dims")?;
-        return Ok((read_raw(path, dims, &a.raw_type)?, "raw".into()));
+        let dims = Dims::parse_flag(a.raw_dims.as_deref().unwrap_or_default(), "--raw-dims")?;
+        let element = match a.raw_type.as_str() {
+            "f32" => RawElement::F32,
+            _ => RawElement::U8,
+        };
+        return Ok((read_raw(path, dims, element)?, "raw".into()));
     }
-    let shape_name = a.source.shape.as_deref().unwrap_or("crown");
-    let Some(shape) = Shape::parse(shape_name) else {
-        bail!("unknown shape '{shape_name}': expected sphere, cube or crown");
-    };
-    let dims = parse_dims(a.grid.as_deref().unwrap_or("128"), "--grid")?;
+    let shape = Shape::named(a.source.shape.as_deref().unwrap_or("crown"))?;
+    let dims = Dims::parse_flag(a.grid.as_deref().unwrap_or("128"), "--grid")?;
     sylva_lb::solver::check_solve_memory(dims)?;
     Ok((shape.grid(dims), shape.name().into()))
-}
-
-fn read_raw(path: &Path, dims: Dims, ty: &str) -> Result<DensityGrid> {
-    let element = if ty == "f32" {
-        RawElement::F32
-    } else {
-        RawElement::U8
-    };
-    let want = (dims.sites() * element.size()) as u64;
-    // A regular file of exactly the bytes the grid needs, checked before it is read.
-    let (_, size) = sylva_core::open_file(path, u64::MAX, "raw grid files")?;
-    if size != want {
-        bail!(
-            "{}: a {dims} grid of {ty} needs {want} bytes, the file has {size}",
-            path.display()
-        );
-    }
-    let bytes = sylva_core::read_file(path, want, "raw grid files")?;
-    DensityGrid::from_raw(dims, &bytes, element).with_context(|| format!("{}", path.display()))
 }
 
 fn solve(a: SolveArgs) -> Result<()> {
@@ -317,61 +217,34 @@ fn solve(a: SolveArgs) -> Result<()> {
         (None, Some(s)) => scene_model_preset(s, a.scene_model.as_deref())?,
         (None, None) => "leaf".to_string(),
     };
-    let m = medium(&a, &preset)?;
-    let sun = parse_sun(a.sun.as_deref(), a.elevation, a.azimuth)?;
+    let m = MediumOverrides::from(&a).apply(&preset)?;
+    let sun = Sun::from_flags(a.sun.as_deref(), a.elevation, a.azimuth)?;
     if !(a.intensity.is_finite() && a.intensity > 0.0) {
         bail!("--intensity {} must be a positive number", a.intensity);
     }
     // Outputs named on the command line are checked (writable, not a directory) before the
     // grid is built; default names wait for the grid's name.
-    let early: Vec<PathBuf> = match (&a.output, &a.png) {
-        (Some(o), p) => vec![
-            o.clone(),
-            p.clone().unwrap_or_else(|| o.with_extension("png")),
-        ],
-        (None, Some(p)) => vec![p.clone()],
-        (None, None) => Vec::new(),
-    };
-    sylva_core::OutputSet::new::<&Path>(&[]).plan(&early)?;
+    OutputSet::check_named(a.output.as_deref(), a.png.as_deref(), "png")?;
     let t0 = Instant::now();
     let (grid, name) = load_source(&a, scene.as_ref())?;
     let dims = grid.dims;
     let load_s = t0.elapsed().as_secs_f64();
-    let opts = match (a.steps, a.tolerance) {
-        (Some(s), t) => SolveOptions {
-            max_steps: s,
-            tolerance: t,
-        },
-        (None, None) => SolveOptions::papers(dims),
-        (None, Some(t)) => SolveOptions {
-            max_steps: 10 * dims.longest_edge(),
-            tolerance: Some(t),
-        },
-    };
+    let opts = SolveOptions::for_run(a.steps, a.tolerance, dims);
     let output = a
         .output
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("sylva-out/lb-{name}.sgrid")));
-    let png = a
-        .png
-        .clone()
-        .unwrap_or_else(|| output.with_extension("png"));
+    let png = companion_path(&output, a.png.as_deref(), "png");
     // Inputs are protected (--input and --raw here; scene and model files as they are read),
     // and the grid and its preview are checked against each other, before the solve.
     let inputs: Vec<&Path> = [a.source.input.as_deref(), a.source.raw.as_deref()]
         .into_iter()
         .flatten()
         .collect();
-    let mut outputs = sylva_core::OutputSet::new(&inputs);
+    let mut outputs = OutputSet::new(&inputs);
     outputs.plan(&[&output, &png])?;
-    let (mean, occupied) = grid.occupancy();
+    println!("{}", lighting_line(&name, &grid, &preset, &sun));
     let d = sun.travel();
-    println!(
-        "lighting {name}: {dims} grid, {occupied} occupied sites (mean density {mean:.4}), preset {}, sun elevation {:.1}° azimuth {:.1}°",
-        preset,
-        sun.elevation_deg(),
-        sun.azimuth_deg()
-    );
     let backend = super::device::open_solver(a.device, a.precision)?;
     let pb = bar(3 * opts.max_steps as u64, "LB solve");
     let mut last_colour = usize::MAX;
@@ -398,55 +271,17 @@ fn solve(a: SolveArgs) -> Result<()> {
     )?;
     pb.finish_and_clear();
     let solve_s = t1.elapsed().as_secs_f64();
-    for (c, r) in reports.iter().enumerate() {
-        let p: &ColourParams = &m.colours[c];
-        println!(
-            "  {:>5}: σ_a {:.3} σ_s {:.3} g {:+.3}: {} steps, stop: {}, final residual {:.2e}, {:.2} s, {:.0} MLUPS",
-            sylva_lb::params::COLOUR_NAMES[c],
-            p.sigma_a,
-            p.sigma_s,
-            p.g,
-            r.steps,
-            r.stop,
-            r.residual,
-            r.seconds,
-            r.mlups(dims)
-        );
-    }
-    let metadata = vec![
-        ("source".to_string(), name.clone()),
-        ("preset".to_string(), preset.clone()),
-        (
-            "sun_to".to_string(),
-            format!(
-                "{:.6},{:.6},{:.6}",
-                sun.to_sun().x,
-                sun.to_sun().y,
-                sun.to_sun().z
-            ),
-        ),
-        (
-            "params".to_string(),
-            m.colours
-                .iter()
-                .map(|c| format!("{}/{}/{}", c.sigma_a, c.sigma_s, c.g))
-                .collect::<Vec<_>>()
-                .join(" "),
-        ),
-        (
-            "steps".to_string(),
-            reports
-                .iter()
-                .map(|r| r.steps.to_string())
-                .collect::<Vec<_>>()
-                .join(","),
-        ),
-    ];
+    let solved = SolvedGrid {
+        source: &name,
+        preset: &preset,
+        medium: &m,
+        sun: &sun,
+        dims,
+        reports: &reports,
+    };
+    print!("{solved}");
     let element = if a.f16 { Element::F16 } else { Element::F32 };
-    GridFile::from_lighting(&lighting, element, metadata).write_into(&mut outputs, &output)?;
-    let preview = lighting_preview_png(&lighting)
-        .with_context(|| format!("cannot encode the preview {}", png.display()))?;
-    outputs.write_bytes(&png, &preview)?;
+    solved.write(&lighting, element, &mut outputs, &output, &png)?;
     outputs.commit()?;
     println!(
         "total {:.2} s (setup {load_s:.2} s, solve {solve_s:.2} s, {})",
@@ -458,50 +293,6 @@ fn solve(a: SolveArgs) -> Result<()> {
 }
 
 fn info(path: &Path) -> Result<()> {
-    let header = read_header_verified(path)?;
-    println!("{}", path.display());
-    println!("  kind:      {} grid", header.kind.name());
-    println!(
-        "  size:      {} ({} sites)",
-        header.dims,
-        header.dims.sites()
-    );
-    println!("  element:   {}", header.element.name());
-    println!(
-        "  bounds:    ({}, {}, {}) .. ({}, {}, {})",
-        header.bounds.min[0],
-        header.bounds.min[1],
-        header.bounds.min[2],
-        header.bounds.max[0],
-        header.bounds.max[1],
-        header.bounds.max[2]
-    );
-    println!(
-        "  file:      {} ({}), checksum {:08x} ok",
-        header.file_bytes,
-        sylva_core::format_bytes(header.file_bytes),
-        header.checksum
-    );
-    for (k, v) in &header.metadata {
-        println!("  {k:<10} {v}");
-    }
-    let file = GridFile::read(path)?;
-    for (name, ch) in header.kind.channel_names().iter().zip(&file.channels) {
-        let (mut lo, mut hi, mut sum) = (f32::INFINITY, f32::NEG_INFINITY, 0.0f64);
-        for &v in ch {
-            lo = lo.min(v);
-            hi = hi.max(v);
-            sum += v as f64;
-        }
-        println!(
-            "  {name:<14} min {lo:.5}  max {hi:.5}  mean {:.5}",
-            sum / ch.len() as f64
-        );
-    }
-    if header.kind == GridKind::Density {
-        let g = file.into_density(path)?;
-        let (mean, occupied) = g.occupancy();
-        println!("  occupied:  {occupied} sites, mean density {mean:.5}");
-    }
+    print!("{}", GridInfo::read(path)?);
     Ok(())
 }

@@ -49,6 +49,14 @@ pub fn print_report<R: Serialize + std::fmt::Display>(r: &R, json: bool) -> Resu
     Ok(())
 }
 
+/// A report on stdout through [`emit`]: pretty JSON, keys sorted (`json`), or its text.
+pub fn emit_report<R: Serialize + std::fmt::Display>(r: &R, json: bool) -> Result<()> {
+    if json {
+        return emit(&format!("{}\n", pretty_json(r)?));
+    }
+    emit(&r.to_string())
+}
+
 /// `r` as pretty JSON, keys sorted (as `serde_json::json!` objects print them).
 pub fn pretty_json<R: Serialize>(r: &R) -> Result<String> {
     Ok(serde_json::to_string_pretty(&serde_json::to_value(r)?)?)

@@ -8,6 +8,7 @@ use sylva_geom::{Medium, Model};
 use sylva_light::lighting::LightingReport;
 use sylva_light::lighting::ShadedDensity;
 use sylva_light::relight::{BasisReport, GlobalReport};
+use sylva_light::report::LightEvent;
 use sylva_light::Progress;
 
 /// A bar over `len` units of work, labelled `what`.
@@ -24,26 +25,13 @@ pub fn bar(len: u64, what: &str) -> ProgressBar {
     pb
 }
 
-/// What the pipeline reports about the LB light, one event at a time.
-pub enum Report<'a> {
-    /// A model's LB light for the sun, or a medium's (its sun and its sky solves), by name.
-    Lit(&'a str, &'a LightingReport),
-    /// A model's base solutions.
-    Basis(&'a Model, &'a BasisReport),
-    /// The coarse global grid.
-    Global(&'a GlobalReport),
-    /// A model's neighbours' foliage added to its density in a forest: (model, own optical
-    /// depth, added).
-    Shade(&'a str, f64, f64),
-}
-
 /// One bar per piece of pipeline work; `on_report` hears each LB report.
 pub struct Bars<F> {
     current: Mutex<Option<ProgressBar>>,
     on_report: F,
 }
 
-impl<F: Fn(Report) + Sync> Bars<F> {
+impl<F: Fn(LightEvent) + Sync> Bars<F> {
     pub fn new(on_report: F) -> Bars<F> {
         Bars {
             current: Mutex::new(None),
@@ -58,7 +46,7 @@ impl<F: Fn(Report) + Sync> Bars<F> {
     }
 }
 
-impl<F: Fn(Report) + Sync> Progress for Bars<F> {
+impl<F: Fn(LightEvent) + Sync> Progress for Bars<F> {
     fn start(&self, what: &str, total: u64) {
         *self.current.lock().expect("progress bar") = Some(bar(total, what));
     }
@@ -82,29 +70,32 @@ impl<F: Fn(Report) + Sync> Progress for Bars<F> {
 
     fn model_lit(&self, model: &Model, report: &LightingReport) {
         self.finish();
-        (self.on_report)(Report::Lit(&model.name, report));
+        (self.on_report)(LightEvent::Lit(&model.name, report));
     }
 
     fn medium_lit(&self, medium: &Medium, reports: &[LightingReport]) {
         self.finish();
         for (report, which) in reports.iter().zip(["sun", "sky"]) {
-            (self.on_report)(Report::Lit(&format!("{} ({which})", medium.name), report));
+            (self.on_report)(LightEvent::Lit(
+                &format!("{} ({which})", medium.name),
+                report,
+            ));
         }
     }
 
     fn model_basis(&self, model: &Model, report: &BasisReport) {
         self.finish();
-        (self.on_report)(Report::Basis(model, report));
+        (self.on_report)(LightEvent::Basis(model, report));
     }
 
     fn global_grid(&self, report: &GlobalReport) {
         self.finish();
-        (self.on_report)(Report::Global(report));
+        (self.on_report)(LightEvent::Global(report));
     }
 
     fn neighbour_shade(&self, model: &Model, shade: &ShadedDensity) {
         self.finish();
-        (self.on_report)(Report::Shade(
+        (self.on_report)(LightEvent::Shade(
             &model.name,
             shade.own_depth,
             shade.added_depth,

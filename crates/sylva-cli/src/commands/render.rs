@@ -9,20 +9,20 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use sylva_core::Sun;
-use sylva_lb::relight::{Codec, CompressTarget, Precision};
+use sylva_lb::relight::Precision;
 use sylva_lb::LbSolver;
-use sylva_light::lighting::{Light, LightingSource};
 use sylva_light::relight::{BasisReport, GlobalGridOptions, SunWeights};
-use sylva_light::{IndirectLight, Progress, Silent};
+use sylva_light::report::LightEvent;
+use sylva_light::{Progress, Silent};
 use sylva_pipeline::{
-    image_paths, load_scene, resolution, tone_map_modes, write_images, BasisUse, LbPlan,
-    PrepareOptions, PreparedScene, RelightPlan, Runner, ShadowMethod,
+    check_png_name, costly_grid_warning, load_scene, plan_images, resolution, scene_line,
+    tone_map_modes, write_images, written_line, BasisChoice, LbPlan, LightSettings, PrepareOptions,
+    PreparedScene, RenderSummary, Runner, ShadowMethod,
 };
-use sylva_render::{stage, Mode, ShadingParams, ToneMap};
-use sylva_spp::trees::system::{SppLight, SppSystem, SystemConfig};
+use sylva_render::{Mode, ShadingParams, ToneMap};
 use sylva_trace::TraversalConfig;
 
-use super::progress::{Bars, Report};
+use super::progress::Bars;
 use super::sun_time::SunTimeArgs;
 
 /// Whether the LB light of plants comes from base solutions (paper 004): the physical light's
@@ -268,152 +268,42 @@ pub struct FrameArgs {
     pub grid: GridArgs,
 }
 
-/// The light model's name for a command that relights from base solutions: the physical
-/// light by default, or the paper light; the SPP light has none (an error, not another
-/// light's bases shaded as it).
-pub fn relight_light(light: Option<&str>) -> Result<&'static str> {
-    match light {
-        None | Some("physical") => Ok("physical"),
-        Some("paper") => Ok("paper"),
-        Some(l) => bail!(
-            "--light {l}: this command relights from base solutions, and the {l} light has \
-             none (docs/relight.md): use the physical light (the default) or --light paper"
-        ),
-    }
-}
-
-/// The relighting plan of these options under light `light` (`None`: per-sun LB light).
-/// `basis`: `--basis`; `force`: base solutions whatever it says (`auto` then solves missing
-/// ones); `keep_raw`: keep the uncompressed bases too. The physical and the paper light have
-/// base solutions (`--basis always` with the SPP light is an error); `auto` on the physical
-/// light solves for the sun (exact at that sun: docs/relight.md).
-pub fn relight_plan(
+/// The light as `--light`, `--basis` and the relighting options ask for it.
+pub fn light_settings(
+    light: Option<String>,
     basis: BasisArg,
     relit: &RelitArgs,
     grid: &GridArgs,
-    force: bool,
-    keep_raw: bool,
-    light: &str,
-) -> Result<Option<RelightPlan>> {
-    let paper = light == "paper";
-    let basis = match (basis, force) {
-        (BasisArg::Never, true) => {
-            bail!("--basis never: this command relights from base solutions")
-        }
-        (BasisArg::Never, false) => return Ok(None),
-        (BasisArg::Always, false) if light == "spp" => bail!(
-            "--basis always: the SPP light has no base solutions (docs/relight.md); use the \
-             physical light (the default) or --light paper"
-        ),
-        (BasisArg::Auto, false) if !paper => return Ok(None),
-        (BasisArg::Auto, false) => BasisUse::IfCached,
-        _ => BasisUse::Always,
-    };
-    if !(relit.ambient.is_finite() && relit.ambient >= 0.0) {
-        bail!("--ambient {}: must be a finite number ≥ 0", relit.ambient);
-    }
-    let global = (!grid.no_global).then_some(GlobalGridOptions {
-        sites: grid.global_grid,
-    });
-    if let Some(g) = &global {
-        g.validate()
-            .map_err(|e| anyhow::anyhow!("--global-grid: {e}"))?;
-    }
-    let codec = Codec::parse(&grid.codec).map_err(|e| anyhow::anyhow!("--codec: {e}"))?;
-    let target = CompressTarget {
-        precision: match grid.basis_precision {
-            BasisPrecisionArg::F16 => Precision::F16,
-            BasisPrecisionArg::F32 => Precision::F32,
-            BasisPrecisionArg::Packed => Precision::Packed,
+) -> LightSettings {
+    LightSettings {
+        light,
+        basis: match basis {
+            BasisArg::Auto => BasisChoice::Auto,
+            BasisArg::Always => BasisChoice::Always,
+            BasisArg::Never => BasisChoice::Never,
         },
-        ..CompressTarget::new(codec)
-    };
-    target
-        .validate()
-        .map_err(|e| anyhow::anyhow!("--codec/--basis-precision: {e}"))?;
-    Ok(Some(RelightPlan {
-        basis,
         sun: match relit.sun_weights {
             SunWeightsArg::Three => SunWeights::ThreeBasis,
             SunWeightsArg::Exact => SunWeights::Exact,
         },
         ambient: relit.ambient,
-        global,
-        target,
-        keep_raw,
-    }))
+        global_grid: (!grid.no_global).then_some(grid.global_grid),
+        codec: grid.codec.clone(),
+        precision: match grid.basis_precision {
+            BasisPrecisionArg::F16 => Precision::F16,
+            BasisPrecisionArg::F32 => Precision::F32,
+            BasisPrecisionArg::Packed => Precision::Packed,
+        },
+    }
 }
 
-/// A warning line before a coarse grid (`plan`'s relighting grid, or the physical light's
-/// forest grid `forest`) whose solves cost far more than the default's, if `scene` will solve
-/// one; `None` otherwise.
-pub fn costly_grid_warning(
-    scene: &sylva_geom::Scene,
-    plan: Option<&RelightPlan>,
-    forest: Option<&GlobalGridOptions>,
-    light: Light,
-) -> Result<Option<String>> {
-    let physical_bases = plan.is_some() && light == Light::Physical;
-    let (grid, solves) = match (plan.and_then(|p| p.global.as_ref()), forest) {
-        // The physical light's forest grid parts: 13 sun directions, a sky and a ground.
-        (_, Some(g)) if physical_bases && sylva_pipeline::uses_forest(scene, light, Some(g)) => {
-            (g, 3 * (sylva_light::relight::physical::SUN_PARTS + 2))
-        }
-        (_, None) if physical_bases => return Ok(None),
-        (Some(g), _) => (g, sylva_lb::relight::BASES - 1),
-        (None, Some(g)) if sylva_pipeline::uses_forest(scene, light, Some(g)) => (g, 3),
-        _ => return Ok(None),
-    };
-    let b = scene.instance_bounds();
-    if b.is_empty() {
-        return Ok(None);
+impl From<&FrameArgs> for LightSettings {
+    fn from(a: &FrameArgs) -> LightSettings {
+        light_settings(a.light.light.clone(), a.light.basis, &a.relit, &a.grid)
     }
-    grid.cost_warning(b.max - b.min, solves)
-        .map_err(|e| anyhow::anyhow!("--global-grid: {e}"))
-        .map(|w| w.map(|w| format!("warning: {w}, where it is not cached")))
 }
 
 impl FrameArgs {
-    /// The light model's name: `--light`, by default physical ([`relight_light`] for a
-    /// command that relights).
-    pub fn light_for(&self, relights: bool) -> Result<&str> {
-        match (self.light.light.as_deref(), relights) {
-            (l, true) => relight_light(l),
-            (l, false) => Ok(l.unwrap_or("physical")),
-        }
-    }
-
-    /// [`relight_plan`] of these options.
-    pub fn relight_plan(
-        &self,
-        force: bool,
-        keep_raw: bool,
-        light: &str,
-    ) -> Result<Option<RelightPlan>> {
-        relight_plan(
-            self.light.basis,
-            &self.relit,
-            &self.grid,
-            force,
-            keep_raw,
-            light,
-        )
-    }
-
-    /// The physical light's coarse forest grid (`--global-grid`, off with `--no-global`);
-    /// `None` for other lights.
-    pub fn forest_grid(&self, light: Light) -> Result<Option<GlobalGridOptions>> {
-        if self.grid.no_global || light != Light::Physical {
-            return Ok(None);
-        }
-        let g = GlobalGridOptions {
-            sites: self.grid.global_grid,
-        };
-        g.validate()
-            .map_err(|e| anyhow::anyhow!("--global-grid: {e}"))?;
-        Ok(Some(g))
-    }
-
     pub fn shadow_method(&self) -> ShadowMethod {
         match self.view.shadows {
             ShadowsArg::Kd => ShadowMethod::KdTree,
@@ -422,101 +312,12 @@ impl FrameArgs {
     }
 }
 
-/// One line about an LB report, and whether it is a warning (to stderr).
-pub fn report_line(r: Report) -> (String, Option<String>) {
-    // A bad entry recomputed, and an entry that could not be written (a read-only cache:
-    // the result is good, only not kept).
-    let warn = |s: &LightingSource, cache_warning: &Option<String>| {
-        let lines: Vec<String> = [
-            match s {
-                LightingSource::Recomputed { reason } => {
-                    Some(format!("warning: {reason}; recomputed"))
-                }
-                _ => None,
-            },
-            cache_warning.as_ref().map(|w| format!("warning: {w}")),
-        ]
-        .into_iter()
-        .flatten()
-        .collect();
-        (!lines.is_empty()).then(|| lines.join("\n"))
-    };
-    match r {
-        Report::Lit(name, report) => {
-            let line = match &report.source {
-                LightingSource::Cached => format!(
-                    "  LB {}: {} grid from cache ({:.2} s)",
-                    name, report.dims, report.seconds
-                ),
-                LightingSource::Computed => format!(
-                    "  LB {}: {} grid solved in {:.1} s{}",
-                    name,
-                    report.dims,
-                    report.seconds,
-                    report
-                        .path
-                        .as_ref()
-                        .filter(|_| report.cache_warning.is_none())
-                        .map(|p| format!(", cached as {}", p.display()))
-                        .unwrap_or_default()
-                ),
-                LightingSource::Recomputed { .. } => format!(
-                    "  LB {}: {} grid solved again in {:.1} s",
-                    name, report.dims, report.seconds
-                ),
-            };
-            (line, warn(&report.source, &report.cache_warning))
-        }
-        Report::Basis(model, report) => {
-            let how = match &report.source {
-                LightingSource::Cached => format!("from cache ({:.2} s)", report.seconds),
-                LightingSource::Computed => format!("solved in {:.1} s", report.seconds),
-                LightingSource::Recomputed { .. } => {
-                    format!("solved again in {:.1} s", report.seconds)
-                }
-            };
-            let line = format!(
-                "  basis {}: {} grid {how}{}; {} → {} ({:.1}×){}",
-                model.name,
-                report.dims,
-                report
-                    .solve_seconds
-                    .map(|s| format!(", 54 solves {s:.1} s"))
-                    .unwrap_or_default(),
-                sylva_core::format_bytes(report.raw_bytes),
-                sylva_core::format_bytes(report.compressed_bytes),
-                report.raw_bytes as f64 / report.compressed_bytes.max(1) as f64,
-                match (&report.source, &report.path, &report.cache_warning) {
-                    (LightingSource::Cached, _, _) | (_, None, _) | (_, _, Some(_)) => {
-                        String::new()
-                    }
-                    (_, Some(p), None) => format!(", cached as {}", p.display()),
-                }
-            );
-            (line, warn(&report.source, &report.cache_warning))
-        }
-        Report::Global(report) => {
-            let how = match &report.source {
-                LightingSource::Cached => "from cache",
-                LightingSource::Computed => "solved",
-                LightingSource::Recomputed { .. } => "solved again",
-            };
-            (
-                format!(
-                    "  global grid: {} {how} in {:.2} s",
-                    report.dims, report.seconds
-                ),
-                warn(&report.source, &report.cache_warning),
-            )
-        }
-        Report::Shade(name, own, added) => (
-            format!(
-                "  {name}: neighbours' foliage inside its boxes adds {:.0} % to its optical depth",
-                100.0 * added / own.max(1e-12)
-            ),
-            None,
-        ),
+/// Says an LB report: its warnings to stderr (on the root), its line as `say` does.
+pub fn say_report(r: &LightEvent, root: bool, say: &dyn Fn(String)) {
+    if let (Some(w), true) = (r.warning(), root) {
+        eprintln!("{w}");
     }
+    say(r.line());
 }
 
 #[derive(Args, Debug)]
@@ -628,33 +429,16 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
     };
     let sun = match sun {
         Some(sun) => Some(sun),
-        None => (a.sun.sun.is_some() || a.sun.elevation.is_some() || a.sun.azimuth.is_some())
-            .then(|| super::lb::parse_sun(a.sun.sun.as_deref(), a.sun.elevation, a.sun.azimuth))
-            .transpose()?,
+        None => Sun::given(a.sun.sun.as_deref(), a.sun.elevation, a.sun.azimuth)?,
     };
-    if !(1..=sylva_trace::MAX_DEPTH).contains(&a.view.stack) {
-        bail!(
-            "--stack {}: the short stack holds 1 to {} entries",
-            a.view.stack,
-            sylva_trace::MAX_DEPTH
-        );
-    }
+    let traversal = TraversalConfig::checked(a.view.stack).map_err(anyhow::Error::msg)?;
     let scene = load_scene(&a.scene, sun)?;
     let (width, height) = resolution(a.view.width, a.view.height, &scene.camera)?;
     let rays_per_pixel = rays_per_pixel.unwrap_or(scene.camera.rays_per_pixel);
     if let Some(check) = check_size {
         check(width, height)?;
     }
-    say(format!(
-        "scene {}: {} models, {} instances, {} instanced triangles, {} media; {width}x{height}; sun elevation {:.1}° azimuth {:.1}°",
-        scene.name,
-        scene.models.len(),
-        scene.instances.len(),
-        scene.instanced_triangles(),
-        scene.media.len(),
-        scene.sun.elevation_deg(),
-        scene.sun.azimuth_deg()
-    ));
+    say(scene_line(&scene, width, height));
     let gpu = super::device::open_gpu(a.lb.device)?;
     let solver: Option<Box<dyn LbSolver>> = if need_lb {
         let solver = super::device::solver_for(gpu.as_ref(), a.lb.device, a.lb.precision)?;
@@ -663,19 +447,8 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
     } else {
         None
     };
-    let light_name = a.light_for(force_basis)?;
-    // The SPP light replaces the paper's LB grids under the paper's shading.
-    let light = match light_name {
-        "spp" => Light::Paper,
-        l => Light::parse(l).context("--light")?,
-    };
-    // The SPP light needs no LB, but `--basis always` with it is still refused, not ignored.
-    let relight = if need_lb || a.light.basis == BasisArg::Always {
-        a.relight_plan(force_basis, keep_raw, light_name)?
-            .filter(|_| need_lb)
-    } else {
-        None
-    };
+    let choice = LightSettings::from(a).choose(force_basis, keep_raw, need_lb)?;
+    let light = choice.light;
     let opts = PrepareOptions {
         runner,
         lb: solver.as_deref().map(|solver| LbPlan {
@@ -684,7 +457,7 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
             cache_dir: (!a.lb.no_cache).then_some(a.lb.cache_dir.as_path()),
             light,
         }),
-        traversal: TraversalConfig::with_stack(a.view.stack),
+        traversal,
         trace_gpu: gpu.as_ref(),
         shade_on_gpu: !a.view.cpu_shading,
         light,
@@ -693,32 +466,24 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
         gather_rays: a.light.gather_rays,
         largest_frame: Some((width, height, rays_per_pixel)),
         output_images,
-        relight,
+        relight: choice.relight,
         shadows: a.shadow_method(),
-        forest: a.forest_grid(light)?,
+        forest: choice.forest,
     };
     // Before any LB work: a coarse grid far costlier than the default's says so.
+    let forest = opts.forest.as_ref().filter(|_| need_lb);
     if let (Some(w), true) = (
-        costly_grid_warning(
-            &scene,
-            opts.relight.as_ref(),
-            opts.forest.as_ref().filter(|_| need_lb),
-            light,
-        )?,
+        costly_grid_warning(&scene, opts.relight.as_ref(), forest, light)?,
         root,
     ) {
         eprintln!("{w}");
     }
     let basis = Mutex::new(Vec::new());
-    let progress = Bars::new(|r: Report| {
-        if let Report::Basis(_, b) = &r {
+    let progress = Bars::new(|r: LightEvent| {
+        if let LightEvent::Basis(_, b) = &r {
             basis.lock().expect("basis reports").push((*b).clone());
         }
-        let (line, warning) = report_line(r);
-        if let (Some(w), true) = (warning, root) {
-            eprintln!("{w}");
-        }
-        say(line);
+        say_report(&r, root, &say);
     });
     if need_lb && runner.processes() > 1 {
         say(format!(
@@ -730,80 +495,8 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
         let progress: &dyn Progress = if root { &progress } else { &Silent };
         PreparedScene::new(scene, &opts, progress)?
     };
-    say(format!(
-        "ray tracer: {}{}",
-        scene.tracer.describe(),
-        match (&scene.gpu_frame, scene.tracer.gpu()) {
-            (Some(f), _) => format!(
-                "; shading on the GPU ({} of shading data)",
-                sylva_core::format_bytes(f.device_bytes())
-            ),
-            (None, Some(_)) => match scene.gpu_shading_note() {
-                Some(why) => format!("; shading on the CPU: {why}"),
-                None => "; shading on the CPU".into(),
-            },
-            _ => String::new(),
-        }
-    ));
-    if let Some(p) = &scene.physical {
-        say(format!(
-            "LB light: the physical light relit from its base solutions ({} sun parts and 3 \
-             diffuse parts per model, forest grid {}), shadows {}",
-            sylva_light::relight::physical::SUN_PARTS,
-            if p.has_forest() { "relit" } else { "off" },
-            scene.shadows().name()
-        ));
-    }
-    if let Some(r) = &scene.relit {
-        let ill = r.illumination();
-        say(format!(
-            "LB light: relit from base solutions ({} weights, ambient {}, global grid {}), shadows {}",
-            ill.sun.name(),
-            ill.ambient,
-            r.global()
-                .map(|g| g.dims.to_string())
-                .unwrap_or_else(|| "off".into()),
-            scene.shadows().name()
-        ));
-    }
-    if let Some(f) = &scene.forest {
-        // Luminance of each part's weight over its open value, per instance.
-        let y = |v: sylva_light::lighting::Vec3| sylva_core::colour::luminance(v.to_array());
-        let range =
-            |part: fn(&sylva_light::lighting::PartWeights) -> sylva_light::lighting::Vec3| {
-                let free = y(part(&f.free));
-                let r: Vec<f32> = f
-                    .weights
-                    .iter()
-                    .map(|w| if free > 0.0 { y(part(w)) / free } else { 1.0 })
-                    .collect();
-                let (lo, hi) = r
-                    .iter()
-                    .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), &v| {
-                        (a.min(v), b.max(v))
-                    });
-                format!("{lo:.2}–{hi:.2}")
-            };
-        say(format!(
-            "forest grid {}: per instance, of the open's: sun {}, sky through the top {}, \
-             through the sides {}, ground {}",
-            f.dims,
-            range(|w| w.sun),
-            range(|w| w.sky_top),
-            range(|w| w.sky),
-            range(|w| w.ground)
-        ));
-        if instance_weights {
-            for (i, w) in f.weights.iter().enumerate() {
-                say(format!(
-                    "  instance {i}: sun {:.3} sky top {:.3} sides {:.3} ground {:.3}",
-                    y(w.sun),
-                    y(w.sky_top) / y(f.free.sky_top).max(f32::MIN_POSITIVE),
-                    y(w.sky) / y(f.free.sky).max(f32::MIN_POSITIVE),
-                    y(w.ground) / y(f.free.ground).max(f32::MIN_POSITIVE)
-                ));
-            }
-        }
+    for line in scene.describe(instance_weights) {
+        say(line);
     }
     drop(progress);
     Ok(Prepared {
@@ -815,50 +508,30 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
 }
 
 pub fn run(a: RenderArgs, runner: &dyn Runner) -> Result<()> {
-    let modes: Vec<Mode> = match a.mode.as_str() {
-        "all" => Mode::ALL.to_vec(),
-        m => vec![Mode::parse(m)
-            .with_context(|| format!("--mode '{m}': expected full, local, ambient, lb or all"))?],
-    };
+    let modes = Mode::parse_set(&a.mode).with_context(|| {
+        format!(
+            "--mode '{}': expected full, local, ambient, lb or all",
+            a.mode
+        )
+    })?;
     let tm = ToneMap {
         key: a.key,
         white: a.white,
     };
     tm.validate().map_err(anyhow::Error::msg)?;
-    if let Some(o) = &a.output {
-        let ext = o.extension().map(|e| e.to_ascii_lowercase());
-        if ext.as_deref() != Some(std::ffi::OsStr::new("png")) {
-            bail!(
-                "{}: the output is a PNG file (name it .png; --hdr adds an .exr beside it)",
-                o.display()
-            );
-        }
-    }
-    if let Some(r) = a.rpp {
-        let range = sylva_core::limits::RAYS_PER_PIXEL;
-        if !range.contains(&r) {
-            bail!(
-                "--rpp {r}: rays per pixel must be {}",
-                sylva_core::limits::describe(&range)
-            );
-        }
-    }
-    if let Some(o) = &a.output {
-        // Named twice or an input: refused now, not after the render.
-        sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&image_paths(o, &modes, a.hdr))?;
-    }
+    a.output.as_deref().map(check_png_name).transpose()?;
+    sylva_core::limits::check_rays_per_pixel(a.rpp).map_err(anyhow::Error::msg)?;
+    // Named twice or an input: refused now, not after the render.
+    (a.output.as_deref())
+        .map(|o| plan_images(o, &modes, a.hdr))
+        .transpose()?;
     // The sun of a moment: placed (or refused: below the horizon) before any work.
     let moment = a.sun_time.moment()?;
     let sun = match &moment {
         Some(m) => {
             let (sun, angles) = m.sun()?;
             if runner.is_root() {
-                println!(
-                    "sun at {m}: elevation {:.1}°, azimuth {:.1}° from north (world azimuth {:.1}°: north -z, east +x)",
-                    angles.elevation_deg,
-                    angles.azimuth_deg,
-                    sun.azimuth_deg()
-                );
+                println!("{}", angles.describe(m, &sun));
             }
             Some(sun)
         }
@@ -887,30 +560,20 @@ pub fn run(a: RenderArgs, runner: &dyn Runner) -> Result<()> {
     let rpp = a.rpp.unwrap_or(prepared.scene.camera.rays_per_pixel);
     let camera = prepared.camera(p.width, p.height);
     let settings = prepared.settings(camera, rpp, a.frame.view.seed);
-    let bars = Bars::new(|_: Report| {});
+    let bars = Bars::new(|_: LightEvent| {});
     let mut spp_seconds = None;
     let (frame, split) = if spp {
-        let t = Instant::now();
-        let system = SppSystem::for_scene(
-            &prepared.scene,
-            &prepared.tracer.cpu().accel,
-            SystemConfig::default(),
-        )
-        .context("the plane-parallel light (003 §5)")?;
-        let light = SppLight::with_preset(&system, &prepared.scene.lb.preset)?;
-        spp_seconds = Some(t.elapsed().as_secs_f64());
-        // The GPU frame kernel reads only lights with a device side; this one says why not.
-        if prepared.tracer.gpu().is_some() {
-            if let Err(why) = light.device() {
-                println!("shading on the CPU: {why}");
-            }
+        let f = prepared.render_spp(&settings, &bars)?;
+        if let Some(why) = f.cpu_shading {
+            println!("shading on the CPU: {why}");
         }
-        (prepared.render_with(&light, &settings, &bars)?, None)
+        spp_seconds = Some(f.light_seconds);
+        (f.frame, None)
     } else {
         let progress: &dyn Progress = if runner.is_root() { &bars } else { &Silent };
         match prepared.render_split(runner, &settings, progress)? {
             Some(d) if runner.processes() > 1 => {
-                let split = split_summary(&d);
+                let split = d.summary();
                 (d.frame, Some(split))
             }
             Some(d) => (d.frame, None),
@@ -928,79 +591,17 @@ pub fn run(a: RenderArgs, runner: &dyn Runner) -> Result<()> {
     let images = tone_map_modes(&frame, &modes, &tm);
     let written = write_images(&base, frame.width, frame.height, &images, a.hdr)?;
     for (image, files) in images.iter().zip(&written) {
-        let mut wrote = files.png.display().to_string();
-        if let Some(exr) = &files.exr {
-            wrote = format!("{wrote} and {}", exr.display());
-        }
-        println!(
-            "wrote {wrote} ({} mode, mean luminance {:.4}{})",
-            image.mode.name(),
-            sylva_render::mean_luminance(&image.hdr),
-            if image.mode == Mode::Ambient {
-                format!(", ambient {:.4}", frame.matched_ambient())
-            } else {
-                String::new()
-            }
-        );
+        println!("{}", written_line(image, files, &frame));
     }
-    let t = &frame.timings;
-    let mem = prepared.tracer.cpu().accel.memory();
-    println!("stage                 seconds");
-    for (stage, s) in [
-        ("scene build", clock.seconds(stage::SCENE_BUILD)),
-        ("LB precompute", clock.seconds(stage::LB_PRECOMPUTE)),
-        ("SPP maps and grids", spp_seconds.unwrap_or(0.0)),
-        ("acceleration build", clock.seconds(stage::ACCEL_BUILD)),
-        ("primary rays", t.primary_seconds),
-        ("shadow rays", t.shadow_seconds),
-        ("shading", t.shading_seconds),
-        ("GPU frame", t.fused_seconds),
-        ("tone mapping", clock.seconds(stage::TONE_MAPPING)),
-        ("image output", clock.seconds(stage::IMAGE_OUTPUT)),
-    ] {
-        // A GPU frame is one pass (rays and shading); the CPU's passes are separate.
-        let pass = ["primary rays", "shadow rays", "shading"].contains(&stage);
-        let gpu = t.fused_seconds > 0.0;
-        if (stage == "GPU frame" && !gpu) || (pass && gpu) {
-            continue;
-        }
-        println!("  {stage:<20}{s:>8.3}");
-    }
-    println!("  {:<20}{:>8.3}", "total", t_all.elapsed().as_secs_f64());
-    if let Some(split) = split {
-        println!("{split}");
-    }
-    println!(
-        "{}x{} at {rpp} rays/pixel: {} primary + {} shadow rays, {:.2} Mrays/s; frame {:.3} s; {} kd-restarts; kd-trees {}, LB grids {}",
-        frame.width,
-        frame.height,
-        t.primary_rays,
-        t.shadow_rays,
-        t.mrays_per_second(),
-        t.frame_seconds(),
-        frame.stats.restarts,
-        sylva_core::format_bytes(mem.total()),
-        sylva_core::format_bytes(prepared.lighting_bytes()),
-    );
+    let summary = RenderSummary {
+        prepared,
+        frame: &frame,
+        rays_per_pixel: rpp,
+        clock,
+        spp_seconds,
+        total_seconds: t_all.elapsed().as_secs_f64(),
+        split,
+    };
+    print!("{summary}");
     Ok(())
-}
-
-/// One line on how a frame was split across MPI ranks.
-pub fn split_summary(d: &sylva_pipeline::SplitFrame) -> String {
-    let ranks: Vec<String> = d
-        .ranks
-        .iter()
-        .enumerate()
-        .map(|(r, w)| format!("rank {r}: {} units {:.3} s", w.units, w.seconds))
-        .collect();
-    format!(
-        "MPI: {} ranks, {} units of {}x{} tiles, frame {:.3} s wall; {}; imbalance {:.1} %",
-        d.ranks.len(),
-        d.layout.units(),
-        d.layout.edge,
-        d.layout.edge,
-        d.wall_seconds,
-        ranks.join(", "),
-        100.0 * d.imbalance()
-    )
 }

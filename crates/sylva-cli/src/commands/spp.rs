@@ -3,11 +3,13 @@
 //! (`spp trees`, in `spp_trees.rs`).
 
 use super::output::emit_to;
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use std::path::PathBuf;
-use sylva_spp::report::{slab_report, slab_text, table1_text, table2_text, SlabQuery};
+use sylva_spp::report::{
+    directions, parse_thickness, slab_report, slab_text, table1_text, table2_text, SlabQuery,
+};
 use sylva_spp::tables::{self, RmsProtocol};
-use sylva_spp::{Direction, Slab};
+use sylva_spp::Slab;
 
 #[derive(clap::Args)]
 pub struct SppArgs {
@@ -113,37 +115,10 @@ pub fn run(args: SppArgs) -> Result<()> {
     }
 }
 
-fn parse_thickness(s: &str) -> Result<f64> {
-    match s.trim().to_ascii_lowercase().as_str() {
-        "inf" | "infinity" | "∞" => Ok(f64::INFINITY),
-        other => other
-            .parse::<f64>()
-            .with_context(|| format!("--thickness must be a number or \"inf\", got {s:?}")),
-    }
-}
-
 fn slab(a: SlabArgs) -> Result<()> {
     let thickness = parse_thickness(&a.thickness)?;
     let slab = Slab::with_incidence_deg(a.sigma_t, a.albedo, a.g, thickness, a.incidence)?;
-    let mut directions = Vec::new();
-    for &polar in &a.angles {
-        if !(0.0..=180.0).contains(&polar) {
-            bail!("polar angles must be in [0, 180] degrees, got {polar}");
-        }
-        if (polar - 90.0).abs() < 1e-6 {
-            bail!("a horizontal direction (polar angle 90) never meets a face of the slab; pick another angle");
-        }
-        for &azimuth in &a.azimuths {
-            if !azimuth.is_finite() {
-                bail!("azimuths must be finite, got {azimuth}");
-            }
-            directions.push((
-                polar,
-                azimuth,
-                Direction::new(polar.to_radians().cos(), azimuth.to_radians())?,
-            ));
-        }
-    }
+    let directions = directions(&a.angles, &a.azimuths)?;
     let report = slab_report(
         slab,
         &SlabQuery {
@@ -167,13 +142,6 @@ fn slab(a: SlabArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn thickness_accepts_numbers_and_infinity_and_rejects_junk() {
-        assert_eq!(parse_thickness("2.5").unwrap(), 2.5);
-        assert!(parse_thickness("inf").unwrap().is_infinite());
-        assert!(parse_thickness("thick").is_err());
-    }
 
     #[test]
     fn table2_json_is_written_atomically_with_inf_thickness() {

@@ -78,7 +78,7 @@ pub fn run(a: TreesArgs) -> Result<()> {
     let sun =
         sylva_core::Sun::from_angles(a.elevation, a.azimuth).context("--elevation/--azimuth")?;
     let travel = sun.travel();
-    let mut base = load_scene_or_species(&a.scene)?;
+    let mut base = sylva_pipeline::load_scene_or_species(&a.scene)?;
     if a.horizontal_leaves {
         for m in &mut base.models {
             *m = sylva_spp::trees::synthetic::horizontal_leaves(m);
@@ -126,22 +126,4 @@ pub fn run(a: TreesArgs) -> Result<()> {
         sylva_spp::report::tree_text(&report, a.categories)
     };
     super::output::emit_to(&text, a.out)
-}
-
-/// A scene by file or built-in name, or else one tree of a built-in species.
-pub fn load_scene_or_species(name: &str) -> Result<sylva_geom::Scene> {
-    match sylva_pipeline::load_scene(name, None) {
-        Err(sylva_pipeline::PipelineError::Scene(sylva_scene::SceneError::NotFound(_))) => {
-            let text = sylva_scene::builtin_scenes::single_tree(name).with_context(|| {
-                format!(
-                    "'{name}' is no scene file, built-in scene or built-in species (scenes: {}; species: {})",
-                    sylva_scene::builtin_scenes::NAMES.join(", "),
-                    sylva_grow::species::BUILTIN_NAMES.join(", ")
-                )
-            })?;
-            let desc = sylva_scene::SceneDesc::parse(&text, &format!("species '{name}'"), None)?;
-            Ok(desc.build()?)
-        }
-        other => Ok(other?),
-    }
 }

@@ -1,10 +1,11 @@
 //! The sun from date, time and place on the command line: `render --lat --lon --date --time`
 //! and `relight --lat --lon --date --from --to --step`, with `--utc-offset`. Only parsing
-//! here; `sylva_core::solar` places the sun (NREL's SPA; north is -z, east +x).
+//! here; `sylva_core::solar` checks the flags and places the sun (NREL's SPA; north is -z,
+//! east +x).
 
-use anyhow::{anyhow, Result};
+use anyhow::Result;
 use clap::Args;
-use sylva_core::solar::{ClockTime, Date, Place, SolarError, SolarTime, Step, SunPath, UtcOffset};
+use sylva_core::solar::{DayFlags, SolarTime, SunPath};
 
 /// `sylva render`'s sun at a moment: `--lat 48.1 --lon 11.6 --date 2026-06-21 --time 14:30`.
 #[derive(Args, Debug, Clone, Default)]
@@ -40,14 +41,16 @@ impl SunTimeArgs {
         else {
             return Ok(None);
         };
-        let (place, date, offset) = place_date_offset(lat, lon, date, &self.utc_offset)?;
-        let time: ClockTime = time.parse().map_err(|e| anyhow!("--time: {e}"))?;
-        Ok(Some(SolarTime {
-            place,
-            date,
-            time,
-            offset,
-        }))
+        let utc_offset = self.utc_offset.as_deref();
+        Ok(Some(
+            DayFlags {
+                lat,
+                lon,
+                date,
+                utc_offset,
+            }
+            .moment(time)?,
+        ))
     }
 }
 
@@ -92,39 +95,17 @@ impl SunDayArgs {
         let (Some(lat), Some(lon), Some(date)) = (self.lat, self.lon, &self.date) else {
             return Ok(None);
         };
-        let (place, date, offset) = place_date_offset(lat, lon, date, &self.utc_offset)?;
-        let time = |flag: &str, v: &Option<String>, default: &str| -> Result<ClockTime> {
-            v.as_deref()
-                .unwrap_or(default)
-                .parse()
-                .map_err(|e| anyhow!("--{flag}: {e}"))
+        let utc_offset = self.utc_offset.as_deref();
+        let day = DayFlags {
+            lat,
+            lon,
+            date,
+            utc_offset,
         };
-        let from = time("from", &self.from, "00:00")?;
-        let to = time("to", &self.to, "23:59")?;
-        let step: Step = self
-            .step
-            .as_deref()
-            .unwrap_or("1h")
-            .parse()
-            .map_err(|e| anyhow!("--step: {e}"))?;
-        Ok(Some(SunPath::new(place, date, offset, from, to, step)?))
+        Ok(Some(day.path(
+            self.from.as_deref(),
+            self.to.as_deref(),
+            self.step.as_deref(),
+        )?))
     }
-}
-
-fn place_date_offset(
-    lat: f64,
-    lon: f64,
-    date: &str,
-    offset: &Option<String>,
-) -> Result<(Place, Date, UtcOffset)> {
-    let place = Place::new(lat, lon).map_err(|e| match e {
-        SolarError::Latitude(_) => anyhow!("--lat: {e}"),
-        _ => anyhow!("--lon: {e}"),
-    })?;
-    let date: Date = date.parse().map_err(|e| anyhow!("--date: {e}"))?;
-    let offset = match offset {
-        Some(o) => o.parse().map_err(|e| anyhow!("--utc-offset: {e}"))?,
-        None => place.zone_offset(),
-    };
-    Ok((place, date, offset))
 }

@@ -7,12 +7,12 @@ use std::path::PathBuf;
 
 use anyhow::{anyhow, Result};
 use clap::Args;
-use sylva_pipeline::Local;
+use sylva_pipeline::{relight_light, Local};
 use sylva_view::{ReadyScene, ServeOptions, Server, WorkerOptions};
 
 use super::render::{
-    prepare, relight_light, FrameArgs, GridArgs, LbArgs, PrepareRequest, RelightLightArg,
-    RelitArgs, RenderLightArgs, Say, SunArgs, ViewArgs, SCENE_HELP,
+    prepare, FrameArgs, GridArgs, LbArgs, PrepareRequest, RelightLightArg, RelitArgs,
+    RenderLightArgs, Say, SunArgs, ViewArgs, SCENE_HELP,
 };
 
 /// What `sylva view` and `sylva bench view` share: the scene and how it is lit and shown.

@@ -6,10 +6,12 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Args;
+use sylva_core::{companion_path, OutputSet};
 use sylva_geom::Model;
 use sylva_lb::preview::density_preview_png;
+use sylva_lb::report::write_with_preview;
 use sylva_lb::{DensityGrid, Element, GridFile};
-use sylva_voxel::{voxelize, Occupancy, VoxelizeOptions, DEFAULT_GRID};
+use sylva_voxel::{cell_size, grid_metadata, voxelize, Occupancy, VoxelizeOptions, DEFAULT_GRID};
 
 use super::progress::bar;
 
@@ -85,39 +87,21 @@ pub fn voxelize_model(
     let t = Instant::now();
     let pb = bar(1, "voxelize");
     pb.set_message(format!("{} triangles", model.triangle_count()));
-    let grid = voxelize(
-        model,
-        &VoxelizeOptions {
-            grid: n,
-            alpha_test,
-            occupancy,
-        },
-    )
-    .with_context(|| format!("voxelizing '{spec}'"))?;
+    let opts = VoxelizeOptions {
+        grid: n,
+        alpha_test,
+        occupancy,
+    };
+    let grid = voxelize(model, &opts).with_context(|| format!("voxelizing '{spec}'"))?;
     pb.finish_and_clear();
-    let voxelize_s = t.elapsed().as_secs_f64();
-    let b = model.bounds;
-    let v3 = |v: [f32; 3]| format!("{},{},{}", v[0], v[1], v[2]);
-    let cell = (grid.bounds.max[0] - grid.bounds.min[0]) / (grid.dims.nx - 1) as f32;
-    let metadata = vec![
-        ("model".to_string(), model.name.clone()),
-        ("source".to_string(), spec.to_string()),
-        ("grid_n".to_string(), n.to_string()),
-        ("triangles".to_string(), model.triangle_count().to_string()),
-        ("model_min".to_string(), v3(b.min.to_array())),
-        ("model_max".to_string(), v3(b.max.to_array())),
-        ("cell_size".to_string(), cell.to_string()),
-        ("occupancy".to_string(), occupancy.name().to_string()),
-        ("alpha_test".to_string(), alpha_test.to_string()),
-    ];
     Ok(Voxelized {
+        metadata: grid_metadata(model, spec, &opts, &grid),
+        cell: cell_size(&grid),
         grid,
         name: model.name.clone(),
-        metadata,
         triangles: model.triangle_count(),
-        cell,
         load_s: 0.0,
-        voxelize_s,
+        voxelize_s: t.elapsed().as_secs_f64(),
     })
 }
 
@@ -145,64 +129,30 @@ pub fn load_model_with_bar(spec: &str) -> Result<Model> {
     Ok(model)
 }
 
-/// Sites with density > 0 whose wood fraction exceeds `threshold` (brown sites in the LB).
-pub fn wood_sites(g: &DensityGrid, threshold: f32) -> usize {
-    g.density
-        .iter()
-        .zip(&g.wood)
-        .filter(|(&d, &w)| d > 0.0 && w > threshold)
-        .count()
-}
-
-/// One line describing a density grid: size, occupancy, mean density, brown sites.
-pub fn summary(g: &DensityGrid) -> String {
-    let (mean, occupied) = g.occupancy();
-    format!(
-        "{} grid, {occupied} occupied sites ({:.1} %), mean density {mean:.4} ({:.4} over occupied sites), {} wood sites (wood fraction > 0.5)",
-        g.dims,
-        100.0 * occupied as f64 / g.dims.sites() as f64,
-        mean * g.dims.sites() as f64 / occupied.max(1) as f64,
-        wood_sites(g, 0.5)
-    )
-}
-
 pub fn run(a: VoxelizeArgs) -> Result<()> {
     let t0 = Instant::now();
     // Before the work: the grid and its preview must differ, replace no input (the model
     // file is protected once read) and be writable. Default names wait for the model's name.
-    let early: Vec<PathBuf> = match (&a.output, &a.png) {
-        (Some(o), p) => vec![
-            o.clone(),
-            p.clone().unwrap_or_else(|| o.with_extension("png")),
-        ],
-        (None, Some(p)) => vec![p.clone()],
-        (None, None) => Vec::new(),
-    };
-    sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&early)?;
+    OutputSet::check_named(a.output.as_deref(), a.png.as_deref(), "png")?;
     let v = load_and_voxelize(&a.model, a.grid, !a.no_alpha, a.occupancy.into())?;
     let name = sylva_core::file_stem(&v.name, "model");
     let output = a
         .output
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("sylva-out/{name}-{}.sgrid", a.grid)));
-    let png = a
-        .png
-        .clone()
-        .unwrap_or_else(|| output.with_extension("png"));
+    let png = companion_path(&output, a.png.as_deref(), "png");
     let mut file = GridFile::from_density(&v.grid, v.metadata.clone());
     if a.f16 {
         file.element = Element::F16;
     }
-    let mut outputs = sylva_core::OutputSet::new::<&std::path::Path>(&[]);
+    let mut outputs = OutputSet::new::<&std::path::Path>(&[]);
     outputs.plan(&[&output, &png])?;
-    file.write_into(&mut outputs, &output)?;
-    let preview = density_preview_png(&v.grid)
-        .with_context(|| format!("cannot encode the preview {}", png.display()))?;
-    outputs.write_bytes(&png, &preview)?;
+    let preview = density_preview_png(&v.grid);
+    write_with_preview(&file, preview, &mut outputs, &output, &png)?;
     outputs.commit()?;
     let b = v.grid.bounds;
     println!("voxelized {name}: {} triangles", v.triangles);
-    println!("  {}", summary(&v.grid));
+    println!("  {}", v.grid.summary());
     println!(
         "  site centres span ({:.3}, {:.3}, {:.3}) .. ({:.3}, {:.3}, {:.3}), cell {}",
         b.min[0], b.min[1], b.min[2], b.max[0], b.max[1], b.max[2], v.cell

@@ -111,6 +111,25 @@ pub struct Exported {
 }
 
 impl Exported {
+    /// What `sylva export` says of this export of `format` into `dir`, `seconds` long: the
+    /// files, bytes and triangles, then the main file (with Mitsuba, how to render it).
+    pub fn summary(&self, format: Format, dir: &Path, seconds: f64) -> String {
+        let next = match format {
+            Format::Obj => format!("  {}", dir.join(obj::OBJ_FILE).display()),
+            Format::Mitsuba => format!(
+                "  render: mitsuba -m scalar_rgb -o render.exr {}   (pip install mitsuba; see docs/export.md)",
+                dir.join(mitsuba::XML_FILE).display()
+            ),
+        };
+        format!(
+            "wrote {} files, {}, {} triangles, to {} in {seconds:.1} s\n{next}",
+            self.files.len(),
+            sylva_core::format_bytes(self.bytes),
+            sylva_core::thousands(self.triangles),
+            dir.display(),
+        )
+    }
+
     /// Plans `files` (relative to `dir`) in a new output set: every one is checked before
     /// the first is written.
     fn plan(dir: &Path, files: &[PathBuf]) -> Result<sylva_core::OutputSet, ExportError> {

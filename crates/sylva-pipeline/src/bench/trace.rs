@@ -10,7 +10,8 @@ use sylva_core::format_bytes;
 use sylva_core::measure::{median, median_index, peak_rss_bytes};
 use sylva_render::{Frame, RenderSettings};
 
-use crate::{PipelineError, PreparedScene, Silent};
+use super::scaling::TileCosts;
+use crate::{PipelineError, PreparedScene, Runner, Silent};
 
 /// Untimed frames fill at least this long before the timed ones (a single process).
 const WARM_UP_SECONDS: f64 = 1.0;
@@ -474,4 +475,64 @@ impl fmt::Display for TraceBench {
         }
         Ok(())
     }
+}
+/// `sylva bench trace` on a prepared scene at `width × height`: frames at 1 and 4 rays per
+/// pixel (`run.runs` timed each after a warm-up), alone or split across the processes of
+/// `runner`, and with `tile_costs` every tile timed alone for the scaling model of 000 Table
+/// 4 (one process). `None` on processes other than the root, which reports.
+pub fn trace(
+    p: &PreparedScene,
+    (width, height): (u32, u32),
+    seed: u64,
+    run: TraceRun,
+    runner: &dyn Runner,
+    tile_costs: bool,
+) -> Result<Option<TraceBench>, PipelineError> {
+    let several = runner.processes() > 1;
+    let camera = p.camera(width, height);
+    // One frame: alone, or across the ranks (`None` on ranks other than 0).
+    let mut frame = |settings: &RenderSettings| -> Result<Option<TimedFrame>, PipelineError> {
+        Ok(p.render_split(runner, settings, &Silent)?
+            .map(|d| TimedFrame {
+                split: several.then(|| RankSplit {
+                    wall_seconds: d.wall_seconds,
+                    units: d.layout.units(),
+                    unit_edge: d.layout.edge,
+                    rank_seconds: d.ranks.iter().map(|w| w.seconds).collect(),
+                    rank_units: d.ranks.iter().map(|w| w.units).collect(),
+                    imbalance: d.imbalance(),
+                }),
+                frame: d.frame,
+            }))
+    };
+    let mut measures = Vec::new();
+    for rpp in [1u32, 4] {
+        let settings = p.settings(camera, rpp, seed);
+        measures.extend(measure_frames(&settings, run.runs, !several, &mut frame)?);
+    }
+    let Ok(measures) = <[_; 2]>::try_from(measures) else {
+        return Ok(None);
+    };
+    let scaling = match tile_costs {
+        true => {
+            let times = tile_times(p, &p.settings(camera, 1, seed), run.runs)?;
+            let costs = TileCosts {
+                columns: times.columns,
+                rows: times.rows,
+                seconds: times.seconds.clone(),
+            };
+            Some(ScalingModel::new(&times, |ranks| {
+                let s = costs.split(ranks);
+                (s.strips, s.on_demand)
+            }))
+        }
+        false => None,
+    };
+    Ok(Some(TraceBench::new(
+        p,
+        (width, height),
+        measures,
+        run,
+        scaling,
+    )))
 }
