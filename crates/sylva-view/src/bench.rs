@@ -35,6 +35,19 @@ pub struct ViewBenchPlan {
     pub timeout: Duration,
 }
 
+impl ViewBenchPlan {
+    /// Refuses a plan that measures nothing or would never end.
+    pub fn check(&self) -> Result<(), String> {
+        if !(self.drag_seconds.is_finite() && (0.1..=600.0).contains(&self.drag_seconds)) {
+            return Err(format!("--drag-seconds {}: 0.1 to 600", self.drag_seconds));
+        }
+        if !(self.elevation_deg > 0.0 && self.elevation_deg <= 90.0) {
+            return Err(format!("--sun-elevation {}: (0, 90]", self.elevation_deg));
+        }
+        Ok(())
+    }
+}
+
 /// What it measured.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct ViewBenchReport {

@@ -72,6 +72,35 @@ pub struct ReadyScene {
     pub lon: f64,
 }
 
+impl ReadyScene {
+    /// `scene` at `size` (width, height), the time-of-day control starting at `place`
+    /// (latitude, longitude); what lights it is read from the scene.
+    pub fn new(scene: PreparedScene, size: (u32, u32), place: (f64, f64)) -> ReadyScene {
+        let light = match (&scene.physical, &scene.relit) {
+            (Some(_), _) => "the physical light, relit from its base solutions",
+            (_, Some(_)) => "the paper light, relit from its base solutions",
+            _ => "the local light (no LB light)",
+        };
+        ReadyScene {
+            scene,
+            width: size.0,
+            height: size.1,
+            light: light.into(),
+            lat: place.0,
+            lon: place.1,
+        }
+    }
+}
+
+/// Whether `host` is a loopback address (or `localhost`): anything else lets other machines
+/// reach the server.
+pub fn is_loopback(host: &str) -> bool {
+    host.eq_ignore_ascii_case("localhost")
+        || host
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback())
+}
+
 /// Where the scene's preparation stands.
 #[derive(Debug, Clone)]
 enum Phase {

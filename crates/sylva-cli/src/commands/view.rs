@@ -95,19 +95,7 @@ impl ViewSceneArgs {
             &Local,
         )
         .map_err(|e| super::error_report("", &e).trim_end().to_string())?;
-        let light = match (&p.scene.physical, &p.scene.relit) {
-            (Some(_), _) => "the physical light, relit from its base solutions",
-            (_, Some(_)) => "the paper light, relit from its base solutions",
-            _ => "the local light (no LB light)",
-        };
-        Ok(ReadyScene {
-            width: p.width,
-            height: p.height,
-            light: light.into(),
-            scene: p.scene,
-            lat,
-            lon,
-        })
+        Ok(ReadyScene::new(p.scene, (p.width, p.height), (lat, lon)))
     }
 }
 
@@ -134,14 +122,6 @@ pub struct ViewCommandArgs {
     pub lon: f64,
 }
 
-/// Whether `host` is a loopback address (or `localhost`).
-fn loopback(host: &str) -> bool {
-    host.eq_ignore_ascii_case("localhost")
-        || host
-            .parse::<std::net::IpAddr>()
-            .is_ok_and(|ip| ip.is_loopback())
-}
-
 pub fn run(a: ViewCommandArgs) -> Result<()> {
     relight_light(a.scene.light.light.as_deref())?;
     sylva_core::solar::Place::new(a.lat, a.lon).map_err(|e| anyhow!("--lat/--lon: {e}"))?;
@@ -155,7 +135,7 @@ pub fn run(a: ViewCommandArgs) -> Result<()> {
             output.display()
         ));
     }
-    if !loopback(&a.host) {
+    if !sylva_view::server::is_loopback(&a.host) {
         eprintln!(
             "warning: listening on {}: other machines can reach the viewer (they need the \
              URL's token); an SSH tunnel to 127.0.0.1 keeps it private (README: Viewer)",
@@ -215,17 +195,18 @@ pub struct BenchViewArgs {
 
 pub fn bench(a: BenchViewArgs) -> Result<()> {
     relight_light(a.scene.light.light.as_deref())?;
-    if !(a.drag_seconds.is_finite() && (0.1..=600.0).contains(&a.drag_seconds)) {
-        return Err(anyhow!("--drag-seconds {}: 0.1 to 600", a.drag_seconds));
-    }
-    if !(a.sun_elevation > 0.0 && a.sun_elevation <= 90.0) {
-        return Err(anyhow!("--sun-elevation {}: (0, 90]", a.sun_elevation));
-    }
-    let size = (
-        a.scene.view.width.unwrap_or(512),
-        a.scene.view.height.unwrap_or(512),
-    );
-    let gather_rays = a.scene.gather_rays;
+    // Checked before the scene is prepared.
+    let plan = sylva_view::bench::ViewBenchPlan {
+        width: a.scene.view.width.unwrap_or(512),
+        height: a.scene.view.height.unwrap_or(512),
+        drag_seconds: a.drag_seconds,
+        sweep_deg: 60.0,
+        elevation_deg: a.sun_elevation,
+        gather_rays: a.scene.gather_rays,
+        runs: a.runs,
+        timeout: std::time::Duration::from_secs(120),
+    };
+    plan.check().map_err(anyhow::Error::msg)?;
     let say = if a.json { Say::Stderr } else { Say::Stdout };
     let opts = ServeOptions {
         host: "127.0.0.1".into(),
@@ -236,16 +217,6 @@ pub fn bench(a: BenchViewArgs) -> Result<()> {
     let scene = a.scene;
     let mut server = Server::start(opts, move |status| scene.prepare(say, status, 48.1, 11.6))?;
     server.wait_ready()?;
-    let plan = sylva_view::bench::ViewBenchPlan {
-        width: size.0,
-        height: size.1,
-        drag_seconds: a.drag_seconds,
-        sweep_deg: 60.0,
-        elevation_deg: a.sun_elevation,
-        gather_rays,
-        runs: a.runs,
-        timeout: std::time::Duration::from_secs(120),
-    };
     let report = sylva_view::bench::run(server.addr(), server.token(), &plan)?;
     server.shutdown();
     if a.json {

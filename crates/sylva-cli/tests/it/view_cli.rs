@@ -101,6 +101,13 @@ fn view_refuses_bad_input_before_it_serves() {
         assert!(err.contains(word), "{args:?}: '{err}' should name {word}");
         assert!(!err.contains("panicked"), "{err}");
     }
+    for (args, word) in [
+        (["shade", "--drag-seconds", "0"], "drag-seconds"),
+        (["shade", "--sun-elevation", "-3"], "sun-elevation"),
+    ] {
+        let (ok, _, err) = sylva(&[&["bench", "view"][..], &args[..]].concat());
+        assert!(!ok && err.contains(word), "{args:?}: {err}");
+    }
 }
 
 #[test]
