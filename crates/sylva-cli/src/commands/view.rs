@@ -180,13 +180,13 @@ pub struct BenchViewArgs {
     #[command(flatten)]
     pub scene: ViewSceneArgs,
     /// Seconds of dragging the sun per run.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
     pub drag_seconds: f64,
     /// Drags measured, each followed by its refined frame.
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
     pub runs: u32,
     /// Sun elevation while dragging (degrees).
-    #[arg(long, default_value_t = 40.0)]
+    #[arg(long, default_value_t = 40.0, allow_negative_numbers = true)]
     pub sun_elevation: f64,
     /// Print one JSON object instead of text.
     #[arg(long)]
