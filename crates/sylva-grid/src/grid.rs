@@ -311,6 +311,28 @@ impl LightingGrid {
 mod tests {
     use super::*;
 
+    /// A grid flag's value: a cube or three edges; a bad size or syntax names the flag.
+    #[test]
+    fn grid_flags_parse_or_name_the_flag() {
+        assert_eq!(
+            Dims::parse_flag("16", "--grid").unwrap(),
+            Dims::cube(16).unwrap()
+        );
+        assert_eq!(
+            Dims::parse_flag("8x4x6", "--grid").unwrap(),
+            Dims::new(8, 4, 6).unwrap()
+        );
+        let e = Dims::parse_flag("12x", "--raw-dims").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "--raw-dims '12x': expected N or NXxNYxNZ, e.g. 128 or 256x128x128"
+        );
+        assert!(matches!(
+            Dims::parse_flag("2", "--grid"),
+            Err(DimsFlagError::Bad { flag: "--grid", .. })
+        ));
+    }
+
     #[test]
     fn dims_parse_and_index() {
         let d = Dims::parse("4x5x6").unwrap().unwrap();

@@ -137,3 +137,47 @@ impl fmt::Display for SolvedGrid<'_> {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::params::Preset;
+    use crate::StopReason;
+
+    /// The metadata gives back the sun it was solved for and each colour's steps; the text
+    /// has a line per colour.
+    #[test]
+    fn metadata_records_the_sun_and_the_steps() {
+        let sun = Sun::from_angles(30.0, 100.0).unwrap();
+        let medium = Preset::Leaf.params();
+        let report = |steps| SolveReport {
+            steps,
+            stop: StopReason::StepLimit,
+            residual: 1e-3,
+            seconds: 0.5,
+        };
+        let reports = [report(10), report(12), report(14)];
+        let solved = SolvedGrid {
+            source: "sphere",
+            preset: "leaf",
+            medium: &medium,
+            sun: &sun,
+            dims: Dims::cube(8).unwrap(),
+            reports: &reports,
+        };
+        let meta = solved.metadata();
+        let get = |k: &str| meta.iter().find(|(key, _)| key == k).unwrap().1.clone();
+        assert_eq!(get("steps"), "10,12,14");
+        let to_sun: Vec<f64> = get("sun_to")
+            .split(',')
+            .map(|v| v.parse().unwrap())
+            .collect();
+        let d = sun.to_sun();
+        for (a, b) in to_sun.iter().zip([d.x, d.y, d.z]) {
+            assert!((a - b).abs() < 1e-6);
+        }
+        let text = solved.to_string();
+        assert_eq!(text.lines().count(), 3);
+        assert!(text.lines().nth(1).unwrap().contains("green") && text.contains("12 steps"));
+    }
+}

@@ -184,3 +184,44 @@ impl fmt::Display for SequenceTimes {
         )
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// 004's sequence: one label per sun, numbered; each frame's line gives its sun's
+    /// elevation and world azimuth.
+    #[test]
+    fn zenith_sequence_labels_and_angles() {
+        let s = SunSequence::zenith(3, 30.0);
+        assert_eq!(s.labels, ["00", "01", "02"]);
+        assert_eq!(s.at(1), ": sun elevation  90.0° azimuth   0.0°");
+        assert_eq!(s.at(2), ": sun elevation  45.0° azimuth  30.0°");
+        assert!(s.describe().ends_with("path azimuth 30.0°"));
+        assert!(s.night_note().is_none());
+    }
+
+    /// Mean, median, least and most of the frame times, and the first and last frames'
+    /// luminance.
+    #[test]
+    fn sequence_times_summarise_the_frames() {
+        let frame = |seconds: f64, y: f32| RelitFrame {
+            hdr: vec![[y; 3]; 4],
+            relight_seconds: 0.0,
+            render_seconds: seconds,
+            timings: FrameTimings::default(),
+        };
+        let mut times = SequenceTimes::default();
+        for (s, y) in [(3.0, 1.0), (1.0, 0.5), (2.0, 0.25)] {
+            times.push(&frame(s, y));
+        }
+        assert_eq!(times.seconds, [3.0, 1.0, 2.0]);
+        assert!((times.first_luminance - 1.0).abs() < 1e-6);
+        assert!((times.last_luminance - 0.25).abs() < 1e-6);
+        let text = times.to_string();
+        assert!(
+            text.starts_with("frame time: mean 2.000 s, median 2.000 s, min 1.000 s, max 3.000 s"),
+            "{text}"
+        );
+    }
+}

@@ -1032,6 +1032,21 @@ impl ClipBuffers {
 mod tests {
     use super::*;
 
+    /// `--grid N` within the model grid's range, else an error naming the flag.
+    #[test]
+    fn grid_flag_is_one_number_in_range() {
+        assert_eq!(parse_grid_flag(" 64 "), Ok(64));
+        assert_eq!(parse_grid_flag("3"), Err(GridFlagError::Range(3)));
+        assert!(matches!(
+            parse_grid_flag("abc"),
+            Err(GridFlagError::NotANumber { .. })
+        ));
+        assert_eq!(
+            GridFlagError::Range(3).to_string(),
+            "--grid 3: a model's grid must be 4 to 2048 sites along its longest edge"
+        );
+    }
+
     #[test]
     fn placement_fills_the_interior_along_the_longest_edge() {
         let p = GridPlacement::fit([0.0, 0.0, 0.0], [9.0, 3.0, 0.0], 5).unwrap();
