@@ -41,16 +41,6 @@ impl Viewer {
         Viewer { child, url, lines }
     }
 
-    /// Host and port of the URL.
-    pub fn authority(&self) -> String {
-        self.url
-            .trim_start_matches("http://")
-            .split('/')
-            .next()
-            .unwrap()
-            .to_string()
-    }
-
     /// Sends SIGINT (Ctrl-C) and waits for the process: its exit status and what it printed
     /// after the URL.
     pub fn interrupt(mut self) -> (bool, Vec<String>) {
@@ -60,6 +50,26 @@ impl Viewer {
         let status = self.child.wait().unwrap();
         let lines = self.lines.try_iter().collect();
         (status.success(), lines)
+    }
+
+    /// Host and port of the URL.
+    pub fn authority(&self) -> String {
+        self.url
+            .trim_start_matches("http://")
+            .split('/')
+            .next()
+            .unwrap()
+            .to_string()
+    }
+}
+
+impl Drop for Viewer {
+    /// A test that fails leaves no server behind.
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
     }
 }
 
