@@ -495,6 +495,8 @@ pub struct PreparedScene {
     pub lb_models_cached: usize,
     /// The physical light's forest grid, when the scene was lit through it.
     pub forest: Option<ForestLight>,
+    /// Seconds the physical light's base solutions took, when they were solved now.
+    pub basis_solve_seconds: Option<f64>,
 }
 
 /// The unit vector towards the scene's sun.
@@ -565,6 +567,47 @@ fn prepare_media(
     Ok(media)
 }
 
+/// The LB light solved for a scene's own sun ([`solve_per_sun`]).
+struct PerSunLight {
+    models: Vec<ModelLighting>,
+    /// Models whose light came from the cache.
+    cached: usize,
+    /// The forest grid's weights, when the scene is lit through it.
+    forest: Option<ForestLight>,
+}
+
+/// Every model's LB light solved for `scene`'s sun (from the cache when it can): through the
+/// physical light's forest grid `forest` when the scene uses one ([`uses_forest`]), else per
+/// model in the open. What [`PreparedScene::new`] lights a scene with when it does not
+/// relight, and what [`PreparedScene::per_sun_light`] solves for another sun.
+fn solve_per_sun(
+    scene: &Scene,
+    lb: &LbPlan,
+    forest: Option<&GlobalGridOptions>,
+    runner: &dyn Runner,
+    progress: &dyn Progress,
+) -> Result<PerSunLight, PipelineError> {
+    match forest {
+        Some(gopts) if uses_forest(scene, lb.light, Some(gopts)) => {
+            let densities = forest_densities(scene, lb, gopts)?;
+            let (models, cached, f) = light_forest(scene, lb, gopts, densities, runner, progress)?;
+            Ok(PerSunLight {
+                models,
+                cached,
+                forest: Some(f),
+            })
+        }
+        _ => {
+            let (models, cached) = light_models(scene, lb, runner, progress)?;
+            Ok(PerSunLight {
+                models,
+                cached,
+                forest: None,
+            })
+        }
+    }
+}
+
 impl PreparedScene {
     /// Checks the frame's memory and the shading constants, lights every model (from the
     /// cache when it can: [`light_models`], [`light_forest`] or [`precompute_relighting`], as
@@ -612,17 +655,10 @@ impl PreparedScene {
         let (lighting, cached) = match (&lb, &relit_parts, &physical) {
             (_, Some(parts), _) => (none(), parts.cached),
             (_, _, Some(p)) => (none(), p.cached),
-            (Some(lb), None, None) if uses_forest(&scene, lb.light, opts.forest.as_ref()) => {
-                let gopts = opts.forest.expect("uses_forest checks it");
-                let densities = forest_densities(&scene, lb, &gopts)?;
-                let (lit, cached, f) =
-                    light_forest(&scene, lb, &gopts, densities, runner, progress)?;
-                forest = Some(f);
-                (lit.into_iter().map(Some).collect(), cached)
-            }
             (Some(lb), None, None) => {
-                let (lit, cached) = light_models(&scene, lb, runner, progress)?;
-                (lit.into_iter().map(Some).collect(), cached)
+                let lit = solve_per_sun(&scene, lb, opts.forest.as_ref(), runner, progress)?;
+                forest = lit.forest;
+                (lit.models.into_iter().map(Some).collect(), lit.cached)
             }
             (None, _, _) => (none(), 0),
         };
@@ -725,6 +761,7 @@ impl PreparedScene {
             }
             None => (None, Vec::new()),
         };
+        let basis_solve_seconds = physical.as_ref().and_then(|p| p.solve_seconds);
         let physical = match physical {
             Some(p) => Some(
                 PhysicalRelitLight::new(
@@ -767,6 +804,7 @@ impl PreparedScene {
         };
         Ok(PreparedScene {
             forest: None,
+            basis_solve_seconds,
             materials,
             gpu_frame,
             gpu_shading_note,
@@ -1020,6 +1058,40 @@ impl PreparedScene {
     /// Bytes of the LB light (per-sun grids or stored bases in use) and the media's volumes.
     pub fn lighting_bytes(&self) -> u64 {
         self.indirect().memory_bytes() + self.media.memory_bytes()
+    }
+
+    /// The LB light solved for the sun towards `to_sun` as a scene that does not relight is
+    /// lit ([`PreparedScene::new`] without a relight plan: per model for the sun in the
+    /// world's frame, through the forest grid `forest` when the scene uses one), from `lb`'s
+    /// cache when it can. What relit frames are measured against (`sylva bench relight
+    /// --against-direct`); render it with [`PreparedScene::render_with`] after
+    /// [`PreparedScene::set_sun`] to the same sun.
+    pub fn per_sun_light(
+        &self,
+        to_sun: Vec3,
+        lb: &LbPlan,
+        forest: Option<&GlobalGridOptions>,
+        progress: &dyn Progress,
+    ) -> Result<ModelGridLight, PipelineError> {
+        let to_sun = to_sun.normalize_or_zero();
+        let mut scene = self.scene.clone();
+        scene.sun = Sun::from_direction(to_sun.x as f64, to_sun.y as f64, to_sun.z as f64)
+            .map_err(|e| PipelineError::Shading(format!("sun direction {to_sun}: {e}")))?;
+        if scene.sun.to_sun().y < 0.0 {
+            return Err(PipelineError::SunBelowHorizon {
+                elevation: -scene.sun.elevation_deg(),
+            });
+        }
+        let lit = solve_per_sun(&scene, lb, forest, &Local, progress)?;
+        let light = ModelGridLight::new(
+            lit.models.into_iter().map(Some).collect(),
+            &scene.models,
+            self.tracer.cpu().accel.instances(),
+        );
+        Ok(match lit.forest {
+            Some(f) => light.with_instance_weights(f.weights),
+            None => light,
+        })
     }
 }
 

@@ -30,6 +30,9 @@ pub struct PhysicalRelighting {
     pub forest: Option<ForestBases>,
     /// Models whose parts all came from the cache.
     pub cached: usize,
+    /// Seconds the parts' solves took, when every part was solved now (`None` when some came
+    /// from the cache: their solve time is not recorded).
+    pub solve_seconds: Option<f64>,
 }
 
 /// Every model's [`PhysicalBasis`] (from the root's cache, or solved through `runner` and
@@ -153,9 +156,11 @@ pub fn precompute_physical(
     let mut diffuse: Vec<Vec<sylva_lb::LightingGrid>> =
         scene.models.iter().map(|_| Vec::new()).collect();
     let mut reports: Vec<Option<LightingReport>> = scene.models.iter().map(|_| None).collect();
+    let mut all_solved = true;
     for (w, (mut grids, report)) in plans.iter().zip(solved) {
         let m = w.model;
         if let Some(r) = report {
+            all_solved &= r.source != LightingSource::Cached;
             reports[m] = Some(match reports[m].take() {
                 None => r,
                 Some(mut acc) => {
@@ -190,6 +195,7 @@ pub fn precompute_physical(
         ));
     }
     let cached = root_count(runner, "cached models", cached)?;
+    let solve_seconds = all_solved.then(|| reports.iter().flatten().map(|r| r.seconds).sum());
 
     // The forest grid's parts: every process solves them (deterministic, and small).
     let forest = match (in_forest, forest) {
@@ -223,5 +229,6 @@ pub fn precompute_physical(
         bases,
         forest,
         cached,
+        solve_seconds,
     }))
 }

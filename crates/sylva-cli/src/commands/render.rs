@@ -560,6 +560,8 @@ pub struct Prepared {
     pub height: u32,
     /// Per model, what its base solutions' preparation reported (empty without them).
     pub basis: Vec<BasisReport>,
+    /// The LB solver the scene was lit with (none without LB light).
+    pub solver: Option<Box<dyn LbSolver>>,
 }
 
 /// Where `prepare` prints what it does: stdout, or stderr when stdout is for JSON.
@@ -805,6 +807,7 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
         width,
         height,
         basis: basis.into_inner().expect("basis reports"),
+        solver,
     })
 }
 

@@ -15,8 +15,10 @@ use sylva_light::lighting::{physical_environment, PartWeights};
 use sylva_light::relight::physical::{sun_part_weights, SUN_DIRECTIONS};
 use sylva_light::relight::{GlobalGridOptions, SunWeights};
 use sylva_light::{Light, Silent};
+use sylva_pipeline::bench::{relight_physical, DirectSolve, RelightBenchPlan};
 use sylva_pipeline::{
-    load_scene, scene_illumination, BasisUse, LbPlan, PrepareOptions, PreparedScene, RelightPlan,
+    load_scene, scene_illumination, scene_to_sun, BasisUse, LbPlan, PrepareOptions, PreparedScene,
+    RelightPlan, ShadowMethod,
 };
 
 use crate::forest::{instances, shade_parts};
@@ -242,4 +244,58 @@ fn the_physical_light_takes_no_exact_weights_and_no_ambient() {
         .expect("refused");
         assert!(err.to_string().contains("paper light"), "{err}");
     }
+}
+
+#[test]
+fn the_bench_against_direct_solves_is_exact_at_lattice_suns_and_not_between() {
+    let mut scene = load_scene("shade", None).unwrap();
+    for i in &mut scene.instances {
+        i.rotation_deg = 0.0;
+    }
+    // Azimuth 0: the path's ends (45° either side of the zenith) and its middle (the zenith)
+    // are lattice directions, the two suns between them are not.
+    scene.sun = Sun::from_angles(50.0, 0.0).unwrap();
+    let mut relit = prepare(&scene, &CpuSolver, true);
+    let plan = RelightBenchPlan {
+        suns: 5,
+        runs: 1,
+        shadows: ShadowMethod::KdTree,
+        size: (40, 30),
+        seed: 7,
+        against_direct: true,
+    };
+    // The direct solves need the LB plan; asked without it, the bench says so.
+    assert!(relight_physical(&mut relit, plan, None, &|| {}).is_err());
+    let direct = DirectSolve {
+        lb: LbPlan {
+            solver: &CpuSolver,
+            grid: Some(GRID),
+            cache_dir: None,
+            light: Light::Physical,
+        },
+        forest: Some(FOREST),
+    };
+    let report = relight_physical(&mut relit, plan, Some(&direct), &|| {}).unwrap();
+    let a = report.against_direct.as_ref().expect("measured");
+    assert_eq!(report.rmse_vs_direct, Some(a.image_rmse));
+    assert_eq!(a.per_sun.len(), 5);
+    assert!(a.plant_pixels > 0);
+    let lattice: Vec<bool> = a.per_sun.iter().map(|s| s.lattice).collect();
+    assert_eq!(lattice, [true, false, true, false, true], "{a:#?}");
+    let exact = a.per_sun.iter().filter(|s| s.lattice);
+    let noise = exact.fold(0.0f64, |m, s| m.max(s.image_rmse).max(s.plant_rel_rmse));
+    // Measured: about 5e-9 (f32 rounding of the same light summed in another order).
+    assert!(noise < 1e-6, "at lattice suns: {a:#?}");
+    for s in a.per_sun.iter().filter(|s| !s.lattice) {
+        assert!(
+            s.plant_rel_rmse > 1e-3 && s.image_rmse > 1e3 * noise,
+            "between lattice suns the parts are interpolated: {s:?}"
+        );
+        assert!((s.plant_ratio - 1.0).abs() < 0.2, "{s:?}");
+    }
+    // The largest errors are the interpolated suns', and the overall figures pool them.
+    assert!(a.largest.len() == 3 && !a.per_sun[a.largest[0]].lattice);
+    assert!(a.image_rmse > 0.0 && a.plant_rel_rmse > 0.0);
+    // The bench left the scene's own sun in place.
+    assert!((relit.to_sun - scene_to_sun(&scene)).length() < 1e-6);
 }
