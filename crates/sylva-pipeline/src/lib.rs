@@ -53,7 +53,7 @@ pub use bases::precompute_relighting;
 pub use forest::{forest_densities, light_forest, uses_forest, ForestDensities};
 pub use frame::{RankWork, SplitFrame, UnitLayout};
 pub use models::light_models;
-pub use physical::{precompute_physical, PhysicalRelighting};
+pub use physical::{precompute_physical, PhysicalBasisPlan, PhysicalRelighting};
 pub use sylva_core::jobs::{Local, Runner};
 
 use std::path::{Path, PathBuf};
@@ -80,8 +80,8 @@ use sylva_light::media::{prepare_medium, Media, MediumSolve};
 pub use sylva_light::progress::{Progress, Silent};
 use sylva_light::relight::{
     BasisCacheOptions, BasisPlan, GlobalGridOptions, GlobalInstance, GlobalLight, GlobalReport,
-    ModelBasis, PhysicalRelitLight, RelitIllumination, RelitLight, StoredBasis, SunWeights,
-    GLOBAL_EXTENSION,
+    ModelBasis, PhysicalRelitLight, PhysicalTarget, RelitIllumination, RelitLight, StoredBasis,
+    StoredPhysicalBasis, SunWeights, GLOBAL_EXTENSION,
 };
 use sylva_render::gpu_frame::{FrameError, GpuFrame};
 use sylva_render::output::{encode_exr, encode_png, OutputError};
@@ -255,8 +255,10 @@ pub struct RelightPlan {
     pub ambient: f64,
     /// The coarse global grid; `None`: instances keep their fine light unscaled.
     pub global: Option<GlobalGridOptions>,
-    /// What the cached bases are compressed to.
+    /// What the cached bases are compressed to (the paper light's).
     pub target: CompressTarget,
+    /// What the physical light's parts are compressed to (`None`: kept as solved).
+    pub physical: Option<PhysicalTarget>,
     /// Also keep the uncompressed bases (for [`PreparedScene::use_uncompressed`]).
     pub keep_raw: bool,
 }
@@ -271,6 +273,7 @@ impl Default for RelightPlan {
             ambient: 0.0,
             global: Some(GlobalGridOptions::default()),
             target: CompressTarget::recommended(),
+            physical: Some(PhysicalTarget::recommended()),
             keep_raw: false,
         }
     }
@@ -479,8 +482,12 @@ pub struct PreparedScene {
     /// them (a relight plan on the physical light).
     pub physical: Option<PhysicalRelitLight>,
     /// The stored fields not in use: the uncompressed bases while the compressed ones are,
-    /// and the other way round ([`PreparedScene::use_uncompressed`]).
+    /// and the other way round ([`PreparedScene::use_uncompressed`]); the paper light's, and
+    /// the physical light's.
     spare_bases: Vec<Option<StoredBasis>>,
+    spare_physical: Vec<Option<StoredPhysicalBasis>>,
+    /// Bytes of the physical light's parts uncompressed, when it is relit.
+    pub physical_raw_bytes: u64,
     uncompressed: bool,
     shadows: ShadowMethod,
     /// The sun-aligned shadow grid (CPU tracer only: a GPU tracer answers shadow rays with
@@ -633,7 +640,11 @@ impl PreparedScene {
                 physical = precompute_physical(
                     &scene,
                     lb,
-                    plan.basis,
+                    &PhysicalBasisPlan {
+                        basis: plan.basis,
+                        target: plan.physical,
+                        keep_raw: plan.keep_raw,
+                    },
                     opts.forest.as_ref(),
                     runner,
                     progress,
@@ -726,7 +737,7 @@ impl PreparedScene {
         lighting: Vec<Option<ModelLighting>>,
         lb_models_cached: usize,
         relit_parts: Option<Relighting>,
-        physical: Option<PhysicalRelighting>,
+        mut physical: Option<PhysicalRelighting>,
         forest: Option<&ForestLight>,
         progress: &dyn Progress,
     ) -> Result<PreparedScene, PipelineError> {
@@ -762,6 +773,14 @@ impl PreparedScene {
             None => (None, Vec::new()),
         };
         let basis_solve_seconds = physical.as_ref().and_then(|p| p.solve_seconds);
+        let physical_raw_bytes = physical.as_ref().map_or(0, |p| p.raw_bytes);
+        let spare_physical: Vec<Option<StoredPhysicalBasis>> = match &mut physical {
+            Some(p) => std::mem::take(&mut p.raw)
+                .into_iter()
+                .map(|b| b.map(StoredPhysicalBasis::Full))
+                .collect(),
+            None => Vec::new(),
+        };
         let physical = match physical {
             Some(p) => Some(
                 PhysicalRelitLight::new(
@@ -814,6 +833,8 @@ impl PreparedScene {
             relit,
             physical,
             spare_bases,
+            spare_physical,
+            physical_raw_bytes,
             uncompressed: false,
             shadows: opts.shadows,
             sun_grid,
@@ -910,9 +931,10 @@ impl PreparedScene {
         self.shadows
     }
 
-    /// Whether uncompressed bases were kept ([`RelightPlan::keep_raw`]).
+    /// Whether uncompressed bases were kept beside compressed ones ([`RelightPlan::keep_raw`]).
     pub fn has_uncompressed(&self) -> bool {
-        self.relit.is_some() && self.spare_bases.iter().any(Option::is_some)
+        (self.relit.is_some() && self.spare_bases.iter().any(Option::is_some))
+            || (self.physical.is_some() && self.spare_physical.iter().any(Option::is_some))
     }
 
     /// Relights from the uncompressed bases (`true`) or the compressed ones (`false`), for
@@ -925,6 +947,15 @@ impl PreparedScene {
             return Err(PipelineError::Shading(
                 "the scene was prepared without its uncompressed bases (keep_raw)".into(),
             ));
+        }
+        if let Some(p) = self.physical.as_mut() {
+            let spare = std::mem::take(&mut self.spare_physical);
+            self.spare_physical = p.swap_bases(spare).map_err(|source| PipelineError::Relit {
+                scene: self.scene.name.clone(),
+                source,
+            })?;
+            self.uncompressed = yes;
+            return Ok(());
         }
         let r = self.relit.as_mut().expect("checked above");
         let spare = std::mem::take(&mut self.spare_bases);

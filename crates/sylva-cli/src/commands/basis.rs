@@ -14,7 +14,8 @@ use clap::Args;
 use sylva_light::relight::GlobalGridOptions;
 use sylva_light::{Progress, Silent};
 use sylva_pipeline::{
-    load_scene, precompute_physical, precompute_relighting, BasisUse, LbPlan, RelightingAt, Runner,
+    load_scene, precompute_physical, precompute_relighting, BasisUse, LbPlan, PhysicalBasisPlan,
+    RelightingAt, Runner,
 };
 
 use super::progress::{Bars, Report};
@@ -134,7 +135,11 @@ pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
         let done = precompute_physical(
             &scene,
             &lb,
-            BasisUse::Always,
+            &PhysicalBasisPlan {
+                basis: BasisUse::Always,
+                target: plan.physical,
+                keep_raw: false,
+            },
             forest.as_ref(),
             runner,
             progress,
@@ -151,11 +156,13 @@ pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
         let bytes: u64 = done.bases.iter().flatten().map(|b| b.bytes()).sum();
         println!(
             "{} of {} models from the cache; physical bases {} in all ({} parts per model, \
-             uncompressed){}; {:.1} s",
+             {}; {} uncompressed){}; {:.1} s",
             done.cached,
             scene.models.len(),
             sylva_core::format_bytes(bytes),
             sylva_light::relight::physical::PARTS,
+            plan.physical.map_or("uncompressed".into(), |t| t.name()),
+            sylva_core::format_bytes(done.raw_bytes),
             if done.forest.is_some() {
                 ", forest grid parts solved"
             } else {

@@ -12,7 +12,7 @@ use sylva_core::Sun;
 use sylva_lb::relight::{Codec, CompressTarget, Precision};
 use sylva_lb::LbSolver;
 use sylva_light::lighting::{Light, LightingSource};
-use sylva_light::relight::{BasisReport, GlobalGridOptions, SunWeights};
+use sylva_light::relight::{BasisReport, GlobalGridOptions, PhysicalTarget, SunWeights};
 use sylva_light::{IndirectLight, Progress, Silent};
 use sylva_pipeline::{
     image_paths, load_scene, resolution, tone_map_modes, write_images, BasisUse, LbPlan,
@@ -232,7 +232,9 @@ pub struct GridArgs {
     )]
     pub global_grid: usize,
     /// Compression of cached base solutions: colour:T (per-basis colour decorrelation +
-    /// Haar), haar:T, pca:K or pcahaar:K:T.
+    /// Haar), haar:T, pca:K or pcahaar:K:T. The physical light: one codec for its 13 sun
+    /// parts and 3 diffuse parts, or two separated by a comma (sun parts, then diffuse
+    /// parts, e.g. pcahaar:12:0.002,colour:0.004), or none (kept as solved).
     #[arg(long, default_value = "colour:0.004")]
     pub codec: String,
     /// Stored values of compressed base solutions.
@@ -319,18 +321,30 @@ pub fn relight_plan(
         g.validate()
             .map_err(|e| anyhow::anyhow!("--global-grid: {e}"))?;
     }
-    let codec = Codec::parse(&grid.codec).map_err(|e| anyhow::anyhow!("--codec: {e}"))?;
-    let target = CompressTarget {
-        precision: match grid.basis_precision {
-            BasisPrecisionArg::F16 => Precision::F16,
-            BasisPrecisionArg::F32 => Precision::F32,
-            BasisPrecisionArg::Packed => Precision::Packed,
-        },
-        ..CompressTarget::new(codec)
+    let precision = match grid.basis_precision {
+        BasisPrecisionArg::F16 => Precision::F16,
+        BasisPrecisionArg::F32 => Precision::F32,
+        BasisPrecisionArg::Packed => Precision::Packed,
     };
-    target
-        .validate()
-        .map_err(|e| anyhow::anyhow!("--codec/--basis-precision: {e}"))?;
+    // The paper light's bases are one set; the physical light's two (sun parts, diffuse
+    // parts), or none.
+    let (target, physical) = if paper {
+        let codec = Codec::parse(&grid.codec).map_err(|e| {
+            anyhow::anyhow!("--codec: {e} (the paper light's bases take one codec, not none)")
+        })?;
+        let target = CompressTarget {
+            precision,
+            ..CompressTarget::new(codec)
+        };
+        target
+            .validate()
+            .map_err(|e| anyhow::anyhow!("--codec/--basis-precision: {e}"))?;
+        (target, None)
+    } else {
+        let physical = PhysicalTarget::parse(&grid.codec, precision)
+            .map_err(|e| anyhow::anyhow!("--codec/--basis-precision: {e}"))?;
+        (CompressTarget::recommended(), physical)
+    };
     Ok(Some(RelightPlan {
         basis,
         sun: match relit.sun_weights {
@@ -340,6 +354,7 @@ pub fn relight_plan(
         ambient: relit.ambient,
         global,
         target,
+        physical,
         keep_raw,
     }))
 }

@@ -17,6 +17,7 @@ use sylva_lb::relight::{BasisSet, BasisWeights, RelightError};
 use sylva_light::lighting::{LightingSource, ModelLighting};
 use sylva_light::relight::physical::sun_part_weights;
 use sylva_light::relight::{sun_path, BasisReport, GlobalGridOptions, StoredBasis};
+use sylva_light::relight::{CompressedPhysicalBasis, StoredPhysicalBasis};
 use sylva_light::ModelGridLight;
 use sylva_render::{plant_coverage, Frame, Mode, RenderSettings, ToneMap};
 
@@ -388,12 +389,24 @@ pub struct PhysicalRelightBench {
     /// The per-sun light's frame (one grid of four parts per model), same run.
     pub static_frame_seconds: f64,
     pub ratio_to_static: f64,
-    /// The base solutions' solve time, when they were solved now (cached parts carry none).
+    /// The base solutions' solve time: solved now, or as recorded in the compressed cache
+    /// entries (`None`: parts read from the cache, whose solve time is not recorded).
     pub basis_seconds: Option<f64>,
-    /// Bytes of the models' bases (16 parts, f32, uncompressed).
+    /// Bytes of the models' bases uncompressed (16 parts × 3 colours, f32).
     pub basis_bytes: u64,
-    /// Image RMSE of the relit frames against frames of the light solved for each sun
-    /// (`against_direct.image_rmse`), with `--against-direct`.
+    /// The parts' compression (`--codec`: the sun parts' and the diffuse parts'), or `none`.
+    pub codec: String,
+    /// Bytes of the compressed bases in use (`None`: uncompressed), and of their two sets.
+    pub compressed_bytes: Option<u64>,
+    pub compressed_sun_bytes: Option<u64>,
+    pub compressed_diffuse_bytes: Option<u64>,
+    /// Frames relit from the compressed bases against the uncompressed ones over the suns
+    /// (with the uncompressed bases kept): image RMSE (tone-mapped sRGB) and plant-pixel
+    /// relative RMSE.
+    pub rmse: Option<f64>,
+    pub plant_rel_rmse: Option<f64>,
+    /// Image RMSE of the relit frames (the bases in use) against frames of the light solved
+    /// for each sun (`against_direct.image_rmse`), with `--against-direct`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub rmse_vs_direct: Option<f64>,
     /// Plant-pixel relative RMSE of the same (`against_direct.plant_rel_rmse`).
@@ -401,6 +414,9 @@ pub struct PhysicalRelightBench {
     pub plant_rel_rmse_vs_direct: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub against_direct: Option<AgainstDirect>,
+    /// The same measured with the uncompressed bases (when kept beside compressed ones).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub against_direct_uncompressed: Option<AgainstDirect>,
     /// Loading, solving or reading the bases and building the scene.
     pub prepare_seconds: f64,
     pub peak_rss_bytes: Option<u64>,
@@ -443,21 +459,69 @@ pub fn relight_physical(
         .physical
         .as_ref()
         .ok_or(PipelineError::NeedsBasis)?;
-    let static_light = p.static_light(
-        &prepared.scene.models,
-        prepared.tracer.cpu().accel.instances(),
-    );
-    let basis_bytes = (0..prepared.scene.models.len())
-        .filter_map(|m| p.model(m))
-        .map(|b| b.bytes())
-        .sum();
+    let relit_err = |source| PipelineError::Relit {
+        scene: prepared.scene.name.clone(),
+        source,
+    };
+    let static_light = p
+        .static_light(
+            &prepared.scene.models,
+            prepared.tracer.cpu().accel.instances(),
+        )
+        .map_err(relit_err)?;
+    let models = prepared.scene.models.len();
+    let compressed: Vec<&CompressedPhysicalBasis> = (0..models)
+        .filter_map(|m| match p.model(m) {
+            Some(StoredPhysicalBasis::Compressed(c)) => Some(&**c),
+            _ => None,
+        })
+        .collect();
+    let sets = |f: fn((u64, u64)) -> u64| {
+        (!compressed.is_empty()).then(|| compressed.iter().map(|c| f(c.set_bytes())).sum())
+    };
+    let (compressed_sun_bytes, compressed_diffuse_bytes) = (sets(|s| s.0), sets(|s| s.1));
+    let compressed_bytes = compressed_sun_bytes
+        .zip(compressed_diffuse_bytes)
+        .map(|(a, b)| a + b);
+    let codec = compressed
+        .first()
+        .map_or_else(|| "none".to_string(), |c| c.target().name());
     let forest_grid = p.has_forest();
     let t = time_frames(prepared, &static_light, &suns, &settings, plan, tick)?;
     let frame_seconds = t.chosen(plan.shadows);
     prepared.set_shadows(plan.shadows);
-    let against = match direct {
-        Some(d) => Some(against_direct(prepared, &suns, d, &settings, tick)?),
-        None => None,
+
+    // Compression's error: frames relit from the compressed bases against the uncompressed
+    // ones (all of one, then all of the other: each switch relights every instance).
+    let (mut rmse, mut plant_rel_rmse) = (None, None);
+    if prepared.has_uncompressed() {
+        let plant = plant_pixels(prepared, &settings)?;
+        let to_sun = prepared.to_sun;
+        let mut small = Vec::with_capacity(suns.len());
+        for &sun in &suns {
+            prepared.set_sun(sun)?;
+            small.push(prepared.render(&settings, &Silent)?);
+            tick();
+        }
+        prepared.use_uncompressed(true)?;
+        let mut total = PairSums::default();
+        for (&sun, c) in suns.iter().zip(&small) {
+            prepared.set_sun(sun)?;
+            let full = prepared.render(&settings, &Silent)?;
+            total.add(&pair_error(c, &full, &plant));
+            tick();
+        }
+        prepared.use_uncompressed(false)?;
+        prepared.set_sun(to_sun)?;
+        rmse = Some(total.image_rmse());
+        plant_rel_rmse = Some(total.plant_rel_rmse());
+    }
+    let (against, against_uncompressed) = match direct {
+        Some(d) => {
+            let (a, u) = against_direct(prepared, &suns, d, &settings, tick)?;
+            (Some(a), u)
+        }
+        None => (None, None),
     };
     Ok(PhysicalRelightBench {
         scene: prepared.scene.name.clone(),
@@ -479,14 +543,32 @@ pub fn relight_physical(
         static_frame_seconds: t.static_seconds,
         ratio_to_static: frame_seconds / t.static_seconds,
         basis_seconds: prepared.basis_solve_seconds,
-        basis_bytes,
+        basis_bytes: prepared.physical_raw_bytes,
+        codec,
+        compressed_bytes,
+        compressed_sun_bytes,
+        compressed_diffuse_bytes,
+        rmse,
+        plant_rel_rmse,
         rmse_vs_direct: against.as_ref().map(|a| a.image_rmse),
         plant_rel_rmse_vs_direct: against.as_ref().map(|a| a.plant_rel_rmse),
         against_direct: against,
+        against_direct_uncompressed: against_uncompressed,
         prepare_seconds: 0.0,
         peak_rss_bytes: peak_rss_bytes(),
         device: prepared.tracer.device(),
     })
+}
+
+/// Per pixel of `settings`' frames, whether every sample's primary ray hits a plant.
+fn plant_pixels(
+    prepared: &PreparedScene,
+    settings: &RenderSettings,
+) -> Result<Vec<bool>, PipelineError> {
+    Ok(plant_coverage(prepared.tracer.query(), settings)?
+        .into_iter()
+        .map(|c| c >= 1.0)
+        .collect())
 }
 
 /// One sun of [`AgainstDirect`].
@@ -589,28 +671,71 @@ fn pair_error(relit: &Frame, direct: &Frame, plant: &[bool]) -> PairSums {
     sums
 }
 
+/// Per-sun and pooled sums of one light's frames against the direct ones.
+#[derive(Default)]
+struct Tally {
+    per_sun: Vec<SunAgainstDirect>,
+    total: PairSums,
+}
+
+impl Tally {
+    fn add(&mut self, sun: glam::Vec3, sums: PairSums) {
+        self.total.add(&sums);
+        let s = sun.normalize().as_dvec3();
+        let travel = [-s.x, -s.y, -s.z];
+        self.per_sun.push(SunAgainstDirect {
+            elevation_deg: s.y.clamp(-1.0, 1.0).asin().to_degrees(),
+            azimuth_deg: s.z.atan2(s.x).to_degrees(),
+            lattice: sun_part_weights(travel).is_ok_and(|w| w.len() == 1),
+            image_rmse: sums.image_rmse(),
+            plant_rel_rmse: sums.plant_rel_rmse(),
+            plant_ratio: sums.plant_ratio(),
+        });
+    }
+
+    fn finish(self, plant_pixels: usize, direct_seconds: f64) -> AgainstDirect {
+        let per_sun = self.per_sun;
+        let mut largest: Vec<usize> = (0..per_sun.len()).collect();
+        largest.sort_by(|&a, &b| {
+            per_sun[b]
+                .plant_rel_rmse
+                .total_cmp(&per_sun[a].plant_rel_rmse)
+                .then(a.cmp(&b))
+        });
+        largest.truncate(3);
+        AgainstDirect {
+            image_rmse: self.total.image_rmse(),
+            plant_rel_rmse: self.total.plant_rel_rmse(),
+            plant_ratio: self.total.plant_ratio(),
+            plant_pixels,
+            largest,
+            direct_seconds,
+            per_sun,
+        }
+    }
+}
+
 /// The relit frames of `prepared` (its physical light relit from its bases) against frames
 /// of the light solved for each of `suns` (towards the sun) as a scene that does not relight
 /// is lit ([`PreparedScene::per_sun_light`], from the LB cache when it can), both rendered
 /// with `settings`: per sun and over all, the image RMSE (tone-mapped sRGB) and the plant
 /// pixels' relative RMSE and mean ratio. At a lattice sun the two lights agree for unrotated
 /// instances (float noise); between them the difference is the sun parts' interpolation.
+/// The bases in use, and (when the uncompressed bases are kept beside compressed ones) the
+/// uncompressed bases too.
 pub fn against_direct(
     prepared: &mut PreparedScene,
     suns: &[glam::Vec3],
     direct: &DirectSolve,
     settings: &RenderSettings,
     tick: &dyn Fn(),
-) -> Result<AgainstDirect, PipelineError> {
+) -> Result<(AgainstDirect, Option<AgainstDirect>), PipelineError> {
     if prepared.physical.is_none() {
         return Err(PipelineError::NeedsBasis);
     }
-    let plant: Vec<bool> = plant_coverage(prepared.tracer.query(), settings)?
-        .into_iter()
-        .map(|c| c >= 1.0)
-        .collect();
-    let mut per_sun = Vec::with_capacity(suns.len());
-    let mut total = PairSums::default();
+    let plant = plant_pixels(prepared, settings)?;
+    let both = prepared.has_uncompressed();
+    let (mut in_use, mut uncompressed) = (Tally::default(), Tally::default());
     let mut direct_seconds = 0.0;
     let to_sun = prepared.to_sun;
     for &sun in suns {
@@ -622,37 +747,21 @@ pub fn against_direct(
         tick();
         let r = prepared.render(settings, &Silent)?;
         tick();
-        let sums = pair_error(&r, &d, &plant);
-        total.add(&sums);
-        let s = sun.normalize().as_dvec3();
-        let travel = [-s.x, -s.y, -s.z];
-        per_sun.push(SunAgainstDirect {
-            elevation_deg: s.y.clamp(-1.0, 1.0).asin().to_degrees(),
-            azimuth_deg: s.z.atan2(s.x).to_degrees(),
-            lattice: sun_part_weights(travel).is_ok_and(|w| w.len() == 1),
-            image_rmse: sums.image_rmse(),
-            plant_rel_rmse: sums.plant_rel_rmse(),
-            plant_ratio: sums.plant_ratio(),
-        });
+        in_use.add(sun, pair_error(&r, &d, &plant));
+        if both {
+            prepared.use_uncompressed(true)?;
+            let u = prepared.render(settings, &Silent);
+            prepared.use_uncompressed(false)?;
+            uncompressed.add(sun, pair_error(&u?, &d, &plant));
+            tick();
+        }
     }
     prepared.set_sun(to_sun)?;
-    let mut largest: Vec<usize> = (0..per_sun.len()).collect();
-    largest.sort_by(|&a, &b| {
-        per_sun[b]
-            .plant_rel_rmse
-            .total_cmp(&per_sun[a].plant_rel_rmse)
-            .then(a.cmp(&b))
-    });
-    largest.truncate(3);
-    Ok(AgainstDirect {
-        image_rmse: total.image_rmse(),
-        plant_rel_rmse: total.plant_rel_rmse(),
-        plant_ratio: total.plant_ratio(),
-        plant_pixels: plant.iter().filter(|&&p| p).count(),
-        largest,
-        direct_seconds,
-        per_sun,
-    })
+    let n = plant.iter().filter(|&&p| p).count();
+    Ok((
+        in_use.finish(n, direct_seconds),
+        both.then(|| uncompressed.finish(n, direct_seconds)),
+    ))
 }
 
 impl fmt::Display for AgainstDirect {
@@ -711,15 +820,40 @@ impl fmt::Display for PhysicalRelightBench {
         )?;
         writeln!(
             f,
-            "base solutions: {} (16 parts per model, uncompressed), {}; prepared in {:.1} s",
+            "base solutions: {} uncompressed (16 parts per model), {}; prepared in {:.1} s",
             format_bytes(self.basis_bytes),
             self.basis_seconds
                 .map(|s| format!("{s:.1} s of solves"))
-                .unwrap_or_else(|| "from the cache".into()),
+                .unwrap_or_else(|| "solve time not recorded".into()),
             self.prepare_seconds
         )?;
+        if let (Some(c), Some(sun), Some(diffuse)) = (
+            self.compressed_bytes,
+            self.compressed_sun_bytes,
+            self.compressed_diffuse_bytes,
+        ) {
+            writeln!(
+                f,
+                "compressed ({}): {} ({:.1}×; sun parts {}, diffuse parts {})",
+                self.codec,
+                format_bytes(c),
+                self.basis_bytes as f64 / c.max(1) as f64,
+                format_bytes(sun),
+                format_bytes(diffuse)
+            )?;
+        }
+        if let (Some(r), Some(p)) = (self.rmse, self.plant_rel_rmse) {
+            writeln!(
+                f,
+                "compressed vs uncompressed: image RMSE {r:.5} (tone-mapped sRGB, [0, 1]), plant relative RMSE {:.2} %",
+                100.0 * p
+            )?;
+        }
         if let Some(a) = &self.against_direct {
             write!(f, "{a}")?;
+        }
+        if let Some(a) = &self.against_direct_uncompressed {
+            write!(f, "uncompressed bases, {a}")?;
         }
         Ok(())
     }

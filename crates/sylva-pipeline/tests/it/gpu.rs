@@ -340,6 +340,7 @@ fn relit_light_is_shaded_on_the_gpu_as_on_the_cpu() {
         ambient: 0.1,
         global: None,
         target: CompressTarget::recommended(),
+        physical: None,
         keep_raw: true,
     };
     let mut cpu = prepare_lit(dir.path(), None, false, Some(plan));
@@ -408,6 +409,7 @@ fn every_stored_form_of_the_bases_is_read_on_the_gpu_as_on_the_cpu() {
             ambient: 0.2,
             global: None,
             target,
+            physical: None,
             keep_raw: false,
         };
         let mut cpu = prepare_lit(dir.path(), None, false, Some(plan));
