@@ -839,7 +839,10 @@ mod tests {
 
     #[test]
     fn the_physical_light_relit_reads_back_as_the_cpu_combines_it() {
-        use crate::relight::physical::{PhysicalBasis, PhysicalRelitLight, SUN_PARTS};
+        use crate::relight::physical::{PhysicalRelitLight, SUN_PARTS};
+        use crate::relight::physical_basis::{
+            CompressedPhysicalBasis, PhysicalBasis, PhysicalTarget, StoredPhysicalBasis,
+        };
         let (plate, bounds) = model();
         let models = [plate.clone(), plate];
         let placed = instances(models[0].bounds);
@@ -864,22 +867,46 @@ mod tests {
             sky: Vec3::new(0.2, 0.25, 0.35),
             ground: Some(Vec3::splat(0.2)),
         };
-        let mut light = PhysicalRelitLight::new(
-            vec![Some(basis), None],
+        // As solved; compressed, it has no device side (the kernel reads no physical codec).
+        let dims = basis.dims();
+        let density = sylva_lb::DensityGrid {
+            dims,
+            bounds,
+            density: vec![0.5; dims.sites()],
+            wood: vec![0.0; dims.sites()],
+        };
+        let compressed =
+            CompressedPhysicalBasis::compress(&basis, &density, &PhysicalTarget::recommended())
+                .unwrap();
+        let light = PhysicalRelitLight::new(
+            vec![
+                Some(StoredPhysicalBasis::Compressed(Box::new(compressed))),
+                None,
+            ],
             &models,
             &placed,
             None,
             lit(Vec3::new(0.3, 0.8, -0.2)),
         )
         .unwrap();
-        let dev = agrees_as(&light, &placed, 1e-5, true);
+        assert!(light.device().is_err());
+        let (stored, tol) = (StoredPhysicalBasis::Full(basis), 1e-5);
+        let mut light = PhysicalRelitLight::new(
+            vec![Some(stored), None],
+            &models,
+            &placed,
+            None,
+            lit(Vec3::new(0.3, 0.8, -0.2)),
+        )
+        .unwrap();
+        let dev = agrees_as(&light, &placed, tol, true);
         assert_eq!(dev.kind, DeviceKind::Relit);
         let g = dev.packed.records[0];
         assert_eq!(dev.w(g + RELIT_KIND as u32), 0, "every field at every site");
         assert_eq!(dev.packed.records[1], NONE);
         // The sun moves: the new sun words alone give the new light and ground.
         light.relight(lit(Vec3::new(-0.5, 0.6, 0.4))).unwrap();
-        let moved = agrees_as(&light, &placed, 1e-5, true);
+        let moved = agrees_as(&light, &placed, tol, true);
         assert_eq!(moved.pool, dev.pool, "the pool stays when the sun moves");
         assert_ne!(moved.sun.words, dev.sun.words);
     }

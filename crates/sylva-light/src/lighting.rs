@@ -1529,6 +1529,11 @@ impl<'a> PartsPlan<'a> {
         self.plan.dims()
     }
 
+    /// The parts' grid's box (model space).
+    pub fn bounds(&self) -> sylva_lb::Bounds {
+        self.plan.placement.bounds()
+    }
+
     /// The medium the parts are solved with.
     pub fn medium(&self) -> &MediumParams {
         &self.medium

@@ -60,7 +60,7 @@ pub use models::light_models;
 pub use options::{
     costly_grid_warning, relight_light, BasisChoice, LightChoice, LightSettings, OptionError,
 };
-pub use physical::{precompute_physical, PhysicalRelighting};
+pub use physical::{precompute_physical, PhysicalBasisPlan, PhysicalRelighting};
 pub use report::{basis_jobs, basis_scene_line, scene_line, written_line, RenderSummary};
 pub use sylva_core::jobs::{Local, Runner};
 
@@ -88,8 +88,8 @@ use sylva_light::media::{prepare_medium, Media, MediumSolve};
 pub use sylva_light::progress::{Progress, Silent};
 use sylva_light::relight::{
     BasisCacheOptions, BasisPlan, GlobalGridOptions, GlobalInstance, GlobalLight, GlobalReport,
-    ModelBasis, PhysicalRelitLight, RelitIllumination, RelitLight, StoredBasis, SunWeights,
-    GLOBAL_EXTENSION,
+    ModelBasis, PhysicalRelitLight, PhysicalTarget, RelitIllumination, RelitLight, StoredBasis,
+    StoredPhysicalBasis, SunWeights, GLOBAL_EXTENSION,
 };
 use sylva_render::gpu_frame::{FrameError, GpuFrame};
 use sylva_render::output::{encode_exr, encode_png, OutputError};
@@ -278,8 +278,10 @@ pub struct RelightPlan {
     pub ambient: f64,
     /// The coarse global grid; `None`: instances keep their fine light unscaled.
     pub global: Option<GlobalGridOptions>,
-    /// What the cached bases are compressed to.
+    /// What the cached bases are compressed to (the paper light's).
     pub target: CompressTarget,
+    /// What the physical light's parts are compressed to (`None`: kept as solved).
+    pub physical: Option<PhysicalTarget>,
     /// Also keep the uncompressed bases (for [`PreparedScene::use_uncompressed`]).
     pub keep_raw: bool,
 }
@@ -294,6 +296,7 @@ impl Default for RelightPlan {
             ambient: 0.0,
             global: Some(GlobalGridOptions::default()),
             target: CompressTarget::recommended(),
+            physical: Some(PhysicalTarget::recommended()),
             keep_raw: false,
         }
     }
@@ -502,8 +505,12 @@ pub struct PreparedScene {
     /// them (a relight plan on the physical light).
     pub physical: Option<PhysicalRelitLight>,
     /// The stored fields not in use: the uncompressed bases while the compressed ones are,
-    /// and the other way round ([`PreparedScene::use_uncompressed`]).
+    /// and the other way round ([`PreparedScene::use_uncompressed`]); the paper light's, and
+    /// the physical light's.
     spare_bases: Vec<Option<StoredBasis>>,
+    spare_physical: Vec<Option<StoredPhysicalBasis>>,
+    /// Bytes of the physical light's parts uncompressed, when it is relit.
+    pub physical_raw_bytes: u64,
     uncompressed: bool,
     shadows: ShadowMethod,
     /// The sun-aligned shadow grid (CPU tracer only: a GPU tracer answers shadow rays with
@@ -518,6 +525,8 @@ pub struct PreparedScene {
     pub lb_models_cached: usize,
     /// The physical light's forest grid, when the scene was lit through it.
     pub forest: Option<ForestLight>,
+    /// Seconds the physical light's base solutions took, when they were solved now.
+    pub basis_solve_seconds: Option<f64>,
 }
 
 /// The unit vector towards the scene's sun.
@@ -588,6 +597,47 @@ fn prepare_media(
     Ok(media)
 }
 
+/// The LB light solved for a scene's own sun ([`solve_per_sun`]).
+struct PerSunLight {
+    models: Vec<ModelLighting>,
+    /// Models whose light came from the cache.
+    cached: usize,
+    /// The forest grid's weights, when the scene is lit through it.
+    forest: Option<ForestLight>,
+}
+
+/// Every model's LB light solved for `scene`'s sun (from the cache when it can): through the
+/// physical light's forest grid `forest` when the scene uses one ([`uses_forest`]), else per
+/// model in the open. What [`PreparedScene::new`] lights a scene with when it does not
+/// relight, and what [`PreparedScene::per_sun_light`] solves for another sun.
+fn solve_per_sun(
+    scene: &Scene,
+    lb: &LbPlan,
+    forest: Option<&GlobalGridOptions>,
+    runner: &dyn Runner,
+    progress: &dyn Progress,
+) -> Result<PerSunLight, PipelineError> {
+    match forest {
+        Some(gopts) if uses_forest(scene, lb.light, Some(gopts)) => {
+            let densities = forest_densities(scene, lb, gopts)?;
+            let (models, cached, f) = light_forest(scene, lb, gopts, densities, runner, progress)?;
+            Ok(PerSunLight {
+                models,
+                cached,
+                forest: Some(f),
+            })
+        }
+        _ => {
+            let (models, cached) = light_models(scene, lb, runner, progress)?;
+            Ok(PerSunLight {
+                models,
+                cached,
+                forest: None,
+            })
+        }
+    }
+}
+
 impl PreparedScene {
     /// Checks the frame's memory and the shading constants, lights every model (from the
     /// cache when it can: [`light_models`], [`light_forest`] or [`precompute_relighting`], as
@@ -613,7 +663,11 @@ impl PreparedScene {
                 physical = precompute_physical(
                     &scene,
                     lb,
-                    plan.basis,
+                    &PhysicalBasisPlan {
+                        basis: plan.basis,
+                        target: plan.physical,
+                        keep_raw: plan.keep_raw,
+                    },
                     opts.forest.as_ref(),
                     runner,
                     progress,
@@ -635,17 +689,10 @@ impl PreparedScene {
         let (lighting, cached) = match (&lb, &relit_parts, &physical) {
             (_, Some(parts), _) => (none(), parts.cached),
             (_, _, Some(p)) => (none(), p.cached),
-            (Some(lb), None, None) if uses_forest(&scene, lb.light, opts.forest.as_ref()) => {
-                let gopts = opts.forest.expect("uses_forest checks it");
-                let densities = forest_densities(&scene, lb, &gopts)?;
-                let (lit, cached, f) =
-                    light_forest(&scene, lb, &gopts, densities, runner, progress)?;
-                forest = Some(f);
-                (lit.into_iter().map(Some).collect(), cached)
-            }
             (Some(lb), None, None) => {
-                let (lit, cached) = light_models(&scene, lb, runner, progress)?;
-                (lit.into_iter().map(Some).collect(), cached)
+                let lit = solve_per_sun(&scene, lb, opts.forest.as_ref(), runner, progress)?;
+                forest = lit.forest;
+                (lit.models.into_iter().map(Some).collect(), lit.cached)
             }
             (None, _, _) => (none(), 0),
         };
@@ -713,7 +760,7 @@ impl PreparedScene {
         lighting: Vec<Option<ModelLighting>>,
         lb_models_cached: usize,
         relit_parts: Option<Relighting>,
-        physical: Option<PhysicalRelighting>,
+        mut physical: Option<PhysicalRelighting>,
         forest: Option<&ForestLight>,
         progress: &dyn Progress,
     ) -> Result<PreparedScene, PipelineError> {
@@ -747,6 +794,15 @@ impl PreparedScene {
                 (Some(relit), parts.raw)
             }
             None => (None, Vec::new()),
+        };
+        let basis_solve_seconds = physical.as_ref().and_then(|p| p.solve_seconds);
+        let physical_raw_bytes = physical.as_ref().map_or(0, |p| p.raw_bytes);
+        let spare_physical: Vec<Option<StoredPhysicalBasis>> = match &mut physical {
+            Some(p) => std::mem::take(&mut p.raw)
+                .into_iter()
+                .map(|b| b.map(StoredPhysicalBasis::Full))
+                .collect(),
+            None => Vec::new(),
         };
         let physical = match physical {
             Some(p) => Some(
@@ -790,6 +846,7 @@ impl PreparedScene {
         };
         Ok(PreparedScene {
             forest: None,
+            basis_solve_seconds,
             materials,
             gpu_frame,
             gpu_shading_note,
@@ -799,6 +856,8 @@ impl PreparedScene {
             relit,
             physical,
             spare_bases,
+            spare_physical,
+            physical_raw_bytes,
             uncompressed: false,
             shadows: opts.shadows,
             sun_grid,
@@ -898,9 +957,10 @@ impl PreparedScene {
         self.shadows
     }
 
-    /// Whether uncompressed bases were kept ([`RelightPlan::keep_raw`]).
+    /// Whether uncompressed bases were kept beside compressed ones ([`RelightPlan::keep_raw`]).
     pub fn has_uncompressed(&self) -> bool {
-        self.relit.is_some() && self.spare_bases.iter().any(Option::is_some)
+        (self.relit.is_some() && self.spare_bases.iter().any(Option::is_some))
+            || (self.physical.is_some() && self.spare_physical.iter().any(Option::is_some))
     }
 
     /// Relights from the uncompressed bases (`true`) or the compressed ones (`false`), for
@@ -913,6 +973,15 @@ impl PreparedScene {
             return Err(PipelineError::Shading(
                 "the scene was prepared without its uncompressed bases (keep_raw)".into(),
             ));
+        }
+        if let Some(p) = self.physical.as_mut() {
+            let spare = std::mem::take(&mut self.spare_physical);
+            self.spare_physical = p.swap_bases(spare).map_err(|source| PipelineError::Relit {
+                scene: self.scene.name.clone(),
+                source,
+            })?;
+            self.uncompressed = yes;
+            return Ok(());
         }
         let r = self.relit.as_mut().expect("checked above");
         let spare = std::mem::take(&mut self.spare_bases);
@@ -1046,6 +1115,40 @@ impl PreparedScene {
     /// Bytes of the LB light (per-sun grids or stored bases in use) and the media's volumes.
     pub fn lighting_bytes(&self) -> u64 {
         self.indirect().memory_bytes() + self.media.memory_bytes()
+    }
+
+    /// The LB light solved for the sun towards `to_sun` as a scene that does not relight is
+    /// lit ([`PreparedScene::new`] without a relight plan: per model for the sun in the
+    /// world's frame, through the forest grid `forest` when the scene uses one), from `lb`'s
+    /// cache when it can. What relit frames are measured against (`sylva bench relight
+    /// --against-direct`); render it with [`PreparedScene::render_with`] after
+    /// [`PreparedScene::set_sun`] to the same sun.
+    pub fn per_sun_light(
+        &self,
+        to_sun: Vec3,
+        lb: &LbPlan,
+        forest: Option<&GlobalGridOptions>,
+        progress: &dyn Progress,
+    ) -> Result<ModelGridLight, PipelineError> {
+        let to_sun = to_sun.normalize_or_zero();
+        let mut scene = self.scene.clone();
+        scene.sun = Sun::from_direction(to_sun.x as f64, to_sun.y as f64, to_sun.z as f64)
+            .map_err(|e| PipelineError::Shading(format!("sun direction {to_sun}: {e}")))?;
+        if scene.sun.to_sun().y < 0.0 {
+            return Err(PipelineError::SunBelowHorizon {
+                elevation: -scene.sun.elevation_deg(),
+            });
+        }
+        let lit = solve_per_sun(&scene, lb, forest, &Local, progress)?;
+        let light = ModelGridLight::new(
+            lit.models.into_iter().map(Some).collect(),
+            &scene.models,
+            self.tracer.cpu().accel.instances(),
+        );
+        Ok(match lit.forest {
+            Some(f) => light.with_instance_weights(f.weights),
+            None => light,
+        })
     }
 }
 

@@ -8,7 +8,7 @@
 use sylva_geom::Scene;
 use sylva_lb::relight::{Codec, CompressTarget, Precision};
 use sylva_light::lighting::Light;
-use sylva_light::relight::{GlobalGridOptions, SunWeights};
+use sylva_light::relight::{GlobalGridOptions, PhysicalTarget, SunWeights};
 
 use crate::{uses_forest, BasisUse, RelightPlan};
 
@@ -133,20 +133,34 @@ impl LightSettings {
             g.validate()
                 .map_err(|e| refuse(format!("--global-grid: {e}")))?;
         }
-        let codec = Codec::parse(&self.codec).map_err(|e| refuse(format!("--codec: {e}")))?;
-        let target = CompressTarget {
-            precision: self.precision,
-            ..CompressTarget::new(codec)
+        // The paper light's bases are one set; the physical light's two (sun parts, diffuse
+        // parts), or none.
+        let (target, physical) = if paper {
+            let codec = Codec::parse(&self.codec).map_err(|e| {
+                refuse(format!(
+                    "--codec: {e} (the paper light's bases take one codec, not none)"
+                ))
+            })?;
+            let target = CompressTarget {
+                precision: self.precision,
+                ..CompressTarget::new(codec)
+            };
+            target
+                .validate()
+                .map_err(|e| refuse(format!("--codec/--basis-precision: {e}")))?;
+            (target, None)
+        } else {
+            let physical = PhysicalTarget::parse(&self.codec, self.precision)
+                .map_err(|e| refuse(format!("--codec/--basis-precision: {e}")))?;
+            (CompressTarget::recommended(), physical)
         };
-        target
-            .validate()
-            .map_err(|e| refuse(format!("--codec/--basis-precision: {e}")))?;
         Ok(Some(RelightPlan {
             basis,
             sun: self.sun,
             ambient: self.ambient,
             global,
             target,
+            physical,
             keep_raw,
         }))
     }

@@ -7,14 +7,23 @@
 //! ([`ForestBases`]), solved by every process (deterministic). Nothing here depends on the
 //! sun's direction: the light it gives moves with the sun without a solve.
 
-use sylva_core::jobs::Runner;
+use std::time::Instant;
+
+use sylva_core::cache::{CacheKey, Lookup};
+use sylva_core::jobs::{from_root, Runner};
+use sylva_core::wire::{Reader, Writer};
 use sylva_geom::Scene;
+use sylva_lb::{Bounds, DensityGrid, Dims};
 use sylva_light::forest::{ForestBases, ForestInstance};
 use sylva_light::lighting::{
     model_density, LightingError, LightingReport, LightingSource, PartsPlan,
 };
 use sylva_light::relight::physical::{
-    overhead_part, sun_part_illumination, PhysicalBasis, SUN_PARTS,
+    overhead_part, sun_part_illumination, PhysicalBasis, PARTS, SUN_PARTS,
+};
+use sylva_light::relight::physical_basis::{
+    compressed_physical_key, lookup_physical, physical_path, store_physical, CachedPhysical,
+    CompressedPhysicalBasis, PhysicalTarget, StoredPhysicalBasis,
 };
 use sylva_light::relight::GlobalGridOptions;
 use sylva_light::Progress;
@@ -24,28 +33,63 @@ use crate::forest::{forest_densities, solve_light_parts, uses_forest, PlanParts}
 use crate::jobs::root_count;
 use crate::{lighting_options, scene_illumination, BasisUse, LbPlan, PipelineError};
 
-/// Every model's physical basis and the forest grid's parts: what a scene is relit with.
-pub struct PhysicalRelighting {
-    pub bases: Vec<Option<PhysicalBasis>>,
-    pub forest: Option<ForestBases>,
-    /// Models whose parts all came from the cache.
-    pub cached: usize,
+/// What the physical light's bases are made and kept as.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PhysicalBasisPlan {
+    /// Solve missing parts, or take cached bases only.
+    pub basis: BasisUse,
+    /// The parts compressed to this, and the compressed basis cached per model (`None`:
+    /// kept as solved, 16 × 3 f32 per site).
+    pub target: Option<PhysicalTarget>,
+    /// With a target, also keep the uncompressed parts ([`PhysicalRelighting::raw`]).
+    pub keep_raw: bool,
 }
 
-/// Every model's [`PhysicalBasis`] (from the root's cache, or solved through `runner` and
-/// cached there) and, for a forest (`forest`, more than one instance), the coarse grid's
-/// parts. `None` when `basis` takes cached bases only and a part is missing. Every process
-/// calls it with the same scene and options and gets the same relighting.
+/// Every model's physical basis and the forest grid's parts: what a scene is relit with.
+pub struct PhysicalRelighting {
+    /// Per model, its basis as the light reads it: compressed with a target.
+    pub bases: Vec<Option<StoredPhysicalBasis>>,
+    /// Per model, its uncompressed parts beside compressed ones (with
+    /// [`PhysicalBasisPlan::keep_raw`]); empty otherwise.
+    pub raw: Vec<Option<PhysicalBasis>>,
+    pub forest: Option<ForestBases>,
+    /// Models whose basis (compressed, or its parts) came from the cache.
+    pub cached: usize,
+    /// Seconds the parts' solves took: solved now, or as recorded in the compressed entries
+    /// (`None` when some came from the cache without a record).
+    pub solve_seconds: Option<f64>,
+    /// Bytes of every model's parts uncompressed (16 × 3 f32 per site).
+    pub raw_bytes: u64,
+}
+
+/// The 16 parts' cache keys of a model in [`PhysicalBasis`]'s order: its sun parts' (one
+/// plan per direction), then the overhead plan's top sky, sky and ground (the side sky is
+/// the sky less the top's).
+fn part_keys(sun_plans: &[PlanParts], overhead: usize) -> [CacheKey; PARTS] {
+    let o = &sun_plans[overhead].plan;
+    let diffuse = [o.key(3), o.key(1), o.key(2)];
+    std::array::from_fn(|k| match k {
+        k if k < SUN_PARTS => sun_plans[k].plan.key(0),
+        k => diffuse[k - SUN_PARTS],
+    })
+}
+
+/// Every model's physical basis (compressed to `bplan`'s target and cached as such, or as
+/// parts; from the root's cache, or solved through `runner` and cached there) and, for a
+/// forest (`forest`, more than one instance), the coarse grid's parts. `None` when
+/// `bplan.basis` takes cached bases only and one is missing. Every process calls it with the
+/// same scene and options and gets the same relighting.
 pub fn precompute_physical(
     scene: &Scene,
     lb: &LbPlan,
-    basis: BasisUse,
+    bplan: &PhysicalBasisPlan,
     forest: Option<&GlobalGridOptions>,
     runner: &dyn Runner,
     progress: &dyn Progress,
 ) -> Result<Option<PhysicalRelighting>, PipelineError> {
     let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
     let several = runner.processes() > 1;
+    let root = runner.is_root();
     let illum = scene_illumination(scene);
     let mut opts = lighting_options(scene, lb);
     if several {
@@ -53,7 +97,7 @@ pub fn precompute_physical(
         runner.agree(
             "the physical basis settings",
             &format!(
-                "{} ({} models, {} instances) grid {} forest grid {:?} {basis:?}",
+                "{} ({} models, {} instances) grid {} forest grid {:?} {bplan:?}",
                 scene.name,
                 scene.models.len(),
                 scene.instances.len(),
@@ -62,7 +106,7 @@ pub fn precompute_physical(
             ),
         )?;
     }
-    if !runner.is_root() {
+    if !root {
         opts.cache_dir = None;
     }
     let lighting_err = |k: usize, source: LightingError| PipelineError::Lighting {
@@ -127,13 +171,75 @@ pub fn precompute_physical(
             });
         }
     }
-    if basis == BasisUse::IfCached {
-        let all_cached = sylva_core::jobs::from_root(
+    let model_plans = |m: usize| &plans[m * SUN_PARTS..(m + 1) * SUN_PARTS];
+    let keys: Vec<Option<CacheKey>> = (0..scene.models.len())
+        .map(|m| {
+            bplan
+                .target
+                .map(|t| compressed_physical_key(&part_keys(model_plans(m), overhead), &t))
+        })
+        .collect();
+    // Per model, its parts' grid and box.
+    let grids: Vec<(Dims, Bounds)> = (0..scene.models.len())
+        .map(|m| {
+            (
+                model_plans(m)[0].plan.dims(),
+                model_plans(m)[0].plan.bounds(),
+            )
+        })
+        .collect();
+
+    // The root: each model's compressed entry, when there is a target and a cache.
+    let t_lookup = Instant::now();
+    let mut hits: Vec<Option<CachedPhysical>> = scene.models.iter().map(|_| None).collect();
+    let mut bad: Vec<Option<String>> = scene.models.iter().map(|_| None).collect();
+    if let (Some(dir), true) = (&opts.cache_dir, root) {
+        for (m, key) in keys.iter().enumerate() {
+            let Some(key) = *key else { continue };
+            let (dims, bounds) = grids[m];
+            match lookup_physical(dir, &scene.models[m], key, dims, bounds) {
+                Lookup::Hit(h) => hits[m] = Some(h),
+                Lookup::Miss => {}
+                Lookup::Bad(reason) => bad[m] = Some(reason),
+            }
+        }
+    }
+    let lookup_seconds = t_lookup.elapsed().as_secs_f64();
+    // To every process: the models whose parts are needed (no compressed entry, or the
+    // uncompressed parts kept as well).
+    let need: Vec<usize> = from_root(
+        runner,
+        "the models whose parts are needed",
+        || {
+            Ok::<_, PipelineError>(
+                (0..scene.models.len())
+                    .filter(|&m| bplan.target.is_none() || bplan.keep_raw || hits[m].is_none())
+                    .collect(),
+            )
+        },
+        |need: &Vec<usize>| {
+            let mut w = Writer::default();
+            w.u64s(&need.iter().map(|&m| m as u64).collect::<Vec<_>>());
+            w.0
+        },
+        |data| {
+            let mut r = Reader::new(data, "models whose parts are needed");
+            let need = r.indices(scene.models.len())?;
+            r.end()?;
+            Ok(need)
+        },
+    )?;
+    let wanted: Vec<PlanParts> = plans
+        .into_iter()
+        .filter(|w| need.contains(&w.model))
+        .collect();
+    if bplan.basis == BasisUse::IfCached {
+        let all_cached = from_root(
             runner,
             "whether every part is cached",
             || {
                 Ok::<_, PipelineError>(
-                    plans
+                    wanted
                         .iter()
                         .all(|w| w.parts.iter().all(|&k| w.plan.is_cached(k))),
                 )
@@ -145,17 +251,19 @@ pub fn precompute_physical(
             return Ok(None);
         }
     }
-    let solved = solve_light_parts(scene, lb, &plans, runner, progress)?;
+    let solved = solve_light_parts(scene, lb, &wanted, runner, progress)?;
 
-    // Per model: its 13 sun parts and the overhead plan's diffuse parts.
+    // Per model needed: its 13 sun parts and the overhead plan's diffuse parts.
     let mut sun: Vec<Vec<sylva_lb::LightingGrid>> =
         scene.models.iter().map(|_| Vec::new()).collect();
     let mut diffuse: Vec<Vec<sylva_lb::LightingGrid>> =
         scene.models.iter().map(|_| Vec::new()).collect();
     let mut reports: Vec<Option<LightingReport>> = scene.models.iter().map(|_| None).collect();
-    for (w, (mut grids, report)) in plans.iter().zip(solved) {
+    let mut all_solved: Vec<bool> = scene.models.iter().map(|_| true).collect();
+    for (w, (mut grids, report)) in wanted.iter().zip(solved) {
         let m = w.model;
         if let Some(r) = report {
+            all_solved[m] &= r.source != LightingSource::Cached;
             reports[m] = Some(match reports[m].take() {
                 None => r,
                 Some(mut acc) => {
@@ -172,29 +280,118 @@ pub fn precompute_physical(
             diffuse[m] = rest;
         }
     }
-    let mut cached = 0;
-    let mut bases = Vec::with_capacity(scene.models.len());
-    for (m, (sun, diffuse)) in sun.into_iter().zip(diffuse).enumerate() {
-        if let Some(r) = &reports[m] {
-            cached += (r.source == LightingSource::Cached) as usize;
-            progress.model_lit(&scene.models[m], r);
-        }
-        let [sky, ground, skytop] = &diffuse[..] else {
+    let mut full: Vec<Option<PhysicalBasis>> = scene.models.iter().map(|_| None).collect();
+    for &m in &need {
+        let [sky, ground, skytop] = &diffuse[m][..] else {
             return Err(lighting_err(
                 m,
                 LightingError::Illumination("the diffuse parts are missing".into()),
             ));
         };
-        bases.push(Some(
-            PhysicalBasis::new(&sun, sky, ground, skytop).map_err(|e| lighting_err(m, e))?,
-        ));
+        full[m] =
+            Some(PhysicalBasis::new(&sun[m], sky, ground, skytop).map_err(|e| lighting_err(m, e))?);
+    }
+    // Per model, its parts' solve seconds: solved now, or as its compressed entry recorded.
+    let mut seconds: Vec<Option<f64>> = (0..scene.models.len())
+        .map(|m| match (&reports[m], all_solved[m]) {
+            (Some(r), true) => Some(r.seconds),
+            _ => None,
+        })
+        .collect();
+
+    let mut cached = 0;
+    let mut bases: Vec<Option<StoredPhysicalBasis>> = Vec::with_capacity(scene.models.len());
+    let mut raw: Vec<Option<PhysicalBasis>> = Vec::new();
+    for m in 0..scene.models.len() {
+        let model = &scene.models[m];
+        let (Some(target), Some(key)) = (bplan.target, keys[m]) else {
+            // Kept as solved.
+            if let Some(r) = &reports[m] {
+                cached += (r.source == LightingSource::Cached) as usize;
+                progress.model_lit(model, r);
+            }
+            bases.push(full[m].take().map(StoredPhysicalBasis::Full));
+            continue;
+        };
+        // The root: the cached compressed basis, or the parts compressed and stored; to
+        // every process.
+        let t = Instant::now();
+        let mut report = reports[m].clone();
+        let hit = hits[m].take();
+        let compressed = from_root(
+            runner,
+            "a model's compressed physical basis",
+            || {
+                if let Some((c, recorded)) = hit {
+                    seconds[m] = recorded;
+                    report = Some(LightingReport {
+                        source: LightingSource::Cached,
+                        seconds: lookup_seconds / scene.models.len() as f64,
+                        path: opts
+                            .cache_dir
+                            .as_ref()
+                            .map(|d| physical_path(&sylva_core::cache::Cache::new(d), model, key)),
+                        dims: c.dims(),
+                        cache_warning: None,
+                    });
+                    return Ok(c);
+                }
+                let parts = full[m]
+                    .as_ref()
+                    .expect("parts of a model not cached compressed");
+                let c = CompressedPhysicalBasis::compress(parts, &own[m], &target)
+                    .map_err(|e| lighting_err(m, e))?;
+                if let (Some(dir), Some(r)) = (&opts.cache_dir, report.as_mut()) {
+                    let warning = store_physical(dir, model, key, &c, seconds[m]);
+                    r.cache_warning = r.cache_warning.take().or(warning);
+                    r.path = Some(physical_path(
+                        &sylva_core::cache::Cache::new(dir),
+                        model,
+                        key,
+                    ));
+                    if let (Some(reason), LightingSource::Cached) = (bad[m].take(), &r.source) {
+                        r.source = LightingSource::Recomputed { reason };
+                    }
+                    r.seconds += t.elapsed().as_secs_f64();
+                }
+                Ok::<_, PipelineError>(c)
+            },
+            CompressedPhysicalBasis::to_bytes,
+            |data| {
+                CompressedPhysicalBasis::from_bytes(data).map_err(|e| {
+                    PipelineError::Jobs(sylva_core::jobs::JobError::Transport(format!(
+                        "a model's compressed physical basis: {e}"
+                    )))
+                })
+            },
+        )?;
+        if let Some(r) = &report {
+            cached += (r.source == LightingSource::Cached) as usize;
+            progress.model_lit(model, r);
+        }
+        if bplan.keep_raw {
+            raw.resize_with(scene.models.len(), || None);
+            raw[m] = full[m].take();
+        }
+        bases.push(Some(StoredPhysicalBasis::Compressed(Box::new(compressed))));
     }
     let cached = root_count(runner, "cached models", cached)?;
+    let solve_seconds = from_root(
+        runner,
+        "the parts' solve seconds",
+        || Ok::<_, PipelineError>(seconds.iter().copied().sum::<Option<f64>>()),
+        |s: &Option<f64>| s.map_or(Vec::new(), |s| s.to_le_bytes().to_vec()),
+        |data| Ok(data.try_into().ok().map(f64::from_le_bytes)),
+    )?;
+    let raw_bytes = grids
+        .iter()
+        .map(|&(dims, _)| PhysicalBasis::memory_needed(dims))
+        .sum();
 
     // The forest grid's parts: every process solves them (deterministic, and small).
     let forest = match (in_forest, forest) {
         (true, Some(gopts)) => {
-            let fine: Vec<_> = own.iter().zip(&media).collect();
+            let fine: Vec<(&DensityGrid, _)> = own.iter().zip(&media).collect();
             let instances: Vec<ForestInstance> = scene
                 .instances
                 .iter()
@@ -221,7 +418,10 @@ pub fn precompute_physical(
     };
     Ok(Some(PhysicalRelighting {
         bases,
+        raw,
         forest,
         cached,
+        solve_seconds,
+        raw_bytes,
     }))
 }

@@ -142,14 +142,16 @@ pub fn basis_jobs(
 }
 
 impl PhysicalRelighting {
-    /// One line on the precomputed parts of `models` models, `seconds` in all.
-    pub fn summary(&self, models: usize, seconds: f64) -> String {
+    /// One line on the precomputed parts of `models` models, stored as `codec` says
+    /// ("uncompressed" or the codecs' names), `seconds` in all.
+    pub fn summary(&self, models: usize, codec: &str, seconds: f64) -> String {
         let bytes: u64 = self.bases.iter().flatten().map(|b| b.bytes()).sum();
         format!(
             "{} of {models} models from the cache; physical bases {} in all ({PARTS} parts per \
-             model, uncompressed){}; {seconds:.1} s",
+             model, {codec}; {} uncompressed){}; {seconds:.1} s",
             self.cached,
             sylva_core::format_bytes(bytes),
+            sylva_core::format_bytes(self.raw_bytes),
             if self.forest.is_some() {
                 ", forest grid parts solved"
             } else {

@@ -25,7 +25,8 @@ pub mod stages;
 pub mod tonemap;
 
 pub use render::{
-    mean_luminance, Frame, FrameTimings, Mode, Region, RenderError, RenderSettings, Renderer,
+    mean_luminance, plant_coverage, Frame, FrameTimings, Mode, Region, RenderError, RenderSettings,
+    Renderer,
 };
 pub use shade::{Radiance, ShadingParams};
 pub use stages::{stage, StageClock};

@@ -281,6 +281,44 @@ pub(crate) fn sample_ray(camera: &PinholeCamera, x: u32, y: u32, s: u32, n: u32,
     camera.ray(x as f32 + o.x, y as f32 + o.y)
 }
 
+/// Per pixel of `settings.region` (row-major), the share of its samples whose primary ray
+/// hits a plant (not the ground, not the sky): the rays a frame of `settings` traces, so
+/// errors can be measured on plants alone (a pixel whose every sample hit a plant is a plant
+/// pixel). Media in front are not looked at.
+pub fn plant_coverage(
+    query: &dyn RayQuery,
+    settings: &RenderSettings,
+) -> Result<Vec<f32>, RenderError> {
+    let camera = PinholeCamera::new(&settings.camera)?;
+    let region = settings.region;
+    if !region.fits(camera.width, camera.height) {
+        return Err(RenderError::Region {
+            region,
+            width: camera.width,
+            height: camera.height,
+        });
+    }
+    let n = settings.rays_per_pixel.max(1);
+    let rows: Vec<Vec<f32>> = (region.y0..region.y0 + region.height)
+        .into_par_iter()
+        .map(|y| {
+            let rays: Vec<Ray> = (region.x0..region.x0 + region.width)
+                .flat_map(|x| (0..n).map(move |s| (x, s)))
+                .map(|(x, s)| sample_ray(&camera, x, y, s, n, settings.seed))
+                .collect();
+            let mut hits = vec![None; rays.len()];
+            query.closest_hits(&rays, &mut hits, &mut TraceStats::default());
+            hits.chunks(n as usize)
+                .map(|h| {
+                    let plant = h.iter().flatten().filter(|h| !h.is_ground()).count();
+                    plant as f32 / n as f32
+                })
+                .collect()
+        })
+        .collect();
+    Ok(rows.concat())
+}
+
 /// The inputs of shading one sample, found by the shadow pass.
 #[derive(Debug, Clone, Copy)]
 enum SampleGeom {

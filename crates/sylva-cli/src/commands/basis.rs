@@ -15,7 +15,7 @@ use sylva_light::report::LightEvent;
 use sylva_light::{Light, Progress, Silent};
 use sylva_pipeline::{
     basis_jobs, basis_scene_line, costly_grid_warning, load_scene, precompute_physical,
-    precompute_relighting, BasisUse, LbPlan, RelightingAt, Runner,
+    precompute_relighting, BasisUse, LbPlan, PhysicalBasisPlan, RelightingAt, Runner,
 };
 
 use super::progress::Bars;
@@ -102,13 +102,18 @@ pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
         let done = precompute_physical(
             &scene,
             &lb,
-            BasisUse::Always,
+            &PhysicalBasisPlan {
+                basis: BasisUse::Always,
+                target: plan.physical,
+                keep_raw: false,
+            },
             forest.as_ref(),
             runner,
             progress,
         )?;
+        let codec = plan.physical.map_or("uncompressed".into(), |t| t.name());
         done.filter(|_| root)
-            .map(|d| d.summary(models, t0.elapsed().as_secs_f64()))
+            .map(|d| d.summary(models, &codec, t0.elapsed().as_secs_f64()))
     } else {
         // Only the root needs the sets: it prints their size.
         let done = precompute_relighting(&scene, &lb, &plan, runner, RelightingAt::Root, progress)?;

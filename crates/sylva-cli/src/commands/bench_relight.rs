@@ -5,7 +5,9 @@
 use std::time::Instant;
 
 use anyhow::Result;
+use sylva_light::Light;
 use sylva_pipeline::bench::{self, RelightBenchPlan};
+use sylva_pipeline::{LbPlan, LightSettings};
 
 use super::output::{bench_bar, emit_report};
 use super::render::{prepare, FrameArgs, PrepareRequest, Say};
@@ -21,6 +23,11 @@ pub struct BenchRelightArgs {
     /// median, then the mean over the suns.
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u32).range(1..=100))]
     pub runs: u32,
+    /// Physical light: also render every sun's frame with the light solved for that sun (LB
+    /// solves, cached) and report the relit frames' error against them: image RMSE
+    /// (tone-mapped sRGB) and plant-pixel relative RMSE, per sun and overall.
+    #[arg(long)]
+    pub against_direct: bool,
     /// Print one JSON object instead of text.
     #[arg(long)]
     pub json: bool,
@@ -51,10 +58,27 @@ pub fn run(a: BenchRelightArgs) -> Result<()> {
         shadows: a.frame.shadow_method(),
         size: (p.width, p.height),
         seed: a.frame.view.seed,
+        against_direct: a.against_direct,
     };
+    if a.against_direct && p.scene.physical.is_none() {
+        anyhow::bail!(
+            "--against-direct measures the physical light (the default); the paper light's \
+             bench measures its compression"
+        );
+    }
     let pb = bench_bar(a.json, plan.frames() as usize, "bench relight");
     if p.scene.physical.is_some() {
-        let mut report = bench::relight_physical(&mut p.scene, plan, &|| pb.inc(1))?;
+        let solver = p.solver.as_deref().expect("bench relight lights with LB");
+        let direct = bench::DirectSolve {
+            lb: LbPlan {
+                solver,
+                grid: a.frame.lb.lb_grid,
+                cache_dir: (!a.frame.lb.no_cache).then_some(a.frame.lb.cache_dir.as_path()),
+                light: Light::Physical,
+            },
+            forest: LightSettings::from(&a.frame).forest_grid(Light::Physical)?,
+        };
+        let mut report = bench::relight_physical(&mut p.scene, plan, Some(&direct), &|| pb.inc(1))?;
         pb.finish_and_clear();
         report.prepare_seconds = prepare_seconds;
         return emit_report(&report, a.json);

@@ -232,7 +232,9 @@ pub struct GridArgs {
     )]
     pub global_grid: usize,
     /// Compression of cached base solutions: colour:T (per-basis colour decorrelation +
-    /// Haar), haar:T, pca:K or pcahaar:K:T.
+    /// Haar), haar:T, pca:K or pcahaar:K:T. The physical light: one codec for its 13 sun
+    /// parts and 3 diffuse parts, or two separated by a comma (sun parts, then diffuse
+    /// parts, e.g. pcahaar:12:0.002,colour:0.004), or none (kept as solved).
     #[arg(long, default_value = "colour:0.004")]
     pub codec: String,
     /// Stored values of compressed base solutions.
@@ -361,6 +363,8 @@ pub struct Prepared {
     pub height: u32,
     /// Per model, what its base solutions' preparation reported (empty without them).
     pub basis: Vec<BasisReport>,
+    /// The LB solver the scene was lit with (none without LB light).
+    pub solver: Option<Box<dyn LbSolver>>,
 }
 
 /// Where `prepare` prints what it does: stdout, or stderr when stdout is for JSON.
@@ -504,6 +508,7 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
         width,
         height,
         basis: basis.into_inner().expect("basis reports"),
+        solver,
     })
 }
 

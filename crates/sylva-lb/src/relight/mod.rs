@@ -37,8 +37,9 @@ pub use basis::{
 };
 pub use compress::haar::{HaarCoefs, HaarView};
 pub use compress::{
-    compress, relit_error, sky_directions, Codec, CompressTarget, CompressedBasis, ErrorReport,
-    Precision, ProjectedWeights, StoredFields, COMPRESSED_EXTENSION,
+    compress, compress_channels, relit_error, sky_directions, Codec, CompressTarget,
+    CompressedBasis, CompressedChannels, ErrorReport, Precision, ProjectedWeights, StoredFields,
+    COMPRESSED_EXTENSION,
 };
 pub use footprint::{Footprint, Placement};
 pub use polyhedron::{exact_weights, face_hit, faces, DirectionError, Face, FaceHit};

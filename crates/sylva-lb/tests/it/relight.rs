@@ -5,9 +5,10 @@ use std::sync::OnceLock;
 
 use sylva_lb::lattice::{unit, Q};
 use sylva_lb::relight::{
-    compress, relit_error, sky_directions, solve_basis, solve_basis_jobs, Ambient, BasisAssembly,
-    BasisJob, BasisOptions, BasisSet, BasisWeights, Codec, CompressTarget, CompressedBasis,
-    Precision, Region, RelightError, COMPRESSED_EXTENSION,
+    compress, compress_channels, relit_error, sky_directions, solve_basis, solve_basis_jobs,
+    Ambient, BasisAssembly, BasisJob, BasisOptions, BasisSet, BasisWeights, Codec, CompressTarget,
+    CompressedBasis, CompressedChannels, Footprint, Precision, Region, RelightError,
+    COMPRESSED_EXTENSION,
 };
 use sylva_lb::shapes::Shape;
 use sylva_lb::{
@@ -871,4 +872,78 @@ fn weights_of_another_compressed_set_are_refused() {
     let pca = compress(set, &region, &CompressTarget::new(Codec::Pca { rank: 3 })).unwrap();
     let w = haar.project(&BasisWeights::exact([0.0, -1.0, 0.0]).unwrap());
     pca.sample_grid([3.0, 3.0, 3.0], &w);
+}
+
+/// Any parts of three colours compress as a basis set does: here the first three base
+/// solutions (9 channels) as parts, each colour weighed on its own.
+#[test]
+fn compressed_channels_of_any_parts_round_trip() {
+    let set = solved();
+    let ch = set.channels();
+    let dims = set.dims;
+    let all = Region::all(dims);
+    let scales = [18.0, 18.0, 18.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0];
+    let value = |c: usize, s: usize| ch[c][s];
+    let terms = [(0usize, [0.02f32, 0.03, 0.01]), (2, [0.7, 0.5, 0.9])];
+    // Σ_part w[c] · channel(3 part + c), trilinear at grid point g: the reference.
+    let direct = |g: [f32; 3]| {
+        let fp = Footprint::at(dims, g);
+        let (sites, wt) = (fp.sites(dims), fp.weights());
+        let mut out = [0.0f32; 3];
+        for k in 0..8 {
+            for &(p, w) in &terms {
+                for c in 0..3 {
+                    out[c] += wt[k] * w[c] * ch[3 * p + c][sites[k]];
+                }
+            }
+        }
+        out
+    };
+    for codec in [
+        Codec::Haar { threshold: 0.0 },
+        Codec::Pca { rank: 9 },
+        Codec::PcaHaar {
+            rank: 9,
+            threshold: 0.0,
+        },
+        Codec::ColourHaar { threshold: 0.0 },
+    ] {
+        let target = CompressTarget {
+            codec,
+            precision: Precision::F32,
+            far_threshold: 0.0,
+        };
+        let c = compress_channels(dims, 9, &value, &scales, &all, &target).unwrap();
+        assert_eq!(c.channels(), 9);
+        let back = c.decompress().unwrap();
+        for (k, got) in back.iter().enumerate() {
+            for (x, y) in got.iter().zip(&ch[k]) {
+                assert!((x - y).abs() < 2e-5 * scales[k / 3] as f32, "{codec:?} {k}");
+            }
+        }
+        let pw = c.project(&terms);
+        for g in points(&all, 300) {
+            let (a, b) = (c.sample_grid(g, &pw), direct(g));
+            for k in 0..3 {
+                assert!(
+                    (a[k] - b[k]).abs() < 1e-4,
+                    "{codec:?} {g:?}: {a:?} vs {b:?}"
+                );
+            }
+        }
+        let bytes = c.to_bytes();
+        assert!(CompressedChannels::from_bytes(&bytes).unwrap() == c);
+        for cut in [0, bytes.len() / 3, bytes.len() - 1] {
+            let e = CompressedChannels::from_bytes(&bytes[..cut]).unwrap_err();
+            assert!(e.to_string().contains("compressed parts"), "{e}");
+        }
+    }
+    // A rank above the channels, or channels that are not three colours per part.
+    let pca = |rank| CompressTarget::new(Codec::Pca { rank });
+    let e = compress_channels(dims, 9, &value, &scales, &all, &pca(10)).unwrap_err();
+    assert!(matches!(e, RelightError::Target(_)), "{e}");
+    let e = compress_channels(dims, 8, &value, &scales[..8], &all, &pca(2)).unwrap_err();
+    assert!(matches!(e, RelightError::Mismatch(_)), "{e}");
+    let e = compress_channels(dims, 9, &value, &[0.0; 9], &all, &pca(2)).unwrap_err();
+    assert!(e.to_string().contains("scale"), "{e}");
 }

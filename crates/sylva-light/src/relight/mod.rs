@@ -11,14 +11,17 @@
 //!   scales it gives ([`GlobalLight`]).
 //! * [`light`]: [`RelitLight`], the [`crate::IndirectLight`] that combines each instance's
 //!   base solutions for the current sun.
-//! * [`physical`]: the physical light relit: per model its 13 sun parts and 3 diffuse parts
-//!   ([`physical::PhysicalBasis`]), and [`physical::PhysicalRelitLight`], which weighs them
-//!   per instance for the current sun (with the forest grid's relit weights).
+//! * [`physical_basis`]: the physical light's bases: per model its 13 sun parts and 3
+//!   diffuse parts ([`PhysicalBasis`]), compressed with the codecs above (the sun parts and
+//!   the diffuse parts each with its own, [`PhysicalTarget`]) and cached per model.
+//! * [`physical`]: the physical light relit: [`physical::PhysicalRelitLight`] weighs each
+//!   model's parts per instance for the current sun (with the forest grid's relit weights).
 
 pub mod basis_cache;
 pub mod global;
 pub mod light;
 pub mod physical;
+pub mod physical_basis;
 pub mod sun_parts;
 pub mod weights;
 
@@ -32,6 +35,9 @@ pub use global::{
 };
 pub use light::{ProjectedLight, RelitLight, StoredBasis};
 pub use physical::{PhysicalBasis, PhysicalRelitLight};
+pub use physical_basis::{
+    CompressedPhysicalBasis, PhysicalTarget, PhysicalTerms, StoredPhysicalBasis,
+};
 pub use weights::{RelitIllumination, SunWeights};
 
 /// The 24 sun positions of 004 Table 1's sequence: over 90° about the zenith, along the

@@ -23,10 +23,13 @@
 
 use glam::{Affine3A, Vec3};
 use sylva_geom::{Aabb, Model};
-use sylva_lb::relight::{Footprint, Placement};
-use sylva_lb::{Bounds, Dims, LightingGrid};
+use sylva_lb::LightingGrid;
 use sylva_trace::TraceInstance;
 
+pub use super::physical_basis::{
+    CompressedPhysicalBasis, PartTerms, PhysicalBasis, PhysicalTarget, PhysicalTerms,
+    StoredPhysicalBasis, PARTS,
+};
 pub use super::sun_parts::{overhead_part, sun_part_weights, SUN_DIRECTIONS, SUN_PARTS};
 use crate::device::{
     DeviceKind, DeviceLight, NoDevice, PackedLight, Packer, SunWords, LIGHT_HEADER, NONE,
@@ -39,9 +42,6 @@ use crate::lighting::{
     ModelLighting, OpenField, PartWeights,
 };
 
-/// Parts per model: the sun's, then `D_top`, `D_side`, `G`.
-pub const PARTS: usize = SUN_PARTS + 3;
-
 /// The illumination sun part `part` is solved under: a unit sun travelling along its lattice
 /// direction, `scene`'s sky and ground (the floor's albedo).
 pub fn sun_part_illumination(scene: &Illumination, part: usize) -> Illumination {
@@ -50,92 +50,6 @@ pub fn sun_part_illumination(scene: &Illumination, part: usize) -> Illumination 
         sun_to: -Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32),
         sun: Vec3::ONE,
         ..*scene
-    }
-}
-
-/// One model's physical light as its [`PARTS`] linear parts, per site and colour.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PhysicalBasis {
-    dims: Dims,
-    bounds: Bounds,
-    placement: Placement,
-    /// Per site: the sun's parts ([`SUN_DIRECTIONS`] order, a unit sun each), then a unit
-    /// sky's through the top, through the sides, a unit ground's; RGB each.
-    values: Vec<[[f32; 3]; PARTS]>,
-}
-
-/// A combination of a model's parts: `(part, weight per colour)`, zero terms left out.
-pub type PartTerms = Vec<(usize, Vec3)>;
-
-impl PhysicalBasis {
-    /// From the sun's parts (one grid per [`SUN_DIRECTIONS`] entry, a unit sun) and the
-    /// diffuse ones as solved (`sky` through every face, `ground`, `skytop` through the top:
-    /// `crate::lighting::PARTS` 1..3); all on one grid.
-    pub fn new(
-        sun: &[LightingGrid],
-        sky: &LightingGrid,
-        ground: &LightingGrid,
-        skytop: &LightingGrid,
-    ) -> Result<PhysicalBasis, LightingError> {
-        if sun.len() != SUN_PARTS {
-            return Err(LightingError::Illumination(format!(
-                "{} sun parts, not {SUN_PARTS}",
-                sun.len()
-            )));
-        }
-        let side = sylva_lb::light::subtract(sky, skytop);
-        let grids: Vec<&LightingGrid> = sun.iter().chain([skytop, &side, ground]).collect();
-        let (dims, bounds) = (sky.dims, sky.bounds);
-        if let Some(g) = grids.iter().find(|g| g.dims != dims || g.bounds != bounds) {
-            return Err(LightingError::Illumination(format!(
-                "a light part on a {} grid beside a {dims} grid",
-                g.dims
-            )));
-        }
-        let values = (0..dims.sites())
-            .map(|i| std::array::from_fn(|k| std::array::from_fn(|c| grids[k].colours[c][i])))
-            .collect();
-        Ok(PhysicalBasis {
-            dims,
-            bounds,
-            placement: Placement::new(dims, bounds),
-            values,
-        })
-    }
-
-    pub fn dims(&self) -> Dims {
-        self.dims
-    }
-
-    pub fn placement(&self) -> &Placement {
-        &self.placement
-    }
-
-    /// Bytes held.
-    pub fn bytes(&self) -> u64 {
-        (self.values.len() * std::mem::size_of::<[[f32; 3]; PARTS]>()) as u64
-    }
-
-    /// Bytes a basis on `dims` holds.
-    pub fn memory_needed(dims: Dims) -> u64 {
-        dims.sites() as u64 * std::mem::size_of::<[[f32; 3]; PARTS]>() as u64
-    }
-
-    /// `Σ w ⊙ part` at model-space point `p` (trilinear, clamped to the grid).
-    #[inline]
-    pub fn sample(&self, p: Vec3, terms: &[(usize, Vec3)]) -> Vec3 {
-        let fp = Footprint::at(self.dims, self.placement.grid_coords(p.to_array()));
-        let (sites, wt) = (fp.sites(self.dims), fp.weights());
-        let mut out = Vec3::ZERO;
-        for k in 0..8 {
-            let v = &self.values[sites[k]];
-            let mut site = Vec3::ZERO;
-            for &(part, w) in terms {
-                site += Vec3::from_array(v[part]) * w;
-            }
-            out += site * wt[k];
-        }
-        out
     }
 }
 
@@ -160,15 +74,19 @@ pub fn instance_terms(
     Ok(terms)
 }
 
-/// Per instance: its model, world → model, its terms for the plants and for the ground.
+/// Per instance: its model, world → model, its terms for the plants and for the ground
+/// (projected onto its model's stored basis).
 #[derive(Debug, Clone)]
 struct InstanceLight {
     model: u32,
     to_model: Affine3A,
-    terms: PartTerms,
+    terms: PhysicalTerms,
     /// Under the free weights (the model's light alone), as the per-sun grids' ground
     /// lookup reads its model's grid.
-    ground: PartTerms,
+    ground: PhysicalTerms,
+    /// Both as parts' weights, for the device side (which reads every part decoded).
+    plant_parts: PartTerms,
+    ground_parts: PartTerms,
 }
 
 /// The physical light of every instance for the current sun from its model's
@@ -176,7 +94,7 @@ struct InstanceLight {
 /// there is a forest. Moving the sun ([`PhysicalRelitLight::relight`]) makes the weights
 /// again: no LB solve.
 pub struct PhysicalRelitLight {
-    models: Vec<Option<PhysicalBasis>>,
+    models: Vec<Option<StoredPhysicalBasis>>,
     model_bounds: Vec<Aabb>,
     instances: Vec<InstanceLight>,
     placed: Vec<(u32, Affine3A)>,
@@ -193,7 +111,7 @@ impl PhysicalRelitLight {
     /// traced; `forest` the forest grid's parts over these instances, if any. Lit by
     /// `illumination` (world frame) at once.
     pub fn new(
-        bases: Vec<Option<PhysicalBasis>>,
+        bases: Vec<Option<StoredPhysicalBasis>>,
         models: &[Model],
         instances: &[TraceInstance],
         forest: Option<ForestBases>,
@@ -220,8 +138,10 @@ impl PhysicalRelitLight {
                 .map(|i| InstanceLight {
                     model: i.model,
                     to_model: i.to_model,
-                    terms: Vec::new(),
-                    ground: Vec::new(),
+                    terms: PhysicalTerms::default(),
+                    ground: PhysicalTerms::default(),
+                    plant_parts: Vec::new(),
+                    ground_parts: Vec::new(),
                 })
                 .collect(),
             placed: instances.iter().map(|i| (i.model, i.to_model)).collect(),
@@ -264,8 +184,16 @@ impl PhysicalRelitLight {
                 .transform_vector3(travel)
                 .as_dvec3()
                 .to_array();
-            inst.terms = instance_terms(t, illumination.sun, w)?;
-            inst.ground = instance_terms(t, illumination.sun, &free)?;
+            let (terms, ground) = (
+                instance_terms(t, illumination.sun, w)?,
+                instance_terms(t, illumination.sun, &free)?,
+            );
+            if let Some(b) = &self.models[inst.model as usize] {
+                inst.terms = b.project(&terms);
+                inst.ground = b.project(&ground);
+            }
+            inst.plant_parts = terms;
+            inst.ground_parts = ground;
         }
         self.open = open_field(&env);
         self.illumination = illumination;
@@ -289,44 +217,69 @@ impl PhysicalRelitLight {
     /// The per-sun light of the current sun as the scene would be lit without bases: per
     /// model one grid of its four parts (the sun's for the sun in the world frame, as a
     /// per-sun solve takes it), weighed per instance as the forest grid says. For measuring
-    /// what relighting costs per frame against the static light (`sylva bench relight`).
-    pub fn static_light(&self, models: &[Model], instances: &[TraceInstance]) -> ModelGridLight {
-        let env = physical_environment(&self.illumination).expect("relit with it");
+    /// what relighting costs per frame against the static light (`sylva bench relight`);
+    /// compressed bases are decoded for it.
+    pub fn static_light(
+        &self,
+        models: &[Model],
+        instances: &[TraceInstance],
+    ) -> Result<ModelGridLight, LightingError> {
+        let env = physical_environment(&self.illumination)?;
         let travel = env.sun_travel;
         let sun = sun_part_weights(travel).unwrap_or_default();
         let e = self.illumination.sun;
-        let lighting = self
-            .models
-            .iter()
-            .map(|b| {
-                let b = b.as_ref()?;
-                let grid = |f: &dyn Fn(&[[f32; 3]; PARTS]) -> Vec3| LightingGrid {
-                    dims: b.dims,
-                    bounds: b.bounds,
-                    colours: std::array::from_fn(|c| b.values.iter().map(|v| f(v)[c]).collect()),
-                };
-                let s = grid(&|v| {
-                    sun.iter()
-                        .map(|&(k, w)| Vec3::from_array(v[k]) * e * w as f32)
-                        .sum()
-                });
-                let part = |k: usize| grid(&|v| Vec3::from_array(v[SUN_PARTS + k]));
-                let (top, side, ground) = (part(0), part(1), part(2));
-                Some(ModelLighting::physical_parts(
-                    [&s, &top, &side, &ground],
-                    &env,
-                ))
-            })
-            .collect();
+        let mut lighting = Vec::with_capacity(self.models.len());
+        for b in &self.models {
+            let Some(b) = b else {
+                lighting.push(None);
+                continue;
+            };
+            let b = b.to_full()?;
+            let grid = |f: &dyn Fn(&[[f32; 3]; PARTS]) -> Vec3| LightingGrid {
+                dims: b.dims(),
+                bounds: b.bounds(),
+                colours: std::array::from_fn(|c| b.sites().iter().map(|v| f(v)[c]).collect()),
+            };
+            let s = grid(&|v| {
+                sun.iter()
+                    .map(|&(k, w)| Vec3::from_array(v[k]) * e * w as f32)
+                    .sum()
+            });
+            let part = |k: usize| grid(&|v| Vec3::from_array(v[SUN_PARTS + k]));
+            let (top, side, ground) = (part(0), part(1), part(2));
+            lighting.push(Some(ModelLighting::physical_parts(
+                [&s, &top, &side, &ground],
+                &env,
+            )));
+        }
         let light = ModelGridLight::new(lighting, models, instances);
-        match &self.forest {
+        Ok(match &self.forest {
             Some(_) => light.with_instance_weights(self.weights.clone()),
             None => light,
+        })
+    }
+
+    /// Relights from `bases` (one per model, as [`PhysicalRelitLight::new`] takes them: the
+    /// uncompressed parts in place of the compressed ones, or back) and returns the ones in
+    /// use until now. For measuring what compression costs in the image.
+    pub fn swap_bases(
+        &mut self,
+        bases: Vec<Option<StoredPhysicalBasis>>,
+    ) -> Result<Vec<Option<StoredPhysicalBasis>>, LightingError> {
+        if bases.len() != self.models.len() {
+            return Err(LightingError::Illumination(format!(
+                "{} bases for {} models",
+                bases.len(),
+                self.models.len()
+            )));
         }
+        let old = std::mem::replace(&mut self.models, bases);
+        self.relight(self.illumination)?;
+        Ok(old)
     }
 
     /// Model `m`'s basis.
-    pub fn model(&self, m: usize) -> Option<&PhysicalBasis> {
+    pub fn model(&self, m: usize) -> Option<&StoredPhysicalBasis> {
         self.models.get(m).and_then(Option::as_ref)
     }
 
@@ -356,8 +309,8 @@ impl IndirectLight for PhysicalRelitLight {
             |i, model, pm| {
                 let basis = self.models[model as usize].as_ref()?;
                 let terms = &self.instances[i].ground;
-                let origin = Vec3::from_array(basis.placement.origin());
-                let inv = Vec3::from_array(basis.placement.inv_cell());
+                let origin = Vec3::from_array(basis.placement().origin());
+                let inv = Vec3::from_array(basis.placement().inv_cell());
                 let cell_y = if inv.y > 0.0 { 1.0 / inv.y } else { 0.0 };
                 let floor = basis.sample(Vec3::new(pm.x, origin.y, pm.z), terms);
                 let lowest = basis.sample(Vec3::new(pm.x, origin.y + cell_y, pm.z), terms);
@@ -367,47 +320,65 @@ impl IndirectLight for PhysicalRelitLight {
     }
 
     fn memory_bytes(&self) -> u64 {
-        self.models.iter().flatten().map(PhysicalBasis::bytes).sum()
+        self.models
+            .iter()
+            .flatten()
+            .map(StoredPhysicalBasis::bytes)
+            .sum()
     }
 
     fn gatherable(&self) -> bool {
         true
     }
 
+    /// Uncompressed bases only: a compressed set's lookups (a block's kept coefficients
+    /// against the footprint) are not its decoded sites' trilinear ones, and the kernel
+    /// reads no physical codec yet.
     fn device(&self) -> Result<&dyn DeviceLight, NoDevice> {
+        if self
+            .models
+            .iter()
+            .flatten()
+            .any(|b| matches!(b, StoredPhysicalBasis::Compressed(_)))
+        {
+            return Err(NoDevice(
+                "the physical light's compressed bases are read on the CPU (--codec none \
+                 shades them on the GPU)",
+            ));
+        }
         Ok(self)
     }
 }
 
-impl PhysicalBasis {
-    /// Words of its relit record: the header, then every field at every site.
-    fn device_words(&self) -> u64 {
-        LIGHT_HEADER as u64 + (3 * PARTS * self.dims.sites()) as u64
-    }
+/// Words of a model's relit record: the header, then every field at every site.
+fn device_words(basis: &StoredPhysicalBasis) -> u64 {
+    LIGHT_HEADER as u64 + (3 * PARTS * basis.dims().sites()) as u64
+}
 
-    /// A relit record of kind 0 (every field at every site, field `3 part + colour`, site
-    /// after site), the paper light's uncompressed layout: shade.wgsl's `relit_terms` reads
-    /// both. `bounds`: the model's. Returns where it starts.
-    fn pack(&self, p: &mut Packer, bounds: Aabb) -> u32 {
-        let mut extra = [0u32; 9];
-        extra[1] = (3 * PARTS) as u32;
-        extra[2] = self.dims.sites() as u32;
-        let start = p.light_header(
-            self.dims,
-            (
-                Vec3::from_array(self.placement.origin()),
-                Vec3::from_array(self.placement.inv_cell()),
-            ),
-            bounds,
-            extra,
-        );
-        for field in 0..3 * PARTS {
-            let (part, colour) = (field / 3, field % 3);
-            p.words
-                .extend(self.values.iter().map(|v| v[part][colour].to_bits()));
-        }
-        start
+/// A relit record of kind 0 (every field at every site, field `3 part + colour`, site after
+/// site; a compressed basis decoded), the paper light's uncompressed layout: shade.wgsl's
+/// `relit_terms` reads both. `bounds`: the model's. Returns where it starts.
+fn pack_basis(basis: &PhysicalBasis, p: &mut Packer, bounds: Aabb) -> u32 {
+    let dims = basis.dims();
+    let mut extra = [0u32; 9];
+    extra[1] = (3 * PARTS) as u32;
+    extra[2] = dims.sites() as u32;
+    let placement = basis.placement();
+    let start = p.light_header(
+        dims,
+        (
+            Vec3::from_array(placement.origin()),
+            Vec3::from_array(placement.inv_cell()),
+        ),
+        bounds,
+        extra,
+    );
+    for field in 0..3 * PARTS {
+        let (part, colour) = (field / 3, field % 3);
+        p.words
+            .extend(basis.sites().iter().map(|v| v[part][colour].to_bits()));
     }
+    start
 }
 
 /// `terms` over the device's scalar fields (`3 part + colour`): a part's weight per colour
@@ -439,12 +410,7 @@ impl DeviceLight for PhysicalRelitLight {
     }
 
     fn pool_words(&self) -> u64 {
-        let records: u64 = self
-            .models
-            .iter()
-            .flatten()
-            .map(PhysicalBasis::device_words)
-            .sum();
+        let records: u64 = self.models.iter().flatten().map(device_words).sum();
         records + self.ground_index.words()
     }
 
@@ -454,7 +420,11 @@ impl DeviceLight for PhysicalRelitLight {
             .models
             .iter()
             .zip(&self.model_bounds)
-            .map(|(b, &bounds)| b.as_ref().map_or(NONE, |b| b.pack(&mut p, bounds)))
+            .map(|(b, &bounds)| match b {
+                Some(StoredPhysicalBasis::Full(b)) => pack_basis(b, &mut p, bounds),
+                // Refused by `device` (and no basis: no LB light).
+                _ => NONE,
+            })
             .collect();
         PackedLight {
             records,
@@ -478,9 +448,9 @@ impl DeviceLight for PhysicalRelitLight {
                 continue;
             }
             let first = words.len() as u32;
-            let count = field_terms(&inst.terms, &mut words);
+            let count = field_terms(&inst.plant_parts, &mut words);
             let ground_first = words.len() as u32;
-            let ground_count = field_terms(&inst.ground, &mut words);
+            let ground_count = field_terms(&inst.ground_parts, &mut words);
             words[e] = first;
             words[e + 1] = count;
             words[e + 5] = ground_first;

@@ -7,7 +7,8 @@ mod spp;
 mod trace;
 
 pub use relight::{
-    relight, relight_physical, PhysicalRelightBench, RelightBench, RelightBenchPlan,
+    against_direct, relight, relight_physical, AgainstDirect, DirectSolve, PhysicalRelightBench,
+    RelightBench, RelightBenchPlan, SunAgainstDirect,
 };
 pub use spp::{spp, PaperScene, SppBench};
 pub use trace::trace;

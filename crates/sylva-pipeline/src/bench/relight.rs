@@ -10,15 +10,18 @@ use std::time::Instant;
 
 use serde::Serialize;
 use sylva_core::colour::linear_to_srgb;
+use sylva_core::colour::luminance;
 use sylva_core::format_bytes;
 use sylva_core::measure::{median, peak_rss_bytes};
 use sylva_lb::relight::{BasisSet, BasisWeights, RelightError};
 use sylva_light::lighting::{LightingSource, ModelLighting};
-use sylva_light::relight::{sun_path, BasisReport, StoredBasis};
+use sylva_light::relight::physical::sun_part_weights;
+use sylva_light::relight::{sun_path, BasisReport, GlobalGridOptions, StoredBasis};
+use sylva_light::relight::{CompressedPhysicalBasis, StoredPhysicalBasis};
 use sylva_light::ModelGridLight;
-use sylva_render::{Frame, Mode, ToneMap};
+use sylva_render::{plant_coverage, Frame, Mode, RenderSettings, ToneMap};
 
-use crate::{PipelineError, PreparedScene, ShadowMethod, Silent};
+use crate::{LbPlan, PipelineError, PreparedScene, ShadowMethod, Silent};
 
 /// What to measure.
 #[derive(Debug, Clone, Copy)]
@@ -34,13 +37,17 @@ pub struct RelightBenchPlan {
     pub size: (u32, u32),
     /// Seed of the sub-pixel jitter.
     pub seed: u64,
+    /// Physical light: also render each sun's frame with the light solved for that sun and
+    /// measure the relit frames against it ([`against_direct`]).
+    pub against_direct: bool,
 }
 
 impl RelightBenchPlan {
     /// Frames [`relight`] renders (for a progress bar).
     pub fn frames(&self) -> u64 {
         let suns = self.suns as u64;
-        1 + (self.runs as u64 + 1) * (1 + 2 * suns) + 2 * suns
+        let direct = if self.against_direct { 3 * suns } else { 0 };
+        1 + (self.runs as u64 + 1) * (1 + 2 * suns) + 2 * suns + direct
     }
 }
 
@@ -382,22 +389,68 @@ pub struct PhysicalRelightBench {
     /// The per-sun light's frame (one grid of four parts per model), same run.
     pub static_frame_seconds: f64,
     pub ratio_to_static: f64,
-    /// Bytes of the models' bases (16 parts, f32, uncompressed).
+    /// The base solutions' solve time: solved now, or as recorded in the compressed cache
+    /// entries (`None`: parts read from the cache, whose solve time is not recorded).
+    pub basis_seconds: Option<f64>,
+    /// Bytes of the models' bases uncompressed (16 parts × 3 colours, f32).
     pub basis_bytes: u64,
+    /// The parts' compression (`--codec`: the sun parts' and the diffuse parts'), or `none`.
+    pub codec: String,
+    /// Bytes of the compressed bases in use (`None`: uncompressed), and of their two sets.
+    pub compressed_bytes: Option<u64>,
+    pub compressed_sun_bytes: Option<u64>,
+    pub compressed_diffuse_bytes: Option<u64>,
+    /// Frames relit from the compressed bases against the uncompressed ones over the suns
+    /// (with the uncompressed bases kept): image RMSE (tone-mapped sRGB) and plant-pixel
+    /// relative RMSE.
+    pub rmse: Option<f64>,
+    pub plant_rel_rmse: Option<f64>,
+    /// Image RMSE of the relit frames (the bases in use) against frames of the light solved
+    /// for each sun (`against_direct.image_rmse`), with `--against-direct`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rmse_vs_direct: Option<f64>,
+    /// Plant-pixel relative RMSE of the same (`against_direct.plant_rel_rmse`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub plant_rel_rmse_vs_direct: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub against_direct: Option<AgainstDirect>,
+    /// The same measured with the uncompressed bases (when kept beside compressed ones).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub against_direct_uncompressed: Option<AgainstDirect>,
     /// Loading, solving or reading the bases and building the scene.
     pub prepare_seconds: f64,
     pub peak_rss_bytes: Option<u64>,
     pub device: &'static str,
 }
 
+/// How the bench solves the light for one sun ([`PreparedScene::per_sun_light`]): the LB
+/// plan and the forest grid the scene was prepared with.
+#[derive(Clone, Copy)]
+pub struct DirectSolve<'a> {
+    pub lb: LbPlan<'a>,
+    pub forest: Option<GlobalGridOptions>,
+}
+
 /// Measures the physical light relit on `prepared` (prepared with its base solutions): the
-/// frame time over `plan.suns` suns against the per-sun light's frame, at 1 ray per pixel.
-/// `prepare_seconds` is the caller's to fill in.
+/// frame time over `plan.suns` suns against the per-sun light's frame, at 1 ray per pixel;
+/// with `plan.against_direct` also the relit frames against the light solved for each sun
+/// (`direct`, required then; [`against_direct`]). `prepare_seconds` is the caller's to fill
+/// in.
 pub fn relight_physical(
     prepared: &mut PreparedScene,
     plan: RelightBenchPlan,
+    direct: Option<&DirectSolve>,
     tick: &dyn Fn(),
 ) -> Result<PhysicalRelightBench, PipelineError> {
+    let direct = match (plan.against_direct, direct) {
+        (true, None) => {
+            return Err(PipelineError::Shading(
+                "measuring against direct solves needs the LB plan to solve with".into(),
+            ))
+        }
+        (true, Some(d)) => Some(d),
+        (false, _) => None,
+    };
     let (w, h) = plan.size;
     let camera = prepared.camera(w, h);
     let settings = prepared.settings(camera, 1, plan.seed);
@@ -406,17 +459,70 @@ pub fn relight_physical(
         .physical
         .as_ref()
         .ok_or(PipelineError::NeedsBasis)?;
-    let static_light = p.static_light(
-        &prepared.scene.models,
-        prepared.tracer.cpu().accel.instances(),
-    );
-    let basis_bytes = (0..prepared.scene.models.len())
-        .filter_map(|m| p.model(m))
-        .map(|b| b.bytes())
-        .sum();
+    let relit_err = |source| PipelineError::Relit {
+        scene: prepared.scene.name.clone(),
+        source,
+    };
+    let static_light = p
+        .static_light(
+            &prepared.scene.models,
+            prepared.tracer.cpu().accel.instances(),
+        )
+        .map_err(relit_err)?;
+    let models = prepared.scene.models.len();
+    let compressed: Vec<&CompressedPhysicalBasis> = (0..models)
+        .filter_map(|m| match p.model(m) {
+            Some(StoredPhysicalBasis::Compressed(c)) => Some(&**c),
+            _ => None,
+        })
+        .collect();
+    let sets = |f: fn((u64, u64)) -> u64| {
+        (!compressed.is_empty()).then(|| compressed.iter().map(|c| f(c.set_bytes())).sum())
+    };
+    let (compressed_sun_bytes, compressed_diffuse_bytes) = (sets(|s| s.0), sets(|s| s.1));
+    let compressed_bytes = compressed_sun_bytes
+        .zip(compressed_diffuse_bytes)
+        .map(|(a, b)| a + b);
+    let codec = compressed
+        .first()
+        .map_or_else(|| "none".to_string(), |c| c.target().name());
     let forest_grid = p.has_forest();
     let t = time_frames(prepared, &static_light, &suns, &settings, plan, tick)?;
     let frame_seconds = t.chosen(plan.shadows);
+    prepared.set_shadows(plan.shadows);
+
+    // Compression's error: frames relit from the compressed bases against the uncompressed
+    // ones (all of one, then all of the other: each switch relights every instance).
+    let (mut rmse, mut plant_rel_rmse) = (None, None);
+    if prepared.has_uncompressed() {
+        let plant = plant_pixels(prepared, &settings)?;
+        let to_sun = prepared.to_sun;
+        let mut small = Vec::with_capacity(suns.len());
+        for &sun in &suns {
+            prepared.set_sun(sun)?;
+            small.push(prepared.render(&settings, &Silent)?);
+            tick();
+        }
+        prepared.use_uncompressed(true)?;
+        let mut total = PairSums::default();
+        for (&sun, c) in suns.iter().zip(&small) {
+            prepared.set_sun(sun)?;
+            let full = prepared.render(&settings, &Silent)?;
+            total.add(&pair_error(c, &full, &plant));
+            tick();
+        }
+        prepared.use_uncompressed(false)?;
+        prepared.set_sun(to_sun)?;
+        rmse = Some(total.image_rmse());
+        plant_rel_rmse = Some(total.plant_rel_rmse());
+    }
+    let (against, against_uncompressed) = match direct {
+        Some(d) => {
+            let (a, u) = against_direct(prepared, &suns, d, &settings, tick)?;
+            (Some(a), u)
+        }
+        None => (None, None),
+    };
     Ok(PhysicalRelightBench {
         scene: prepared.scene.name.clone(),
         light: "physical",
@@ -436,11 +542,256 @@ pub fn relight_physical(
         relight_seconds: t.relight_seconds,
         static_frame_seconds: t.static_seconds,
         ratio_to_static: frame_seconds / t.static_seconds,
-        basis_bytes,
+        basis_seconds: prepared.basis_solve_seconds,
+        basis_bytes: prepared.physical_raw_bytes,
+        codec,
+        compressed_bytes,
+        compressed_sun_bytes,
+        compressed_diffuse_bytes,
+        rmse,
+        plant_rel_rmse,
+        rmse_vs_direct: against.as_ref().map(|a| a.image_rmse),
+        plant_rel_rmse_vs_direct: against.as_ref().map(|a| a.plant_rel_rmse),
+        against_direct: against,
+        against_direct_uncompressed: against_uncompressed,
         prepare_seconds: 0.0,
         peak_rss_bytes: peak_rss_bytes(),
         device: prepared.tracer.device(),
     })
+}
+
+/// Per pixel of `settings`' frames, whether every sample's primary ray hits a plant.
+fn plant_pixels(
+    prepared: &PreparedScene,
+    settings: &RenderSettings,
+) -> Result<Vec<bool>, PipelineError> {
+    Ok(plant_coverage(prepared.tracer.query(), settings)?
+        .into_iter()
+        .map(|c| c >= 1.0)
+        .collect())
+}
+
+/// One sun of [`AgainstDirect`].
+#[derive(Debug, Clone, Serialize)]
+pub struct SunAgainstDirect {
+    /// The sun's elevation and azimuth, degrees.
+    pub elevation_deg: f64,
+    pub azimuth_deg: f64,
+    /// Whether the sun travels along a lattice direction (in the world's frame), where the
+    /// relit light of an unrotated instance is its direct solve.
+    pub lattice: bool,
+    /// RMSE of the tone-mapped sRGB values in [0, 1] (the direct frame's exposure).
+    pub image_rmse: f64,
+    /// Over plant pixels: RMS luminance difference over the direct frame's mean luminance.
+    pub plant_rel_rmse: f64,
+    /// Over plant pixels: relit mean luminance over the direct frame's.
+    pub plant_ratio: f64,
+}
+
+/// Relit frames against frames of the light solved for each sun ([`against_direct`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct AgainstDirect {
+    /// RMSE over every sun's pixels, tone-mapped sRGB in [0, 1] (8-bit value / 255, not
+    /// rounded), each frame pair with its direct frame's exposure.
+    pub image_rmse: f64,
+    /// Over every sun's plant pixels: RMS luminance difference over the direct frames' mean.
+    pub plant_rel_rmse: f64,
+    /// Over every sun's plant pixels: relit mean luminance over the direct frames'.
+    pub plant_ratio: f64,
+    /// Pixels whose every sample's primary ray hits a plant (per frame).
+    pub plant_pixels: usize,
+    /// Indices into `per_sun` of the suns with the largest plant relative RMSE, largest first
+    /// (at most three).
+    pub largest: Vec<usize>,
+    /// Solving (or reading from the cache) the light of every sun.
+    pub direct_seconds: f64,
+    pub per_sun: Vec<SunAgainstDirect>,
+}
+
+/// Sums of squared differences of one frame pair ([`pair_error`]).
+#[derive(Debug, Clone, Copy, Default)]
+struct PairSums {
+    /// Tone-mapped sRGB: squared differences and values compared.
+    image_sq: f64,
+    image_n: usize,
+    /// Plant pixels: squared luminance differences, relit and direct luminance.
+    plant_sq: f64,
+    plant_relit: f64,
+    plant_direct: f64,
+    plant_n: usize,
+}
+
+impl PairSums {
+    fn add(&mut self, o: &PairSums) {
+        self.image_sq += o.image_sq;
+        self.image_n += o.image_n;
+        self.plant_sq += o.plant_sq;
+        self.plant_relit += o.plant_relit;
+        self.plant_direct += o.plant_direct;
+        self.plant_n += o.plant_n;
+    }
+
+    fn image_rmse(&self) -> f64 {
+        (self.image_sq / self.image_n.max(1) as f64).sqrt()
+    }
+
+    fn plant_rel_rmse(&self) -> f64 {
+        let n = self.plant_n.max(1) as f64;
+        (self.plant_sq / n).sqrt() / (self.plant_direct / n).max(f64::MIN_POSITIVE)
+    }
+
+    fn plant_ratio(&self) -> f64 {
+        self.plant_relit / self.plant_direct.max(f64::MIN_POSITIVE)
+    }
+}
+
+/// The differences of a relit frame from its direct frame: tone-mapped sRGB with the direct
+/// frame's exposure over every pixel, linear luminance over the pixels of `plant`.
+fn pair_error(relit: &Frame, direct: &Frame, plant: &[bool]) -> PairSums {
+    let tm = ToneMap::default();
+    let (r, d) = (relit.compose(Mode::Full), direct.compose(Mode::Full));
+    let stats = tm.measure(&d);
+    let (x, y) = (display(&tm, &r, stats), display(&tm, &d, stats));
+    let mut sums = PairSums {
+        image_sq: x
+            .iter()
+            .zip(&y)
+            .map(|(u, v)| ((u - v) as f64).powi(2))
+            .sum(),
+        image_n: x.len(),
+        ..PairSums::default()
+    };
+    for ((a, b), _) in r.iter().zip(&d).zip(plant).filter(|(_, &p)| p) {
+        let (la, lb) = (luminance(*a) as f64, luminance(*b) as f64);
+        sums.plant_sq += (la - lb).powi(2);
+        sums.plant_relit += la;
+        sums.plant_direct += lb;
+        sums.plant_n += 1;
+    }
+    sums
+}
+
+/// Per-sun and pooled sums of one light's frames against the direct ones.
+#[derive(Default)]
+struct Tally {
+    per_sun: Vec<SunAgainstDirect>,
+    total: PairSums,
+}
+
+impl Tally {
+    fn add(&mut self, sun: glam::Vec3, sums: PairSums) {
+        self.total.add(&sums);
+        let s = sun.normalize().as_dvec3();
+        let travel = [-s.x, -s.y, -s.z];
+        self.per_sun.push(SunAgainstDirect {
+            elevation_deg: s.y.clamp(-1.0, 1.0).asin().to_degrees(),
+            azimuth_deg: s.z.atan2(s.x).to_degrees(),
+            lattice: sun_part_weights(travel).is_ok_and(|w| w.len() == 1),
+            image_rmse: sums.image_rmse(),
+            plant_rel_rmse: sums.plant_rel_rmse(),
+            plant_ratio: sums.plant_ratio(),
+        });
+    }
+
+    fn finish(self, plant_pixels: usize, direct_seconds: f64) -> AgainstDirect {
+        let per_sun = self.per_sun;
+        let mut largest: Vec<usize> = (0..per_sun.len()).collect();
+        largest.sort_by(|&a, &b| {
+            per_sun[b]
+                .plant_rel_rmse
+                .total_cmp(&per_sun[a].plant_rel_rmse)
+                .then(a.cmp(&b))
+        });
+        largest.truncate(3);
+        AgainstDirect {
+            image_rmse: self.total.image_rmse(),
+            plant_rel_rmse: self.total.plant_rel_rmse(),
+            plant_ratio: self.total.plant_ratio(),
+            plant_pixels,
+            largest,
+            direct_seconds,
+            per_sun,
+        }
+    }
+}
+
+/// The relit frames of `prepared` (its physical light relit from its bases) against frames
+/// of the light solved for each of `suns` (towards the sun) as a scene that does not relight
+/// is lit ([`PreparedScene::per_sun_light`], from the LB cache when it can), both rendered
+/// with `settings`: per sun and over all, the image RMSE (tone-mapped sRGB) and the plant
+/// pixels' relative RMSE and mean ratio. At a lattice sun the two lights agree for unrotated
+/// instances (float noise); between them the difference is the sun parts' interpolation.
+/// The bases in use, and (when the uncompressed bases are kept beside compressed ones) the
+/// uncompressed bases too.
+pub fn against_direct(
+    prepared: &mut PreparedScene,
+    suns: &[glam::Vec3],
+    direct: &DirectSolve,
+    settings: &RenderSettings,
+    tick: &dyn Fn(),
+) -> Result<(AgainstDirect, Option<AgainstDirect>), PipelineError> {
+    if prepared.physical.is_none() {
+        return Err(PipelineError::NeedsBasis);
+    }
+    let plant = plant_pixels(prepared, settings)?;
+    let both = prepared.has_uncompressed();
+    let (mut in_use, mut uncompressed) = (Tally::default(), Tally::default());
+    let mut direct_seconds = 0.0;
+    let to_sun = prepared.to_sun;
+    for &sun in suns {
+        let t = Instant::now();
+        let light = prepared.per_sun_light(sun, &direct.lb, direct.forest.as_ref(), &Silent)?;
+        direct_seconds += t.elapsed().as_secs_f64();
+        prepared.set_sun(sun)?;
+        let d = prepared.render_with(&light, settings, &Silent)?;
+        tick();
+        let r = prepared.render(settings, &Silent)?;
+        tick();
+        in_use.add(sun, pair_error(&r, &d, &plant));
+        if both {
+            prepared.use_uncompressed(true)?;
+            let u = prepared.render(settings, &Silent);
+            prepared.use_uncompressed(false)?;
+            uncompressed.add(sun, pair_error(&u?, &d, &plant));
+            tick();
+        }
+    }
+    prepared.set_sun(to_sun)?;
+    let n = plant.iter().filter(|&&p| p).count();
+    Ok((
+        in_use.finish(n, direct_seconds),
+        both.then(|| uncompressed.finish(n, direct_seconds)),
+    ))
+}
+
+impl fmt::Display for AgainstDirect {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "against the light solved per sun ({} suns, {:.1} s of direct solves): image RMSE {:.5} (tone-mapped sRGB, [0, 1]); plant pixels ({}) relative RMSE {:.2} %, mean ratio {:.4}",
+            self.per_sun.len(),
+            self.direct_seconds,
+            self.image_rmse,
+            self.plant_pixels,
+            100.0 * self.plant_rel_rmse,
+            self.plant_ratio
+        )?;
+        let largest: Vec<String> = self
+            .largest
+            .iter()
+            .map(|&k| {
+                let s = &self.per_sun[k];
+                format!(
+                    "sun {k} (elevation {:.1}°, azimuth {:.1}°): {:.2} %, image {:.5}",
+                    s.elevation_deg,
+                    s.azimuth_deg,
+                    100.0 * s.plant_rel_rmse,
+                    s.image_rmse
+                )
+            })
+            .collect();
+        writeln!(f, "largest plant error: {}", largest.join("; "))
+    }
 }
 
 impl fmt::Display for PhysicalRelightBench {
@@ -469,9 +820,41 @@ impl fmt::Display for PhysicalRelightBench {
         )?;
         writeln!(
             f,
-            "base solutions: {} (16 parts per model, uncompressed); prepared in {:.1} s",
+            "base solutions: {} uncompressed (16 parts per model), {}; prepared in {:.1} s",
             format_bytes(self.basis_bytes),
+            self.basis_seconds
+                .map(|s| format!("{s:.1} s of solves"))
+                .unwrap_or_else(|| "solve time not recorded".into()),
             self.prepare_seconds
-        )
+        )?;
+        if let (Some(c), Some(sun), Some(diffuse)) = (
+            self.compressed_bytes,
+            self.compressed_sun_bytes,
+            self.compressed_diffuse_bytes,
+        ) {
+            writeln!(
+                f,
+                "compressed ({}): {} ({:.1}×; sun parts {}, diffuse parts {})",
+                self.codec,
+                format_bytes(c),
+                self.basis_bytes as f64 / c.max(1) as f64,
+                format_bytes(sun),
+                format_bytes(diffuse)
+            )?;
+        }
+        if let (Some(r), Some(p)) = (self.rmse, self.plant_rel_rmse) {
+            writeln!(
+                f,
+                "compressed vs uncompressed: image RMSE {r:.5} (tone-mapped sRGB, [0, 1]), plant relative RMSE {:.2} %",
+                100.0 * p
+            )?;
+        }
+        if let Some(a) = &self.against_direct {
+            write!(f, "{a}")?;
+        }
+        if let Some(a) = &self.against_direct_uncompressed {
+            write!(f, "uncompressed bases, {a}")?;
+        }
+        Ok(())
     }
 }

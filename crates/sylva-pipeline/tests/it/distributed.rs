@@ -8,12 +8,13 @@ use std::path::Path;
 use sylva_core::jobs::JobError;
 use sylva_geom::Scene;
 use sylva_lb::CpuSolver;
-use sylva_light::relight::{GlobalGridOptions, StoredBasis};
+use sylva_light::relight::{GlobalGridOptions, PhysicalTarget, StoredBasis};
 use sylva_light::{Light, Silent};
 use sylva_mpi::{Comm, LocalComm, QueueRunner};
 use sylva_pipeline::{
-    load_scene, precompute_relighting, relight_options, BasisUse, LbPlan, Local, PipelineError,
-    PrepareOptions, PreparedScene, RelightPlan, Relighting, RelightingAt,
+    load_scene, precompute_physical, precompute_relighting, relight_options, BasisUse, LbPlan,
+    Local, PhysicalBasisPlan, PipelineError, PrepareOptions, PreparedScene, RelightPlan,
+    Relighting, RelightingAt,
 };
 use sylva_render::{Frame, Region, RenderSettings};
 use sylva_testkit::{basis_cache_entries, files_by_name};
@@ -396,4 +397,72 @@ fn bases_are_the_paper_lights() {
     let physical = lb(None, Light::Physical);
     let e = relight_options(&scene, &physical, &plan(BasisUse::Always)).unwrap_err();
     assert!(e.to_string().contains("paper"), "{e}");
+}
+
+/// A cache's entries by name: the compressed physical bases by their payload (their
+/// metadata records solve seconds, which differ from run to run), the others whole.
+fn physical_cache_entries(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    files_by_name(dir)
+        .into_iter()
+        .map(|(name, bytes)| {
+            if !name.ends_with(".spbasis") {
+                return (name, bytes);
+            }
+            let c = sylva_core::container::read_container(
+                &dir.join(&name),
+                b"SYLVAPBS",
+                1,
+                "compressed physical basis",
+            )
+            .unwrap();
+            (name, c.payload)
+        })
+        .collect()
+}
+
+#[test]
+fn distributed_physical_bases_are_the_one_process_ones() {
+    let (dir, scene) = scene();
+    let bplan = PhysicalBasisPlan {
+        basis: BasisUse::Always,
+        target: Some(PhysicalTarget::recommended()),
+        keep_raw: true,
+    };
+    let physical = |runner: &dyn sylva_pipeline::Runner, cache: &Path| {
+        precompute_physical(
+            &scene,
+            &lb(Some(cache), Light::Physical),
+            &bplan,
+            None,
+            runner,
+            &Silent,
+        )
+        .unwrap()
+        .expect("solved")
+    };
+    let one = dir.path().join("one");
+    let want = physical(&Local, &one);
+    assert_eq!(want.cached, 0);
+    assert!(want.solve_seconds.is_some());
+    let want_entries = physical_cache_entries(&one);
+    // Per model 16 parts (13 sun parts, the overhead sun's plan's sky, ground and top sky)
+    // and the compressed basis.
+    assert_eq!(want_entries.len(), 2 * (13 + 3 + 1));
+    for ranks in [2, 3] {
+        let cache = dir.path().join(format!("ranks{ranks}"));
+        for pass in 0..2 {
+            let what = format!("{ranks} ranks, pass {pass}");
+            let got = on_ranks(ranks, |r| physical(r, &cache));
+            for (rank, r) in got.iter().enumerate() {
+                assert!(r.bases == want.bases, "{what}, rank {rank}: bases differ");
+                assert!(r.raw == want.raw, "{what}, rank {rank}: parts differ");
+                assert_eq!(r.cached, if pass == 0 { 0 } else { 2 }, "{what}");
+                assert_eq!(r.raw_bytes, want.raw_bytes, "{what}");
+            }
+            assert!(
+                physical_cache_entries(&cache) == want_entries,
+                "{what}: cache entries differ"
+            );
+        }
+    }
 }

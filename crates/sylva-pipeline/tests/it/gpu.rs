@@ -340,6 +340,7 @@ fn relit_light_is_shaded_on_the_gpu_as_on_the_cpu() {
         ambient: 0.1,
         global: None,
         target: CompressTarget::recommended(),
+        physical: None,
         keep_raw: true,
     };
     let mut cpu = prepare_lit(dir.path(), None, false, Some(plan));
@@ -407,6 +408,9 @@ fn prepare_physical_relit(dir: &Path, gpu: Option<&GpuContext>, forest: bool) ->
             basis: BasisUse::Always,
             sun: SunWeights::ThreeBasis,
             ambient: 0.0,
+            // Uncompressed: the kernel reads no physical codec (compressed bases shade on
+            // the CPU).
+            physical: None,
             ..RelightPlan::default()
         }),
         forest: forest.then_some(sylva_light::relight::GlobalGridOptions { sites: 24 }),
@@ -464,6 +468,7 @@ fn every_stored_form_of_the_bases_is_read_on_the_gpu_as_on_the_cpu() {
             ambient: 0.2,
             global: None,
             target,
+            physical: None,
             keep_raw: false,
         };
         let mut cpu = prepare_lit(dir.path(), None, false, Some(plan));

@@ -13,10 +13,14 @@ use sylva_lb::{CpuSolver, LbSolver};
 use sylva_light::forest::{ForestBases, ForestLight};
 use sylva_light::lighting::{physical_environment, PartWeights};
 use sylva_light::relight::physical::{sun_part_weights, SUN_DIRECTIONS};
-use sylva_light::relight::{GlobalGridOptions, SunWeights};
+use sylva_light::relight::{
+    GlobalGridOptions, PhysicalBasis, PhysicalTarget, StoredPhysicalBasis, SunWeights,
+};
 use sylva_light::{Light, Silent};
+use sylva_pipeline::bench::{relight_physical, DirectSolve, RelightBenchPlan};
 use sylva_pipeline::{
-    load_scene, scene_illumination, BasisUse, LbPlan, PrepareOptions, PreparedScene, RelightPlan,
+    load_scene, scene_illumination, scene_to_sun, BasisUse, LbPlan, PrepareOptions, PreparedScene,
+    RelightPlan, ShadowMethod,
 };
 
 use crate::forest::{instances, shade_parts};
@@ -112,31 +116,41 @@ fn the_forest_relit_at_a_lattice_sun_is_the_forest_solved_for_it() {
     assert!(bases.light(&other).is_err());
 }
 
+/// `scene` lit by the physical light: relit from its uncompressed bases, or solved for its
+/// sun.
 fn prepare(scene: &sylva_geom::Scene, solver: &dyn LbSolver, relight: bool) -> PreparedScene {
+    let plan = RelightPlan {
+        basis: BasisUse::Always,
+        physical: None,
+        ..RelightPlan::default()
+    };
+    prepare_with(scene, solver, relight.then_some(plan), None).unwrap()
+}
+
+fn prepare_with(
+    scene: &sylva_geom::Scene,
+    solver: &dyn LbSolver,
+    relight: Option<RelightPlan>,
+    cache_dir: Option<&std::path::Path>,
+) -> Result<PreparedScene, sylva_pipeline::PipelineError> {
     PreparedScene::new(
         scene.clone(),
         &PrepareOptions {
             lb: Some(LbPlan {
                 solver,
                 grid: Some(GRID),
-                cache_dir: None,
+                cache_dir,
                 light: Light::Physical,
             }),
             light: Light::Physical,
             forest: Some(FOREST),
             gather_rays: 2,
-            relight: relight.then(|| RelightPlan {
-                basis: BasisUse::Always,
-                sun: SunWeights::ThreeBasis,
-                ambient: 0.0,
-                ..RelightPlan::default()
-            }),
+            relight,
             largest_frame: Some((40, 30, 1)),
             ..PrepareOptions::default()
         },
         &Silent,
     )
-    .unwrap()
 }
 
 /// Sum of every pixel's light, and the largest difference between two frames' pixels.
@@ -242,4 +256,121 @@ fn the_physical_light_takes_no_exact_weights_and_no_ambient() {
         .expect("refused");
         assert!(err.to_string().contains("paper light"), "{err}");
     }
+}
+
+#[test]
+fn the_bench_against_direct_solves_is_exact_at_lattice_suns_and_not_between() {
+    let mut scene = load_scene("shade", None).unwrap();
+    for i in &mut scene.instances {
+        i.rotation_deg = 0.0;
+    }
+    // Azimuth 0: the path's ends (45° either side of the zenith) and its middle (the zenith)
+    // are lattice directions, the two suns between them are not.
+    scene.sun = Sun::from_angles(50.0, 0.0).unwrap();
+    let mut relit = prepare(&scene, &CpuSolver, true);
+    let plan = RelightBenchPlan {
+        suns: 5,
+        runs: 1,
+        shadows: ShadowMethod::KdTree,
+        size: (40, 30),
+        seed: 7,
+        against_direct: true,
+    };
+    // The direct solves need the LB plan; asked without it, the bench says so.
+    assert!(relight_physical(&mut relit, plan, None, &|| {}).is_err());
+    let direct = DirectSolve {
+        lb: LbPlan {
+            solver: &CpuSolver,
+            grid: Some(GRID),
+            cache_dir: None,
+            light: Light::Physical,
+        },
+        forest: Some(FOREST),
+    };
+    let report = relight_physical(&mut relit, plan, Some(&direct), &|| {}).unwrap();
+    let a = report.against_direct.as_ref().expect("measured");
+    assert_eq!(report.rmse_vs_direct, Some(a.image_rmse));
+    assert_eq!(a.per_sun.len(), 5);
+    assert!(a.plant_pixels > 0);
+    let lattice: Vec<bool> = a.per_sun.iter().map(|s| s.lattice).collect();
+    assert_eq!(lattice, [true, false, true, false, true], "{a:#?}");
+    let exact = a.per_sun.iter().filter(|s| s.lattice);
+    let noise = exact.fold(0.0f64, |m, s| m.max(s.image_rmse).max(s.plant_rel_rmse));
+    // Measured: about 5e-9 (f32 rounding of the same light summed in another order).
+    assert!(noise < 1e-6, "at lattice suns: {a:#?}");
+    for s in a.per_sun.iter().filter(|s| !s.lattice) {
+        assert!(
+            s.plant_rel_rmse > 1e-3 && s.image_rmse > 1e3 * noise,
+            "between lattice suns the parts are interpolated: {s:?}"
+        );
+        assert!((s.plant_ratio - 1.0).abs() < 0.2, "{s:?}");
+    }
+    // The largest errors are the interpolated suns', and the overall figures pool them.
+    assert!(a.largest.len() == 3 && !a.per_sun[a.largest[0]].lattice);
+    assert!(a.image_rmse > 0.0 && a.plant_rel_rmse > 0.0);
+    // The bench left the scene's own sun in place.
+    assert!((relit.to_sun - scene_to_sun(&scene)).length() < 1e-6);
+}
+
+#[test]
+fn the_compressed_physical_light_is_cached_and_relit_close_to_the_parts() {
+    let scene = load_scene("shade", None).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let plan = RelightPlan {
+        basis: BasisUse::Always,
+        keep_raw: true,
+        ..RelightPlan::default()
+    };
+    assert_eq!(plan.physical, Some(PhysicalTarget::recommended()));
+    let counting = Counting::default();
+    let mut first = prepare_with(&scene, &counting, Some(plan), Some(dir.path())).unwrap();
+    assert_eq!(counting.0.load(Ordering::SeqCst), 2 * 16);
+    let frame = |p: &PreparedScene| {
+        let camera = p.camera(40, 30);
+        p.render(&p.settings(camera, 1, 7), &Silent).unwrap()
+    };
+    let p = first.physical.as_ref().unwrap();
+    let (mut compressed, mut raw) = (0, 0);
+    for m in 0..2 {
+        match p.model(m) {
+            Some(StoredPhysicalBasis::Compressed(c)) => compressed += c.bytes(),
+            other => panic!("model {m}: {other:?}"),
+        }
+        raw += PhysicalBasis::memory_needed(p.model(m).unwrap().dims());
+    }
+    assert!(compressed < raw / 2, "{compressed} of {raw} bytes");
+    assert_eq!(first.physical_raw_bytes, raw);
+    // Relit from the compressed parts, the frame is the parts' within the codec's error.
+    let small = frame(&first);
+    first.use_uncompressed(true).unwrap();
+    let full = frame(&first);
+    first.use_uncompressed(false).unwrap();
+    let (peak, worst) = compare(&full, &small);
+    assert!(worst > 0.0 && worst <= 0.03 * peak, "{worst} of {peak}");
+    // One entry per model holds the compressed basis: a second preparation reads it and
+    // solves nothing, not even its parts, and relights the same.
+    let entries = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter(|e| e.as_ref().unwrap().path().extension() == Some("spbasis".as_ref()))
+        .count();
+    assert_eq!(entries, 2);
+    let lookup = RelightPlan {
+        basis: BasisUse::IfCached,
+        ..RelightPlan::default()
+    };
+    let counting = Counting::default();
+    let second = prepare_with(&scene, &counting, Some(lookup), Some(dir.path())).unwrap();
+    assert_eq!(counting.0.load(Ordering::SeqCst), 0);
+    assert!(!second.has_uncompressed());
+    let (_, again) = compare(&small, &frame(&second));
+    assert_eq!(again, 0.0);
+    // Another codec is another entry: cached bases only, so none.
+    let other = RelightPlan {
+        physical: PhysicalTarget::parse("haar:0.01", sylva_lb::relight::Precision::F16).unwrap(),
+        ..lookup
+    };
+    let third = prepare_with(&scene, &counting, Some(other), Some(dir.path())).unwrap();
+    // Its parts are cached (the first preparation stored them), so it is made from them.
+    assert!(third.physical.is_some());
+    assert_eq!(counting.0.load(Ordering::SeqCst), 0);
 }

@@ -141,6 +141,7 @@ fn plan(basis: BasisUse, sun: SunWeights, global: bool, keep_raw: bool) -> Relig
         ambient: 0.0,
         global: global.then_some(GLOBAL),
         target: CompressTarget::recommended(),
+        physical: None,
         keep_raw,
     }
 }

@@ -15,7 +15,8 @@ use sylva_core::container::{read_container, write_container, ByteReader, ByteWri
 
 use super::haar::HaarFields;
 use super::{
-    Codec, CompressTarget, CompressedBasis, DenseFields, Precision, Store, Transform, Values,
+    Codec, CompressTarget, CompressedBasis, CompressedChannels, DenseFields, Encoded, Precision,
+    Store, Transform, Values,
 };
 use crate::grid::{Bounds, Dims};
 use crate::relight::basis::{basis_metadata, parse_basis_metadata};
@@ -104,36 +105,11 @@ impl CompressedBasis {
         metadata.extend(basis_metadata(&self.medium, &self.options));
         metadata.extend(extra.iter().cloned());
         let mut w = ByteWriter::new();
-        for n in [self.dims.nx, self.dims.ny, self.dims.nz] {
-            w.u32(n as u32);
-        }
+        write_dims(&mut w, self.dims);
         for v in self.bounds.min.iter().chain(&self.bounds.max) {
             w.f32(*v);
         }
-        match &self.transform {
-            Transform::Identity => w.u8(0),
-            Transform::Linear {
-                mean,
-                components,
-                rank,
-            } => {
-                w.u8(1);
-                w.u32(*rank as u32);
-                w.f32s(mean);
-                w.f32s(components);
-            }
-        }
-        match &self.store {
-            Store::Dense(d) => {
-                w.u8(0);
-                w.u32(d.fields as u32);
-                d.values.write_to(&mut w);
-            }
-            Store::Haar(h) => {
-                w.u8(1);
-                h.write_to(&mut w);
-            }
-        }
+        self.encoded.write_to(&mut w);
         (metadata, w.bytes)
     }
 }
@@ -162,27 +138,7 @@ fn decode(metadata: &[(String, String)], payload: &[u8]) -> Result<CompressedBas
     };
     target.validate().map_err(|e| e.to_string())?;
     let mut r = ByteReader::new(payload);
-    let (transform, store, dims, bounds) = read_payload(&mut r, &target)?;
-    Ok(CompressedBasis {
-        dims,
-        bounds,
-        medium,
-        options,
-        target,
-        transform,
-        store,
-    })
-}
-
-fn read_payload(
-    r: &mut ByteReader,
-    target: &CompressTarget,
-) -> Result<(Transform, Store, Dims, Bounds), String> {
-    let mut n = [0usize; 3];
-    for v in &mut n {
-        *v = r.u32("grid size")? as usize;
-    }
-    let dims = Dims::new(n[0], n[1], n[2]).map_err(|e| e.to_string())?;
+    let dims = read_dims(&mut r)?;
     let mut b = [0f32; 6];
     for v in &mut b {
         *v = r.f32("bounds")?;
@@ -194,16 +150,145 @@ fn read_payload(
         min: [b[0], b[1], b[2]],
         max: [b[3], b[4], b[5]],
     };
+    let encoded = Encoded::read_from(&mut r, dims, CHANNELS, &target)?;
+    r.finish()?;
+    Ok(CompressedBasis {
+        dims,
+        bounds,
+        medium,
+        options,
+        target,
+        encoded,
+    })
+}
+
+fn write_dims(w: &mut ByteWriter, dims: Dims) {
+    for n in [dims.nx, dims.ny, dims.nz] {
+        w.u32(n as u32);
+    }
+}
+
+fn read_dims(r: &mut ByteReader) -> Result<Dims, String> {
+    let mut n = [0usize; 3];
+    for v in &mut n {
+        *v = r.u32("grid size")? as usize;
+    }
+    Dims::new(n[0], n[1], n[2]).map_err(|e| e.to_string())
+}
+
+impl CompressedChannels {
+    /// The set as bytes (its grid, channels, target and fields), for a cache file or another
+    /// process: [`CompressedChannels::from_bytes`] gives back this set exactly.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut w = ByteWriter::new();
+        write_dims(&mut w, self.dims);
+        w.u32(self.encoded.channels as u32);
+        w.u8s(self.target.codec.name().as_bytes());
+        w.u8s(self.target.precision.name().as_bytes());
+        w.u64(self.target.far_threshold.to_bits());
+        self.encoded.write_to(&mut w);
+        w.bytes
+    }
+
+    /// The set [`CompressedChannels::to_bytes`] encoded; inconsistent bytes are refused
+    /// (every length and index a lookup follows is checked), the error saying what.
+    pub fn from_bytes(bytes: &[u8]) -> Result<CompressedChannels, RelightError> {
+        let bad = |what: String| RelightError::Mismatch(format!("compressed parts: {what}"));
+        let mut r = ByteReader::new(bytes);
+        let dims = read_dims(&mut r).map_err(bad)?;
+        let channels = r.u32("channel count").map_err(bad)? as usize;
+        if channels == 0 || !channels.is_multiple_of(3) {
+            return Err(bad(format!(
+                "{channels} channels: not three colours per part"
+            )));
+        }
+        let text = |r: &mut ByteReader, what: &str| -> Result<String, String> {
+            String::from_utf8(r.u8s(what)?).map_err(|_| format!("{what} is not UTF-8"))
+        };
+        let codec = Codec::parse(&text(&mut r, "codec").map_err(bad)?).map_err(bad)?;
+        let precision = text(&mut r, "precision").map_err(bad)?;
+        let precision = Precision::parse(&precision)
+            .ok_or_else(|| bad(format!("precision '{precision}' is not f16, f32 or packed")))?;
+        let far_threshold = f64::from_bits(r.u64("far threshold").map_err(bad)?);
+        let target = CompressTarget {
+            codec,
+            precision,
+            far_threshold,
+        };
+        target.validate_for(channels)?;
+        let encoded = Encoded::read_from(&mut r, dims, channels, &target).map_err(bad)?;
+        r.finish().map_err(bad)?;
+        Ok(CompressedChannels {
+            dims,
+            target,
+            encoded,
+        })
+    }
+}
+
+impl Encoded {
+    /// The map back to channels (tag 0 identity, or 1 linear: rank, the channels' means, the
+    /// components), then the fields (tag 0 dense, or 1 Haar).
+    fn write_to(&self, w: &mut ByteWriter) {
+        match &self.transform {
+            Transform::Identity => w.u8(0),
+            Transform::Linear {
+                mean,
+                components,
+                rank,
+            } => {
+                w.u8(1);
+                w.u32(*rank as u32);
+                w.f32s(mean);
+                w.f32s(components);
+            }
+        }
+        match &self.store {
+            Store::Dense(d) => {
+                w.u8(0);
+                w.u32(d.fields as u32);
+                d.values.write_to(w);
+            }
+            Store::Haar(h) => {
+                w.u8(1);
+                h.write_to(w);
+            }
+        }
+    }
+
+    /// Reads what [`Encoded::write_to`] wrote for `channels` channels of a `dims` grid,
+    /// compressed to `target`; `Err` says what is inconsistent.
+    fn read_from(
+        r: &mut ByteReader,
+        dims: Dims,
+        channels: usize,
+        target: &CompressTarget,
+    ) -> Result<Encoded, String> {
+        let (transform, store) = read_fields(r, dims, channels, target)?;
+        Ok(Encoded {
+            channels,
+            transform,
+            store,
+        })
+    }
+}
+
+fn read_fields(
+    r: &mut ByteReader,
+    dims: Dims,
+    channels: usize,
+    target: &CompressTarget,
+) -> Result<(Transform, Store), String> {
     let transform = match r.u8("channel map")? {
         0 => Transform::Identity,
         1 => {
             let rank = r.u32("rank")? as usize;
-            if !(1..=CHANNELS).contains(&rank) {
-                return Err(format!("rank {rank} is not in 1..={CHANNELS}"));
+            if !(1..=channels).contains(&rank) {
+                return Err(format!("rank {rank} is not in 1..={channels}"));
             }
             let mean = r.f32s("channel means")?;
             let components = r.f32s("components")?;
-            if mean.len() != CHANNELS || components.len() != CHANNELS * rank {
+            if mean.len() != channels || components.len() != channels * rank {
                 return Err(format!(
                     "{} means and {} components for rank {rank}",
                     mean.len(),
@@ -222,7 +307,7 @@ fn read_payload(
         t => return Err(format!("unknown channel map {t}")),
     };
     let fields = match &transform {
-        Transform::Identity => CHANNELS,
+        Transform::Identity => channels,
         Transform::Linear { rank, .. } => *rank,
     };
     let store = match r.u8("field store")? {
@@ -245,7 +330,6 @@ fn read_payload(
         1 => Store::Haar(HaarFields::read_from(r, dims, fields)?),
         t => return Err(format!("unknown field store {t}")),
     };
-    r.finish()?;
     let consistent = match (target.codec, &transform, &store) {
         (Codec::Haar { .. }, Transform::Identity, Store::Haar(_)) => true,
         (Codec::Pca { rank }, Transform::Linear { rank: k, .. }, Store::Dense(_)) => rank == *k,
@@ -253,7 +337,7 @@ fn read_payload(
             rank == *k
         }
         (Codec::ColourHaar { .. }, Transform::Linear { rank, .. }, Store::Haar(_)) => {
-            *rank == CHANNELS
+            *rank == channels
         }
         _ => false,
     };
@@ -263,5 +347,5 @@ fn read_payload(
             target.codec.name()
         ));
     }
-    Ok((transform, store, dims, bounds))
+    Ok((transform, store))
 }

@@ -1,9 +1,13 @@
 //! Compression of a basis set (004 §4.2), with lookups that decode only a trilinear footprint.
 //!
-//! Every codec stores a few scalar *fields* over the grid and a linear map back to the 57
-//! channels: `channel ≈ mean + Σ_f component[channel][f] · field_f`.
+//! Every codec stores a few scalar *fields* over the grid and a linear map back to the
+//! channels: `channel ≈ mean + Σ_f component[channel][f] · field_f`. A paper basis set has 57
+//! channels (19 bases × 3 colours, [`CompressedBasis`]); any set of parts of three colours
+//! each compresses the same way ([`CompressedChannels`]: the physical light's 13 sun parts,
+//! or its 3 diffuse parts), channel `3 part + colour`, each channel measured in units of its
+//! own scale (a basis's free-space value; a physical part's mean where light matters).
 //!
-//! * [`Codec::Haar`]: the fields are the 57 channels themselves (identity map), each
+//! * [`Codec::Haar`]: the fields are the channels themselves (identity map), each
 //!   compressed with Haar wavelets on 4³ blocks ([`haar`]).
 //! * [`Codec::Pca`]: the fields are the `rank` leading principal components across the
 //!   channels ([`pca`]), stored per site.
@@ -219,7 +223,13 @@ impl CompressTarget {
         }
     }
 
+    /// Checks the target for a paper basis set (57 channels).
     pub fn validate(&self) -> Result<(), RelightError> {
+        self.validate_for(CHANNELS)
+    }
+
+    /// Checks the target for a set of `channels` channels (a PCA rank is at most that).
+    pub fn validate_for(&self, channels: usize) -> Result<(), RelightError> {
         let bad = |what: String| Err(RelightError::Target(what));
         let threshold_ok = |t: f64| !t.is_nan() && t >= 0.0;
         match self.codec {
@@ -233,9 +243,9 @@ impl CompressTarget {
                 ))
             }
             Codec::Pca { rank } | Codec::PcaHaar { rank, .. }
-                if !(1..=CHANNELS).contains(&rank) =>
+                if !(1..=channels).contains(&rank) =>
             {
-                return bad(format!("rank {rank} must lie in 1..={CHANNELS}"))
+                return bad(format!("rank {rank} must lie in 1..={channels}"))
             }
             _ => {}
         }
@@ -327,107 +337,105 @@ pub enum StoredFields<'a> {
     Haar(haar::HaarView<'a>),
 }
 
-/// A compressed basis set.
+/// Fields of some channels and the map back to them: what every codec stores.
 #[derive(Debug, Clone, PartialEq)]
-pub struct CompressedBasis {
-    pub dims: Dims,
-    pub bounds: Bounds,
-    /// The medium and schedule the basis set was solved with.
-    pub medium: MediumParams,
-    pub options: BasisOptions,
-    pub target: CompressTarget,
+pub(crate) struct Encoded {
+    /// Channels the map gives back (`3 part + colour`).
+    channels: usize,
     transform: Transform,
     store: Store,
 }
 
-/// Compresses `basis`, spending the bits on `region` (see [`CompressTarget`]).
-pub fn compress(
-    basis: &BasisSet,
-    region: &Region,
-    target: &CompressTarget,
-) -> Result<CompressedBasis, RelightError> {
-    target.validate()?;
-    if region.dims != basis.dims {
-        return Err(RelightError::Mismatch(format!(
-            "region of a {} grid for a {} basis set",
-            region.dims, basis.dims
-        )));
-    }
-    let dims = basis.dims;
-    let far = target.far_threshold as f32;
-    let (transform, store) = match target.codec {
-        Codec::Haar { threshold } => {
-            let ch = basis.channels();
-            let scales: Vec<f32> = (0..CHANNELS)
-                .map(|c| {
-                    if c < 3 {
-                        AMBIENT_FREE_SPACE as f32
-                    } else {
-                        1.0
-                    }
-                })
-                .collect();
-            let haar = HaarFields::encode(
-                dims,
-                &|f, s| ch[f][s],
-                &scales,
-                threshold as f32,
-                far,
-                region,
-                target.precision,
-            )?;
-            (Transform::Identity, Store::Haar(haar))
+impl Encoded {
+    /// Compresses `channels` channels of a `dims` grid, `value(channel, site)`, each in units
+    /// of its `scales` entry (Haar thresholds and PCA components are taken in these units),
+    /// spending the bits on `region`.
+    fn encode(
+        dims: Dims,
+        channels: usize,
+        value: &(dyn Fn(usize, usize) -> f32 + Sync),
+        scales: &[f64],
+        region: &Region,
+        target: &CompressTarget,
+    ) -> Result<Encoded, RelightError> {
+        target.validate_for(channels)?;
+        if region.dims != dims {
+            return Err(RelightError::Mismatch(format!(
+                "region of a {} grid for a {dims} set",
+                region.dims
+            )));
         }
-        Codec::Pca { .. } | Codec::PcaHaar { .. } | Codec::ColourHaar { .. } => {
-            let structure = match target.codec {
-                Codec::Pca { rank } | Codec::PcaHaar { rank, .. } => {
-                    pca::Structure::Global { rank }
-                }
-                _ => pca::Structure::PerBasis,
-            };
-            let p = pca::fit(basis, region, structure)?;
-            let rank = p.rank;
-            let store = match target.codec {
-                Codec::PcaHaar { threshold, .. } | Codec::ColourHaar { threshold } => {
-                    let coefs = &p.coefficients;
-                    Store::Haar(HaarFields::encode(
-                        dims,
-                        &|f, s| coefs[s * rank + f],
-                        &vec![1.0; rank],
-                        threshold as f32,
-                        far,
-                        region,
-                        target.precision,
-                    )?)
-                }
-                _ => Store::Dense(DenseFields {
+        if channels == 0 || !channels.is_multiple_of(3) || scales.len() != channels {
+            return Err(RelightError::Mismatch(format!(
+                "{channels} channels with {} scales: expected three colours per part, one scale each",
+                scales.len()
+            )));
+        }
+        if let Some(c) = scales.iter().position(|s| !(s.is_finite() && *s > 0.0)) {
+            return Err(RelightError::Target(format!(
+                "channel {c}'s scale {} is not a positive finite number",
+                scales[c]
+            )));
+        }
+        let far = target.far_threshold as f32;
+        let (transform, store) = match target.codec {
+            Codec::Haar { threshold } => {
+                let scales: Vec<f32> = scales.iter().map(|&s| s as f32).collect();
+                let haar = HaarFields::encode(
                     dims,
-                    fields: rank,
-                    values: Values::new(p.coefficients, target.precision),
-                }),
-            };
-            let transform = Transform::Linear {
-                mean: p.mean,
-                components: p.components,
-                rank,
-            };
-            (transform, store)
-        }
-    };
-    Ok(CompressedBasis {
-        dims,
-        bounds: basis.bounds,
-        medium: basis.medium.clone(),
-        options: basis.options,
-        target: *target,
-        transform,
-        store,
-    })
-}
+                    value,
+                    &scales,
+                    threshold as f32,
+                    far,
+                    region,
+                    target.precision,
+                )?;
+                (Transform::Identity, Store::Haar(haar))
+            }
+            Codec::Pca { .. } | Codec::PcaHaar { .. } | Codec::ColourHaar { .. } => {
+                let structure = match target.codec {
+                    Codec::Pca { rank } | Codec::PcaHaar { rank, .. } => {
+                        pca::Structure::Global { rank }
+                    }
+                    _ => pca::Structure::PerBasis,
+                };
+                let p = pca::fit(dims, channels, value, scales, region, structure)?;
+                let rank = p.rank;
+                let store = match target.codec {
+                    Codec::PcaHaar { threshold, .. } | Codec::ColourHaar { threshold } => {
+                        let coefs = &p.coefficients;
+                        Store::Haar(HaarFields::encode(
+                            dims,
+                            &|f, s| coefs[s * rank + f],
+                            &vec![1.0; rank],
+                            threshold as f32,
+                            far,
+                            region,
+                            target.precision,
+                        )?)
+                    }
+                    _ => Store::Dense(DenseFields {
+                        dims,
+                        fields: rank,
+                        values: Values::new(p.coefficients, target.precision),
+                    }),
+                };
+                let transform = Transform::Linear {
+                    mean: p.mean,
+                    components: p.components,
+                    rank,
+                };
+                (transform, store)
+            }
+        };
+        Ok(Encoded {
+            channels,
+            transform,
+            store,
+        })
+    }
 
-impl CompressedBasis {
-    /// Bytes of compressed data held (fields, their index, and the map back to channels).
-    pub fn bytes(&self) -> u64 {
+    fn bytes(&self) -> u64 {
         let store = match &self.store {
             Store::Dense(d) => d.values.bytes(),
             Store::Haar(h) => h.bytes(),
@@ -441,38 +449,46 @@ impl CompressedBasis {
         store + transform
     }
 
-    /// Fields stored (57 for Haar alone, the rank for PCA).
-    pub fn fields(&self) -> usize {
+    fn fields(&self) -> usize {
         match &self.transform {
-            Transform::Identity => CHANNELS,
+            Transform::Identity => self.channels,
             Transform::Linear { rank, .. } => *rank,
         }
     }
 
-    /// Haar coefficients kept (0 without Haar).
-    pub fn haar_coefficients(&self) -> usize {
+    fn haar_coefficients(&self) -> usize {
         match &self.store {
             Store::Haar(h) => h.coefficients(),
             Store::Dense(_) => 0,
         }
     }
 
-    /// Projects a combination onto the fields: once per instance and sun.
-    pub fn project(&self, weights: &BasisWeights) -> ProjectedWeights {
+    /// Projects `Σ_part w_part[c] · channel(3 part + c)` onto the fields.
+    fn project(&self, terms: impl Iterator<Item = (usize, [f64; 3])>) -> ProjectedWeights {
         match &self.transform {
             Transform::Identity => {
-                let mut terms = Vec::new();
-                for (j, w) in weights.terms() {
+                // Per part, its colours' weights (a part named twice adds up); the fields in
+                // order, as a Haar lookup walks them.
+                let mut per_part: Vec<Option<[f64; 3]>> = vec![None; self.channels / 3];
+                for (j, w) in terms {
+                    let p = per_part[j].get_or_insert([0.0; 3]);
                     for c in 0..3 {
+                        p[c] += w[c];
+                    }
+                }
+                let mut out = Vec::new();
+                for (j, w) in per_part.iter().enumerate() {
+                    let Some(w) = w else { continue };
+                    for c in (0..3).filter(|&c| w[c] != 0.0) {
                         let mut v = [0.0f32; 3];
-                        v[c] = w as f32;
-                        terms.push(((3 * j + c) as u32, v));
+                        v[c] = w[c] as f32;
+                        out.push(((3 * j + c) as u32, v));
                     }
                 }
                 ProjectedWeights {
-                    fields: CHANNELS,
+                    fields: self.channels,
                     constant: [0.0; 3],
-                    terms,
+                    terms: out,
                 }
             }
             Transform::Linear {
@@ -482,12 +498,12 @@ impl CompressedBasis {
             } => {
                 let mut constant = [0.0f64; 3];
                 let mut per_field = vec![[0.0f64; 3]; *rank];
-                for (j, w) in weights.terms() {
+                for (j, w) in terms {
                     for c in 0..3 {
                         let ch = 3 * j + c;
-                        constant[c] += w * mean[ch] as f64;
+                        constant[c] += w[c] * mean[ch] as f64;
                         for (f, p) in per_field.iter_mut().enumerate() {
-                            p[c] += w * components[ch * rank + f] as f64;
+                            p[c] += w[c] * components[ch * rank + f] as f64;
                         }
                     }
                 }
@@ -505,16 +521,14 @@ impl CompressedBasis {
         }
     }
 
-    /// The relit light at grid coordinates `g` (in sites, clamped to the grid), decoding only
-    /// the footprint. `w` must come from this set's [`CompressedBasis::project`].
     #[inline]
-    pub fn sample_grid(&self, g: [f32; 3], w: &ProjectedWeights) -> [f32; 3] {
+    fn sample_grid(&self, dims: Dims, g: [f32; 3], w: &ProjectedWeights) -> [f32; 3] {
         assert_eq!(
             w.fields,
             self.fields(),
             "weights projected for a compressed set with another number of fields"
         );
-        let fp = Footprint::at(self.dims, g);
+        let fp = Footprint::at(dims, g);
         let mut out = w.constant;
         match &self.store {
             Store::Dense(d) => d.sample_into(&fp, &w.terms, &mut out),
@@ -523,33 +537,29 @@ impl CompressedBasis {
         out
     }
 
-    /// The relit light at model-space point `p` (placement as [`BasisSet::placement`]).
-    pub fn sample(&self, p: [f32; 3], w: &ProjectedWeights) -> [f32; 3] {
-        self.sample_grid(Placement::new(self.dims, self.bounds).grid_coords(p), w)
-    }
-
-    /// [`CompressedBasis::sample_grid`] through a full decode of the block (Haar) instead of
-    /// the footprint kernel: the reference the fast path is tested against.
-    pub fn sample_grid_by_full_decode(&self, g: [f32; 3], w: &ProjectedWeights) -> [f32; 3] {
+    fn sample_grid_by_full_decode(
+        &self,
+        dims: Dims,
+        g: [f32; 3],
+        w: &ProjectedWeights,
+    ) -> [f32; 3] {
         match &self.store {
-            Store::Dense(_) => self.sample_grid(g, w),
+            Store::Dense(_) => self.sample_grid(dims, g, w),
             Store::Haar(h) => {
                 let mut out = w.constant;
-                h.sample_by_full_decode(&Footprint::at(self.dims, g), &w.terms, &mut out);
+                h.sample_by_full_decode(&Footprint::at(dims, g), &w.terms, &mut out);
                 out
             }
         }
     }
 
-    /// The stored fields as a lookup reads them (for kernels on other devices that mirror
-    /// [`CompressedBasis::sample_grid`]): per-site values, or Haar blocks.
-    pub fn stored_fields(&self) -> StoredFields<'_> {
+    fn stored_fields(&self, dims: Dims) -> StoredFields<'_> {
         match &self.store {
             Store::Haar(h) => StoredFields::Haar(h.view()),
             Store::Dense(d) => StoredFields::Dense(
                 (0..self.fields())
                     .map(|f| {
-                        (0..self.dims.sites())
+                        (0..dims.sites())
                             .map(|s| d.values.get(s * d.fields + f))
                             .collect()
                     })
@@ -558,37 +568,35 @@ impl CompressedBasis {
         }
     }
 
-    /// Field `f` (< [`CompressedBasis::fields`]) at every site, site order as in
-    /// [`LightingGrid`] (Haar: each site from the block that owns it). A lookup of the
-    /// projected combination is `constant + Σ_terms weights · trilinear(field)`.
-    pub fn decode_field(&self, f: usize) -> Vec<f32> {
+    fn decode_field(&self, dims: Dims, f: usize) -> Vec<f32> {
         assert!(f < self.fields(), "field {f} of {}", self.fields());
         match &self.store {
             Store::Haar(h) => h.decode_field(f),
-            Store::Dense(d) => (0..self.dims.sites())
+            Store::Dense(d) => (0..dims.sites())
                 .map(|s| d.values.get(s * d.fields + f))
                 .collect(),
         }
     }
 
-    /// Decodes every channel at every site (Haar: each site from the block that owns it).
-    pub fn decompress(&self) -> Result<BasisSet, RelightError> {
-        let n = self.dims.sites();
+    /// Every channel at every site (Haar: each site from the block that owns it), after the
+    /// memory for them is checked (`what` names the set).
+    fn decode_channels(&self, dims: Dims, what: &str) -> Result<Vec<Vec<f32>>, RelightError> {
+        let n = dims.sites();
         sylva_core::check_memory(
-            &format!("decompressing a basis set on a {} grid", self.dims),
-            BasisSet::memory_needed(self.dims) + (self.fields() * n * 4) as u64,
+            &format!("decompressing {what} on a {dims} grid"),
+            ((self.channels + self.fields()) * n * 4) as u64,
         )?;
         let fields: Vec<Vec<f32>> = (0..self.fields())
             .into_par_iter()
-            .map(|f| self.decode_field(f))
+            .map(|f| self.decode_field(dims, f))
             .collect();
-        let channels = match &self.transform {
+        Ok(match &self.transform {
             Transform::Identity => fields,
             Transform::Linear {
                 mean,
                 components,
                 rank,
-            } => (0..CHANNELS)
+            } => (0..self.channels)
                 .into_par_iter()
                 .map(|ch| {
                     (0..n)
@@ -602,7 +610,123 @@ impl CompressedBasis {
                         .collect()
                 })
                 .collect(),
-        };
+        })
+    }
+}
+
+/// A compressed basis set.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CompressedBasis {
+    pub dims: Dims,
+    pub bounds: Bounds,
+    /// The medium and schedule the basis set was solved with.
+    pub medium: MediumParams,
+    pub options: BasisOptions,
+    pub target: CompressTarget,
+    encoded: Encoded,
+}
+
+/// Each channel's scale in a paper basis set: its free-space value (18 for `B_0`'s colours,
+/// 1 for the others).
+fn basis_scales() -> Vec<f64> {
+    (0..CHANNELS)
+        .map(|c| if c < 3 { AMBIENT_FREE_SPACE } else { 1.0 })
+        .collect()
+}
+
+/// Compresses `basis`, spending the bits on `region` (see [`CompressTarget`]).
+pub fn compress(
+    basis: &BasisSet,
+    region: &Region,
+    target: &CompressTarget,
+) -> Result<CompressedBasis, RelightError> {
+    target.validate()?;
+    if region.dims != basis.dims {
+        return Err(RelightError::Mismatch(format!(
+            "region of a {} grid for a {} basis set",
+            region.dims, basis.dims
+        )));
+    }
+    let ch = basis.channels();
+    let encoded = Encoded::encode(
+        basis.dims,
+        CHANNELS,
+        &|c, s| ch[c][s],
+        &basis_scales(),
+        region,
+        target,
+    )?;
+    Ok(CompressedBasis {
+        dims: basis.dims,
+        bounds: basis.bounds,
+        medium: basis.medium.clone(),
+        options: basis.options,
+        target: *target,
+        encoded,
+    })
+}
+
+impl CompressedBasis {
+    /// Bytes of compressed data held (fields, their index, and the map back to channels).
+    pub fn bytes(&self) -> u64 {
+        self.encoded.bytes()
+    }
+
+    /// Fields stored (57 for Haar alone, the rank for PCA).
+    pub fn fields(&self) -> usize {
+        self.encoded.fields()
+    }
+
+    /// Haar coefficients kept (0 without Haar).
+    pub fn haar_coefficients(&self) -> usize {
+        self.encoded.haar_coefficients()
+    }
+
+    /// Projects a combination onto the fields: once per instance and sun.
+    pub fn project(&self, weights: &BasisWeights) -> ProjectedWeights {
+        let terms: Vec<(usize, f64)> = weights.terms().collect();
+        self.encoded
+            .project(terms.iter().map(|&(j, w)| (j, [w; 3])))
+    }
+
+    /// The relit light at grid coordinates `g` (in sites, clamped to the grid), decoding only
+    /// the footprint. `w` must come from this set's [`CompressedBasis::project`].
+    #[inline]
+    pub fn sample_grid(&self, g: [f32; 3], w: &ProjectedWeights) -> [f32; 3] {
+        self.encoded.sample_grid(self.dims, g, w)
+    }
+
+    /// The relit light at model-space point `p` (placement as [`BasisSet::placement`]).
+    pub fn sample(&self, p: [f32; 3], w: &ProjectedWeights) -> [f32; 3] {
+        self.sample_grid(Placement::new(self.dims, self.bounds).grid_coords(p), w)
+    }
+
+    /// [`CompressedBasis::sample_grid`] through a full decode of the block (Haar) instead of
+    /// the footprint kernel: the reference the fast path is tested against.
+    pub fn sample_grid_by_full_decode(&self, g: [f32; 3], w: &ProjectedWeights) -> [f32; 3] {
+        self.encoded.sample_grid_by_full_decode(self.dims, g, w)
+    }
+
+    /// The stored fields as a lookup reads them (for kernels on other devices that mirror
+    /// [`CompressedBasis::sample_grid`]): per-site values, or Haar blocks.
+    pub fn stored_fields(&self) -> StoredFields<'_> {
+        self.encoded.stored_fields(self.dims)
+    }
+
+    /// Field `f` (< [`CompressedBasis::fields`]) at every site, site order as in
+    /// [`LightingGrid`] (Haar: each site from the block that owns it). A lookup of the
+    /// projected combination is `constant + Σ_terms weights · trilinear(field)`.
+    pub fn decode_field(&self, f: usize) -> Vec<f32> {
+        self.encoded.decode_field(self.dims, f)
+    }
+
+    /// Decodes every channel at every site (Haar: each site from the block that owns it).
+    pub fn decompress(&self) -> Result<BasisSet, RelightError> {
+        sylva_core::check_memory(
+            &format!("decompressing a basis set on a {} grid", self.dims),
+            BasisSet::memory_needed(self.dims) + (self.fields() * self.dims.sites() * 4) as u64,
+        )?;
+        let channels = self.encoded.decode_channels(self.dims, "a basis set")?;
         BasisSet::new(
             self.dims,
             self.bounds,
@@ -610,6 +734,70 @@ impl CompressedBasis {
             self.options,
             channels,
         )
+    }
+}
+
+/// Parts of three colours each over a grid, compressed: channel `3 part + colour`
+/// ([`compress_channels`]). The physical light's parts are kept this way.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CompressedChannels {
+    pub dims: Dims,
+    pub target: CompressTarget,
+    encoded: Encoded,
+}
+
+/// Compresses `channels` channels (three colours per part) of a `dims` grid,
+/// `value(channel, site)`, each in units of its `scales` entry (a Haar threshold is a
+/// fraction of it; PCA weighs channels in these units), spending the bits on `region`.
+pub fn compress_channels(
+    dims: Dims,
+    channels: usize,
+    value: &(dyn Fn(usize, usize) -> f32 + Sync),
+    scales: &[f64],
+    region: &Region,
+    target: &CompressTarget,
+) -> Result<CompressedChannels, RelightError> {
+    Ok(CompressedChannels {
+        dims,
+        target: *target,
+        encoded: Encoded::encode(dims, channels, value, scales, region, target)?,
+    })
+}
+
+impl CompressedChannels {
+    /// Channels held (three per part).
+    pub fn channels(&self) -> usize {
+        self.encoded.channels
+    }
+
+    /// Bytes of compressed data held (fields, their index, and the map back to channels).
+    pub fn bytes(&self) -> u64 {
+        self.encoded.bytes()
+    }
+
+    /// Fields stored (the channels for Haar alone, the rank for PCA).
+    pub fn fields(&self) -> usize {
+        self.encoded.fields()
+    }
+
+    /// Projects `Σ_part w_part[c] · channel(3 part + c)` onto the fields (`terms`: part and
+    /// per-colour weight): once per instance and sun.
+    pub fn project(&self, terms: &[(usize, [f32; 3])]) -> ProjectedWeights {
+        self.encoded
+            .project(terms.iter().map(|&(j, w)| (j, w.map(f64::from))))
+    }
+
+    /// The projected combination at grid coordinates `g` (in sites, clamped to the grid),
+    /// decoding only the footprint. `w` must come from this set's
+    /// [`CompressedChannels::project`].
+    #[inline]
+    pub fn sample_grid(&self, g: [f32; 3], w: &ProjectedWeights) -> [f32; 3] {
+        self.encoded.sample_grid(self.dims, g, w)
+    }
+
+    /// Every channel at every site (Haar: each site from the block that owns it).
+    pub fn decompress(&self) -> Result<Vec<Vec<f32>>, RelightError> {
+        self.encoded.decode_channels(self.dims, "compressed parts")
     }
 }
 
