@@ -148,6 +148,10 @@ pub fn run(a: ViewCommandArgs) -> Result<()> {
         token: None,
         worker: a.scene.worker(output),
     };
+    // From here Ctrl-C marks the process interrupted instead of ending it, so the server
+    // closes its pages and a frame being saved is finished or removed
+    // (sylva_core::interrupt). Before the URL is printed: a user may press it at once.
+    let _staging = sylva_core::interrupt::StagingGuard::new();
     let (scene, lat, lon) = (a.scene, a.lat, a.lon);
     let server = Server::start(opts, move |status| {
         scene.prepare(Say::Stdout, status, lat, lon)
@@ -167,9 +171,6 @@ pub fn run(a: ViewCommandArgs) -> Result<()> {
         "sylva view: open {} (Ctrl-C stops the server)",
         server.url(shown)
     );
-    // Ctrl-C marks the process interrupted instead of ending it, so the server closes its
-    // pages and a frame being saved is finished or removed (sylva_core::interrupt).
-    let _staging = sylva_core::interrupt::StagingGuard::new();
     server.run_until(sylva_core::interrupt::interrupted)?;
     println!("sylva view: stopped");
     Ok(())
