@@ -101,6 +101,28 @@ pub fn is_loopback(host: &str) -> bool {
             .is_ok_and(|ip| ip.is_loopback())
 }
 
+/// Checks what `sylva view` is asked before any work: the folder saved frames go to, the
+/// time-of-day control's place. A warning to print when `host` lets other machines in.
+pub fn check_options(
+    host: &str,
+    output: &std::path::Path,
+    (lat, lon): (f64, f64),
+) -> Result<Option<String>, String> {
+    sylva_core::solar::Place::new(lat, lon).map_err(|e| format!("--lat/--lon: {e}"))?;
+    if output.exists() && !output.is_dir() {
+        return Err(format!(
+            "--output {}: not a folder (saved frames go there)",
+            output.display()
+        ));
+    }
+    Ok((!is_loopback(host)).then(|| {
+        format!(
+            "listening on {host}: other machines can reach the viewer (they need the URL's \
+             token); an SSH tunnel to 127.0.0.1 keeps it private (README: Viewer)"
+        )
+    }))
+}
+
 /// Where the scene's preparation stands.
 #[derive(Debug, Clone)]
 enum Phase {

@@ -124,23 +124,11 @@ pub struct ViewCommandArgs {
 
 pub fn run(a: ViewCommandArgs) -> Result<()> {
     relight_light(a.scene.light.light.as_deref())?;
-    sylva_core::solar::Place::new(a.lat, a.lon).map_err(|e| anyhow!("--lat/--lon: {e}"))?;
-    let output = a
-        .output
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("sylva-out"));
-    if output.exists() && !output.is_dir() {
-        return Err(anyhow!(
-            "--output {}: not a folder (saved frames go there)",
-            output.display()
-        ));
-    }
-    if !sylva_view::server::is_loopback(&a.host) {
-        eprintln!(
-            "warning: listening on {}: other machines can reach the viewer (they need the \
-             URL's token); an SSH tunnel to 127.0.0.1 keeps it private (README: Viewer)",
-            a.host
-        );
+    let output = a.output.clone().unwrap_or_else(|| "sylva-out".into());
+    let warning = sylva_view::server::check_options(&a.host, &output, (a.lat, a.lon))
+        .map_err(anyhow::Error::msg)?;
+    if let Some(w) = warning {
+        eprintln!("warning: {w}");
     }
     let opts = ServeOptions {
         host: a.host.clone(),
