@@ -888,6 +888,10 @@ impl PreparedScene {
                 "sun direction {to_sun} must be a finite, non-zero vector"
             )));
         }
+        if to_sun == self.to_sun {
+            // Where it is already (a viewer's repeated request): nothing to relight.
+            return Ok(());
+        }
         match &mut self.relit {
             Some(r) => {
                 let ill = RelitIllumination {

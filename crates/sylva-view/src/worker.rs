@@ -435,7 +435,8 @@ impl Worker {
 
     /// Moves the scene's sun (shared by every page) when it is not there already.
     fn set_sun(&mut self, to_sun: glam::Vec3) -> Result<(), String> {
-        if (self.scene.to_sun - to_sun).length() < 1e-7 {
+        if self.scene.to_sun == to_sun.normalize_or_zero() {
+            // Not moved: keep the last move's time for the frame header.
             return Ok(());
         }
         let t = Instant::now();

@@ -21,8 +21,8 @@ use sylva_render::ToneMap;
 
 use super::progress::bar;
 use super::render::{
-    prepare, FrameArgs, GridArgs, LbArgs, PrepareRequest, RelightLightArg, RelitArgs,
-    RenderLightArgs, SunArgs, ViewArgs, SCENE_HELP,
+    prepare, FrameArgs, GridArgs, LbArgs, PrepareRequest, RelightLightArg, RelitArgs, ViewArgs,
+    SCENE_HELP,
 };
 use super::sun_time::SunDayArgs;
 
@@ -87,19 +87,13 @@ impl RelightArgs {
     /// The frame options `prepare` reads: these, with the scene's sun (the path replaces it)
     /// and the paper light's settings.
     fn frame(&self) -> FrameArgs {
-        FrameArgs {
-            scene: self.scene.clone(),
-            view: self.view.clone(),
-            sun: SunArgs::default(),
-            light: RenderLightArgs {
-                light: self.light.light.clone(),
-                gather_rays: self.gather_rays,
-                ..RenderLightArgs::default()
-            },
-            lb: self.lb.clone(),
-            relit: self.relit.clone(),
-            grid: self.grid.clone(),
-        }
+        FrameArgs::relit(
+            &self.scene,
+            &self.view,
+            &self.light.light,
+            self.gather_rays,
+            (&self.lb, &self.relit, &self.grid),
+        )
     }
 }
 

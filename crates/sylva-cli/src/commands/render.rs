@@ -270,6 +270,33 @@ pub struct FrameArgs {
     pub grid: GridArgs,
 }
 
+impl FrameArgs {
+    /// The frame options of a command that relights (`relight`, `view`): its own view, LB,
+    /// relighting and grid options, the scene's sun (the command moves it), `light` and
+    /// `gather_rays`, the rest as `render`'s defaults.
+    pub fn relit(
+        scene: &str,
+        view: &ViewArgs,
+        light: &Option<String>,
+        gather_rays: u32,
+        (lb, relit, grid): (&LbArgs, &RelitArgs, &GridArgs),
+    ) -> FrameArgs {
+        FrameArgs {
+            scene: scene.to_string(),
+            view: view.clone(),
+            sun: SunArgs::default(),
+            light: RenderLightArgs {
+                light: light.clone(),
+                gather_rays,
+                ..RenderLightArgs::default()
+            },
+            lb: lb.clone(),
+            relit: relit.clone(),
+            grid: grid.clone(),
+        }
+    }
+}
+
 /// The light as `--light`, `--basis` and the relighting options ask for it.
 pub fn light_settings(
     light: Option<String>,

@@ -11,8 +11,8 @@ use sylva_pipeline::{relight_light, Local};
 use sylva_view::{ReadyScene, ServeOptions, Server, WorkerOptions};
 
 use super::render::{
-    prepare, FrameArgs, GridArgs, LbArgs, PrepareRequest, RelightLightArg, RelitArgs,
-    RenderLightArgs, Say, SunArgs, ViewArgs, SCENE_HELP,
+    prepare, FrameArgs, GridArgs, LbArgs, PrepareRequest, RelightLightArg, RelitArgs, Say,
+    ViewArgs, SCENE_HELP,
 };
 
 /// What `sylva view` and `sylva bench view` share: the scene and how it is lit and shown.
@@ -48,19 +48,13 @@ pub struct ViewSceneArgs {
 
 impl ViewSceneArgs {
     fn frame(&self) -> FrameArgs {
-        FrameArgs {
-            scene: self.scene.clone(),
-            view: self.view.clone(),
-            sun: SunArgs::default(),
-            light: RenderLightArgs {
-                light: self.light.light.clone(),
-                gather_rays: self.gather_rays,
-                ..RenderLightArgs::default()
-            },
-            lb: self.lb.clone(),
-            relit: self.relit.clone(),
-            grid: self.grid.clone(),
-        }
+        FrameArgs::relit(
+            &self.scene,
+            &self.view,
+            &self.light.light,
+            self.gather_rays,
+            (&self.lb, &self.relit, &self.grid),
+        )
     }
 
     fn worker(&self, output_dir: PathBuf) -> WorkerOptions {

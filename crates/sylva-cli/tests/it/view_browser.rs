@@ -176,21 +176,7 @@ fn the_page_drags_the_sun_in_chromium_and_the_light_follows_without_an_lb_solve(
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let cache = dir.path().join("cache");
-    let viewer = Viewer::start(&[
-        "shade",
-        "--port",
-        "0",
-        // A small grid: the scene's bases are solved first, beside the other tests.
-        "--lb-grid",
-        "16",
-        "--samples",
-        "4",
-        "--cache-dir",
-        cache.to_str().unwrap(),
-        "--output",
-        dir.path().to_str().unwrap(),
-    ]);
+    let viewer = Viewer::shade(dir.path(), &["--samples", "4"]);
     let driver = Driver::start(&chromedriver, &chromium);
     driver.session("POST", "/url", json!({"url": viewer.url}));
     driver.wait_for(

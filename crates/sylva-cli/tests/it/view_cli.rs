@@ -52,6 +52,25 @@ impl Viewer {
         (status.success(), lines)
     }
 
+    /// `sylva view shade` on a 16-cell grid (its bases solved in seconds), caching and
+    /// saving under `dir`, with `extra` arguments.
+    pub fn shade(dir: &std::path::Path, extra: &[&str]) -> Viewer {
+        let cache = dir.join("cache");
+        let mut args = vec![
+            "shade",
+            "--port",
+            "0",
+            "--lb-grid",
+            "16",
+            "--cache-dir",
+            cache.to_str().unwrap(),
+            "--output",
+            dir.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        Viewer::start(&args)
+    }
+
     /// Host and port of the URL.
     pub fn authority(&self) -> String {
         self.url
@@ -123,18 +142,7 @@ fn view_refuses_bad_input_before_it_serves() {
 #[test]
 fn view_serves_the_page_with_its_token_and_ctrl_c_stops_it() {
     let dir = tempfile::tempdir().unwrap();
-    let cache = dir.path().join("cache");
-    let viewer = Viewer::start(&[
-        "shade",
-        "--port",
-        "0",
-        "--lb-grid",
-        "16",
-        "--cache-dir",
-        cache.to_str().unwrap(),
-        "--output",
-        dir.path().to_str().unwrap(),
-    ]);
+    let viewer = Viewer::shade(dir.path(), &[]);
     assert!(
         viewer.url.starts_with("http://127.0.0.1:"),
         "{}",
