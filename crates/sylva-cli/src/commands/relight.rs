@@ -83,20 +83,6 @@ pub struct RelightArgs {
     pub gather_rays: u32,
 }
 
-impl RelightArgs {
-    /// The frame options `prepare` reads: these, with the scene's sun (the path replaces it)
-    /// and the paper light's settings.
-    fn frame(&self) -> FrameArgs {
-        FrameArgs::relit(
-            &self.scene,
-            &self.view,
-            &self.light.light,
-            self.gather_rays,
-            (&self.lb, &self.relit, &self.grid),
-        )
-    }
-}
-
 pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
     let root = runner.is_root();
     // The physical and the paper light have base solutions: another is refused before the
@@ -142,7 +128,14 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
         false => Ok(()),
     };
     let p = prepare(
-        &a.frame(),
+        // Its own options, with the scene's sun (the path replaces it).
+        &FrameArgs::relit(
+            &a.scene,
+            &a.view,
+            &a.light.light,
+            a.gather_rays,
+            (&a.lb, &a.relit, &a.grid),
+        ),
         PrepareRequest {
             need_lb: true,
             rays_per_pixel: a.rpp,

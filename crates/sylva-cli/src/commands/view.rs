@@ -47,16 +47,6 @@ pub struct ViewSceneArgs {
 }
 
 impl ViewSceneArgs {
-    fn frame(&self) -> FrameArgs {
-        FrameArgs::relit(
-            &self.scene,
-            &self.view,
-            &self.light.light,
-            self.gather_rays,
-            (&self.lb, &self.relit, &self.grid),
-        )
-    }
-
     fn worker(&self, output_dir: PathBuf) -> WorkerOptions {
         WorkerOptions {
             max_pixels: self.max_pixels,
@@ -76,7 +66,13 @@ impl ViewSceneArgs {
         lon: f64,
     ) -> Result<ReadyScene, String> {
         let p = prepare(
-            &self.frame(),
+            &FrameArgs::relit(
+                &self.scene,
+                &self.view,
+                &self.light.light,
+                self.gather_rays,
+                (&self.lb, &self.relit, &self.grid),
+            ),
             PrepareRequest {
                 need_lb: true,
                 rays_per_pixel: Some(2),
