@@ -525,8 +525,10 @@ pub struct PreparedScene {
     pub lb_models_cached: usize,
     /// The physical light's forest grid, when the scene was lit through it.
     pub forest: Option<ForestLight>,
-    /// Seconds the physical light's base solutions took, when they were solved now.
+    /// Seconds the physical light's base solutions took, when they were solved now (or as
+    /// their compressed cache entries recorded), and its forest grid's parts.
     pub basis_solve_seconds: Option<f64>,
+    pub forest_basis_seconds: Option<f64>,
 }
 
 /// The unit vector towards the scene's sun.
@@ -796,6 +798,7 @@ impl PreparedScene {
             None => (None, Vec::new()),
         };
         let basis_solve_seconds = physical.as_ref().and_then(|p| p.solve_seconds);
+        let forest_basis_seconds = physical.as_ref().and_then(|p| p.forest_seconds);
         let physical_raw_bytes = physical.as_ref().map_or(0, |p| p.raw_bytes);
         let spare_physical: Vec<Option<StoredPhysicalBasis>> = match &mut physical {
             Some(p) => std::mem::take(&mut p.raw)
@@ -847,6 +850,7 @@ impl PreparedScene {
         Ok(PreparedScene {
             forest: None,
             basis_solve_seconds,
+            forest_basis_seconds,
             materials,
             gpu_frame,
             gpu_shading_note,

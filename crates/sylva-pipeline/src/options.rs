@@ -24,8 +24,8 @@ fn refuse(message: String) -> OptionError {
 /// Whether the LB light of plants comes from base solutions (`--basis`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum BasisChoice {
-    /// Under the paper light, base solutions when every model's are cached, else solved for
-    /// the sun; other lights solve for the sun.
+    /// Base solutions when every model's are cached (the physical light's or the paper
+    /// light's), else solved for the sun; the SPP light solves for the sun.
     Auto,
     /// Base solutions, solved and cached where missing; not the SPP light.
     Always,
@@ -95,8 +95,8 @@ impl LightSettings {
     /// The relighting plan under light `light` (`None`: per-sun LB light). `force`: base
     /// solutions whatever `basis` says (`Auto` then solves missing ones); `keep_raw`: keep
     /// the uncompressed bases too. The physical and the paper light have base solutions
-    /// (`Always` with the SPP light is an error); `Auto` on the physical light solves for
-    /// the sun (exact at that sun: docs/relight.md).
+    /// (`Always` with the SPP light is an error); `Auto` takes them when every model's are
+    /// cached, else solves for the sun (docs/relight.md).
     pub fn plan(
         &self,
         force: bool,
@@ -118,7 +118,7 @@ impl LightSettings {
                         .into(),
                 ))
             }
-            (BasisChoice::Auto, false) if !paper => return Ok(None),
+            (BasisChoice::Auto, false) if light == "spp" => return Ok(None),
             (BasisChoice::Auto, false) => BasisUse::IfCached,
             _ => BasisUse::Always,
         };
@@ -251,15 +251,15 @@ mod tests {
         }
     }
 
-    /// `--basis` against the light and the command: auto solves for the sun except under
-    /// the paper light, a command that relights always has a plan, and the lights without
-    /// base solutions are refused where bases are asked for.
+    /// `--basis` against the light and the command: auto takes cached bases of the physical
+    /// and the paper light (the SPP light has none), a command that relights always has a
+    /// plan, and the lights without base solutions are refused where bases are asked for.
     #[test]
     fn basis_choice_against_light_and_command() {
         let s = settings();
         let auto = s.choose(false, false, true).unwrap();
         assert_eq!((auto.name, auto.light), ("physical", Light::Physical));
-        assert!(auto.relight.is_none());
+        assert_eq!(auto.relight.unwrap().basis, BasisUse::IfCached);
         assert_eq!(auto.forest, Some(GlobalGridOptions { sites: 64 }));
         let paper = LightSettings {
             light: Some("paper".into()),

@@ -58,6 +58,9 @@ pub struct PhysicalRelighting {
     /// Seconds the parts' solves took: solved now, or as recorded in the compressed entries
     /// (`None` when some came from the cache without a record).
     pub solve_seconds: Option<f64>,
+    /// Seconds the forest grid's parts took (solved in every preparation: they are small
+    /// and not cached); `None` without a forest grid.
+    pub forest_seconds: Option<f64>,
     /// Bytes of every model's parts uncompressed (16 × 3 f32 per site).
     pub raw_bytes: u64,
 }
@@ -349,7 +352,8 @@ pub fn precompute_physical(
                         model,
                         key,
                     ));
-                    if let (Some(reason), LightingSource::Cached) = (bad[m].take(), &r.source) {
+                    // A damaged or stale entry was replaced: say why.
+                    if let Some(reason) = bad[m].take() {
                         r.source = LightingSource::Recomputed { reason };
                     }
                     r.seconds += t.elapsed().as_secs_f64();
@@ -389,6 +393,7 @@ pub fn precompute_physical(
         .sum();
 
     // The forest grid's parts: every process solves them (deterministic, and small).
+    let mut forest_seconds = None;
     let forest = match (in_forest, forest) {
         (true, Some(gopts)) => {
             let fine: Vec<(&DensityGrid, _)> = own.iter().zip(&media).collect();
@@ -404,11 +409,13 @@ pub fn precompute_physical(
                 })
                 .collect();
             progress.start("forest grid parts", ForestBases::SOLVES as u64);
+            let t = Instant::now();
             let ground = illum.ground.map(|g| g.as_dvec3().to_array());
             let bases = ForestBases::solve(&instances, ground, 0.0, gopts, &mut |done, total| {
                 progress.set(done as u64, total as u64)
             });
             progress.finish();
+            forest_seconds = Some(t.elapsed().as_secs_f64());
             Some(bases.map_err(|source| PipelineError::Global {
                 scene: scene.name.clone(),
                 source,
@@ -422,6 +429,7 @@ pub fn precompute_physical(
         forest,
         cached,
         solve_seconds,
+        forest_seconds,
         raw_bytes,
     }))
 }

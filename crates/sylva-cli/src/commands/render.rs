@@ -29,8 +29,9 @@ use super::sun_time::SunTimeArgs;
 /// (13 sun parts and 3 diffuse parts per model) or, with --light paper, 004's (docs/relight.md).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum BasisArg {
-    /// Under --light paper, base solutions when every model's are cached (`sylva basis`),
-    /// else solved for the sun; other lights solve for the sun.
+    /// Base solutions when every model's are cached (`sylva basis`; the physical light's
+    /// or, with --light paper, 004's), else solved for the sun; the SPP light solves for the
+    /// sun.
     Auto,
     /// Base solutions, solved and cached where missing (paper 004: any sun, rotated
     /// instances lit correctly, the forest or global grid relit); not the SPP light.
@@ -146,8 +147,8 @@ pub struct RenderLightArgs {
     )]
     pub gather_rays: u32,
     /// LB light from base solutions (always: the physical light's 16 parts per model or,
-    /// with --light paper, 004's bases), solved for the sun (never), or (auto) solved for the
-    /// sun under the physical light, the paper light's bases when all are cached.
+    /// with --light paper, 004's bases), solved for the sun (never), or (auto) the bases
+    /// when all are cached, else solved for the sun.
     #[arg(long, value_enum, default_value = "auto")]
     pub basis: BasisArg,
 }

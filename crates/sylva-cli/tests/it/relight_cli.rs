@@ -217,6 +217,33 @@ fn the_physical_light_moves_with_the_sun_from_its_bases() {
         "{stdout}"
     );
     assert!(out.is_file());
+    // `--basis auto` (the default) takes the cached bases, and solves for the sun where
+    // there are none.
+    let mut args = vec!["render", scene, "-o", out.to_str().unwrap()];
+    args.extend(common);
+    let (ok, stdout, stderr) = sylva(&args);
+    assert!(ok, "{stdout}{stderr}");
+    assert!(
+        stdout.contains("the physical light relit") && !stdout.contains("solved"),
+        "{stdout}"
+    );
+    let empty = dir.path().join("empty-cache");
+    let args = [
+        "render",
+        scene,
+        "-o",
+        out.to_str().unwrap(),
+        "--cache-dir",
+        empty.to_str().unwrap(),
+        "--global-grid",
+        "24",
+    ];
+    let (ok, stdout, stderr) = sylva(&args);
+    assert!(ok, "{stdout}{stderr}");
+    assert!(
+        !stdout.contains("the physical light relit") && stdout.contains("solved"),
+        "{stdout}"
+    );
 
     // The benchmark measures the relit frame against the per-sun light's.
     let mut args = vec![

@@ -938,6 +938,31 @@ fn compressed_channels_of_any_parts_round_trip() {
             assert!(e.to_string().contains("compressed parts"), "{e}");
         }
     }
+    // Two sets on one grid looked up together (one footprint, one Haar kernel) give the sum
+    // of their lookups.
+    let rest = |c: usize, s: usize| ch[9 + c][s];
+    let lossy = |codec| CompressTarget::new(codec);
+    for (a, b) in [
+        (
+            Codec::ColourHaar { threshold: 4e-3 },
+            Codec::Haar { threshold: 1e-2 },
+        ),
+        (
+            Codec::ColourHaar { threshold: 4e-3 },
+            Codec::Pca { rank: 4 },
+        ),
+    ] {
+        let x = compress_channels(dims, 9, &value, &scales, &all, &lossy(a)).unwrap();
+        let y = compress_channels(dims, 9, &rest, &[1.0; 9], &all, &lossy(b)).unwrap();
+        let (wx, wy) = (x.project(&terms), y.project(&[(1, [0.3, 0.2, 0.1])]));
+        for g in points(&all, 300) {
+            let both = x.sample_grid_with(&wx, &y, &wy, g);
+            let (p, q) = (x.sample_grid(g, &wx), y.sample_grid(g, &wy));
+            for k in 0..3 {
+                assert!((both[k] - (p[k] + q[k])).abs() < 1e-5, "{a:?} {b:?} {g:?}");
+            }
+        }
+    }
     // A rank above the channels, or channels that are not three colours per part.
     let pca = |rank| CompressTarget::new(Codec::Pca { rank });
     let e = compress_channels(dims, 9, &value, &scales, &all, &pca(10)).unwrap_err();

@@ -463,8 +463,7 @@ impl StoredPhysicalBasis {
             (StoredPhysicalBasis::Full(b), PhysicalTerms::Full(t)) => b.sample(p, t),
             (StoredPhysicalBasis::Compressed(c), PhysicalTerms::Compressed(sun, diffuse)) => {
                 let g = c.placement.grid_coords(p.to_array());
-                let (a, b) = (c.sun.sample_grid(g, sun), c.diffuse.sample_grid(g, diffuse));
-                Vec3::from_array(a) + Vec3::from_array(b)
+                Vec3::from_array(c.sun.sample_grid_with(sun, &c.diffuse, diffuse, g))
             }
             _ => panic!("terms projected for another kind of physical basis"),
         }

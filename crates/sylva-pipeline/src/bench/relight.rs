@@ -392,6 +392,8 @@ pub struct PhysicalRelightBench {
     /// The base solutions' solve time: solved now, or as recorded in the compressed cache
     /// entries (`None`: parts read from the cache, whose solve time is not recorded).
     pub basis_seconds: Option<f64>,
+    /// The forest grid's parts (45 coarse solves, made in every preparation).
+    pub forest_basis_seconds: Option<f64>,
     /// Bytes of the models' bases uncompressed (16 parts × 3 colours, f32).
     pub basis_bytes: u64,
     /// The parts' compression (`--codec`: the sun parts' and the diffuse parts'), or `none`.
@@ -543,6 +545,7 @@ pub fn relight_physical(
         static_frame_seconds: t.static_seconds,
         ratio_to_static: frame_seconds / t.static_seconds,
         basis_seconds: prepared.basis_solve_seconds,
+        forest_basis_seconds: prepared.forest_basis_seconds,
         basis_bytes: prepared.physical_raw_bytes,
         codec,
         compressed_bytes,
@@ -820,11 +823,14 @@ impl fmt::Display for PhysicalRelightBench {
         )?;
         writeln!(
             f,
-            "base solutions: {} uncompressed (16 parts per model), {}; prepared in {:.1} s",
+            "base solutions: {} uncompressed (16 parts per model), {}{}; prepared in {:.1} s",
             format_bytes(self.basis_bytes),
             self.basis_seconds
                 .map(|s| format!("{s:.1} s of solves"))
                 .unwrap_or_else(|| "solve time not recorded".into()),
+            self.forest_basis_seconds
+                .map(|s| format!(", forest grid parts {s:.1} s"))
+                .unwrap_or_default(),
             self.prepare_seconds
         )?;
         if let (Some(c), Some(sun), Some(diffuse)) = (

@@ -442,8 +442,27 @@ impl HaarFields {
     /// finds every field.
     #[inline]
     pub fn sample_into(&self, fp: &Footprint, terms: &[(u32, [f32; 3])], out: &mut [f32; 3]) {
+        let (b, k) = self.block_kernel(fp);
+        self.sample_block(b, &k, terms, out);
+    }
+
+    /// The block answering a lookup at `fp` and its kernel: the same for every set of fields
+    /// on the same grid, so several sets can share them ([`HaarFields::sample_block`]).
+    #[inline]
+    pub(crate) fn block_kernel(&self, fp: &Footprint) -> (usize, [f32; BLOCK_VALUES]) {
         let (b, o) = self.block_of(fp.corner);
-        let k = kernel(o, fp.t);
+        (b, kernel(o, fp.t))
+    }
+
+    /// [`HaarFields::sample_into`] with the block and kernel of [`HaarFields::block_kernel`].
+    #[inline]
+    pub(crate) fn sample_block(
+        &self,
+        b: usize,
+        k: &[f32; BLOCK_VALUES],
+        terms: &[(u32, [f32; 3])],
+        out: &mut [f32; 3],
+    ) {
         let counts = &self.counts[b * self.fields..(b + 1) * self.fields];
         let mut pos = self.starts[b] as usize;
         let mut next = 0usize;
@@ -451,7 +470,7 @@ impl HaarFields {
             let f = f as usize;
             pos += counts[next..f].iter().map(|&c| c as usize).sum::<usize>();
             let n = counts[f] as usize;
-            let v = self.coefs.dot(f, pos..pos + n, &k);
+            let v = self.coefs.dot(f, pos..pos + n, k);
             pos += n;
             next = f + 1;
             for c in 0..3 {

@@ -799,6 +799,40 @@ impl CompressedChannels {
     pub fn decompress(&self) -> Result<Vec<Vec<f32>>, RelightError> {
         self.encoded.decode_channels(self.dims, "compressed parts")
     }
+
+    /// `self`'s combination `w` plus `other`'s combination `v` at grid coordinates `g`: the
+    /// sum of the two [`CompressedChannels::sample_grid`]s, the footprint found once and, when
+    /// both are Haar sets on one grid, its kernel built once for both.
+    #[inline]
+    pub fn sample_grid_with(
+        &self,
+        w: &ProjectedWeights,
+        other: &CompressedChannels,
+        v: &ProjectedWeights,
+        g: [f32; 3],
+    ) -> [f32; 3] {
+        if let (Store::Haar(a), Store::Haar(b), true) = (
+            &self.encoded.store,
+            &other.encoded.store,
+            self.dims == other.dims,
+        ) {
+            for (x, set) in [(w, self), (v, other)] {
+                assert_eq!(
+                    x.fields,
+                    set.fields(),
+                    "weights projected for a compressed set with another number of fields"
+                );
+            }
+            let fp = Footprint::at(self.dims, g);
+            let (block, k) = a.block_kernel(&fp);
+            let mut out: [f32; 3] = std::array::from_fn(|c| w.constant[c] + v.constant[c]);
+            a.sample_block(block, &k, &w.terms, &mut out);
+            b.sample_block(block, &k, &v.terms, &mut out);
+            return out;
+        }
+        let (x, y) = (self.sample_grid(g, w), other.sample_grid(g, v));
+        [x[0] + y[0], x[1] + y[1], x[2] + y[2]]
+    }
 }
 
 /// Travel directions of `n` suns spread evenly over the sky (above the horizon, equal areas
