@@ -47,18 +47,18 @@ enum Command {
     /// light through leaves and LB indirect light, e.g. `sylva render beech --rpp 4 --hdr`;
     /// the sun of a place and moment with `--lat 48.1 --lon 11.6 --date 2026-06-21 --time 14:30`.
     Render(commands::render::RenderArgs),
-    /// Precompute every model's 19 base solutions (paper 004), compressed and cached, and the
-    /// scene's coarse global grid: afterwards the sun moves with no LB solve, e.g.
-    /// `sylva basis canopy` (`--device gpu` solves on the GPU; `mpirun -np N sylva basis`
-    /// across processes, with the `mpi` feature). Base solutions are the paper light's
-    /// (`--light paper`, the default here; docs/relight.md).
+    /// Precompute every model's base solutions, compressed and cached: afterwards the sun
+    /// moves with no LB solve, e.g. `sylva basis canopy` (`--device gpu` solves on the GPU;
+    /// `mpirun -np N sylva basis` across processes, with the `mpi` feature). The physical
+    /// light's 13 sun parts and 3 diffuse parts per model (the default), or with `--light
+    /// paper` 004's 19 bases and the scene's coarse global grid (docs/relight.md).
     Basis(commands::basis::BasisArgs),
     /// Relight a scene over a moving sun (004 Table 1): numbered PNGs, an animated PNG and
     /// per-frame times, e.g. `sylva relight catalpa --suns 24`; or the sun's path over a day
     /// at a place, a frame per step named by its local time, e.g. `sylva relight demo --lat
     /// 48.1 --lon 11.6 --date 2026-06-21 --from 05:00 --to 21:00 --step 15m` (NREL's SPA;
-    /// north is -z, east +x). Under the paper light, whose base solutions these are
-    /// (`--light paper`, the default here).
+    /// north is -z, east +x). The physical light from its base solutions (`sylva basis`; the
+    /// default), or 004's paper light with `--light paper`.
     Relight(commands::relight::RelightArgs),
     /// Measure speed on this machine: `bench lb` (LB solver against copy bandwidth),
     /// `bench scene` (generation and scene building), `bench voxelize`, `bench trace`

@@ -86,6 +86,7 @@ use sylva_light::lighting::{
 };
 use sylva_light::media::{prepare_medium, Media, MediumSolve};
 pub use sylva_light::progress::{Progress, Silent};
+pub use sylva_light::relight::{BakeSummary, DEFAULT_BAKE_BUDGET};
 use sylva_light::relight::{
     BasisCacheOptions, BasisPlan, GlobalGridOptions, GlobalInstance, GlobalLight, GlobalReport,
     ModelBasis, PhysicalRelitLight, PhysicalTarget, RelitIllumination, RelitLight, StoredBasis,
@@ -511,6 +512,8 @@ pub struct PreparedScene {
     spare_physical: Vec<Option<StoredPhysicalBasis>>,
     /// Bytes of the physical light's parts uncompressed, when it is relit.
     pub physical_raw_bytes: u64,
+    /// Bytes the physical light relit may decode per sun ([`PreparedScene::set_bake_budget`]).
+    bake_budget: u64,
     uncompressed: bool,
     shadows: ShadowMethod,
     /// The sun-aligned shadow grid (CPU tracer only: a GPU tracer answers shadow rays with
@@ -863,6 +866,7 @@ impl PreparedScene {
             spare_physical,
             physical_raw_bytes,
             uncompressed: false,
+            bake_budget: DEFAULT_BAKE_BUDGET,
             shadows: opts.shadows,
             sun_grid,
             to_sun,
@@ -870,6 +874,21 @@ impl PreparedScene {
             lb_models_cached,
             scene,
         })
+    }
+
+    /// Bytes the physical light relit may decode per sun for the frames that read it often
+    /// (default [`DEFAULT_BAKE_BUDGET`]; 0: none, every lookup decodes the parts). From the
+    /// next sun on (a sun already decoded keeps its decoding).
+    pub fn set_bake_budget(&mut self, bytes: u64) {
+        self.bake_budget = bytes;
+    }
+
+    /// What decoding the physical light relit for the current sun did, once a frame made
+    /// it worthwhile ([`PhysicalRelitLight::bake_for_frame`]).
+    pub fn bake_summary(&self) -> Option<BakeSummary> {
+        self.physical
+            .as_ref()
+            .and_then(PhysicalRelitLight::bake_summary)
     }
 
     /// The indirect light frames use: the relit light when there is one, else the per-sun
@@ -1101,6 +1120,14 @@ impl PreparedScene {
                 }
             }
             (light, _, _) => {
+                if let (None, Some(p)) = (light, &self.physical) {
+                    // The relit light decoded once for this sun when the frame reads it more
+                    // often than it has sites.
+                    let lookups = settings.region.pixels()
+                        * u64::from(settings.rays_per_pixel)
+                        * (1 + u64::from(settings.shading.gather_rays));
+                    p.bake_for_frame(lookups, self.bake_budget);
+                }
                 let light = light.unwrap_or(self.indirect());
                 match (&self.tracer, &self.sun_grid) {
                     (Tracer::Cpu(cpu), Some(grid)) => {

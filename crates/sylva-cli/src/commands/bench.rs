@@ -41,8 +41,9 @@ enum BenchCommand {
     Spp(super::bench_spp::BenchSppArgs),
     /// Relighting (004 Table 1): frame time over 24 suns (kd-tree and sun-grid shadows)
     /// against the static frame, basis solve time, compressed bytes, image RMSE of the
-    /// compression (default scene: demo; 004 measured catalpa and canopy). Under the paper
-    /// light, whose base solutions these are.
+    /// compression (default scene: demo; 004 measured catalpa and canopy). The physical light
+    /// from its base solutions (the default; `--against-direct` also against the light solved
+    /// per sun), or 004's paper light with `--light paper`.
     Relight(super::bench_relight::BenchRelightArgs),
     /// The viewer (`sylva view`) driven as the page drives it: input-to-frame latency and
     /// frames per second while the sun is dragged, and the refined frame's delay after the

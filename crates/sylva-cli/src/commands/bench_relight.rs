@@ -1,6 +1,7 @@
 //! `sylva bench relight SCENE`: 004 Table 1 on this machine (`sylva_pipeline::bench`): relit
-//! frame times over a sequence of suns against the static frame; for the paper light
-//! (`--light paper`) also the base solutions' cost and the image error of their compression.
+//! frame times over a sequence of suns against the static frame, the base solutions' cost and
+//! the image error of their compression; on the physical light (the default) also against the
+//! light solved per sun (`--against-direct`).
 
 use std::time::Instant;
 

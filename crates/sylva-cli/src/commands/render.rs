@@ -132,7 +132,7 @@ pub struct RenderLightArgs {
     /// (the paper's shading with the plane-parallel light and G-factor of 003 §5 instead of
     /// LB grids: deep opacity maps in 16 directions, 16³ instance grids, leaf albedo from the
     /// scene's [lb] preset; the `lb` mode shows the SPP light alone).
-    /// [default: physical; paper for the commands that relight: basis, relight, bench relight]
+    /// [default: physical]
     #[arg(long, value_parser = ["physical", "paper", "spp"])]
     pub light: Option<String>,
     /// Physical light: final-gather rays per camera sample on a plant, 0 to 256: the light

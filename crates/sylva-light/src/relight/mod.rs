@@ -34,9 +34,9 @@ pub use global::{
     GLOBAL_EXTENSION,
 };
 pub use light::{ProjectedLight, RelitLight, StoredBasis};
-pub use physical::{PhysicalBasis, PhysicalRelitLight};
+pub use physical::{BakeSummary, PhysicalBasis, PhysicalRelitLight, DEFAULT_BAKE_BUDGET};
 pub use physical_basis::{
-    CompressedPhysicalBasis, PhysicalTarget, PhysicalTerms, StoredPhysicalBasis,
+    BakedLight, CompressedPhysicalBasis, PhysicalTarget, PhysicalTerms, StoredPhysicalBasis,
 };
 pub use weights::{RelitIllumination, SunWeights};
 

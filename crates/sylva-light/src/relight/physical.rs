@@ -21,13 +21,16 @@
 //! a boundary sun, while the physical sun enters as its first collisions along the exact
 //! direction, which no lattice direction's solve holds.
 
+use std::collections::HashMap;
+use std::sync::{Arc, OnceLock};
+
 use glam::{Affine3A, Vec3};
 use sylva_geom::{Aabb, Model};
 use sylva_lb::LightingGrid;
 use sylva_trace::TraceInstance;
 
 pub use super::physical_basis::{
-    CompressedPhysicalBasis, PartTerms, PhysicalBasis, PhysicalTarget, PhysicalTerms,
+    BakedLight, CompressedPhysicalBasis, PartTerms, PhysicalBasis, PhysicalTarget, PhysicalTerms,
     StoredPhysicalBasis, PARTS,
 };
 pub use super::sun_parts::{overhead_part, sun_part_weights, SUN_DIRECTIONS, SUN_PARTS};
@@ -89,6 +92,55 @@ struct InstanceLight {
     ground_parts: PartTerms,
 }
 
+/// The current sun's light decoded at every site ([`PhysicalRelitLight::bake_for_frame`]).
+#[derive(Debug)]
+struct Baked {
+    /// Per instance (shared by the instances of one model with the same terms).
+    instances: Vec<Option<Arc<BakedLight>>>,
+    summary: BakeSummary,
+}
+
+/// Bytes of decoded light [`PhysicalRelitLight::bake_for_frame`] may hold by default: a lone tree at
+/// grid 128 takes 19 MB, so a dozen distinct instances fit.
+pub const DEFAULT_BAKE_BUDGET: u64 = 256 << 20;
+
+/// What [`PhysicalRelitLight::bake_for_frame`] did.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct BakeSummary {
+    /// Instances whose lookups read decoded light.
+    pub instances: usize,
+    /// Of all instances with a basis.
+    pub of: usize,
+    /// Grids decoded (instances of one model with equal terms share one).
+    pub grids: usize,
+    pub bytes: u64,
+    pub seconds: f64,
+}
+
+/// A key equal for equal terms (their bits).
+fn terms_key(terms: &PhysicalTerms) -> Vec<u32> {
+    let mut key = Vec::new();
+    match terms {
+        PhysicalTerms::Full(t) => {
+            for (part, w) in t {
+                key.push(*part as u32);
+                key.extend(w.to_array().map(f32::to_bits));
+            }
+        }
+        PhysicalTerms::Compressed(sun, diffuse) => {
+            for set in [sun, diffuse] {
+                key.extend(set.constant().map(f32::to_bits));
+                for (f, w) in set.terms() {
+                    key.push(*f);
+                    key.extend(w.map(f32::to_bits));
+                }
+                key.push(u32::MAX);
+            }
+        }
+    }
+    key
+}
+
 /// The physical light of every instance for the current sun from its model's
 /// [`PhysicalBasis`], weighed by the forest grid's relit weights ([`ForestBases`]) when
 /// there is a forest. Moving the sun ([`PhysicalRelitLight::relight`]) makes the weights
@@ -104,6 +156,8 @@ pub struct PhysicalRelitLight {
     /// Per instance, its part weights for the current sun (the forest's, or the free ones).
     weights: Vec<PartWeights>,
     open: OpenField,
+    /// The current sun's light decoded, once a frame asked for it.
+    baked: OnceLock<Baked>,
 }
 
 impl PhysicalRelitLight {
@@ -150,6 +204,7 @@ impl PhysicalRelitLight {
             illumination,
             weights: Vec::new(),
             open: open_field(&env),
+            baked: OnceLock::new(),
         };
         light.relight(illumination)?;
         Ok(light)
@@ -195,6 +250,7 @@ impl PhysicalRelitLight {
             inst.plant_parts = terms;
             inst.ground_parts = ground;
         }
+        self.baked = OnceLock::new();
         self.open = open_field(&env);
         self.illumination = illumination;
         Ok(())
@@ -202,6 +258,93 @@ impl PhysicalRelitLight {
 
     pub fn illumination(&self) -> Illumination {
         self.illumination
+    }
+
+    /// Groups of instances sharing a model and terms, largest first (ties in instance
+    /// order), and the instances with a basis.
+    fn bake_groups(&self) -> (Vec<Vec<usize>>, usize) {
+        let mut groups: HashMap<(u32, Vec<u32>), Vec<usize>> = HashMap::new();
+        let mut order = Vec::new();
+        for (i, inst) in self.instances.iter().enumerate() {
+            if self.models[inst.model as usize].is_none() {
+                continue;
+            }
+            let key = (inst.model, terms_key(&inst.terms));
+            let group = groups.entry(key.clone()).or_default();
+            if group.is_empty() {
+                order.push(key);
+            }
+            group.push(i);
+        }
+        let of = groups.values().map(Vec::len).sum();
+        let mut order: Vec<Vec<usize>> = order
+            .into_iter()
+            .map(|k| groups.remove(&k).expect("every key has a group"))
+            .collect();
+        order.sort_by_key(|g| std::cmp::Reverse(g.len()));
+        (order, of)
+    }
+
+    /// Before a frame of about `lookups` plant lookups (pixels × samples × (1 + gather
+    /// rays)): decodes the current sun's light at every site for as many instances as
+    /// `budget` bytes hold (the largest groups of instances sharing a model and terms first)
+    /// when the frame reads it more often than there are sites to decode, so their lookups
+    /// read 3 values instead of every part's (or, compressed, a Haar kernel per field).
+    /// Once per sun: the next [`PhysicalRelitLight::relight`] drops it. `None` when nothing
+    /// is decoded (not worth it, nothing fits, or memory refused: lookups decode the parts).
+    pub fn bake_for_frame(&self, lookups: u64, budget: u64) -> Option<BakeSummary> {
+        if let Some(b) = self.baked.get() {
+            return Some(b.summary);
+        }
+        let (groups, of) = self.bake_groups();
+        let mut chosen = Vec::new();
+        let (mut bytes, mut sites) = (0u64, 0u64);
+        for group in groups {
+            let basis = self.models[self.instances[group[0]].model as usize].as_ref()?;
+            let b = BakedLight::memory_needed(basis.dims());
+            if bytes + b > budget {
+                continue;
+            }
+            bytes += b;
+            sites += basis.dims().sites() as u64;
+            chosen.push(group);
+        }
+        if chosen.is_empty() || lookups < sites {
+            return None;
+        }
+        let baked = self.baked.get_or_init(|| {
+            let t = std::time::Instant::now();
+            let mut instances = vec![None; self.instances.len()];
+            let mut summary = BakeSummary {
+                of,
+                ..BakeSummary::default()
+            };
+            for group in chosen {
+                let first = &self.instances[group[0]];
+                let basis = self.models[first.model as usize]
+                    .as_ref()
+                    .expect("grouped instances have a basis");
+                // Memory refused: this group's lookups decode the parts.
+                let Ok(light) = basis.bake(&first.terms) else {
+                    continue;
+                };
+                let light = Arc::new(light);
+                summary.bytes += light.bytes();
+                for &i in &group {
+                    instances[i] = Some(light.clone());
+                }
+                summary.instances += group.len();
+                summary.grids += 1;
+            }
+            summary.seconds = t.elapsed().as_secs_f64();
+            Baked { instances, summary }
+        });
+        Some(baked.summary)
+    }
+
+    /// What the current sun's decoding did, once a frame made it.
+    pub fn bake_summary(&self) -> Option<BakeSummary> {
+        self.baked.get().map(|b| b.summary)
     }
 
     /// Whether the forest grid weighs the instances.
@@ -287,6 +430,13 @@ impl PhysicalRelitLight {
     #[inline]
     pub fn sample_instance(&self, instance: usize, p: Vec3) -> Option<Vec3> {
         let inst = self.instances.get(instance)?;
+        if let Some(b) = self
+            .baked
+            .get()
+            .and_then(|b| b.instances[instance].as_ref())
+        {
+            return Some(b.sample(p));
+        }
         let basis = self.models[inst.model as usize].as_ref()?;
         Some(basis.sample(p, &inst.terms))
     }

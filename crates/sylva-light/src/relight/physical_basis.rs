@@ -21,6 +21,7 @@
 use std::path::{Path, PathBuf};
 
 use glam::Vec3;
+use rayon::prelude::*;
 use serde::Serialize;
 use sylva_core::cache::{Cache, CacheKey, CacheKind, Lookup, KEY_METADATA};
 use sylva_core::container::{read_container, write_container, ByteReader, ByteWriter};
@@ -161,6 +162,39 @@ impl PhysicalBasis {
                 site += Vec3::from_array(v[part]) * w;
             }
             out += site * wt[k];
+        }
+        out
+    }
+}
+
+/// One instance's light for the current sun at every site of its model's grid
+/// ([`StoredPhysicalBasis::bake`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BakedLight {
+    dims: Dims,
+    placement: Placement,
+    values: Vec<[f32; 3]>,
+}
+
+impl BakedLight {
+    /// Bytes a baked light on `dims` holds.
+    pub fn memory_needed(dims: Dims) -> u64 {
+        dims.sites() as u64 * std::mem::size_of::<[f32; 3]>() as u64
+    }
+
+    /// Bytes held.
+    pub fn bytes(&self) -> u64 {
+        Self::memory_needed(self.dims)
+    }
+
+    /// The light at model-space point `p` (trilinear, clamped to the grid).
+    #[inline]
+    pub fn sample(&self, p: Vec3) -> Vec3 {
+        let fp = Footprint::at(self.dims, self.placement.grid_coords(p.to_array()));
+        let (sites, wt) = (fp.sites(self.dims), fp.weights());
+        let mut out = Vec3::ZERO;
+        for k in 0..8 {
+            out += Vec3::from_array(self.values[sites[k]]) * wt[k];
         }
         out
     }
@@ -469,6 +503,50 @@ impl StoredPhysicalBasis {
         }
     }
 
+    /// The combination `terms` (from this basis's [`StoredPhysicalBasis::project`]) at every
+    /// site: one sun's light for an instance, read by the frames that follow at 3 values per
+    /// lookup. From the full parts its lookups equal [`StoredPhysicalBasis::sample`]'s bit
+    /// for bit; from compressed ones they equal them at the sites and wherever the footprint
+    /// lies in one Haar block (across a block's seam they read the next block's own sites).
+    pub fn bake(&self, terms: &PhysicalTerms) -> Result<BakedLight, LightingError> {
+        let dims = self.dims();
+        sylva_core::check_memory(
+            &format!("the relit light decoded for one sun on a {dims} grid"),
+            BakedLight::memory_needed(dims),
+        )
+        .map_err(|e| LightingError::Illumination(e.to_string()))?;
+        let values = match (self, terms) {
+            (StoredPhysicalBasis::Full(b), PhysicalTerms::Full(t)) => b
+                .values
+                .par_iter()
+                .map(|v| {
+                    // As `PhysicalBasis::sample` sums a site: the same rounding.
+                    let mut site = Vec3::ZERO;
+                    for &(part, w) in t {
+                        site += Vec3::from_array(v[part]) * w;
+                    }
+                    site.to_array()
+                })
+                .collect(),
+            (StoredPhysicalBasis::Compressed(c), PhysicalTerms::Compressed(sun, diffuse)) => {
+                let mut out = vec![[0.0f32; 3]; dims.sites()];
+                c.sun.decode_combined_into(sun, &mut out);
+                c.diffuse.decode_combined_into(diffuse, &mut out);
+                out
+            }
+            _ => {
+                return Err(LightingError::Illumination(
+                    "terms projected for another kind of physical basis".into(),
+                ))
+            }
+        };
+        Ok(BakedLight {
+            dims,
+            placement: *self.placement(),
+            values,
+        })
+    }
+
     /// Every part at every site (a compressed basis decoded).
     pub fn to_full(&self) -> Result<std::borrow::Cow<'_, PhysicalBasis>, LightingError> {
         Ok(match self {
@@ -681,6 +759,64 @@ mod tests {
             ],
             vec![(12, Vec3::ONE), (SUN_PARTS + 2, Vec3::splat(0.5))],
         ]
+    }
+
+    /// A baked light reads what the lookups it replaces read: from the full parts bit for
+    /// bit everywhere; from compressed ones (the recommended target, Haar blocks) the same
+    /// at every site, and between sites within the compression's own error of the parts.
+    #[test]
+    fn baked_light_reads_as_the_lookups_it_replaces() {
+        let (basis, density) = synthetic();
+        let c = CompressedPhysicalBasis::compress(&basis, &density, &PhysicalTarget::recommended())
+            .unwrap();
+        let (full, small) = (
+            StoredPhysicalBasis::Full(basis.clone()),
+            StoredPhysicalBasis::Compressed(Box::new(c)),
+        );
+        let dims = basis.dims();
+        let mut rng = sylva_core::SplitMix64::new(8);
+        for t in terms() {
+            let (ft, st) = (full.project(&t), small.project(&t));
+            let (fb, sb) = (full.bake(&ft).unwrap(), small.bake(&st).unwrap());
+            assert_eq!(fb.bytes(), BakedLight::memory_needed(dims));
+            for _ in 0..600 {
+                let p = Vec3::new(
+                    rng.next_f64() as f32 * 2.4 - 1.2,
+                    rng.next_f64() as f32 * 2.4 - 0.2,
+                    rng.next_f64() as f32 * 2.4 - 1.2,
+                );
+                assert_eq!(fb.sample(p), full.sample(p, &ft), "full parts at {p}");
+                // Compressed: where light matters (in and next to the ball: the region the
+                // codec spends its bits on), as a leaf reads it.
+                let p = Vec3::new(0.0, 0.77, -0.08) + (p - Vec3::new(0.0, 1.0, 0.0)) * 0.4;
+                let (baked, looked_up, exact) = (sb.sample(p), small.sample(p, &st), fb.sample(p));
+                let scale = exact.max_element();
+                assert!(
+                    (baked - exact).abs().max_element() < 0.05 * scale,
+                    "{p}: baked {baked} against the parts' {exact}"
+                );
+                assert!(
+                    (baked - looked_up).abs().max_element() < 0.05 * scale,
+                    "{p}: baked {baked} against the lookup's {looked_up}"
+                );
+            }
+            for s in (0..dims.sites()).step_by(7) {
+                let (x, y, z) = dims.coords(s);
+                if x + 1 == dims.nx || y + 1 == dims.ny || z + 1 == dims.nz {
+                    continue;
+                }
+                // Just past the site, so the footprint's lower corner is the site itself
+                // whatever the rounding of model space.
+                let g = [x as f32 + 1e-4, y as f32 + 1e-4, z as f32 + 1e-4];
+                let p = Vec3::from_array(basis.placement().model_point(g));
+                let (baked, looked_up) = (sb.sample(p), small.sample(p, &st));
+                assert!(
+                    (baked - looked_up).abs().max_element()
+                        < 1e-4 * looked_up.max_element().max(1.0),
+                    "site {s}: baked {baked}, looked up {looked_up}"
+                );
+            }
+        }
     }
 
     #[test]

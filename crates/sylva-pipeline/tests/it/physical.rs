@@ -225,6 +225,49 @@ fn relit_at_a_lattice_sun_the_frame_is_the_solved_one_and_moving_the_sun_solves_
     assert!(relit.set_sun(Vec3::new(0.3, -0.5, 0.1)).is_err());
 }
 
+/// A frame that reads the relit light more often than its grids have sites decodes the
+/// sun's light once ([`PreparedScene::bake_summary`]): from the parts it is the same frame
+/// bit for bit, from compressed ones the same within the codec's error; a small frame, or a
+/// budget of 0, decodes nothing.
+#[test]
+fn the_relit_light_decoded_for_a_sun_renders_the_same_frame() {
+    let scene = load_scene("shade", None).unwrap();
+    let mut relit = prepare(&scene, &CpuSolver, true);
+    let frame = |p: &PreparedScene, rpp: u32| {
+        let camera = p.camera(40, 30);
+        p.render(&p.settings(camera, rpp, 7), &Silent).unwrap()
+    };
+    let (first, second) = (
+        Sun::from_angles(35.0, 20.0).unwrap().to_sun(),
+        Sun::from_angles(50.0, 120.0).unwrap().to_sun(),
+    );
+    let (first, second) = (
+        Vec3::new(first.x as f32, first.y as f32, first.z as f32),
+        Vec3::new(second.x as f32, second.y as f32, second.z as f32),
+    );
+    relit.set_sun(first).unwrap();
+    // 40 × 30 pixels at 1 sample and 2 gather rays read fewer lookups than a 24³ grid's sites.
+    frame(&relit, 1);
+    assert_eq!(relit.bake_summary(), None);
+    relit.set_bake_budget(0);
+    relit.set_sun(second).unwrap();
+    relit.set_sun(first).unwrap();
+    let parts = frame(&relit, 16);
+    assert_eq!(relit.bake_summary(), None, "a budget of 0 decodes nothing");
+    relit.set_bake_budget(sylva_pipeline::DEFAULT_BAKE_BUDGET);
+    relit.set_sun(second).unwrap();
+    relit.set_sun(first).unwrap();
+    let baked = frame(&relit, 16);
+    let summary = relit.bake_summary().expect("decoded for a large frame");
+    let with_basis = relit.scene.instances.len();
+    assert_eq!((summary.instances, summary.of), (with_basis, with_basis));
+    assert!(summary.grids >= 1 && summary.grids <= with_basis && summary.bytes > 0);
+    let same = parts.pixels.iter().zip(&baked.pixels).all(|(a, b)| a == b);
+    assert!(same, "decoded light changed the frame");
+    let (peak, _) = compare(&parts, &baked);
+    assert!(peak > 0.0);
+}
+
 #[test]
 fn the_physical_light_takes_no_exact_weights_and_no_ambient() {
     let scene = load_scene("shade", None).unwrap();

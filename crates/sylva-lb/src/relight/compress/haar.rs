@@ -208,6 +208,41 @@ fn inverse(coefs: impl Iterator<Item = (usize, f32)>) -> [f32; BLOCK_VALUES] {
     out
 }
 
+/// The 8-point Walsh-Hadamard transform in place: `x[q] ← Σ_t x[t] σ(t, q)`.
+#[inline]
+fn walsh8(x: &mut [f32; 8]) {
+    for bit in [1, 2, 4] {
+        for i in (0..8).filter(|i| i & bit == 0) {
+            let (a, b) = (x[i], x[i | bit]);
+            x[i] = a + b;
+            x[i | bit] = a - b;
+        }
+    }
+}
+
+/// [`inverse`] of a dense coefficient block in butterflies: the coarse level's 8 means, then
+/// each cell's 8 values from its mean and 7 details (216 additions instead of 960).
+fn inverse_dense(dense: &[f32; BLOCK_VALUES]) -> [f32; BLOCK_VALUES] {
+    let mut coarse: [f32; 8] = std::array::from_fn(|t| dense[t]);
+    walsh8(&mut coarse);
+    let mut out = [0.0f32; BLOCK_VALUES];
+    for (c, &mean) in coarse.iter().enumerate() {
+        let mut cell: [f32; 8] = std::array::from_fn(|t| {
+            if t == 0 {
+                mean
+            } else {
+                dense[8 + 7 * c + t - 1]
+            }
+        });
+        walsh8(&mut cell);
+        let (cx, cy, cz) = (c >> 2, c >> 1 & 1, c & 1);
+        for (p, &v) in cell.iter().enumerate() {
+            out[local(2 * cx + (p >> 2), 2 * cy + (p >> 1 & 1), 2 * cz + (p & 1))] = v;
+        }
+    }
+    out
+}
+
 /// Significance of coefficient `k`: its RMS contribution over the block, per unit value.
 #[inline]
 fn rms_factor(k: usize) -> f32 {
@@ -489,21 +524,99 @@ impl HaarFields {
         inverse((pos..pos + n).map(|i| self.coefs.get(field, i)))
     }
 
+    /// Sites block `b` owns along axis `a`: 3b ..= 3b + 2, and up to the grid's end for the
+    /// last block.
+    fn span(&self, a: usize, b: usize) -> std::ops::RangeInclusive<usize> {
+        let d = self.dims;
+        let n = [d.nx, d.ny, d.nz];
+        let hi = if b + 1 == self.blocks[a] {
+            n[a] - 1
+        } else {
+            OWN * b + OWN - 1
+        };
+        OWN * b..=hi
+    }
+
+    /// Adds `Σ_terms w · field` at every site to `out` (site order as [`Dims::index`]; each
+    /// site from the block that owns it, as [`HaarFields::decode_field`]): the combination
+    /// of one sun decoded once, so lookups read 3 values per site instead of a kernel over
+    /// the block. `terms` sorted by field, as [`super::ProjectedWeights`] holds them. Per
+    /// block the kept coefficients are summed into one dense block per colour, then inverted.
+    pub fn decode_combined_into(&self, terms: &[(u32, [f32; 3])], out: &mut [[f32; 3]]) {
+        let d = self.dims;
+        assert_eq!(
+            out.len(),
+            d.sites(),
+            "a combination decoded onto another grid"
+        );
+        let plane = d.ny * d.nz;
+        // One slab of x planes per row of blocks along x: disjoint, so decoded in parallel
+        // and the same whatever the thread count.
+        let mut slabs = Vec::with_capacity(self.blocks[0]);
+        let mut rest = out;
+        for bx in 0..self.blocks[0] {
+            let xs = self.span(0, bx);
+            let (slab, tail) = rest.split_at_mut((xs.end() + 1 - xs.start()) * plane);
+            slabs.push((bx, slab));
+            rest = tail;
+        }
+        slabs.into_par_iter().for_each(|(bx, slab)| {
+            for by in 0..self.blocks[1] {
+                for bz in 0..self.blocks[2] {
+                    let b = (bx * self.blocks[1] + by) * self.blocks[2] + bz;
+                    let counts = &self.counts[b * self.fields..(b + 1) * self.fields];
+                    let mut dense = [[0.0f32; BLOCK_VALUES]; 3];
+                    let (mut pos, mut next) = (self.starts[b] as usize, 0usize);
+                    let mut details = false;
+                    for &(f, w) in terms {
+                        let f = f as usize;
+                        pos += counts[next..f].iter().map(|&c| c as usize).sum::<usize>();
+                        let n = counts[f] as usize;
+                        for i in pos..pos + n {
+                            let (k, v) = self.coefs.get(f, i);
+                            details |= k != 0;
+                            for c in 0..3 {
+                                dense[c][k] += w[c] * v;
+                            }
+                        }
+                        pos += n;
+                        next = f + 1;
+                    }
+                    // A block of its mean alone (most blocks away from the crown) is that
+                    // mean at every site: no transform.
+                    let values = details.then(|| dense.map(|d| inverse_dense(&d)));
+                    for x in self.span(0, bx) {
+                        for y in self.span(1, by) {
+                            let row = ((x - OWN * bx) * d.ny + y) * d.nz;
+                            for z in self.span(2, bz) {
+                                let o = &mut slab[row + z];
+                                match &values {
+                                    Some(v) => {
+                                        let l = local(x - OWN * bx, y - OWN * by, z - OWN * bz);
+                                        for c in 0..3 {
+                                            o[c] += v[c][l];
+                                        }
+                                    }
+                                    None => {
+                                        for c in 0..3 {
+                                            o[c] += dense[c][0];
+                                        }
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        });
+    }
+
     /// Field `field` at every site, each site taken from the block that owns it as a lower
     /// corner (the last plane of each axis from the last block).
     pub fn decode_field(&self, field: usize) -> Vec<f32> {
         let d = self.dims;
-        let n = [d.nx, d.ny, d.nz];
         let mut out = vec![0.0f32; d.sites()];
-        // Sites of block b along one axis: 3b ..= 3b + 2, and up to the grid's end for the last.
-        let span = |a: usize, b: usize| {
-            let hi = if b + 1 == self.blocks[a] {
-                n[a] - 1
-            } else {
-                OWN * b + OWN - 1
-            };
-            OWN * b..=hi
-        };
+        let span = |a: usize, b: usize| self.span(a, b);
         for bx in 0..self.blocks[0] {
             for by in 0..self.blocks[1] {
                 for bz in 0..self.blocks[2] {
@@ -671,6 +784,83 @@ mod tests {
     fn pseudo_random(n: usize, seed: u64) -> Vec<f32> {
         let mut r = sylva_core::SplitMix64::new(seed);
         (0..n).map(|_| r.next_f64() as f32).collect()
+    }
+
+    /// The butterfly inverse is the direct one, and a combination decoded at every site is
+    /// the weighted sum of the fields decoded one by one (on a grid whose sides are not
+    /// whole blocks, with coefficients dropped by the threshold and packed).
+    #[test]
+    fn combined_decode_is_the_sum_of_decoded_fields() {
+        for seed in 0..4 {
+            let c: [f32; 64] = pseudo_random(64, 20 + seed).try_into().unwrap();
+            let (fast, slow) = (inverse_dense(&c), inverse(c.iter().copied().enumerate()));
+            for i in 0..64 {
+                assert!(
+                    (fast[i] - slow[i]).abs() < 1e-5,
+                    "{i}: {} vs {}",
+                    fast[i],
+                    slow[i]
+                );
+            }
+        }
+        let dims = Dims::new(11, 7, 9).unwrap();
+        let fields = 5;
+        let every = 10usize.div_ceil(3) * 6usize.div_ceil(3) * 8usize.div_ceil(3) * fields * 64;
+        let noise = pseudo_random(fields * dims.sites(), 3);
+        // Half the grid constant (x ≤ 6, two rows of blocks with their means alone).
+        let half: Vec<f32> = (0..noise.len())
+            .map(|i| {
+                let (x, _, _) = dims.coords(i / fields);
+                if x <= 6 {
+                    0.3 + (i % fields) as f32
+                } else {
+                    noise[i]
+                }
+            })
+            .collect();
+        for (data, precision) in [
+            (&noise, Precision::F32),
+            (&noise, Precision::Packed),
+            (&half, Precision::F32),
+        ] {
+            let h = HaarFields::encode(
+                dims,
+                &|f, s| data[s * fields + f],
+                &vec![1.0; fields],
+                0.05,
+                0.05,
+                &Region::all(dims),
+                precision,
+            )
+            .unwrap();
+            let terms = [
+                (0u32, [0.5, 0.0, 2.0]),
+                (2, [1.0, 1.0, 1.0]),
+                (4, [-0.25, 3.0, 0.0]),
+            ];
+            let mut out = vec![[1.0f32; 3]; dims.sites()];
+            h.decode_combined_into(&terms, &mut out);
+            let decoded: Vec<Vec<f32>> = (0..fields).map(|f| h.decode_field(f)).collect();
+            let mut worst = 0.0f32;
+            for (s, o) in out.iter().enumerate() {
+                for c in 0..3 {
+                    let want = 1.0
+                        + terms
+                            .iter()
+                            .map(|&(f, w)| w[c] * decoded[f as usize][s])
+                            .sum::<f32>();
+                    worst = worst.max((o[c] - want).abs());
+                }
+            }
+            assert!(worst < 1e-4, "{precision:?}: off by {worst}");
+            // Not a trivial decode: the threshold dropped coefficients, and the values vary.
+            assert!(
+                h.coefficients() < every,
+                "{} of {every} kept",
+                h.coefficients()
+            );
+            assert!(decoded[2].iter().any(|&v| (v - decoded[2][0]).abs() > 0.1));
+        }
     }
 
     #[test]

@@ -537,6 +537,32 @@ impl Encoded {
         out
     }
 
+    /// Adds the combination `w` at every site to `out` (its constant included).
+    fn decode_combined_into(&self, dims: Dims, w: &ProjectedWeights, out: &mut [[f32; 3]]) {
+        assert_eq!(
+            w.fields,
+            self.fields(),
+            "weights projected for a compressed set with another number of fields"
+        );
+        match &self.store {
+            Store::Haar(h) => h.decode_combined_into(&w.terms, out),
+            Store::Dense(d) => out.par_iter_mut().enumerate().for_each(|(s, o)| {
+                for &(f, wf) in &w.terms {
+                    let v = d.values.get(s * d.fields + f as usize);
+                    for c in 0..3 {
+                        o[c] += wf[c] * v;
+                    }
+                }
+            }),
+        }
+        debug_assert_eq!(out.len(), dims.sites());
+        out.par_iter_mut().for_each(|o| {
+            for (v, k) in o.iter_mut().zip(w.constant) {
+                *v += k;
+            }
+        });
+    }
+
     fn sample_grid_by_full_decode(
         &self,
         dims: Dims,
@@ -798,6 +824,20 @@ impl CompressedChannels {
     /// Every channel at every site (Haar: each site from the block that owns it).
     pub fn decompress(&self) -> Result<Vec<Vec<f32>>, RelightError> {
         self.encoded.decode_channels(self.dims, "compressed parts")
+    }
+
+    /// Adds the projected combination `w` at every site to `out` (site order as
+    /// [`Dims::index`]; Haar: each site from the block that owns it): one sun's light
+    /// decoded once for the frames that follow. Lookups of it match
+    /// [`CompressedChannels::sample_grid`] at the sites, and between them wherever the
+    /// footprint lies in one block.
+    pub fn decode_combined_into(&self, w: &ProjectedWeights, out: &mut [[f32; 3]]) {
+        assert_eq!(
+            out.len(),
+            self.dims.sites(),
+            "a combination decoded onto another grid"
+        );
+        self.encoded.decode_combined_into(self.dims, w, out)
     }
 
     /// `self`'s combination `w` plus `other`'s combination `v` at grid coordinates `g`: the
