@@ -1,5 +1,6 @@
 //! Tracer benchmark: `cargo run --release -p sylva-trace --example trace_bench -- [SCENE...]
-//! [--runs N] [--stack S] [--no-obvhs] [--packets]` (default scenes: beech catalpa; 5 runs).
+//! [--runs N] [--stack S] [--no-obvhs] [--packets] [--size WxH]` (default scenes: beech
+//! catalpa; 5 runs; the scene camera's image size).
 //!
 //! `--packets` traces the primary rays of full tiles in 2×2 packets, as `sylva render`
 //! does; the shadow-ray statistics split lit from blocked rays.
@@ -286,6 +287,7 @@ fn main() {
     let mut runs = 5usize;
     let mut stack = sylva_trace::DEFAULT_STACK_SIZE;
     let mut with_obvhs = true;
+    let mut size = None;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         match a.as_str() {
@@ -293,6 +295,16 @@ fn main() {
             "--stack" => stack = it.next().and_then(|s| s.parse().ok()).expect("--stack S"),
             "--no-obvhs" => with_obvhs = false,
             "--packets" => PACKETS.store(true, std::sync::atomic::Ordering::Relaxed),
+            "--size" => {
+                let wh = it
+                    .next()
+                    .and_then(|s| s.split_once('x'))
+                    .expect("--size WxH");
+                size = Some((
+                    wh.0.parse().expect("--size WxH"),
+                    wh.1.parse().expect("--size WxH"),
+                ));
+            }
             s => scenes.push(s.to_string()),
         }
     }
@@ -306,12 +318,22 @@ fn main() {
         cfg.stack_size
     );
     for name in &scenes {
-        bench_scene(name, runs, cfg, with_obvhs);
+        bench_scene(name, runs, cfg, with_obvhs, size);
     }
 }
 
-fn bench_scene(name: &str, runs: usize, cfg: TraversalConfig, with_obvhs: bool) {
-    let scene = sylva_scene::load(name).unwrap_or_else(|e| panic!("{e}"));
+fn bench_scene(
+    name: &str,
+    runs: usize,
+    cfg: TraversalConfig,
+    with_obvhs: bool,
+    size: Option<(u32, u32)>,
+) {
+    let mut scene = sylva_scene::load(name).unwrap_or_else(|e| panic!("{e}"));
+    if let Some((w, h)) = size {
+        scene.camera.width = w;
+        scene.camera.height = h;
+    }
     let cam = PinholeCamera::new(&scene.camera).unwrap_or_else(|e| panic!("{e}"));
     let (w, h) = (cam.width, cam.height);
     let sun = scene.sun.to_sun().as_vec3();

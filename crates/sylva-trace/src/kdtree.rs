@@ -571,6 +571,56 @@ impl KdTree {
         self.stats
     }
 
+    /// The tree cut `depth` levels below the root: every node at that depth and every leaf
+    /// above it, with its cell, left to right; empty leaves are left out. Every reference
+    /// lies in exactly the leaves under one of them.
+    pub fn subtrees(&self, depth: usize) -> Vec<(u32, Aabb)> {
+        let mut out = Vec::new();
+        if self.bounds.is_empty() {
+            return out;
+        }
+        let mut todo = vec![(0u32, self.bounds, 0usize)];
+        while let Some((node, cell, d)) = todo.pop() {
+            let n = self.nodes[node as usize];
+            if n.is_leaf() {
+                if n.a >> 2 > 0 {
+                    out.push((node, cell));
+                }
+                continue;
+            }
+            if d == depth {
+                out.push((node, cell));
+                continue;
+            }
+            let axis = (n.a & 3) as usize;
+            let split = f32::from_bits(n.b);
+            let mut below = cell;
+            below.max[axis] = split;
+            let mut above = cell;
+            above.min[axis] = split;
+            todo.push((n.a >> 2, above, d + 1));
+            todo.push((node + 1, below, d + 1));
+        }
+        out
+    }
+
+    /// The primitives referenced by the leaves under `node` (with repeats).
+    pub fn subtree_primitives(&self, node: u32) -> Vec<u32> {
+        let mut out = Vec::new();
+        let mut todo = vec![node];
+        while let Some(k) = todo.pop() {
+            let n = self.nodes[k as usize];
+            if n.is_leaf() {
+                let (count, off) = ((n.a >> 2) as usize, n.b as usize);
+                out.extend_from_slice(&self.indices[off..off + count]);
+            } else {
+                todo.push(n.a >> 2);
+                todo.push(k + 1);
+            }
+        }
+        out
+    }
+
     /// Bytes of nodes and leaf index lists.
     pub fn memory_bytes(&self) -> u64 {
         (self.nodes.capacity() * std::mem::size_of::<KdNode>() + self.indices.capacity() * 4) as u64
@@ -591,20 +641,47 @@ impl KdTree {
         t_max: f32,
         cfg: TraversalConfig,
         stats: &mut TraceStats,
-        mut leaf: F,
+        leaf: F,
     ) {
-        let Some((scene_min, scene_max)) = ray_box(
+        self.traverse_subtree(
+            0,
+            &self.bounds,
             origin,
             inv_dir,
-            self.bounds.min,
-            self.bounds.max,
             t_min,
             t_max,
-        ) else {
+            cfg,
+            stats,
+            leaf,
+        )
+    }
+
+    /// [`KdTree::traverse`] of the subtree under `root` alone, over the part of the ray in
+    /// `bounds`: a box that holds every reference of the subtree's leaves (about its cell,
+    /// see [`KdTree::subtrees`]). Leaves outside the subtree are never visited; kd-restart
+    /// restarts from `root`.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)] // the hot path, as `traverse`
+    pub fn traverse_subtree<F: FnMut(&[u32]) -> f32>(
+        &self,
+        root: u32,
+        bounds: &Aabb,
+        origin: Vec3,
+        inv_dir: Vec3,
+        t_min: f32,
+        t_max: f32,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+        mut leaf: F,
+    ) {
+        let Some((scene_min, scene_max)) =
+            ray_box(origin, inv_dir, bounds.min, bounds.max, t_min, t_max)
+        else {
             return;
         };
+        let subtree = root;
         let mut stack = ShortStack::<(u32, f32, f32)>::new(cfg.stack_size);
-        let mut root = 0u32;
+        let mut root = root;
         let mut first = true;
         let o = origin.to_array();
         let inv = inv_dir.to_array();
@@ -649,7 +726,9 @@ impl KdTree {
                     // The ray lies in the plane (zero direction, origin on it): both children
                     // cover the same interval, which kd-restart cannot order. Rare; visit
                     // every leaf the ray touches instead.
-                    self.traverse_all(origin, inv_dir, scene_min, scene_max, stats, &mut leaf);
+                    self.traverse_all(
+                        subtree, origin, inv_dir, scene_min, scene_max, stats, &mut leaf,
+                    );
                     return;
                 } else {
                     stack.push((two, t_split, tmax));
@@ -701,6 +780,39 @@ impl KdTree {
         mask: u32,
         cfg: TraversalConfig,
         stats: &mut TraceStats,
+        leaf: F,
+    ) {
+        self.traverse_packet_subtree(
+            0,
+            &self.bounds,
+            origin,
+            inv_dir,
+            t_min,
+            t_max,
+            mask,
+            cfg,
+            stats,
+            leaf,
+        )
+    }
+
+    /// [`KdTree::traverse_packet`] of the subtree under `root` alone, over the part of each
+    /// lane's ray in `bounds` (as [`KdTree::traverse_subtree`]).
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)] // the hot path, as `traverse`
+    pub fn traverse_packet_subtree<
+        F: FnMut(&[u32], u32, &[f32; PACKET], &[f32; PACKET]) -> [f32; PACKET],
+    >(
+        &self,
+        root: u32,
+        bounds: &Aabb,
+        origin: &[[f32; PACKET]; 3],
+        inv_dir: &[[f32; PACKET]; 3],
+        t_min: &[f32; PACKET],
+        t_max: &[f32; PACKET],
+        mask: u32,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
         mut leaf: F,
     ) {
         // Each lane's interval inside the tree's box.
@@ -712,9 +824,7 @@ impl KdTree {
                 continue;
             }
             let (o, inv) = (lane(origin, l), lane(inv_dir, l));
-            if let Some((a, b)) =
-                ray_box(o, inv, self.bounds.min, self.bounds.max, t_min[l], t_max[l])
-            {
+            if let Some((a, b)) = ray_box(o, inv, bounds.min, bounds.max, t_min[l], t_max[l]) {
                 scene_min[l] = a;
                 scene_max[l] = b;
                 alive |= 1 << l;
@@ -735,7 +845,7 @@ impl KdTree {
         let inv4 = inv_dir.map(Vec4::from_array);
         let scene_max4 = Vec4::from_array(scene_max);
         let mut stack = ShortStack::<(u32, u32, Vec4, Vec4)>::new(cfg.stack_size);
-        let mut root = 0u32;
+        let mut root = root;
         let mut first = true;
         // Where each lane's processed part of its interval ends.
         let mut done = Vec4::from_array(scene_min);
@@ -835,8 +945,10 @@ impl KdTree {
 
     /// Visits every leaf the segment touches, without early exit except when `leaf` returns
     /// `-∞`; skips subtrees that start beyond the current closest hit.
+    #[allow(clippy::too_many_arguments)]
     fn traverse_all<F: FnMut(&[u32]) -> f32>(
         &self,
+        root: u32,
         origin: Vec3,
         inv_dir: Vec3,
         t_min: f32,
@@ -845,7 +957,7 @@ impl KdTree {
         leaf: &mut F,
     ) {
         let mut best = f32::INFINITY;
-        let mut stack: Vec<(u32, f32, f32)> = vec![(0, t_min, t_max)];
+        let mut stack: Vec<(u32, f32, f32)> = vec![(root, t_min, t_max)];
         while let Some((mut node, tmin, mut tmax)) = stack.pop() {
             if best + TERMINATION_SLACK * tmin.abs() < tmin {
                 continue;

@@ -123,10 +123,24 @@ impl Best {
     }
 }
 
+/// Levels of a model's tree above its parts ([`ModelAccel::parts`]): up to 2^6 parts per
+/// model, which the scene's top level holds per instance.
+pub const PART_DEPTH: usize = 6;
+
+/// A subtree of a model's tree that the scene's top level holds on its own for every
+/// instance: its root node and the box its triangles' parts lie in (within its cell).
+#[derive(Debug, Clone, Copy)]
+pub struct Part {
+    pub node: u32,
+    pub bounds: Aabb,
+}
+
 /// A model ready for ray queries.
 #[derive(Debug, Clone)]
 pub struct ModelAccel {
     tree: KdTree,
+    /// The tree cut [`PART_DEPTH`] levels down, each part with its tight box.
+    parts: Vec<Part>,
     /// Corners of a prism containing every vertex: the convex hull of the vertices' (x, z)
     /// at the lowest and at the highest y (see [`ModelAccel::world_bounds`]).
     hull: Vec<Vec3>,
@@ -280,6 +294,40 @@ fn hull_prism(positions: &[[f32; 3]], indices: &[[u32; 3]]) -> Vec<Vec3> {
         .collect()
 }
 
+/// The parts of `tree` ([`PART_DEPTH`] levels down), each with the box that holds every
+/// reference of its leaves: the cell, shrunk to its triangles' boxes widened as
+/// [`clip_triangle`] widens a clipped part, so the box holds every hit its leaves report.
+fn tree_parts(tree: &KdTree, tris: &[Tri]) -> Vec<Part> {
+    use rayon::prelude::*;
+    tree.subtrees(PART_DEPTH)
+        .par_iter()
+        .map(|&(node, cell)| {
+            let mut b = Aabb::EMPTY;
+            let mut widest = 0f32;
+            for p in tree.subtree_primitives(node) {
+                let d = &tris[p as usize].data;
+                let (a, bb, c) = (d.v0, d.v0 + d.e1, d.v0 + d.e2);
+                let (lo, hi) = (a.min(bb).min(c), a.max(bb).max(c));
+                let mag = lo.abs().max(hi.abs()).max_element();
+                let slack = 4e-7 * mag + 2.0 * crate::ray::BARY_EPS * (hi - lo).max_element();
+                widest = widest.max(slack);
+                b.grow(lo - Vec3::splat(slack));
+                b.grow(hi + Vec3::splat(slack));
+            }
+            // The cell widened as its triangles are: a hit computed an ulp outside a flat
+            // cell (a planar model) must still lie in the box.
+            Part {
+                node,
+                bounds: Aabb {
+                    min: b.min.max(cell.min - Vec3::splat(widest)),
+                    max: b.max.min(cell.max + Vec3::splat(widest)),
+                },
+            }
+        })
+        .filter(|p| !p.bounds.is_empty())
+        .collect()
+}
+
 impl ModelAccel {
     /// Builds the kd-tree over the model's triangles (in parallel, deterministic).
     pub fn build(model: &Model) -> ModelAccel {
@@ -299,7 +347,7 @@ impl ModelAccel {
             }));
         }
         let mut alpha = Vec::new();
-        let tris = (0..mesh.indices.len())
+        let tris: Vec<Tri> = (0..mesh.indices.len())
             .map(|i| {
                 let [a, b, c] = clip.corners(i);
                 let mat = mesh.material_ids.get(i).copied().unwrap_or(0) as usize;
@@ -319,8 +367,10 @@ impl ModelAccel {
                 }
             })
             .collect();
+        let parts = tree_parts(&tree, &tris);
         ModelAccel {
             tree,
+            parts,
             hull: hull_prism(&mesh.positions, &mesh.indices),
             tris,
             alpha,
@@ -360,6 +410,12 @@ impl ModelAccel {
         &self.tree
     }
 
+    /// The subtrees the scene's top level holds per instance ([`PART_DEPTH`] levels down;
+    /// empty ones left out): together they hold every triangle reference of the tree.
+    pub fn parts(&self) -> &[Part] {
+        &self.parts
+    }
+
     /// Per triangle (mesh order) its Möller-Trumbore data and its entry in
     /// [`ModelAccel::alpha_triangles`], `u32::MAX` when it is opaque.
     pub fn triangles(&self) -> impl ExactSizeIterator<Item = (&TriangleData, u32)> + '_ {
@@ -384,7 +440,8 @@ impl ModelAccel {
     /// Bytes of the tree, the triangle data and the alpha data (the mesh itself excluded).
     pub fn memory_bytes(&self) -> u64 {
         self.tree.memory_bytes()
-            + (self.hull.capacity() * std::mem::size_of::<Vec3>()
+            + (self.parts.capacity() * std::mem::size_of::<Part>()
+                + self.hull.capacity() * std::mem::size_of::<Vec3>()
                 + self.tris.capacity() * std::mem::size_of::<Tri>()
                 + self.alpha.capacity() * std::mem::size_of::<AlphaTri>()) as u64
             + self.masks.iter().map(AlphaMask::memory_bytes).sum::<u64>()
@@ -468,27 +525,59 @@ impl ModelAccel {
         cfg: TraversalConfig,
         stats: &mut TraceStats,
     ) {
+        let root = Part {
+            node: 0,
+            bounds: self.tree.bounds(),
+        };
+        self.closest_in(&root, origin, dir, t_min, instance, best, cfg, stats);
+    }
+
+    /// [`ModelAccel::closest`] over the leaves of one part (one of [`ModelAccel::parts`], or
+    /// the whole tree).
+    #[inline]
+    #[allow(clippy::too_many_arguments)] // the hot path, called per part a ray meets
+    pub(crate) fn closest_in(
+        &self,
+        part: &Part,
+        origin: Vec3,
+        dir: Vec3,
+        t_min: f32,
+        instance: u32,
+        best: &mut Best,
+        cfg: TraversalConfig,
+        stats: &mut TraceStats,
+    ) {
         let inv = inverse_dir(dir);
         let (mut tests, mut rejects) = (0u64, 0u64);
-        self.tree
-            .traverse(origin, inv, t_min, best.t, cfg, stats, |prims| {
+        self.tree.traverse_subtree(
+            part.node,
+            &part.bounds,
+            origin,
+            inv,
+            t_min,
+            best.t,
+            cfg,
+            stats,
+            |prims| {
                 tests += prims.len() as u64;
                 for &p in prims {
                     rejects += self.offer(origin, dir, t_min, instance, p, best) as u64;
                 }
                 best.t
-            });
+            },
+        );
         stats.triangle_tests += tests;
         stats.alpha_rejects += rejects;
     }
 
-    /// [`ModelAccel::closest`] for the lanes `mask` of a packet (model-space rays that
+    /// [`ModelAccel::closest_in`] for the lanes `mask` of a packet (model-space rays that
     /// [`crate::kdtree::packet_compatible`] accepts), improving each lane's `best`; the same
     /// hits, tie rule and alpha rule lane by lane.
     #[inline]
     #[allow(clippy::too_many_arguments)] // the hot path, called per instance a packet meets
     pub(crate) fn closest_packet(
         &self,
+        part: &Part,
         origin: &[[f32; PACKET]; 3],
         dir: &[[f32; PACKET]; 3],
         inv: &[[f32; PACKET]; 3],
@@ -501,7 +590,9 @@ impl ModelAccel {
     ) {
         let (mut tests, mut rejects) = (0u64, 0u64);
         let t_max = best.map(|b| b.t);
-        self.tree.traverse_packet(
+        self.tree.traverse_packet_subtree(
+            part.node,
+            &part.bounds,
             origin,
             inv,
             t_min,

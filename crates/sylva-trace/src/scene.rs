@@ -46,16 +46,19 @@ pub enum TraceError {
 /// The last few instances a ray (or which lanes of a packet) was tested against: instances
 /// span several top-level leaves, and kd-restarts revisit leaves. A single ray is lane 0.
 struct Mailbox {
-    ids: [u32; 8],
-    lanes: [u32; 8],
+    ids: [u32; MAILBOX],
+    lanes: [u32; MAILBOX],
     next: usize,
 }
+
+/// Entries of a [`Mailbox`]: a ray meets more parts than instances.
+const MAILBOX: usize = 16;
 
 impl Mailbox {
     fn new() -> Mailbox {
         Mailbox {
-            ids: [u32::MAX; 8],
-            lanes: [0; 8],
+            ids: [u32::MAX; MAILBOX],
+            lanes: [0; MAILBOX],
             next: 0,
         }
     }
@@ -63,7 +66,7 @@ impl Mailbox {
     /// The lanes that have tested instance `id`.
     #[inline(always)]
     fn tested(&self, id: u32) -> u32 {
-        (0..8).fold(0, |m, k| {
+        (0..MAILBOX).fold(0, |m, k| {
             if self.ids[k] == id {
                 m | self.lanes[k]
             } else {
@@ -81,7 +84,7 @@ impl Mailbox {
         }
         self.ids[self.next] = id;
         self.lanes[self.next] = lanes;
-        self.next = (self.next + 1) & 7;
+        self.next = (self.next + 1) % MAILBOX;
     }
 
     /// For a single ray: records `id`, `false` when it was seen recently.
@@ -162,30 +165,55 @@ pub struct SceneAccel {
     /// every instance in a top-level leaf is tested against its box before its transform.
     boxes: Vec<[Vec3; 2]>,
     top: KdTree,
+    /// Every instance's parts ([`ModelAccel::parts`]) as `[instance, part]`, their world
+    /// boxes, and a kd-tree over those boxes: closest-hit queries enter the model trees
+    /// part by part, nearest first, so a ray through a crowd of overlapping crown boxes
+    /// skips their empty parts and stops at the first part beyond its hit.
+    parts: Vec<[u32; 2]>,
+    part_boxes: Vec<[Vec3; 2]>,
+    part_top: KdTree,
     /// Half extents (x, z) of the ground rectangle on y = 0, when there is one.
     ground: Option<[f32; 2]>,
 }
 
-struct InstanceClip<'a>(&'a [TraceInstance]);
+/// World boxes (of instances, of parts) for the top-level builder.
+struct BoxClip<'a>(&'a [[Vec3; 2]]);
 
-impl Clip for InstanceClip<'_> {
+impl Clip for BoxClip<'_> {
     fn count(&self) -> usize {
         self.0.len()
     }
 
     fn bounds(&self, i: usize) -> Option<Aabb> {
-        let b = self.0[i].world_bounds;
+        let [min, max] = self.0[i];
+        let b = Aabb { min, max };
         (!b.is_empty()).then_some(b)
     }
 
     fn clip(&self, i: usize, bx: &Aabb) -> Option<Aabb> {
-        let b = self.0[i].world_bounds;
+        let [min, max] = self.0[i];
+        let b = Aabb { min, max };
         let c = Aabb {
             min: b.min.max(bx.min),
             max: b.max.min(bx.max),
         };
         (!c.is_empty()).then_some(c)
     }
+}
+
+/// World box of a part whose model-space box is `b`: its transformed corners, widened for
+/// the rounding of the transform as [`ModelAccel::world_bounds`] is, within the instance's
+/// box; `None` when empty.
+fn part_world_box(b: &Aabb, to_world: &Affine3A, instance: &Aabb) -> Option<[Vec3; 2]> {
+    let mut w = Aabb::EMPTY;
+    for c in b.corners() {
+        w.grow(to_world.transform_point3(c));
+    }
+    let mag = w.min.abs().max(w.max.abs()).max_element();
+    let slack = 4e-7 * mag;
+    let min = (w.min - Vec3::splat(slack)).max(instance.min);
+    let max = (w.max + Vec3::splat(slack)).min(instance.max);
+    (min.cmple(max).all()).then_some([min, max])
 }
 
 /// Bytes a model's structure will take, roughly (for the memory check).
@@ -248,16 +276,35 @@ impl SceneAccel {
                 world_bounds: m.world_bounds(&to_world),
             });
         }
-        let top = KdTree::build(&InstanceClip(&inst));
-        let boxes = inst
+        let boxes: Vec<[Vec3; 2]> = inst
             .iter()
             .map(|i| [i.world_bounds.min, i.world_bounds.max])
             .collect();
+        let top = KdTree::build(&BoxClip(&boxes));
+        let (parts, part_boxes): (Vec<[u32; 2]>, Vec<[Vec3; 2]>) = inst
+            .iter()
+            .enumerate()
+            .flat_map(|(k, i)| {
+                let model = &built[i.model as usize];
+                model
+                    .parts()
+                    .iter()
+                    .enumerate()
+                    .filter_map(move |(p, part)| {
+                        let b = part_world_box(&part.bounds, &i.to_world, &i.world_bounds)?;
+                        Some(([k as u32, p as u32], b))
+                    })
+            })
+            .unzip();
+        let part_top = KdTree::build(&BoxClip(&part_boxes));
         Ok(SceneAccel {
             models: built,
             instances: inst,
             boxes,
             top,
+            parts,
+            part_boxes,
+            part_top,
             ground,
         })
     }
@@ -287,8 +334,11 @@ impl SceneAccel {
         AccelMemory {
             models: self.models.iter().map(ModelAccel::memory_bytes).sum(),
             top: self.top.memory_bytes()
+                + self.part_top.memory_bytes()
                 + (self.instances.capacity() * std::mem::size_of::<TraceInstance>()
-                    + self.boxes.capacity() * std::mem::size_of::<[Vec3; 2]>())
+                    + (self.boxes.capacity() + self.part_boxes.capacity())
+                        * std::mem::size_of::<[Vec3; 2]>()
+                    + self.parts.capacity() * std::mem::size_of::<[u32; 2]>())
                     as u64,
         }
     }
@@ -326,29 +376,38 @@ impl SceneAccel {
         let mut visits = 0u64;
         let mut mailbox = Mailbox::new();
         let mut inner = TraceStats::default();
-        self.top
+        self.part_top
             .traverse(o, inv_d, ray.t_min, best.t, cfg, stats, |prims| {
-                let mut enter = |i: u32, best: &mut Best| {
-                    // An instance met in an earlier leaf was already tested over the whole
+                let mut enter = |k: u32, best: &mut Best| {
+                    // A part met in an earlier leaf was already tested over the whole
                     // interval.
-                    if !mailbox.first_visit(i) {
+                    if !mailbox.first_visit(k) {
                         return;
                     }
                     visits += 1;
+                    let [i, part] = self.parts[k as usize];
                     let inst = &self.instances[i as usize];
                     let mo = inst.to_model.transform_point3(o);
                     let md = inst.to_model.transform_vector3(d);
-                    self.models[inst.model as usize]
-                        .closest(mo, md, ray.t_min, i, best, cfg, &mut inner);
+                    let model = &self.models[inst.model as usize];
+                    let part = &model.parts()[part as usize];
+                    model.closest_in(part, mo, md, ray.t_min, i, best, cfg, &mut inner);
                 };
-                // Only instances whose box the ray meets before the closest hit (the leaf's
+                // Only parts whose box the ray meets before the closest hit (the leaf's
                 // region is larger than the ray's path through a box), nearest entry first:
-                // a near tree's hit then cuts the far ones' traversals short or skips them.
+                // a near part's hit then cuts the far ones' traversals short or skips them.
                 let mut cand = [(0f32, 0u32); SORTED_INSTANCES];
                 let t_max = best.t;
-                let n = self.entries(prims, o, inv_d, ray.t_min, t_max, &mut cand, |i| {
-                    enter(i, &mut best)
-                });
+                let n = self.entries(
+                    &self.part_boxes,
+                    prims,
+                    o,
+                    inv_d,
+                    ray.t_min,
+                    t_max,
+                    &mut cand,
+                    |k| enter(k, &mut best),
+                );
                 for &(t0, i) in &cand[..n] {
                     // Equal entry still enters: a hit at exactly `best.t` may win the tie.
                     if t0 > best.t {
@@ -425,7 +484,7 @@ impl SceneAccel {
         let mut visits = 0u64;
         let mut mailbox = Mailbox::new();
         let mut inner = TraceStats::default();
-        self.top.traverse_packet(
+        self.part_top.traverse_packet(
             &o,
             &inv,
             &t_min,
@@ -434,11 +493,11 @@ impl SceneAccel {
             cfg,
             stats,
             |prims, lanes, _, _| {
-                // (first entry over the lanes, instance, lanes, each lane's entry)
+                // (first entry over the lanes, part, lanes, each lane's entry)
                 let mut cand = [(0f32, 0u32, 0u32, [0f32; PACKET]); SORTED_INSTANCES];
                 let mut n = 0;
                 for &i in prims {
-                    let [bmin, bmax] = self.boxes[i as usize];
+                    let [bmin, bmax] = self.part_boxes[i as usize];
                     let mut entry = [f32::INFINITY; PACKET];
                     let mut meet = 0u32;
                     for l in 0..PACKET {
@@ -496,13 +555,13 @@ impl SceneAccel {
         out
     }
 
-    /// Tests instance `i` for the lanes `lanes` of a packet, in model space, grouping the
+    /// Tests part `k` (of [`SceneAccel::parts`]) for the lanes `lanes` of a packet, in model space, grouping the
     /// lanes by the signs of their model-space directions (a rotation can separate them).
     #[allow(clippy::too_many_arguments)] // the hot path
     #[allow(clippy::needless_range_loop)] // lanes index several parallel arrays
     fn enter_packet(
         &self,
-        i: u32,
+        k: u32,
         rays: &[Ray; PACKET],
         t_min: &[f32; PACKET],
         lanes: u32,
@@ -510,8 +569,10 @@ impl SceneAccel {
         cfg: TraversalConfig,
         stats: &mut TraceStats,
     ) {
+        let [i, part] = self.parts[k as usize];
         let inst = &self.instances[i as usize];
         let model = &self.models[inst.model as usize];
+        let part = &model.parts()[part as usize];
         let mut mo = [[0f32; PACKET]; 3];
         let mut md = [[0f32; PACKET]; 3];
         let mut inv = [[0f32; PACKET]; 3];
@@ -537,7 +598,8 @@ impl SceneAccel {
             let g = group[lead];
             if g == 8 {
                 left &= !(1 << lead);
-                model.closest(
+                model.closest_in(
+                    part,
                     lane(&mo, lead),
                     lane(&md, lead),
                     t_min[lead],
@@ -555,7 +617,7 @@ impl SceneAccel {
                 }
             }
             left &= !m;
-            model.closest_packet(&mo, &md, &inv, t_min, m, i, best, cfg, stats);
+            model.closest_packet(part, &mo, &md, &inv, t_min, m, i, best, cfg, stats);
         }
     }
 
@@ -627,8 +689,16 @@ impl SceneAccel {
                     // Nearest box first: of the trees not yet tested, the ones the ray
                     // starts in or meets soonest.
                     let mut cand = [(0f32, 0u32); SORTED_INSTANCES];
-                    let n =
-                        self.entries(prims, o, inv_d, ray.t_min, ray.t_max, &mut cand, &mut enter);
+                    let n = self.entries(
+                        &self.boxes,
+                        prims,
+                        o,
+                        inv_d,
+                        ray.t_min,
+                        ray.t_max,
+                        &mut cand,
+                        &mut enter,
+                    );
                     for &(_, i) in &cand[..n] {
                         enter(i);
                     }
@@ -691,7 +761,14 @@ impl SceneAccel {
             };
             let mut cand = [(0f32, 0u32); SORTED_INSTANCES];
             let n = self.entries(
-                candidates, o, inv_d, ray.t_min, ray.t_max, &mut cand, &mut enter,
+                &self.boxes,
+                candidates,
+                o,
+                inv_d,
+                ray.t_min,
+                ray.t_max,
+                &mut cand,
+                &mut enter,
             );
             for &(_, i) in &cand[..n] {
                 enter(i);
@@ -743,7 +820,8 @@ impl SceneAccel {
         false
     }
 
-    /// The instances of a top-level leaf whose world box the ray meets within
+    /// The instances (or parts, with their `boxes`) of a top-level leaf whose world box the
+    /// ray meets within
     /// `[t_min, t_max]`: the first [`SORTED_INSTANCES`] go into `cand` as `(entry t, id)`,
     /// sorted by entry (stable, so ties keep leaf order); any further ones are handed to
     /// `overflow` at once. Returns how many went into `cand`.
@@ -751,6 +829,7 @@ impl SceneAccel {
     #[allow(clippy::too_many_arguments)] // the hot path, called per top-level leaf
     fn entries(
         &self,
+        boxes: &[[Vec3; 2]],
         prims: &[u32],
         o: Vec3,
         inv_d: Vec3,
@@ -761,7 +840,7 @@ impl SceneAccel {
     ) -> usize {
         let mut n = 0;
         for &i in prims {
-            let [bmin, bmax] = self.boxes[i as usize];
+            let [bmin, bmax] = boxes[i as usize];
             let Some((t0, _)) = ray_box(o, inv_d, bmin, bmax, t_min, t_max) else {
                 continue;
             };

@@ -356,3 +356,84 @@ fn all_hits_equal_brute_force_with_alpha_and_instances() {
     );
     assert!(alpha_rejects > 0, "the alpha rule never ran");
 }
+
+#[test]
+fn parts_hold_every_reference_once() {
+    // The top level enters a model's tree part by part, so the parts must hold every
+    // triangle reference of the tree, each in exactly one part.
+    let accel = red_maple_accel();
+    let tree = accel.tree();
+    let parts = accel.parts();
+    assert!(parts.len() > 8, "{} parts", parts.len());
+    let mut seen = 0usize;
+    for part in parts {
+        let n = tree.subtree_primitives(part.node).len();
+        assert!(n > 0, "empty parts are left out");
+        seen += n;
+    }
+    assert_eq!(seen, tree.stats().references);
+}
+
+#[test]
+fn forest_closest_hits_equal_brute_force_and_any_hit_agrees() {
+    // Nine red maples (about 90 k alpha-tested triangles each), rotated, scaled and
+    // overlapping: rays cross several crowns' parts. Rays come from outside the forest
+    // (cameras) and from inside the crowns (shadow and gather rays).
+    let model = red_maple().clone();
+    let h = model.bounds.max.y;
+    let mut r = rng(61);
+    let instances: Vec<Instance> = (0..9)
+        .map(|k| Instance {
+            model: 0,
+            position: Vec3::new(
+                ((k % 3) as f32 - 1.0) * 0.4 * h,
+                0.0,
+                ((k / 3) as f32 - 1.0) * 0.4 * h,
+            ),
+            rotation_deg: uniform(&mut r, 0.0, 360.0),
+            scale: uniform(&mut r, 0.8, 1.2),
+        })
+        .collect();
+    let accel = SceneAccel::from_parts(&[model], &instances, Some([2.0 * h, 2.0 * h])).unwrap();
+    assert!(accel.models()[0].parts().len() > 8);
+    let (mut tree_hits, mut misses) = (0, 0);
+    for k in 0..240 {
+        let target = Vec3::new(
+            uniform(&mut r, -0.7, 0.7) * h,
+            uniform(&mut r, 0.1, 1.0) * h,
+            uniform(&mut r, -0.7, 0.7) * h,
+        );
+        let origin = if k % 2 == 0 {
+            Vec3::new(uniform(&mut r, -2.0, 2.0), uniform(&mut r, 0.1, 1.5), 2.5) * h
+        } else {
+            // Inside the crowns, in any direction.
+            target + unit(&mut r) * uniform(&mut r, 0.0, 0.3) * h
+        };
+        let mut ray = Ray::new(origin, (target - origin).normalize_or(Vec3::Y));
+        if k % 2 == 1 {
+            ray.dir = unit(&mut r);
+        }
+        if k % 5 == 0 {
+            ray.t_max = uniform(&mut r, 0.05, 1.0) * h;
+        }
+        let bf = accel.brute_closest_hit(&ray);
+        for cfg in [TraversalConfig::default(), TraversalConfig::UNBOUNDED] {
+            let mut st = TraceStats::default();
+            let kd = accel.closest_hit(&ray, cfg, &mut st);
+            assert!(same(kd, bf), "ray {k} {ray:?}: kd {kd:?} brute {bf:?}");
+            assert_eq!(
+                accel.any_hit(&ray, cfg, &mut st),
+                kd.is_some(),
+                "any-hit against closest hit, ray {k}"
+            );
+        }
+        match bf {
+            Some(h) => tree_hits += !h.is_ground() as usize,
+            None => misses += 1,
+        }
+    }
+    assert!(
+        tree_hits > 80 && misses > 10,
+        "{tree_hits} tree hits, {misses} misses"
+    );
+}
