@@ -5,7 +5,8 @@
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use sylva_lb::relight::{
-    compress, BasisOptions, BasisSet, BasisWeights, Codec, CompressTarget, Precision, Region,
+    compress, compress_channels, BasisOptions, BasisSet, BasisWeights, Codec, CompressTarget,
+    Footprint, Precision, Region,
 };
 use sylva_lb::shapes::Shape;
 use sylva_lb::{Dims, Preset};
@@ -75,5 +76,85 @@ fn lookups(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, lookups);
+/// One sun's combination of compressed parts (colour + Haar, packed; three sun parts and a
+/// sky part as the physical light reads them): looked up through the footprint kernel, against
+/// decoded once at every site (`decode_combined_into`, timed on its own) and looked up
+/// trilinearly in the decoded grid.
+fn decoded(c: &mut Criterion) {
+    let grid = Shape::Crown.grid(Dims::cube(40).unwrap());
+    let (basis, _) = BasisSet::solve(
+        &grid,
+        &Preset::Leaf.params(),
+        &BasisOptions::papers(grid.dims),
+        &mut |_| {},
+    )
+    .unwrap();
+    let dims = grid.dims;
+    let channels = basis.channels();
+    let region = Region::near_medium(&grid, 1);
+    let target = CompressTarget {
+        precision: Precision::Packed,
+        ..CompressTarget::new(Codec::ColourHaar { threshold: 4e-3 })
+    };
+    let set = compress_channels(
+        dims,
+        channels.len(),
+        &|ch, s| channels[ch][s],
+        &vec![1.0; channels.len()],
+        &region,
+        &target,
+    )
+    .unwrap();
+    let w = set.project(&[
+        (3, [0.5, 0.45, 0.4]),
+        (7, [0.3, 0.3, 0.28]),
+        (8, [0.2, 0.2, 0.18]),
+        (0, [0.2, 0.2, 0.2]),
+    ]);
+    let sites = region.sites();
+    let mut r = sylva_core::SplitMix64::new(1);
+    let points: Vec<[f32; 3]> = (0..4096)
+        .map(|_| {
+            let s = sites[(r.next_u64() % sites.len() as u64) as usize];
+            let (x, y, z) = dims.coords(s);
+            [x, y, z].map(|v| v as f32 + r.next_f64() as f32)
+        })
+        .collect();
+    let mut out = vec![[0.0f32; 3]; dims.sites()];
+    set.decode_combined_into(&w, &mut out);
+
+    let mut group = c.benchmark_group("relight_decoded");
+    group.throughput(Throughput::Elements(points.len() as u64));
+    group.bench_function("kernel_lookup", |b| {
+        b.iter(|| {
+            points
+                .iter()
+                .map(|&g| set.sample_grid(g, &w)[1])
+                .sum::<f32>()
+        })
+    });
+    group.bench_function("decoded_lookup", |b| {
+        b.iter(|| {
+            points
+                .iter()
+                .map(|&g| {
+                    let fp = Footprint::at(dims, g);
+                    let (s, t) = (fp.sites(dims), fp.weights());
+                    (0..8).map(|k| out[s[k]][1] * t[k]).sum::<f32>()
+                })
+                .sum::<f32>()
+        })
+    });
+    group.throughput(Throughput::Elements(dims.sites() as u64));
+    group.bench_function("decode_every_site", |b| {
+        b.iter(|| {
+            let mut grid = vec![[0.0f32; 3]; dims.sites()];
+            set.decode_combined_into(&w, &mut grid);
+            grid[grid.len() / 2][1]
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, lookups, decoded);
 criterion_main!(benches);

@@ -288,7 +288,7 @@ impl PhysicalRelitLight {
     /// Before a frame of about `lookups` plant lookups (pixels × samples × (1 + gather
     /// rays)): decodes the current sun's light at every site for as many instances as
     /// `budget` bytes hold (the largest groups of instances sharing a model and terms first)
-    /// when the frame reads it more often than there are sites to decode, so their lookups
+    /// when the frame reads it at least a quarter as often as there are sites, so their lookups
     /// read 3 values instead of every part's (or, compressed, a Haar kernel per field).
     /// Once per sun: the next [`PhysicalRelitLight::relight`] drops it. `None` when nothing
     /// is decoded (not worth it, nothing fits, or memory refused: lookups decode the parts).
@@ -309,7 +309,12 @@ impl PhysicalRelitLight {
             sites += basis.dims().sites() as u64;
             chosen.push(group);
         }
-        if chosen.is_empty() || lookups < sites {
+        // A site decodes in about an eighth of a compressed lookup's CPU time (one Haar
+        // block's inverse shared by its 27 sites) and a decoded lookup takes a tenth of one
+        // (`benches/relight_lookup.rs`, relight_decoded): decoding pays once the frame reads
+        // about a quarter as many lookups as there are sites (counting every pixel, not only
+        // the plants').
+        if chosen.is_empty() || lookups.saturating_mul(4) < sites {
             return None;
         }
         let baked = self.baked.get_or_init(|| {
