@@ -171,3 +171,29 @@ def channel_ratios(test_rgb, ref_rgb, mask):
         return [None, None, None]
     tm, rm = t.mean(axis=0), r.mean(axis=0)
     return [float(a / b) if b > 0 else None for a, b in zip(tm, rm)]
+
+
+def equal_error(rel_rmse, ref_noise, spp, ref_seconds, sylva_seconds):
+    """What the path tracer would take to reach sylva's error (issue 28's "time to equal error").
+
+    One reference render at `spp` samples has relative RMS noise `ref_noise`, which falls as
+    1/sqrt(samples), so the path tracer reaches sylva's `rel_rmse` (its difference from the
+    two-seed reference, that reference's noise subtracted) at
+    `spp_needed = spp · (ref_noise / rel_rmse)²`, taking `ref_seconds · spp_needed / spp`
+    (`ref_seconds`: one render at `spp`, on the same cores). `speedup` is that over
+    `sylva_seconds`. Returns a dict of those, or None where sylva's error is not above zero
+    (within the reference's noise: the reference cannot tell how many samples would match it).
+    """
+    if not (rel_rmse and ref_noise and spp and ref_seconds and sylva_seconds):
+        return None
+    if rel_rmse <= 0.0 or ref_noise <= 0.0 or sylva_seconds <= 0.0:
+        return None
+    spp_needed = spp * (ref_noise / rel_rmse) ** 2
+    seconds = ref_seconds * spp_needed / spp
+    return {
+        "spp_needed": spp_needed,
+        "seconds": seconds,
+        "sylva_seconds": sylva_seconds,
+        "speedup": seconds / sylva_seconds,
+    }
+

@@ -242,7 +242,18 @@ def render_sylva(sylva, scene, out_dir, rpp, width, indirect, extra):
     m = re.search(r"\(ambient mode, mean luminance [0-9.]+, ambient ([0-9.eE+-]+)\)", stdout)
     if not m:
         fail(f"sylva render printed no matched ambient (ambient mode line):\n{stdout}")
-    return args, float(m.group(1)), seconds
+    return args, float(m.group(1)), seconds, lb_stage(stdout)
+
+
+def lb_stage(stdout):
+    """The render's LB stage from its stage summary: seconds (None if it printed none) and
+    whether every model's light came from the cache (a warm run) or some was solved."""
+    m = re.search(r"^[ \t]*LB precompute[ \t]+([0-9.]+)[ \t]*$", stdout, re.M)
+    solved = re.search(r"^[ \t]*(LB|basis) [^:\n]+:.*\bsolved\b", stdout, re.M)
+    return {
+        "seconds": float(m.group(1)) if m else None,
+        "cached": solved is None,
+    }
 
 
 # ---------------------------------------------------------------------------------- mitsuba
@@ -447,6 +458,23 @@ def scene_markdown(r):
         "mean plant luminance).",
         "",
     ]
+    e = r.get("equal_error") or {}
+    whole, warm = e.get("whole_render"), e.get("without_lb")
+    if whole:
+        lb = e["lb"]
+        lines += [
+            f"Time to equal error on plants: Mitsuba needs {whole['spp_needed']:.0f} spp "
+            f"({whole['seconds']:.1f} s) for sylva's plant error; sylva took "
+            f"{whole['sylva_seconds']:.1f} s with its LB {'from the cache' if lb['cached'] else 'solved'}"
+            f" (**{whole['speedup']:.1f}×**)"
+            + (
+                f", {warm['sylva_seconds']:.1f} s without the LB stage (**{warm['speedup']:.1f}×**)"
+                if warm
+                else ""
+            )
+            + ".",
+            "",
+        ]
     return "\n".join(lines)
 
 
@@ -487,7 +515,7 @@ def run_scene(a, mitsuba, scene):
 
     # 1. sylva: full, local, ambient, lb at the harness's resolution.
     indirect = a.indirect if a.indirect is not None else sylva_default_indirect(a.sylva)
-    sylva_args, matched_c, sylva_seconds = render_sylva(
+    sylva_args, matched_c, sylva_seconds, lb = render_sylva(
         a.sylva,
         scene,
         out / "sylva",
@@ -587,6 +615,20 @@ def run_scene(a, mitsuba, scene):
                 row[k] = metrics.compare(metrics.luminance(img), ra, rb, m)
         class_rows[name] = row
 
+    # Time to equal error on plants: the path tracer's samples for sylva's plant error, from
+    # one reference render's noise and time; sylva's whole render (its LB as this run had
+    # it, cached or solved) and without the LB stage.
+    plant_row = class_rows["plant"]["sylva"]
+    one_ref = sum(m["seconds"] for m in ref_meta) / len(ref_meta)
+    equal = {"lb": lb}
+    for key, secs in (
+        ("whole_render", sylva_seconds),
+        ("without_lb", sylva_seconds - lb["seconds"] if lb["seconds"] is not None else None),
+    ):
+        equal[key] = metrics.equal_error(
+            plant_row["rel_rmse"], plant_row["ref_noise"], a.spp, one_ref, secs
+        )
+
     # 5. Pictures: sylva | reference | difference, the difference alone, the classes.
     exposure = imaging.log_average(L_ref)
     diff = L["full"] - L_ref
@@ -627,6 +669,7 @@ def run_scene(a, mitsuba, scene):
         "fits": {"ambient_c": c_amb, "sylva_matched_c": matched_c, "indirect": s_lb},
         "difference_scale": {"multiple_of_plant_ref_mean": a.diff_scale, "luminance": scale},
         "classes": class_rows,
+        "equal_error": equal,
         "images": {
             "compare": f"{slug}_compare.png",
             "difference": f"{slug}_diff.png",

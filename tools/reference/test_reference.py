@@ -148,6 +148,34 @@ class Compare(unittest.TestCase):
             )
 
 
+class EqualError(unittest.TestCase):
+    def test_closed_form(self):
+        # 4 % noise at 512 spp; sylva 8 % off: a quarter of the samples, a quarter the time.
+        e = metrics.equal_error(0.08, 0.04, 512, 100.0, 5.0)
+        self.assertAlmostEqual(e["spp_needed"], 128.0)
+        self.assertAlmostEqual(e["seconds"], 25.0)
+        self.assertAlmostEqual(e["speedup"], 5.0)
+        # Halving sylva's error takes four times the samples.
+        self.assertAlmostEqual(metrics.equal_error(0.04, 0.04, 512, 100.0, 5.0)["spp_needed"], 512.0)
+
+    def test_error_within_the_reference_noise_has_no_answer(self):
+        self.assertIsNone(metrics.equal_error(0.0, 0.04, 512, 100.0, 5.0))
+        self.assertIsNone(metrics.equal_error(None, 0.04, 512, 100.0, 5.0))
+        self.assertIsNone(metrics.equal_error(0.05, 0.04, 512, 100.0, 0.0))
+
+
+class LbStage(unittest.TestCase):
+    def test_cached_and_solved_runs(self):
+        warm = "  LB catalpa: 128×108×116 grid from cache (0.25 s)\nstage  seconds\n  LB precompute          8.180\n"
+        self.assertEqual(reference.lb_stage(warm), {"seconds": 8.18, "cached": True})
+        cold = "  LB maple: 64×60×62 grid solved in 12.0 s, cached as x.sgrid\n  LB precompute   18.5\n"
+        self.assertEqual(reference.lb_stage(cold), {"seconds": 18.5, "cached": False})
+        # The physical light's forest grid is solved in every run: still a warm run.
+        forest = warm + "  global grid: 32×20×32 solved in 0.50 s\n"
+        self.assertTrue(reference.lb_stage(forest)["cached"])
+        self.assertIsNone(reference.lb_stage("no summary")["seconds"])
+
+
 class ChannelRatios(unittest.TestCase):
     def test_per_channel_mean_ratios_on_the_mask(self):
         ref = np.ones((2, 2, 3)) * [0.2, 0.4, 0.5]
