@@ -560,9 +560,15 @@ impl Lattice {
         self.floor = floor;
     }
 
-    /// Chooses the portable kernel even where AVX2 exists (for comparisons).
-    pub fn force_portable_kernel(&mut self) {
-        self.isa = KernelIsa::Portable;
+    /// Runs `isa`'s kernel instead of the widest this CPU has (tests and benchmarks compare
+    /// them). Panics if this CPU lacks its instructions.
+    pub fn set_kernel(&mut self, isa: KernelIsa) {
+        assert!(
+            isa.is_supported(),
+            "this CPU cannot run the {} LB kernel",
+            isa.name()
+        );
+        self.isa = isa;
     }
 
     pub fn kernel(&self) -> KernelIsa {
@@ -1038,6 +1044,31 @@ pub fn solve_lighting_rgb(
     opts: &SolveOptions,
     progress: &mut dyn FnMut(usize, usize, f64),
 ) -> Result<(LightingGrid, Vec<SolveReport>), SolveError> {
+    solve_lighting_rgb_on(
+        KernelIsa::detect(),
+        grid,
+        medium,
+        boundaries,
+        floor,
+        source,
+        opts,
+        progress,
+    )
+}
+
+/// [`solve_lighting_rgb`] with `kernel` instead of the widest kernel this CPU runs (the CPU
+/// must support it).
+#[allow(clippy::too_many_arguments)]
+pub fn solve_lighting_rgb_on(
+    kernel: KernelIsa,
+    grid: &DensityGrid,
+    medium: &MediumParams,
+    boundaries: &[Boundary; 3],
+    floor: Option<&Floor>,
+    source: Option<&VolumeSource>,
+    opts: &SolveOptions,
+    progress: &mut dyn FnMut(usize, usize, f64),
+) -> Result<(LightingGrid, Vec<SolveReport>), SolveError> {
     medium.validate()?;
     opts.validate()?;
     if let Some(f) = floor {
@@ -1064,6 +1095,7 @@ pub fn solve_lighting_rgb(
                 }
                 None => Lattice::new(grid, medium, c, boundary)?,
             };
+            lat.set_kernel(kernel);
             lat.set_floor(floor.map(|f| f.radiance[c].clone()));
             lat.set_source(source.map(|s| s.colour(c)));
             lat.reset(boundary);
