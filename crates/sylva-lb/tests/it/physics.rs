@@ -92,33 +92,46 @@ fn vector_kernel_matches_dense_reference() {
     }
 }
 
+/// Sweeps of every depth (temporal blocking) against single steps, bit for bit, with a floor
+/// (the rings' floor rows are refilled per plane) and grids as thin as the sweep's stages.
 #[test]
-fn two_step_sweep_equals_two_steps() {
+fn sweeps_equal_single_steps() {
     for dims in [
         Dims::new(9, 7, 21).unwrap(),
         Dims::new(12, 10, 16).unwrap(),
         Dims::new(5, 6, 4).unwrap(),
+        Dims::new(3, 5, 9).unwrap(),
     ] {
         let grid = mixed_grid(dims, 11);
         let m = Preset::Dogrose.params();
         let b = Boundary::sun([0.3, -0.8, 0.52], 1.0);
-        let mut single = Lattice::new(&grid, &m, 2, b).unwrap();
-        let mut pair = Lattice::new(&grid, &m, 2, b).unwrap();
-        for _ in 0..5 {
-            let t0 = single.step();
-            let t1 = single.step();
-            assert_eq!(pair.step_pair(), (t0, t1));
-        }
-        assert_eq!(single.site_totals(), pair.site_totals(), "{dims}");
-        for x in 0..dims.nx {
-            for y in 0..dims.ny {
-                for z in 0..dims.nz {
-                    for q in 0..Q {
-                        assert_eq!(
-                            single.f(x, y, z, q),
-                            pair.f(x, y, z, q),
-                            "{dims} ({x},{y},{z}) f{q}"
-                        );
+        let floor: Vec<f32> = (0..dims.nx * dims.nz)
+            .map(|i| 0.2 + (i % 5) as f32 * 0.1)
+            .collect();
+        for depth in 2..=sylva_lb::solver::SWEEP_STEPS {
+            let mut single = Lattice::new(&grid, &m, 2, b).unwrap();
+            let mut swept = Lattice::new(&grid, &m, 2, b).unwrap();
+            for lat in [&mut single, &mut swept] {
+                lat.set_floor(Some(floor.clone()));
+                lat.reset(b);
+            }
+            for _ in 0..3 {
+                let totals: Vec<f64> = (0..depth).map(|_| single.step()).collect();
+                assert_eq!(swept.step_sweep(depth), totals, "{dims} depth {depth}");
+            }
+            let (t0, t1) = (single.step(), single.step());
+            assert_eq!(swept.step_pair(), (t0, t1));
+            assert_eq!(single.site_totals(), swept.site_totals(), "{dims}");
+            for x in 0..dims.nx {
+                for y in 0..dims.ny {
+                    for z in 0..dims.nz {
+                        for q in 0..Q {
+                            assert_eq!(
+                                single.f(x, y, z, q),
+                                swept.f(x, y, z, q),
+                                "{dims} depth {depth} ({x},{y},{z}) f{q}"
+                            );
+                        }
                     }
                 }
             }
