@@ -5,9 +5,10 @@
 //! in `sylva-lb-gpu` (`select_solver`), which sees both.
 
 use crate::bandwidth::copy_bandwidth_gbs;
+use crate::kernel::KernelIsa;
 use crate::lattice::Q;
 use crate::solver::{
-    solve_lighting_rgb, Boundary, Floor, Lattice, SolveError, SolveOptions, SolveReport,
+    solve_lighting_rgb_on, Boundary, Floor, Lattice, SolveError, SolveOptions, SolveReport,
     VolumeSource,
 };
 use crate::{DensityGrid, LightingGrid, MediumParams};
@@ -142,9 +143,24 @@ pub trait LbSolver: Send + Sync {
     fn cache_tag(&self) -> String;
 }
 
-/// The CPU solver of this crate (vector kernel, all rayon threads).
+/// The CPU solver of this crate (the widest vector kernel this CPU runs, all rayon threads).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct CpuSolver;
+
+impl CpuSolver {
+    /// The same solver on a kernel chosen by hand (benchmarks compare kernels): `None` if
+    /// this CPU lacks its instructions.
+    pub fn with_kernel(kernel: KernelIsa) -> Option<CpuKernelSolver> {
+        kernel.is_supported().then_some(CpuKernelSolver { kernel })
+    }
+}
+
+/// [`CpuSolver`] on a given kernel ([`CpuSolver::with_kernel`]). The AVX-512 and AVX2
+/// kernels write the same state bit for bit; the portable one rounds its multiply-adds twice.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CpuKernelSolver {
+    kernel: KernelIsa,
+}
 
 impl LbSolver for CpuSolver {
     fn solve_lighting_rgb(
@@ -157,9 +173,68 @@ impl LbSolver for CpuSolver {
         opts: &SolveOptions,
         progress: &mut dyn FnMut(usize, usize, f64),
     ) -> Result<(LightingGrid, Vec<SolveReport>), LbSolverError> {
+        CpuKernelSolver::detected()
+            .solve_lighting_rgb(grid, medium, boundaries, floor, source, opts, progress)
+    }
+
+    fn benchmark(
+        &self,
+        grid: &DensityGrid,
+        medium: &MediumParams,
+        boundary: Boundary,
+        steps: usize,
+        repeats: usize,
+        progress: &mut dyn FnMut(usize),
+    ) -> Result<LbBenchmark, LbSolverError> {
+        CpuKernelSolver::detected().benchmark(grid, medium, boundary, steps, repeats, progress)
+    }
+
+    fn device(&self) -> &'static str {
+        "cpu"
+    }
+
+    fn describe(&self) -> String {
+        CpuKernelSolver::detected().describe()
+    }
+
+    fn cache_tag(&self) -> String {
+        CpuKernelSolver::detected().cache_tag()
+    }
+}
+
+impl CpuKernelSolver {
+    fn detected() -> CpuKernelSolver {
+        CpuKernelSolver {
+            kernel: KernelIsa::detect(),
+        }
+    }
+
+    pub fn kernel(&self) -> KernelIsa {
+        self.kernel
+    }
+}
+
+impl LbSolver for CpuKernelSolver {
+    fn solve_lighting_rgb(
+        &self,
+        grid: &DensityGrid,
+        medium: &MediumParams,
+        boundaries: &[Boundary; 3],
+        floor: Option<&Floor>,
+        source: Option<&VolumeSource>,
+        opts: &SolveOptions,
+        progress: &mut dyn FnMut(usize, usize, f64),
+    ) -> Result<(LightingGrid, Vec<SolveReport>), LbSolverError> {
         count_solve();
-        Ok(solve_lighting_rgb(
-            grid, medium, boundaries, floor, source, opts, progress,
+        Ok(solve_lighting_rgb_on(
+            self.kernel,
+            grid,
+            medium,
+            boundaries,
+            floor,
+            source,
+            opts,
+            progress,
         )?)
     }
 
@@ -177,6 +252,7 @@ impl LbSolver for CpuSolver {
             tolerance: None,
         };
         let mut lattice = Lattice::new(grid, medium, 0, boundary)?;
+        lattice.set_kernel(self.kernel);
         let mut runs = Vec::with_capacity(repeats);
         for r in 0..repeats {
             lattice.reset(boundary);
@@ -200,7 +276,7 @@ impl LbSolver for CpuSolver {
     fn describe(&self) -> String {
         format!(
             "CPU, kernel {}, {} threads",
-            crate::kernel::KernelIsa::detect().name(),
+            self.kernel.name(),
             rayon::current_num_threads()
         )
     }
@@ -214,6 +290,43 @@ impl LbSolver for CpuSolver {
 mod tests {
     use super::*;
     use crate::{Dims, Preset};
+
+    #[test]
+    fn fused_kernels_solve_alike_and_name_themselves() {
+        let dims = Dims::new(8, 7, 19).unwrap();
+        let mut grid = DensityGrid::empty(dims);
+        for (i, d) in grid.density.iter_mut().enumerate() {
+            *d = (i % 5) as f32 / 5.0;
+        }
+        let medium = Preset::Leaf.params();
+        let boundary = Boundary::sun([0.3, -0.9, 0.3], 1.0);
+        let opts = SolveOptions::papers(dims);
+        let (detected, _) = CpuSolver
+            .solve_lighting(&grid, &medium, boundary, &opts, &mut |_, _, _| {})
+            .unwrap();
+        for isa in KernelIsa::supported() {
+            let solver = CpuSolver::with_kernel(isa).expect("supported");
+            assert_eq!(solver.kernel(), isa);
+            assert!(
+                solver.describe().contains(isa.name()),
+                "{}",
+                solver.describe()
+            );
+            let (got, _) = solver
+                .solve_lighting(&grid, &medium, boundary, &opts, &mut |_, _, _| {})
+                .unwrap();
+            // The fused kernels (all but the portable one) do the same arithmetic per site.
+            if isa != KernelIsa::Portable {
+                assert!(
+                    got == detected,
+                    "{} differs from {}",
+                    isa.name(),
+                    KernelIsa::detect().name()
+                );
+            }
+        }
+        assert!(CpuSolver::with_kernel(KernelIsa::Portable).is_some());
+    }
 
     #[test]
     fn cpu_backend_is_the_solver() {

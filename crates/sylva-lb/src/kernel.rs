@@ -5,7 +5,8 @@
 //! before and after each run ([`run_stride`]). The padding takes the stores that a shift by
 //! `c_z = ±1` pushes past either end of a run, so every chunk stores whole vectors and no
 //! store ever reaches another run. A row is collided
-//! [`LANES`] sites at a time with the reduced Ω (see [`ReducedOmega`]), and each direction's
+//! [`LANES`] (AVX2) or [`LANES_AVX512`] sites at a time with the reduced Ω (see
+//! [`ReducedOmega`]), and each direction's
 //! result is stored straight into the neighbouring row of the next state, shifted by `c_m`.
 //! Only interior sites are written: the shell keeps its boundary values. The first and last
 //! chunk of a row, whose shifted stores could reach the shell, store lane by lane.
@@ -17,8 +18,15 @@ use crate::collision::{ReducedOmega, PAIRS};
 
 use crate::lattice::{C, Q};
 
-/// Sites collided together; 8 f32 fill one AVX2 register.
+/// Sites collided together by the AVX2 and portable kernels; 8 f32 fill one AVX2 register.
 pub const LANES: usize = 8;
+
+/// Sites collided together by the AVX-512 kernel: 16 f32 fill one AVX-512 register.
+pub const LANES_AVX512: usize = 16;
+
+/// Lanes of [`CubicOmega`]'s repeated coefficients: enough for the widest kernel, which reads
+/// them as whole-register memory operands (a narrower kernel reads the first `L`).
+const WIDEST: usize = LANES_AVX512;
 
 /// Floats per run in the state: `nz` sites plus one padding float at each end (run data
 /// starts at offset 1).
@@ -71,25 +79,25 @@ impl MulAdd for Fused {
 /// dense Ω in tests.
 #[derive(Debug, Clone)]
 pub struct CubicOmega {
-    o00: [f32; LANES],
-    o0q: [f32; LANES],
-    op0_axial: [f32; LANES],
-    op0_diagonal: [f32; LANES],
-    a0: [f32; LANES],
-    alpha: [f32; LANES],
-    b1: [f32; LANES],
-    minus_beta: [f32; LANES],
-    c0: [f32; LANES],
-    gamma: [f32; LANES],
-    d_half_even: [f32; LANES],
-    delta: [f32; LANES],
-    epsilon: [f32; LANES],
-    minus_epsilon: [f32; LANES],
-    odd_axial: [f32; LANES],
-    odd_b: [f32; LANES],
-    odd_c: [f32; LANES],
-    odd_d_half: [f32; LANES],
-    kappa: [f32; LANES],
+    o00: [f32; WIDEST],
+    o0q: [f32; WIDEST],
+    op0_axial: [f32; WIDEST],
+    op0_diagonal: [f32; WIDEST],
+    a0: [f32; WIDEST],
+    alpha: [f32; WIDEST],
+    b1: [f32; WIDEST],
+    minus_beta: [f32; WIDEST],
+    c0: [f32; WIDEST],
+    gamma: [f32; WIDEST],
+    d_half_even: [f32; WIDEST],
+    delta: [f32; WIDEST],
+    epsilon: [f32; WIDEST],
+    minus_epsilon: [f32; WIDEST],
+    odd_axial: [f32; WIDEST],
+    odd_b: [f32; WIDEST],
+    odd_c: [f32; WIDEST],
+    odd_d_half: [f32; WIDEST],
+    kappa: [f32; WIDEST],
 }
 
 impl CubicOmega {
@@ -103,7 +111,7 @@ impl CubicOmega {
                 .map(|i| r.odd[i])
                 .expect("structurally non-zero odd term")
         };
-        let w = |v: f32| [v; LANES];
+        let w = |v: f32| [v; WIDEST];
         let (a1, a0, b1, b0) = (e[0][0], e[0][1], e[0][3], e[0][7]);
         let (c1, c0) = (e[3][0], e[3][2]);
         let (d_same, d_perp, d_half) = (e[3][3], e[3][4], e[3][5]);
@@ -239,7 +247,7 @@ fn sub<const L: usize>(a: [f32; L], b: [f32; L]) -> [f32; L] {
 
 /// `w * x` with a lane-broadcast weight.
 #[inline(always)]
-fn mul<const L: usize>(w: &[f32; LANES], x: [f32; L]) -> [f32; L] {
+fn mul<const L: usize>(w: &[f32; WIDEST], x: [f32; L]) -> [f32; L] {
     let mut r = x;
     for l in 0..L {
         r[l] *= w[l];
@@ -249,7 +257,7 @@ fn mul<const L: usize>(w: &[f32; LANES], x: [f32; L]) -> [f32; L] {
 
 /// `acc + w * x`.
 #[inline(always)]
-fn mad<A: MulAdd, const L: usize>(w: &[f32; LANES], x: [f32; L], acc: [f32; L]) -> [f32; L] {
+fn mad<A: MulAdd, const L: usize>(w: &[f32; WIDEST], x: [f32; L], acc: [f32; L]) -> [f32; L] {
     let mut r = acc;
     for l in 0..L {
         r[l] = A::mul_add(w[l], x[l], r[l]);
@@ -257,20 +265,104 @@ fn mad<A: MulAdd, const L: usize>(w: &[f32; LANES], x: [f32; L], acc: [f32; L]) 
     r
 }
 
+/// The 19 input vectors of a collision: a chunk of the state, or an earlier result.
+///
+/// Inputs and outputs are traits with `#[inline(always)]` methods, not closures: a closure is
+/// a function of its own, compiled without the kernel's target features, and LLVM declined
+/// to inline some of them into the 16-lane kernel (a call per direction, twice as slow).
+trait Inputs<const L: usize> {
+    fn get(&self, m: usize) -> [f32; L];
+}
+
+/// Where a collision's 19 result vectors go.
+trait Outputs<const L: usize> {
+    fn put(&mut self, m: usize, v: [f32; L]);
+}
+
+impl<const L: usize> Inputs<L> for [[f32; L]; Q] {
+    #[inline(always)]
+    fn get(&self, m: usize) -> [f32; L] {
+        self[m]
+    }
+}
+
+impl<const L: usize> Outputs<L> for [[f32; L]; Q] {
+    #[inline(always)]
+    fn put(&mut self, m: usize, v: [f32; L]) {
+        self[m] = v;
+    }
+}
+
+/// Sites `k0..k0 + L` of a row's 19 runs in the state.
+struct StateChunk {
+    src: *const f32,
+    nz: usize,
+    k0: usize,
+}
+
+impl<const L: usize> Inputs<L> for StateChunk {
+    #[inline(always)]
+    fn get(&self, m: usize) -> [f32; L] {
+        // SAFETY: `collide_chunk`'s contract: `src` holds 19 padded runs of `nz` sites and
+        // `k0 + L <= nz`.
+        unsafe { load::<L>(self.src.add(m * run_stride(self.nz) + 1 + self.k0)) }
+    }
+}
+
+/// Stores sites `k..k + L` of each direction into its target run ([`RowTargets`]).
+struct TargetStores<'a> {
+    targets: &'a RowTargets,
+    k: usize,
+}
+
+impl<const L: usize> Outputs<L> for TargetStores<'_> {
+    #[inline(always)]
+    fn put(&mut self, m: usize, v: [f32; L]) {
+        // SAFETY: `process_row_generic`'s contract: every target run is valid for writes at
+        // offsets `-c_z ..= nz - 1 - c_z`, and `k + L <= nz`.
+        unsafe { std::ptr::write_unaligned(self.targets.run[m].add(self.k) as *mut [f32; L], v) }
+    }
+}
+
+/// Adds a row's volume source (if any) to every result before passing it on.
+struct AddSource<'a, O, const L: usize> {
+    out: &'a mut O,
+    source: Option<(&'a RowSource<'a>, &'a [f32; L])>,
+    code: &'a [f32; L],
+}
+
+impl<O: Outputs<L>, const L: usize> Outputs<L> for AddSource<'_, O, L> {
+    #[inline(always)]
+    fn put(&mut self, m: usize, v: [f32; L]) {
+        let mut r = v;
+        if let Some((source, strength)) = self.source {
+            let (g, b) = (source.green[m], source.brown[m]);
+            for l in 0..L {
+                let profile = if self.code[l] < 0.0 { b } else { g };
+                r[l] += strength[l] * profile;
+            }
+        }
+        self.out.put(m, r)
+    }
+}
+
 /// Emits `base(m) + rho · (Ω f)_m` for all 19 directions through `out` (direction 0 also
 /// multiplied by `keep0`) and returns the lane-wise total density `Σ_m f_m`. See
 /// [`CubicOmega`] for the factorisation; `f` is re-read from L1 rather than held in registers.
 #[inline(always)]
-unsafe fn collide_lanes<A: MulAdd, const L: usize>(
+fn collide_lanes<A: MulAdd, const L: usize>(
     om: &CubicOmega,
     rho: &[f32; L],
     keep0: &[f32; L],
-    fin: impl Fn(usize) -> [f32; L],
-    base: impl Fn(usize) -> [f32; L],
-    mut out: impl FnMut(usize, [f32; L]),
+    fin: &impl Inputs<L>,
+    base: &impl Inputs<L>,
+    out: &mut impl Outputs<L>,
 ) -> [f32; L] {
-    let f0 = fin(0);
-    let s: [[f32; L]; PAIRS] = std::array::from_fn(|q| add(fin(2 * q + 1), fin(2 * q + 2)));
+    let f0 = fin.get(0);
+    let mut s = [[0.0f32; L]; PAIRS];
+    for q in 0..PAIRS {
+        s[q] = add(fin.get(2 * q + 1), fin.get(2 * q + 2));
+    }
     let sum_axial = add(add(s[0], s[1]), s[2]);
     let (u_xy, u_xz, u_yz) = (add(s[3], s[4]), add(s[5], s[6]), add(s[7], s[8]));
     let sum_diagonal = add(add(u_xy, u_xz), u_yz);
@@ -284,24 +376,38 @@ unsafe fn collide_lanes<A: MulAdd, const L: usize>(
         sum_diagonal,
         mad::<A, L>(&om.c0, sum_axial, mul(&om.op0_diagonal, f0)),
     );
-    let even_axial =
-        |sq, u_other| mad::<A, L>(&om.minus_beta, u_other, mad::<A, L>(&om.alpha, sq, c_a));
-    let plane_base = |s_other, u| {
+    #[inline(always)]
+    fn even_axial<A: MulAdd, const L: usize>(
+        om: &CubicOmega,
+        c_a: [f32; L],
+        sq: [f32; L],
+        u_other: [f32; L],
+    ) -> [f32; L] {
+        mad::<A, L>(&om.minus_beta, u_other, mad::<A, L>(&om.alpha, sq, c_a))
+    }
+    #[inline(always)]
+    fn plane_base<A: MulAdd, const L: usize>(
+        om: &CubicOmega,
+        c_d: [f32; L],
+        sum_axial: [f32; L],
+        s_other: [f32; L],
+        u: [f32; L],
+    ) -> [f32; L] {
         mad::<A, L>(
             &om.delta,
             u,
             mad::<A, L>(&om.gamma, sub(sum_axial, s_other), c_d),
         )
-    };
+    }
     let (b_xy, b_xz, b_yz) = (
-        plane_base(s[2], u_xy),
-        plane_base(s[1], u_xz),
-        plane_base(s[0], u_yz),
+        plane_base::<A, L>(om, c_d, sum_axial, s[2], u_xy),
+        plane_base::<A, L>(om, c_d, sum_axial, s[1], u_xz),
+        plane_base::<A, L>(om, c_d, sum_axial, s[0], u_yz),
     );
     let e = [
-        even_axial(s[0], u_yz),
-        even_axial(s[1], u_xz),
-        even_axial(s[2], u_xy),
+        even_axial::<A, L>(om, c_a, s[0], u_yz),
+        even_axial::<A, L>(om, c_a, s[1], u_xz),
+        even_axial::<A, L>(om, c_a, s[2], u_xy),
         mad::<A, L>(&om.epsilon, sub(s[3], s[4]), b_xy),
         mad::<A, L>(&om.minus_epsilon, sub(s[3], s[4]), b_xy),
         mad::<A, L>(&om.epsilon, sub(s[5], s[6]), b_xz),
@@ -311,17 +417,34 @@ unsafe fn collide_lanes<A: MulAdd, const L: usize>(
     ];
     let ssum = add(sum_axial, sum_diagonal);
 
-    let d: [[f32; L]; PAIRS] = std::array::from_fn(|q| sub(fin(2 * q + 1), fin(2 * q + 2)));
+    let mut d = [[0.0f32; L]; PAIRS];
+    for q in 0..PAIRS {
+        d[q] = sub(fin.get(2 * q + 1), fin.get(2 * q + 2));
+    }
     let v_x = add(add(d[3], d[4]), add(d[5], d[6]));
     let v_y = add(sub(d[3], d[4]), add(d[7], d[8]));
     let v_z = add(sub(d[5], d[6]), sub(d[7], d[8]));
-    let odd_axial = |di, v| mad::<A, L>(&om.odd_b, v, mul(&om.odd_axial, di));
-    let w_axis = |di, v| mad::<A, L>(&om.odd_d_half, v, mul(&om.odd_c, di));
-    let (w_x, w_y, w_z) = (w_axis(d[0], v_x), w_axis(d[1], v_y), w_axis(d[2], v_z));
+    #[inline(always)]
+    fn odd_axial<A: MulAdd, const L: usize>(
+        om: &CubicOmega,
+        di: [f32; L],
+        v: [f32; L],
+    ) -> [f32; L] {
+        mad::<A, L>(&om.odd_b, v, mul(&om.odd_axial, di))
+    }
+    #[inline(always)]
+    fn w_axis<A: MulAdd, const L: usize>(om: &CubicOmega, di: [f32; L], v: [f32; L]) -> [f32; L] {
+        mad::<A, L>(&om.odd_d_half, v, mul(&om.odd_c, di))
+    }
+    let (w_x, w_y, w_z) = (
+        w_axis::<A, L>(om, d[0], v_x),
+        w_axis::<A, L>(om, d[1], v_y),
+        w_axis::<A, L>(om, d[2], v_z),
+    );
     let o = [
-        odd_axial(d[0], v_x),
-        odd_axial(d[1], v_y),
-        odd_axial(d[2], v_z),
+        odd_axial::<A, L>(om, d[0], v_x),
+        odd_axial::<A, L>(om, d[1], v_y),
+        odd_axial::<A, L>(om, d[2], v_z),
         mad::<A, L>(&om.kappa, d[3], add(w_x, w_y)),
         mad::<A, L>(&om.kappa, d[4], sub(w_x, w_y)),
         mad::<A, L>(&om.kappa, d[5], add(w_x, w_z)),
@@ -330,7 +453,7 @@ unsafe fn collide_lanes<A: MulAdd, const L: usize>(
         mad::<A, L>(&om.kappa, d[8], sub(w_y, w_z)),
     ];
 
-    let b0 = base(0);
+    let b0 = base.get(0);
     let mut r0 = [0.0f32; L];
     let mut total = [0.0f32; L];
     for l in 0..L {
@@ -338,13 +461,16 @@ unsafe fn collide_lanes<A: MulAdd, const L: usize>(
         r0[l] = A::mul_add(rho[l], c0, b0[l]) * keep0[l];
         total[l] = f0[l] + ssum[l];
     }
-    out(0, r0);
+    out.put(0, r0);
     for p in 0..PAIRS {
-        let (bp, bm) = (base(2 * p + 1), base(2 * p + 2));
-        let plus: [f32; L] = std::array::from_fn(|l| A::mul_add(rho[l], e[p][l] + o[p][l], bp[l]));
-        let minus: [f32; L] = std::array::from_fn(|l| A::mul_add(rho[l], e[p][l] - o[p][l], bm[l]));
-        out(2 * p + 1, plus);
-        out(2 * p + 2, minus);
+        let (bp, bm) = (base.get(2 * p + 1), base.get(2 * p + 2));
+        let (mut plus, mut minus) = ([0.0f32; L], [0.0f32; L]);
+        for l in 0..L {
+            plus[l] = A::mul_add(rho[l], e[p][l] + o[p][l], bp[l]);
+            minus[l] = A::mul_add(rho[l], e[p][l] - o[p][l], bm[l]);
+        }
+        out.put(2 * p + 1, plus);
+        out.put(2 * p + 2, minus);
     }
     total
 }
@@ -361,23 +487,18 @@ unsafe fn collide_chunk<A: MulAdd, const L: usize>(
     k0: usize,
     codes: &[f32],
     rp: &RowParams,
-    mut out: impl FnMut(usize, [f32; L]),
+    out: &mut impl Outputs<L>,
 ) -> [f32; L] {
-    let fin = |m: usize| load::<L>(src.add(m * run_stride(nz) + 1 + k0));
+    let fin = StateChunk { src, nz, k0 };
     let code: &[f32; L] = codes[k0..k0 + L].try_into().expect("chunk");
-    // The volume source, added to every direction's result.
-    let mut out = |m: usize, v: [f32; L]| match &rp.source {
-        None => out(m, v),
-        Some(source) => {
-            let strength: &[f32; L] = source.strength[k0..k0 + L].try_into().expect("chunk");
-            let (g, b) = (source.green[m], source.brown[m]);
-            let mut r = v;
-            for l in 0..L {
-                let profile = if code[l] < 0.0 { b } else { g };
-                r[l] += strength[l] * profile;
-            }
-            out(m, r)
-        }
+    let strength = rp.source.as_ref().map(|source| {
+        let strength: &[f32; L] = source.strength[k0..k0 + L].try_into().expect("chunk");
+        (source, strength)
+    });
+    let mut out = AddSource {
+        out,
+        source: strength,
+        code,
     };
     // Folds without early exit so they vectorise.
     let any_medium = code.iter().fold(false, |a, &c| a | (c != 0.0));
@@ -386,11 +507,11 @@ unsafe fn collide_chunk<A: MulAdd, const L: usize>(
         // Empty space, most of a forest grid, only streams.
         let mut total = [0.0f32; L];
         for m in 0..Q {
-            let f = fin(m);
+            let f: [f32; L] = fin.get(m);
             for l in 0..L {
                 total[l] += f[l];
             }
-            out(m, f);
+            out.put(m, f);
         }
         return total;
     }
@@ -402,34 +523,35 @@ unsafe fn collide_chunk<A: MulAdd, const L: usize>(
         keep0[l] = if code[l] > 0.0 { rp.keep_f0_green } else { k };
     }
     if !any_brown {
-        return collide_lanes::<A, L>(rp.green, &rho, &keep0, fin, fin, out);
+        return collide_lanes::<A, L>(rp.green, &rho, &keep0, &fin, &fin, &mut out);
     }
     // Mixed chunk: green collision into `res`, then the brown one added on top.
     let mut res = [[0.0f32; L]; Q];
     let ones = [1.0f32; L];
-    let total = collide_lanes::<A, L>(rp.green, &rho, &ones, fin, fin, |m, v| res[m] = v);
+    let total = collide_lanes::<A, L>(rp.green, &rho, &ones, &fin, &fin, &mut res);
     for l in 0..L {
         rho[l] = (-code[l]).max(0.0);
     }
-    let snapshot = res;
-    collide_lanes::<A, L>(rp.brown, &rho, &keep0, fin, |m| snapshot[m], out);
+    collide_lanes::<A, L>(rp.brown, &rho, &keep0, &fin, &res, &mut out);
     total
 }
 
-/// Collides and streams a whole interior row; returns the total density of its interior
-/// sites before the step.
+/// Collides and streams a whole interior row, `L` sites at a time; returns the total density
+/// of its interior sites before the step.
 ///
 /// Chunks cover the interior sites `1..nz-1` and store whole vectors: a shifted store can then
 /// reach z = 0 or z = nz - 1 of its own target run (never another run), and those two shell
 /// values are restored afterwards. The two shell sites of the row only emit into the
-/// interior along ±z.
+/// interior along ±z. Each site's arithmetic does not depend on `L`, so kernels of any width
+/// with the same [`MulAdd`] write the same state bit for bit (the totals are summed in a
+/// different order).
 ///
 /// # Safety
 /// `src` valid for `19 * nz` reads; `codes` of length `nz`; every target run valid for
 /// writes at offsets `-c_z ..= nz - 1 - c_z` and written by no other row (the sink excepted,
 /// which only its own thread writes).
 #[inline(always)]
-unsafe fn process_row_generic<A: MulAdd>(
+unsafe fn process_row_generic<A: MulAdd, const L: usize>(
     src: *const f32,
     nz: usize,
     codes: &[f32],
@@ -440,35 +562,33 @@ unsafe fn process_row_generic<A: MulAdd>(
     // chunk can be handled alike; stores that land on z = 0 or nz - 1 are restored below,
     // those past the ends of a run fall into its padding.
     let mut total = 0.0f32;
-    if nz < LANES {
+    if nz < L {
         for k in 0..nz {
-            let t = collide_chunk::<A, 1>(src, nz, k, codes, rp, |m, v: [f32; 1]| {
-                *targets.run[m].add(k) = v[0]
-            });
+            let mut stores = TargetStores { targets, k };
+            let t = collide_chunk::<A, 1>(src, nz, k, codes, rp, &mut stores);
             if k > 0 && k < nz - 1 {
                 total += t[0];
             }
         }
     } else {
-        // The last chunk ends at nz - 1; when nz is not a multiple of LANES it overlaps the
+        // The last chunk ends at nz - 1; when nz is not a multiple of L it overlaps the
         // previous chunk, whose sites it recomputes and stores again, identically. Only
         // interior sites not yet counted add to the total.
-        let last = nz - LANES;
-        let mut lanes = [0.0f32; LANES];
+        let last = nz - L;
+        let mut lanes = [0.0f32; L];
         let mut counted = 1; // sites below this are counted (or the shell site 0)
         let mut k = 0;
         loop {
-            let t = collide_chunk::<A, LANES>(src, nz, k, codes, rp, |m, v| {
-                std::ptr::write_unaligned(targets.run[m].add(k) as *mut [f32; LANES], v)
-            });
-            if k > 0 && k + LANES < nz {
+            let mut stores = TargetStores { targets, k };
+            let t = collide_chunk::<A, L>(src, nz, k, codes, rp, &mut stores);
+            if k > 0 && k + L < nz {
                 // Wholly interior and not overlapping: every lane counts.
-                for l in 0..LANES {
+                for l in 0..L {
                     lanes[l] += t[l];
                 }
-                counted = k + LANES;
+                counted = k + L;
             } else {
-                let (lo, hi) = (counted.max(k), (k + LANES).min(nz - 1));
+                let (lo, hi) = (counted.max(k), (k + L).min(nz - 1));
                 if lo < hi {
                     total += t[lo - k..hi - k].iter().sum::<f32>();
                 }
@@ -477,7 +597,7 @@ unsafe fn process_row_generic<A: MulAdd>(
             if k == last {
                 break;
             }
-            k = (k + LANES).min(last);
+            k = (k + L).min(last);
         }
         total += lanes.iter().sum::<f32>();
     }
@@ -498,7 +618,26 @@ unsafe fn process_row_avx2(
     rp: &RowParams,
     targets: &RowTargets,
 ) -> f32 {
-    process_row_generic::<Fused>(src, nz, codes, rp, targets)
+    process_row_generic::<Fused, LANES>(src, nz, codes, rp, targets)
+}
+
+/// The same code as [`process_row_avx2`] 16 lanes wide: `[f32; 16]` arithmetic becomes one
+/// zmm instruction, and the coefficients stay whole-register memory operands. Rows shorter
+/// than 16 sites take 8-lane chunks.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx2,fma")]
+unsafe fn process_row_avx512(
+    src: *const f32,
+    nz: usize,
+    codes: &[f32],
+    rp: &RowParams,
+    targets: &RowTargets,
+) -> f32 {
+    if nz < LANES_AVX512 {
+        process_row_generic::<Fused, LANES>(src, nz, codes, rp, targets)
+    } else {
+        process_row_generic::<Fused, LANES_AVX512>(src, nz, codes, rp, targets)
+    }
 }
 
 /// Asks the CPU to bring `data` into cache (one hint per 64-byte line); a no-op elsewhere.
@@ -524,26 +663,63 @@ pub fn prefetch(data: &[f32]) {
 /// Which instruction set the kernel runs with (chosen once at start-up).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum KernelIsa {
+    /// AVX-512F with FMA, 16 sites per vector; the same arithmetic as [`KernelIsa::Avx2Fma`].
+    Avx512,
     Avx2Fma,
+    /// Plain Rust, separate multiply and add: the reference the others are tested against.
     Portable,
 }
 
 impl KernelIsa {
+    /// Every kernel, widest first.
+    pub const ALL: [KernelIsa; 3] = [KernelIsa::Avx512, KernelIsa::Avx2Fma, KernelIsa::Portable];
+
+    /// The widest kernel this CPU runs.
     pub fn detect() -> KernelIsa {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
-                return KernelIsa::Avx2Fma;
+        KernelIsa::ALL
+            .into_iter()
+            .find(|isa| isa.is_supported())
+            .unwrap_or(KernelIsa::Portable)
+    }
+
+    /// Whether this CPU has the instructions of `self`.
+    pub fn is_supported(self) -> bool {
+        match self {
+            #[cfg(target_arch = "x86_64")]
+            KernelIsa::Avx512 => {
+                std::is_x86_feature_detected!("avx512f")
+                    && std::is_x86_feature_detected!("avx2")
+                    && std::is_x86_feature_detected!("fma")
             }
+            #[cfg(target_arch = "x86_64")]
+            KernelIsa::Avx2Fma => {
+                std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
+            }
+            KernelIsa::Portable => true,
+            #[cfg(not(target_arch = "x86_64"))]
+            _ => false,
         }
-        KernelIsa::Portable
+    }
+
+    /// The kernels this CPU runs, widest first.
+    pub fn supported() -> Vec<KernelIsa> {
+        KernelIsa::ALL
+            .into_iter()
+            .filter(|isa| isa.is_supported())
+            .collect()
     }
 
     pub fn name(self) -> &'static str {
         match self {
+            KernelIsa::Avx512 => "avx512f",
             KernelIsa::Avx2Fma => "avx2+fma",
             KernelIsa::Portable => "portable",
         }
+    }
+
+    /// The kernel called `name` ([`KernelIsa::name`]).
+    pub fn from_name(name: &str) -> Option<KernelIsa> {
+        KernelIsa::ALL.into_iter().find(|isa| isa.name() == name)
     }
 }
 
@@ -581,7 +757,8 @@ pub unsafe fn row_targets(
 /// Collides and streams interior row (x, y) with the kernel for `isa`.
 ///
 /// # Safety
-/// As [`process_row_generic`]; `isa` must be supported by this CPU ([`KernelIsa::detect`]).
+/// As [`process_row_generic`]; `isa` must be supported by this CPU
+/// ([`KernelIsa::is_supported`]).
 pub unsafe fn process_row(
     isa: KernelIsa,
     src: *const f32,
@@ -591,10 +768,15 @@ pub unsafe fn process_row(
     targets: &RowTargets,
 ) -> f32 {
     debug_assert!(codes.len() == nz);
+    // SAFETY (the two target-feature kernels): the caller guarantees that this CPU supports
+    // `isa` ([`KernelIsa::is_supported`], checked where the lattice chose it), and each
+    // kernel is compiled with exactly the features `is_supported` detects for its variant.
     match isa {
         #[cfg(target_arch = "x86_64")]
+        KernelIsa::Avx512 => process_row_avx512(src, nz, codes, rp, targets),
+        #[cfg(target_arch = "x86_64")]
         KernelIsa::Avx2Fma => process_row_avx2(src, nz, codes, rp, targets),
-        _ => process_row_generic::<Plain>(src, nz, codes, rp, targets),
+        _ => process_row_generic::<Plain, LANES>(src, nz, codes, rp, targets),
     }
 }
 
@@ -648,11 +830,10 @@ mod tests {
         ) {
             let dense = Omega::new(&ColourParams { sigma_a: sa, sigma_s: ss, g });
             let cubic = CubicOmega::new(&ReducedOmega::new(&dense));
-            let mut got = [0.0f32; Q];
-            // SAFETY: the closures read the local array only.
-            let total = unsafe {
-                collide_lanes::<Plain, 1>(&cubic, &[rho], &[1.0], |m| [f[m]], |m| [f[m]], |m, v| got[m] = v[0])
-            };
+            let input: [[f32; 1]; Q] = std::array::from_fn(|m| [f[m]]);
+            let mut out = [[0.0f32; 1]; Q];
+            let total = collide_lanes::<Plain, 1>(&cubic, &[rho], &[1.0], &input, &input, &mut out);
+            let got = out.map(|v| v[0]);
             for i in 0..Q {
                 let want: f64 = f[i] as f64
                     + rho as f64 * (0..Q).map(|j| dense.0[i][j] * f[j] as f64).sum::<f64>();

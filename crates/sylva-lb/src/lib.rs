@@ -30,11 +30,13 @@ pub mod report;
 pub mod shapes;
 pub mod solver;
 
-pub use backend::{count_solve, solves_started, CpuSolver, LbBenchmark, LbSolver, LbSolverError};
+pub use backend::{
+    count_solve, solves_started, CpuKernelSolver, CpuSolver, LbBenchmark, LbSolver, LbSolverError,
+};
 pub use grid::{Bounds, DensityGrid, Dims, GridError, LightingGrid, RawElement};
 pub use grid_file::{Element, GridFile, GridFileError, GridKind};
 pub use params::{ColourParams, MediumParams, ParamError, Preset};
 pub use solver::{
-    solve_lighting, solve_lighting_rgb, Boundary, Floor, Flows, Lattice, RunMonitor, SolveError,
-    SolveOptions, SolveReport, StopReason, VolumeSource,
+    solve_lighting, solve_lighting_rgb, solve_lighting_rgb_on, Boundary, Floor, Flows, Lattice,
+    RunMonitor, SolveError, SolveOptions, SolveReport, StopReason, VolumeSource,
 };

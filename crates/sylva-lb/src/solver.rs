@@ -361,8 +361,15 @@ pub struct Flows {
     pub sourced: f64,
 }
 
-/// Planes of the intermediate state that [`Lattice::step_pair`] keeps.
+/// Planes of each intermediate state that [`Lattice::step_sweep`] keeps.
 const RING: usize = 4;
+
+/// The most steps one sweep over memory advances ([`Lattice::step_sweep`]): the state is read
+/// and written once per sweep, and each step beyond the first keeps a ring of [`RING`] planes
+/// in cache (5 MB at 128³). Three measured 8 % faster than two on the shared 2-core host
+/// (dense 128³, AVX-512, CPU-seconds and wall, medians of 8); four and six were slower than
+/// three, their rings crowding the shared L3 (docs/PERFORMANCE.md).
+pub const SWEEP_STEPS: usize = 3;
 
 /// Fills the 19 runs of a row block: the boundary everywhere (`whole`, a shell row) or only
 /// at the two z-ends (an interior row), zero elsewhere.
@@ -407,7 +414,7 @@ fn fill_floor_row(
 pub fn memory_needed(dims: Dims) -> u64 {
     let n = dims.sites() as u64;
     let state = (dims.nx * dims.ny * Q * run_stride(dims.nz)) as u64 * 4;
-    let ring = (RING * dims.ny * Q * run_stride(dims.nz)) as u64 * 4;
+    let ring = ((SWEEP_STEPS - 1) * RING * dims.ny * Q * run_stride(dims.nz)) as u64 * 4;
     2 * state + ring + n * 4 + 3 * n * 4
 }
 
@@ -444,7 +451,7 @@ pub struct Lattice {
     codes: Vec<f32>,
     states: [AlignedBuf; 2],
     current: usize,
-    /// [`RING`] planes of the intermediate state for [`Lattice::step_pair`].
+    /// [`RING`] planes of each intermediate state of [`Lattice::step_sweep`], ring after ring.
     ring: AlignedBuf,
     green: CubicOmega,
     brown: CubicOmega,
@@ -497,7 +504,7 @@ impl Lattice {
             codes,
             states: [AlignedBuf::zeroed(len), AlignedBuf::zeroed(len)],
             current: 0,
-            ring: AlignedBuf::zeroed(RING * dims.ny * Q * run_stride(dims.nz)),
+            ring: AlignedBuf::zeroed((SWEEP_STEPS - 1) * RING * dims.ny * Q * run_stride(dims.nz)),
             green: CubicOmega::new(&ReducedOmega::new(&dense_green)),
             brown: CubicOmega::new(&ReducedOmega::new(&dense_brown)),
             dense_green,
@@ -560,9 +567,15 @@ impl Lattice {
         self.floor = floor;
     }
 
-    /// Chooses the portable kernel even where AVX2 exists (for comparisons).
-    pub fn force_portable_kernel(&mut self) {
-        self.isa = KernelIsa::Portable;
+    /// Runs `isa`'s kernel instead of the widest this CPU has (tests and benchmarks compare
+    /// them). Panics if this CPU lacks its instructions.
+    pub fn set_kernel(&mut self, isa: KernelIsa) {
+        assert!(
+            isa.is_supported(),
+            "this CPU cannot run the {} LB kernel",
+            isa.name()
+        );
+        self.isa = isa;
     }
 
     pub fn kernel(&self) -> KernelIsa {
@@ -722,17 +735,29 @@ impl Lattice {
         totals.iter().sum()
     }
 
-    /// Advances two steps in one sweep over memory (temporal blocking) and returns the
-    /// interior totals before each.
+    /// Advances two steps in one sweep over memory and returns the interior totals before
+    /// each: [`Lattice::step_sweep`] of two steps.
+    pub fn step_pair(&mut self) -> (f64, f64) {
+        let totals = self.step_sweep(2);
+        (totals[0], totals[1])
+    }
+
+    /// Advances `steps` steps (2 to [`SWEEP_STEPS`]) in one sweep over memory (temporal
+    /// blocking) and returns the interior totals before each.
     ///
     /// Step t of plane x reads only plane x and writes planes x - 1..=x + 1 of state t + 1,
     /// so after plane x + 1, plane x of state t + 1 is complete. Sweep stage x therefore runs
-    /// step t of plane x together with step t + 1 of plane x - 2, which reads a ring of four
-    /// planes of state t + 1 that stays in cache and writes back into the current state,
-    /// whose planes x - 3..=x - 1 step t has already consumed. Main memory sees one read and
-    /// one write of the state per two steps. The result is identical to two calls of
-    /// [`Lattice::step`].
-    pub fn step_pair(&mut self) -> (f64, f64) {
+    /// step t + s of plane x - 2s for every s < `steps`: step t reads the current state,
+    /// each intermediate state t + s lives in a ring of four planes that stays in cache
+    /// (plane x - 2s is read while x - 2s + 1..=x - 2s + 3 are written), and the last step
+    /// writes back into the current state, whose planes up to x - 1 step t has already
+    /// consumed. Main memory sees one read and one write of the state per sweep. The result
+    /// is identical to `steps` calls of [`Lattice::step`].
+    pub fn step_sweep(&mut self, steps: usize) -> Vec<f64> {
+        assert!(
+            (2..=SWEEP_STEPS).contains(&steps),
+            "a sweep advances 2 to {SWEEP_STEPS} steps, not {steps}"
+        );
         let (nx, ny, nz) = (self.dims.nx, self.dims.ny, self.dims.nz);
         let plane_len = self.plane_len();
         let block_len = Q * run_stride(nz);
@@ -742,7 +767,8 @@ impl Lattice {
         let r = SharedState(ring.as_mut_ptr());
         let interior = |t: usize| t >= 1 && t < nx - 1;
         let null = SharedState(std::ptr::null_mut());
-        // SAFETY (both closures): t < nx and slots < RING lie inside their buffers.
+        // SAFETY (both closures): t < nx, 1 <= s < SWEEP_STEPS and slots < RING lie inside
+        // their buffers.
         let a_plane = |t: usize| {
             if interior(t) {
                 SharedState(unsafe { a.ptr().add(t * plane_len) })
@@ -750,63 +776,66 @@ impl Lattice {
                 null
             }
         };
-        let r_plane = |t: usize| {
+        // Plane t of intermediate state t + s, in ring s.
+        let r_plane = |s: usize, t: usize| {
             if interior(t) {
-                SharedState(unsafe { r.ptr().add((t % RING) * plane_len) })
+                SharedState(unsafe { r.ptr().add(((s - 1) * RING + t % RING) * plane_len) })
             } else {
                 null
             }
         };
-        let (mut first, mut second) = (vec![0.0f64; nx], vec![0.0f64; nx]);
-        let this = &*self;
-        for x in 0..nx + 2 {
-            // The ring slot that step t + 1 reads this stage stands for plane x - 2: give its
-            // floor row that plane's values (step t writes the other three slots).
-            if self.floor.is_some() && x >= 2 && interior(x - 2) {
-                let p = x - 2;
-                let block = Q * run_stride(nz);
-                // SAFETY: slot p % RING, row 0, lies inside the ring, and nothing else
-                // touches it during this stage.
-                let row = unsafe {
-                    std::slice::from_raw_parts_mut(r.ptr().add((p % RING) * plane_len), block)
-                };
-                fill_floor_row(row, nz, &self.boundary, self.floor.as_deref(), p);
+        // What step s reads of plane p: the current state, or its intermediate state's ring;
+        // shell planes hold the boundary in every state, so they are read from the state.
+        let source = |s: usize, p: usize| {
+            if s == 0 || !interior(p) {
+                unsafe { a.ptr().add(p * plane_len) }
+            } else {
+                r_plane(s, p).ptr()
             }
-            // Rows 0..ny: step t of plane x; rows ny..2ny: step t + 1 of plane x - 2.
-            let jobs: Vec<(usize, bool)> = [(x, x < nx), (x.wrapping_sub(2), x >= 2)]
-                .into_iter()
-                .filter(|j| j.1)
+        };
+        // Where step s writes plane p's results: planes p - 1..=p + 1 of the next ring, or of
+        // the state for the last step.
+        let targets = |s: usize, p: usize| {
+            let plane = |t: usize| {
+                if s + 1 == steps {
+                    a_plane(t)
+                } else {
+                    r_plane(s + 1, t)
+                }
+            };
+            [plane(p.wrapping_sub(1)), plane(p), plane(p + 1)].map(SharedState::ptr)
+        };
+        let mut totals = vec![vec![0.0f64; nx]; steps];
+        let this = &*self;
+        for x in 0..nx + 2 * (steps - 1) {
+            // The ring slot each later step reads this stage stands for plane x - 2s: give
+            // its floor row that plane's values (the step before writes the other three).
+            for s in 1..steps {
+                if self.floor.is_some() && x >= 2 * s && interior(x - 2 * s) {
+                    let p = x - 2 * s;
+                    // SAFETY: row 0 of ring s's slot for plane p lies inside the ring, and
+                    // nothing else touches it during this stage.
+                    let row =
+                        unsafe { std::slice::from_raw_parts_mut(r_plane(s, p).ptr(), block_len) };
+                    fill_floor_row(row, nz, &self.boundary, self.floor.as_deref(), p);
+                }
+            }
+            // Job j: step s of plane p.
+            let jobs: Vec<(usize, usize)> = (0..steps)
+                .filter_map(|s| x.checked_sub(2 * s).filter(|&p| p < nx).map(|p| (s, p)))
                 .collect();
             let rows: Vec<f64> = (0..jobs.len() * ny)
                 .into_par_iter()
                 .map_init(
                     || vec![0.0f32; nz + 2],
                     |sink, i| {
-                        let (job, y) = (i / ny, i % ny);
-                        let p = jobs[job].0;
-                        let second_step = p + 2 == x;
-                        let (src, planes) = if second_step {
-                            // Shell planes hold the boundary in every state; interior planes
-                            // of state t + 1 live in the ring.
-                            let src = if interior(p) {
-                                r_plane(p).ptr()
-                            } else {
-                                unsafe { a.ptr().add(p * plane_len) }
-                            };
-                            (
-                                src,
-                                [a_plane(p.wrapping_sub(1)), a_plane(p), a_plane(p + 1)],
-                            )
-                        } else {
-                            let src = unsafe { a.ptr().add(p * plane_len) };
-                            (
-                                src,
-                                [r_plane(p.wrapping_sub(1)), r_plane(p), r_plane(p + 1)],
-                            )
-                        };
+                        let ((s, p), y) = (jobs[i / ny], i % ny);
+                        let src = source(s, p);
                         // SAFETY: the source row is complete and no job of this stage writes
-                        // it; the two jobs write disjoint planes (ring slots x - 1..=x + 1,
-                        // state planes x - 3..=x - 1), and rows of one job disjoint runs.
+                        // it; jobs write disjoint planes (ring s + 1's slots p - 1..=p + 1,
+                        // which ring s + 1's reader, plane p - 2, does not share; state planes
+                        // below x - 2s + 4 - 2·steps, which step 0 has consumed), and rows of
+                        // one job disjoint runs.
                         unsafe {
                             let block =
                                 std::slice::from_raw_parts(src.add(y * block_len), block_len);
@@ -816,23 +845,18 @@ impl Lattice {
                                     block_len,
                                 ));
                             }
-                            this.sweep_row(block, p, y, planes.map(SharedState::ptr), sink)
+                            this.sweep_row(block, p, y, targets(s, p), sink)
                         }
                     },
                 )
                 .collect();
-            for (j, &(p, _)) in jobs.iter().enumerate() {
-                let total: f64 = rows[j * ny..(j + 1) * ny].iter().sum();
-                if p == x {
-                    first[p] = total;
-                } else {
-                    second[p] = total;
-                }
+            for (j, &(s, p)) in jobs.iter().enumerate() {
+                totals[s][p] = rows[j * ny..(j + 1) * ny].iter().sum();
             }
         }
         self.states[self.current] = state;
         self.ring = ring;
-        (first.iter().sum(), second.iter().sum())
+        totals.iter().map(|t| t.iter().sum()).collect()
     }
 
     /// Advances one step with a direct scalar implementation of eq. 2 in f64 (the dense Ω,
@@ -949,13 +973,21 @@ impl Lattice {
     ) -> Result<SolveReport, SolveError> {
         opts.validate()?;
         let mut monitor = RunMonitor::new(opts);
+        // With a tolerance the monitor checks after every pair of steps (the rule the GPU
+        // backend shares, so both stop after the same step); without one, after whatever
+        // the sweep advanced.
+        let batch = if opts.tolerance.is_some() {
+            2
+        } else {
+            SWEEP_STEPS
+        };
         while monitor.steps_left() > 0 {
-            // Two steps per sweep over memory where two remain. Each step reports the total
-            // of the state it started from, so the change over the previous step is known
-            // one step late; that is all the monitor needs.
-            if monitor.steps_left() >= 2 {
-                let (a, b) = self.step_pair();
-                monitor.record(&[a, b], progress);
+            // Several steps per sweep over memory where they remain. Each step reports the
+            // total of the state it started from, so the change over the previous step is
+            // known one step late; that is all the monitor needs.
+            let steps = monitor.steps_left().min(batch);
+            if steps >= 2 {
+                monitor.record(&self.step_sweep(steps), progress);
             } else {
                 monitor.record(&[self.step()], progress);
             }
@@ -1038,6 +1070,31 @@ pub fn solve_lighting_rgb(
     opts: &SolveOptions,
     progress: &mut dyn FnMut(usize, usize, f64),
 ) -> Result<(LightingGrid, Vec<SolveReport>), SolveError> {
+    solve_lighting_rgb_on(
+        KernelIsa::detect(),
+        grid,
+        medium,
+        boundaries,
+        floor,
+        source,
+        opts,
+        progress,
+    )
+}
+
+/// [`solve_lighting_rgb`] with `kernel` instead of the widest kernel this CPU runs (the CPU
+/// must support it).
+#[allow(clippy::too_many_arguments)]
+pub fn solve_lighting_rgb_on(
+    kernel: KernelIsa,
+    grid: &DensityGrid,
+    medium: &MediumParams,
+    boundaries: &[Boundary; 3],
+    floor: Option<&Floor>,
+    source: Option<&VolumeSource>,
+    opts: &SolveOptions,
+    progress: &mut dyn FnMut(usize, usize, f64),
+) -> Result<(LightingGrid, Vec<SolveReport>), SolveError> {
     medium.validate()?;
     opts.validate()?;
     if let Some(f) = floor {
@@ -1064,6 +1121,7 @@ pub fn solve_lighting_rgb(
                 }
                 None => Lattice::new(grid, medium, c, boundary)?,
             };
+            lat.set_kernel(kernel);
             lat.set_floor(floor.map(|f| f.radiance[c].clone()));
             lat.set_source(source.map(|s| s.colour(c)));
             lat.reset(boundary);

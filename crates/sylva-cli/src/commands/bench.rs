@@ -3,6 +3,7 @@
 use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
 use sylva_lb::bench::{self, BenchMedium};
+use sylva_lb::kernel::KernelIsa;
 use sylva_lb::{Dims, SolveOptions};
 use sylva_pipeline::bench::CloudSolve;
 
@@ -85,6 +86,27 @@ struct BenchLbArgs {
     /// GPU state storage: f32 or f16.
     #[arg(long, value_enum, default_value = "f32")]
     precision: super::device::PrecisionArg,
+    /// CPU only: run this kernel instead of the widest this CPU has (avx512f, avx2+fma or
+    /// portable), to compare kernels back to back.
+    #[arg(long, value_parser = ["avx512f", "avx2+fma", "portable"])]
+    kernel: Option<String>,
+}
+
+impl BenchLbArgs {
+    /// The backend `--device`, `--precision` and `--kernel` ask for.
+    fn solver(&self) -> Result<Box<dyn sylva_lb::LbSolver>> {
+        let Some(name) = &self.kernel else {
+            return super::device::open_solver(self.device, self.precision);
+        };
+        if self.device != super::device::DeviceArg::Cpu {
+            bail!("--kernel chooses a CPU kernel: it needs --device cpu");
+        }
+        let isa = KernelIsa::from_name(name).expect("clap checked the name");
+        match sylva_lb::CpuSolver::with_kernel(isa) {
+            Some(solver) => Ok(Box::new(solver)),
+            None => bail!("--kernel {name}: this CPU lacks its instructions"),
+        }
+    }
 }
 
 pub fn run(args: BenchArgs, runner: &dyn sylva_pipeline::Runner) -> Result<()> {
@@ -115,7 +137,7 @@ fn bench_lb(a: BenchLbArgs) -> Result<()> {
         "empty" => BenchMedium::Empty,
         _ => BenchMedium::Dense,
     };
-    let backend = super::device::open_solver(a.device, a.precision)?;
+    let backend = a.solver()?;
     let pb = bench_bar(a.json, steps * a.repeats, "bench lb");
     let b = bench::dense(backend.as_ref(), dims, medium, steps, a.repeats, &mut |s| {
         pb.set_position(s as u64)
@@ -135,7 +157,7 @@ fn bench_cloud(a: BenchLbArgs) -> Result<()> {
         bail!("--steps must be at least 1");
     }
     let opts = SolveOptions::for_run(a.steps, a.tolerance, cloud.grid.dims);
-    let backend = super::device::open_solver(a.device, a.precision)?;
+    let backend = a.solver()?;
     let pb = bench_bar(a.json, opts.max_steps * a.repeats, "bench cloud");
     let b = bench::solve(
         backend.as_ref(),

@@ -152,3 +152,33 @@ fn bench_lb_json_has_the_fields() {
     assert!((eff - mlups * 156.0 / 1000.0).abs() < 1e-6 * eff.max(1.0));
     assert!((ratio - eff / copy).abs() < 1e-9);
 }
+
+#[test]
+fn bench_lb_runs_the_kernel_it_is_given() {
+    let args = [
+        "bench",
+        "lb",
+        "--grid",
+        "12",
+        "--steps",
+        "3",
+        "--repeats",
+        "1",
+        "--json",
+    ];
+    let with = |extra: &[&str]| sylva(&[&args[..], extra].concat());
+    let (ok, out, err) = with(&["--device", "cpu", "--kernel", "portable"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["kernel"], "portable");
+    // Without one the widest the CPU has runs (the default report says which).
+    let (ok, out, err) = with(&["--device", "cpu"]);
+    assert!(ok, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(v["kernel"], sylva_lb::kernel::KernelIsa::detect().name());
+    // A kernel is a CPU choice; a name clap does not know is refused.
+    let (ok, _, err) = with(&["--device", "auto", "--kernel", "portable"]);
+    assert!(!ok && err.contains("--device cpu"), "{err}");
+    let (ok, _, err) = with(&["--device", "cpu", "--kernel", "sse9"]);
+    assert!(!ok && err.contains("sse9"), "{err}");
+}
