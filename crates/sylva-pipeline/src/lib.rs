@@ -1121,9 +1121,12 @@ impl PreparedScene {
             }
             (light, _, _) => {
                 if let (None, Some(p)) = (light, &self.physical) {
-                    // The relit light decoded once for this sun when the frame reads it more
-                    // often than it has sites.
-                    let lookups = settings.region.pixels()
+                    // The relit light decoded once for this sun when the frame reads it often
+                    // enough: counted over the whole image, not this region, so every part of
+                    // a frame split across processes or strips decides alike (a decoded
+                    // compressed light differs from its lookups within the codec's error).
+                    let lookups = u64::from(settings.camera.width)
+                        * u64::from(settings.camera.height)
                         * u64::from(settings.rays_per_pixel)
                         * (1 + u64::from(settings.shading.gather_rays));
                     p.bake_for_frame(lookups, self.bake_budget);
