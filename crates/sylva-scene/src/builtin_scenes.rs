@@ -11,6 +11,7 @@ pub const NAMES: &[&str] = &[
     "cloud",
     "teapot",
     "demo_cloud",
+    "woodland",
 ];
 
 /// TOML source of built-in scene `name`.
@@ -24,6 +25,7 @@ pub fn source(name: &str) -> Option<&'static str> {
         "cloud" => Some(CLOUD),
         "teapot" => Some(TEAPOT),
         "demo_cloud" => Some(DEMO_CLOUD),
+        "woodland" => Some(WOODLAND),
         _ => None,
     }
 }
@@ -39,6 +41,7 @@ pub fn describe(name: &str) -> Option<&'static str> {
         "cloud" => Some("paper 002 Fig. 1: a 256×128×128 cumulus lit by LB over a sky, 640×360"),
         "teapot" => Some("paper 002 Figs. 4-5: the Newell teapot in PMMA, LB glow against conventional lighting, 512×384"),
         "demo_cloud" => Some("the demo forest under a fair-weather cumulus (clouds in forest scenes, 000 Fig. 3)"),
+        "woodland" => Some("a billion triangles: 3,900 trees of 6 species over 480 × 240 m, about 1.09 G instanced triangles, 896×448"),
         _ => None,
     }
 }
@@ -434,6 +437,104 @@ position = [0.0, 40.0, -62.0]
 look_at = [0.0, 10.0, 0.0]
 fov = 45.0
 resolution = [512, 512]
+rays_per_pixel = 1
+
+[lb]
+grid = 128
+preset = "leaf"
+"#;
+
+const WOODLAND: &str = r#"# A billion triangles (issue 28 item 5): 3,900 trees of six species over 480 × 240 m.
+name = "woodland"
+
+[[models]]
+name = "red_maple"
+species = "red_maple"
+
+[[models]]
+name = "ohio_buckeye"
+species = "ohio_buckeye"
+
+[[models]]
+name = "paper_birch"
+species = "paper_birch"
+
+[[models]]
+name = "southern_catalpa"
+species = "southern_catalpa"
+
+[[models]]
+name = "american_beech"
+species = "american_beech"
+
+[[models]]
+name = "pine"
+species = "pine"
+
+[[instances]]
+model = "american_beech"
+count = 700
+area = { min = [-240.0, -120.0], max = [240.0, 120.0] }
+min_spacing = 3.5
+scale_jitter = 0.15
+seed = 31
+
+[[instances]]
+model = "paper_birch"
+count = 1100
+area = { min = [-240.0, -120.0], max = [240.0, 120.0] }
+min_spacing = 3.5
+scale_jitter = 0.15
+seed = 32
+
+[[instances]]
+model = "pine"
+count = 300
+area = { min = [-240.0, -120.0], max = [240.0, 120.0] }
+min_spacing = 3.5
+scale_jitter = 0.15
+seed = 33
+
+[[instances]]
+model = "ohio_buckeye"
+count = 900
+area = { min = [-240.0, -120.0], max = [240.0, 120.0] }
+min_spacing = 3.5
+scale_jitter = 0.15
+seed = 34
+
+[[instances]]
+model = "southern_catalpa"
+count = 700
+area = { min = [-240.0, -120.0], max = [240.0, 120.0] }
+min_spacing = 3.5
+scale_jitter = 0.15
+seed = 35
+
+[[instances]]
+model = "red_maple"
+count = 200
+area = { min = [-240.0, -120.0], max = [240.0, 120.0] }
+min_spacing = 3.5
+scale_jitter = 0.15
+seed = 36
+
+[ground]
+size = [560.0, 320.0]
+color = [0.16, 0.14, 0.08]
+
+[sun]
+elevation = 45.0
+azimuth = 60.0
+
+[sky]
+color = [0.55, 0.70, 0.95]
+
+[camera]
+position = [0.0, 40.0, -190.0]
+look_at = [0.0, 6.0, 0.0]
+fov = 40.0
+resolution = [896, 448]
 rays_per_pixel = 1
 
 [lb]

@@ -13,8 +13,8 @@ use super::progress::bar;
 
 #[derive(Args)]
 pub struct ExportArgs {
-    /// A scene file (TOML) or a built-in scene: demo, beech, catalpa, canopy, cloud, teapot,
-    /// demo_cloud.
+    /// A scene file (TOML) or a built-in scene: demo, beech, catalpa, canopy, shade, cloud,
+    /// teapot, demo_cloud, woodland.
     pub scene: String,
     /// `obj`: the flattened scene (every instance in world space) as one OBJ + MTL + PNG
     /// textures, ground included. `mitsuba`: a Mitsuba 3 scene.xml that keeps the instancing

@@ -69,7 +69,7 @@ pub enum BasisPrecisionArg {
 
 /// The help of every command's SCENE argument.
 pub const SCENE_HELP: &str = "Scene file (.toml) or built-in scene name (demo, beech, catalpa, \
-     canopy, shade, cloud, teapot, demo_cloud; `sylva scene list`).";
+     canopy, shade, cloud, teapot, demo_cloud, woodland; `sylva scene list`).";
 
 /// The help of `--light` for the commands that relight (`basis`, `relight`).
 const RELIGHT_LIGHT_HELP: &str = "Light model: physical (the default: per model 13 sun parts \

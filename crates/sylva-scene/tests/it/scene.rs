@@ -240,6 +240,27 @@ fn beech_scene_is_table_2_with_five_unique_models() {
     }
 }
 
+/// Issue 28 item 5: a billion instanced triangles from six models, held as six models.
+#[test]
+fn woodland_scene_holds_a_billion_instanced_triangles_in_six_models() {
+    let s = sylva_scene::load("woodland").unwrap();
+    assert_eq!(s.instances.len(), 3900);
+    assert_eq!(s.models.len(), 6);
+    assert_eq!((s.camera.width, s.camera.height), (896, 448));
+    let stats = SceneStats::of(&s);
+    assert!(
+        stats.instanced_triangles >= 1_000_000_000,
+        "{}",
+        stats.instanced_triangles
+    );
+    // The models' memory, not the instances': under 0.2 GiB for a billion triangles.
+    assert!(stats.memory_bytes < 200 << 20, "{}", stats.memory_bytes);
+    // Every tree stands on the 480 × 240 m plot (its placement's area).
+    for i in &s.instances {
+        assert!(i.position.x.abs() <= 240.0 && i.position.z.abs() <= 120.0);
+    }
+}
+
 #[test]
 fn every_builtin_scene_parses_and_places() {
     for name in builtin_scenes::NAMES {
