@@ -287,6 +287,7 @@ impl PreparedScene {
         let layout = UnitLayout::new(region, edge);
 
         let t0 = Instant::now();
+        self.decode_light_for(settings);
         let renderer = self.renderer();
         let root = runner.is_root();
         if root {

@@ -1120,16 +1120,8 @@ impl PreparedScene {
                 }
             }
             (light, _, _) => {
-                if let (None, Some(p)) = (light, &self.physical) {
-                    // The relit light decoded once for this sun when the frame reads it often
-                    // enough: counted over the whole image, not this region, so every part of
-                    // a frame split across processes or strips decides alike (a decoded
-                    // compressed light differs from its lookups within the codec's error).
-                    let lookups = u64::from(settings.camera.width)
-                        * u64::from(settings.camera.height)
-                        * u64::from(settings.rays_per_pixel)
-                        * (1 + u64::from(settings.shading.gather_rays));
-                    p.bake_for_frame(lookups, self.bake_budget);
+                if light.is_none() {
+                    self.decode_light_for(settings);
                 }
                 let light = light.unwrap_or(self.indirect());
                 match (&self.tracer, &self.sun_grid) {
@@ -1148,6 +1140,21 @@ impl PreparedScene {
             return Err(PipelineError::GpuFailed(e));
         }
         Ok(frame?)
+    }
+
+    /// Before a frame shaded on the CPU with the scene's own light: the relit light decoded
+    /// once for this sun when the frame reads it often enough
+    /// ([`PhysicalRelitLight::bake_for_frame`]). Counted over the whole image, not the
+    /// frame's region, so every part of a frame split across processes or strips decides
+    /// alike (a decoded compressed light differs from its lookups within the codec's error).
+    pub(crate) fn decode_light_for(&self, settings: &RenderSettings) {
+        if let Some(p) = &self.physical {
+            let lookups = u64::from(settings.camera.width)
+                * u64::from(settings.camera.height)
+                * u64::from(settings.rays_per_pixel)
+                * (1 + u64::from(settings.shading.gather_rays));
+            p.bake_for_frame(lookups, self.bake_budget);
+        }
     }
 
     /// Bytes of the LB light (per-sun grids or stored bases in use) and the media's volumes.
