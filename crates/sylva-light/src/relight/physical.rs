@@ -296,6 +296,16 @@ impl PhysicalRelitLight {
         if let Some(b) = self.baked.get() {
             return Some(b.summary);
         }
+        // A frame too small for even the smallest grid (a preview) skips the grouping.
+        let smallest = self
+            .models
+            .iter()
+            .flatten()
+            .map(|b| b.dims().sites() as u64)
+            .min()?;
+        if lookups.saturating_mul(4) < smallest {
+            return None;
+        }
         let (groups, of) = self.bake_groups();
         let mut chosen = Vec::new();
         let (mut bytes, mut sites) = (0u64, 0u64);

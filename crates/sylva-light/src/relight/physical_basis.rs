@@ -156,15 +156,21 @@ impl PhysicalBasis {
         let (sites, wt) = (fp.sites(self.dims), fp.weights());
         let mut out = Vec3::ZERO;
         for k in 0..8 {
-            let v = &self.values[sites[k]];
-            let mut site = Vec3::ZERO;
-            for &(part, w) in terms {
-                site += Vec3::from_array(v[part]) * w;
-            }
-            out += site * wt[k];
+            out += combine_site(&self.values[sites[k]], terms) * wt[k];
         }
         out
     }
+}
+
+/// `Σ w ⊙ part` at one site: what a lookup weighs at each corner, and what a baked light
+/// stores (the same rounding, so both read alike bit for bit).
+#[inline]
+fn combine_site(v: &[[f32; 3]; PARTS], terms: &[(usize, Vec3)]) -> Vec3 {
+    let mut site = Vec3::ZERO;
+    for &(part, w) in terms {
+        site += Vec3::from_array(v[part]) * w;
+    }
+    site
 }
 
 /// One instance's light for the current sun at every site of its model's grid
@@ -519,14 +525,7 @@ impl StoredPhysicalBasis {
             (StoredPhysicalBasis::Full(b), PhysicalTerms::Full(t)) => b
                 .values
                 .par_iter()
-                .map(|v| {
-                    // As `PhysicalBasis::sample` sums a site: the same rounding.
-                    let mut site = Vec3::ZERO;
-                    for &(part, w) in t {
-                        site += Vec3::from_array(v[part]) * w;
-                    }
-                    site.to_array()
-                })
+                .map(|v| combine_site(v, t).to_array())
                 .collect(),
             (StoredPhysicalBasis::Compressed(c), PhysicalTerms::Compressed(sun, diffuse)) => {
                 let mut out = vec![[0.0f32; 3]; dims.sites()];

@@ -498,20 +498,33 @@ impl HaarFields {
         terms: &[(u32, [f32; 3])],
         out: &mut [f32; 3],
     ) {
-        let counts = &self.counts[b * self.fields..(b + 1) * self.fields];
-        let mut pos = self.starts[b] as usize;
-        let mut next = 0usize;
-        for &(f, w) in terms {
-            let f = f as usize;
-            pos += counts[next..f].iter().map(|&c| c as usize).sum::<usize>();
-            let n = counts[f] as usize;
-            let v = self.coefs.dot(f, pos..pos + n, k);
-            pos += n;
-            next = f + 1;
+        for (f, w, range) in self.term_coefficients(b, terms) {
+            let v = self.coefs.dot(f, range, k);
             for c in 0..3 {
                 out[c] += w[c] * v;
             }
         }
+    }
+
+    /// Per term of `terms` (sorted by field): its field, its weight and the range of block
+    /// `b`'s kept coefficients of that field, found in one pass over the block's counts.
+    #[inline]
+    fn term_coefficients<'a>(
+        &'a self,
+        b: usize,
+        terms: &'a [(u32, [f32; 3])],
+    ) -> impl Iterator<Item = (usize, [f32; 3], std::ops::Range<usize>)> + 'a {
+        let counts = &self.counts[b * self.fields..(b + 1) * self.fields];
+        let (mut pos, mut next) = (self.starts[b] as usize, 0usize);
+        terms.iter().map(move |&(f, w)| {
+            let f = f as usize;
+            pos += counts[next..f].iter().map(|&c| c as usize).sum::<usize>();
+            let n = counts[f] as usize;
+            let range = pos..pos + n;
+            pos += n;
+            next = f + 1;
+            (f, w, range)
+        })
     }
 
     /// The 4³ values block `b` stores for `field`, decoded in full (the reference for the
@@ -564,23 +577,16 @@ impl HaarFields {
             for by in 0..self.blocks[1] {
                 for bz in 0..self.blocks[2] {
                     let b = (bx * self.blocks[1] + by) * self.blocks[2] + bz;
-                    let counts = &self.counts[b * self.fields..(b + 1) * self.fields];
                     let mut dense = [[0.0f32; BLOCK_VALUES]; 3];
-                    let (mut pos, mut next) = (self.starts[b] as usize, 0usize);
                     let mut details = false;
-                    for &(f, w) in terms {
-                        let f = f as usize;
-                        pos += counts[next..f].iter().map(|&c| c as usize).sum::<usize>();
-                        let n = counts[f] as usize;
-                        for i in pos..pos + n {
+                    for (f, w, range) in self.term_coefficients(b, terms) {
+                        for i in range {
                             let (k, v) = self.coefs.get(f, i);
                             details |= k != 0;
                             for c in 0..3 {
                                 dense[c][k] += w[c] * v;
                             }
                         }
-                        pos += n;
-                        next = f + 1;
                     }
                     // A block of its mean alone (most blocks away from the crown) is that
                     // mean at every site: no transform.

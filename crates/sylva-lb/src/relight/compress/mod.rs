@@ -538,7 +538,7 @@ impl Encoded {
     }
 
     /// Adds the combination `w` at every site to `out` (its constant included).
-    fn decode_combined_into(&self, dims: Dims, w: &ProjectedWeights, out: &mut [[f32; 3]]) {
+    fn decode_combined_into(&self, w: &ProjectedWeights, out: &mut [[f32; 3]]) {
         assert_eq!(
             w.fields,
             self.fields(),
@@ -555,7 +555,6 @@ impl Encoded {
                 }
             }),
         }
-        debug_assert_eq!(out.len(), dims.sites());
         out.par_iter_mut().for_each(|o| {
             for (v, k) in o.iter_mut().zip(w.constant) {
                 *v += k;
@@ -837,7 +836,7 @@ impl CompressedChannels {
             self.dims.sites(),
             "a combination decoded onto another grid"
         );
-        self.encoded.decode_combined_into(self.dims, w, out)
+        self.encoded.decode_combined_into(w, out)
     }
 
     /// `self`'s combination `w` plus `other`'s combination `v` at grid coordinates `g`: the
