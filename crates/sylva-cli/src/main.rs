@@ -50,7 +50,7 @@ enum Command {
     /// Precompute every model's base solutions, compressed and cached: afterwards the sun
     /// moves with no LB solve, e.g. `sylva basis canopy` (`--device gpu` solves on the GPU;
     /// `mpirun -np N sylva basis` across processes, with the `mpi` feature). The physical
-    /// light's 13 sun parts and 3 diffuse parts per model (the default), or with `--light
+    /// light's 25 sun parts and 3 diffuse parts per model (the default), or with `--light
     /// paper` 004's 19 bases and the scene's coarse global grid (docs/relight.md).
     Basis(commands::basis::BasisArgs),
     /// Relight a scene over a moving sun (004 Table 1): numbered PNGs, an animated PNG and

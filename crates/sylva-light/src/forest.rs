@@ -812,12 +812,13 @@ impl ForestLight {
 }
 
 /// The forest grid relit (issue 27, docs/relight.md): the coarse grid solved once per linear
-/// part of its light, a unit sun along each of the lattice directions a sun above the horizon
-/// travels along ([`crate::relight::sun_parts::SUN_DIRECTIONS`]), a unit sky and a unit ground,
-/// and each instance's measures of every part kept. [`ForestBases::light`] combines them for
-/// any sun, sky and ground (the sun's parts by the barycentric weights of the polyhedron face
-/// its direction crosses, 004 §3.1) and marches the sun's transmittance: a [`ForestLight`]
-/// without an LB solve. At a lattice direction it is [`ForestLight::solve`]'s up to rounding
+/// part of its light, a unit sun along each of the models' sun-part directions
+/// ([`crate::relight::sun_parts::sun_directions`]), a unit sky and a unit ground, and each
+/// instance's measures of every part kept. [`ForestBases::light`] combines them for any sun,
+/// sky and ground (the sun's parts by the barycentric weights of the hull face its direction
+/// crosses, [`crate::relight::sun_parts`]) and marches the sun's transmittance: a
+/// [`ForestLight`] without an LB solve. At a part's direction it is [`ForestLight::solve`]'s
+/// up to rounding
 /// (the coarse LB is linear; tested); between them the sun's parts are interpolated.
 pub struct ForestBases {
     coarse: Option<Coarse>,
@@ -853,11 +854,11 @@ impl ForestBases {
             };
             // The lights: a unit sun along each direction, a unit sky, a unit ground.
             let mut lights: Vec<(Environment, [sylva_lb::Boundary; 3], bool, bool)> =
-                crate::relight::sun_parts::SUN_DIRECTIONS
+                crate::relight::sun_parts::sun_directions()
                     .iter()
-                    .map(|&j| {
+                    .map(|&d| {
                         let env = Environment {
-                            sun_travel: sylva_lb::lattice::unit(j),
+                            sun_travel: d,
                             sun_irradiance: [1.0; 3],
                             sky_radiance: [0.0; 3],
                             ground_albedo,
@@ -886,7 +887,7 @@ impl ForestBases {
 
     /// The forest's light under `env` (its ground albedo must be the one solved with): each
     /// instance's weights, no LB solve. The sun's parts are weighted by the barycentric
-    /// weights of the polyhedron face its direction crosses; a sun below the horizon lights
+    /// weights of the hull face its direction crosses; a sun below the horizon lights
     /// nothing.
     pub fn light(&self, env: &Environment) -> Result<ForestLight, LightingError> {
         env.validate().map_err(LightingError::Illumination)?;

@@ -217,7 +217,7 @@ pub fn costly_grid_warning(
 ) -> Result<Option<String>, OptionError> {
     let physical_bases = plan.is_some() && light == Light::Physical;
     let (grid, solves) = match (plan.and_then(|p| p.global.as_ref()), forest) {
-        // The physical light's forest grid parts: 13 sun directions, a sky and a ground.
+        // The physical light's forest grid parts: 25 sun directions, a sky and a ground.
         (_, Some(g)) if physical_bases && uses_forest(scene, light, Some(g)) => {
             (g, 3 * (sylva_light::relight::physical::SUN_PARTS + 2))
         }

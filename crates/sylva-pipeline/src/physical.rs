@@ -1,5 +1,5 @@
 //! The physical light's base solutions (issue 27, docs/relight.md) planned as jobs: per model
-//! its sun part for each of the 13 lattice directions a sun above the horizon travels along,
+//! its sun part for each of the 25 directions a sun above the horizon is solved along,
 //! and its three diffuse parts ([`sylva_light::relight::physical`]), each a light part of the
 //! per-sun light ([`PartsPlan`]) solved for a unit sun along that direction, so each is
 //! cached, solved as a job and shared exactly as a forest's parts are
@@ -39,7 +39,7 @@ pub struct PhysicalBasisPlan {
     /// Solve missing parts, or take cached bases only.
     pub basis: BasisUse,
     /// The parts compressed to this, and the compressed basis cached per model (`None`:
-    /// kept as solved, 16 × 3 f32 per site).
+    /// kept as solved, 28 × 3 f32 per site).
     pub target: Option<PhysicalTarget>,
     /// With a target, also keep the uncompressed parts ([`PhysicalRelighting::raw`]).
     pub keep_raw: bool,
@@ -61,11 +61,11 @@ pub struct PhysicalRelighting {
     /// Seconds the forest grid's parts took (solved in every preparation: they are small
     /// and not cached); `None` without a forest grid.
     pub forest_seconds: Option<f64>,
-    /// Bytes of every model's parts uncompressed (16 × 3 f32 per site).
+    /// Bytes of every model's parts uncompressed (28 × 3 f32 per site).
     pub raw_bytes: u64,
 }
 
-/// The 16 parts' cache keys of a model in [`PhysicalBasis`]'s order: its sun parts' (one
+/// The 28 parts' cache keys of a model in [`PhysicalBasis`]'s order: its sun parts' (one
 /// plan per direction), then the overhead plan's top sky, sky and ground (the side sky is
 /// the sky less the top's).
 fn part_keys(sun_plans: &[PlanParts], overhead: usize) -> [CacheKey; PARTS] {
@@ -256,7 +256,7 @@ pub fn precompute_physical(
     }
     let solved = solve_light_parts(scene, lb, &wanted, runner, progress)?;
 
-    // Per model needed: its 13 sun parts and the overhead plan's diffuse parts.
+    // Per model needed: its 25 sun parts and the overhead plan's diffuse parts.
     let mut sun: Vec<Vec<sylva_lb::LightingGrid>> =
         scene.models.iter().map(|_| Vec::new()).collect();
     let mut diffuse: Vec<Vec<sylva_lb::LightingGrid>> =

@@ -1,6 +1,6 @@
 //! `sylva basis SCENE`: precomputes every model's base solutions and caches them; afterwards
 //! `sylva relight` (and `sylva render --basis always`) move the sun with no LB solve. The
-//! physical light (the default): per model 13 sun parts and 3 diffuse parts, 16 solves, and
+//! physical light (the default): per model 25 sun parts and 3 diffuse parts, 28 solves, and
 //! with several instances the forest grid's parts (`sylva_pipeline::physical`). The paper
 //! light (`--light paper`): 19 base solutions (paper 004 §3.1: 54 solves per model, `B_0`
 //! summed), compressed, and the scene's coarse global grid. Under `mpirun` the solves are jobs

@@ -26,7 +26,7 @@ use super::progress::Bars;
 use super::sun_time::SunTimeArgs;
 
 /// Whether the LB light of plants comes from base solutions (paper 004): the physical light's
-/// (13 sun parts and 3 diffuse parts per model) or, with --light paper, 004's (docs/relight.md).
+/// (25 sun parts and 3 diffuse parts per model) or, with --light paper, 004's (docs/relight.md).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum BasisArg {
     /// Base solutions when every model's are cached (`sylva basis`; the physical light's
@@ -72,7 +72,7 @@ pub const SCENE_HELP: &str = "Scene file (.toml) or built-in scene name (demo, b
      canopy, shade, cloud, teapot, demo_cloud, woodland; `sylva scene list`).";
 
 /// The help of `--light` for the commands that relight (`basis`, `relight`).
-const RELIGHT_LIGHT_HELP: &str = "Light model: physical (the default: per model 13 sun parts \
+const RELIGHT_LIGHT_HELP: &str = "Light model: physical (the default: per model 25 sun parts \
      and 3 diffuse parts, moved with the sun) or paper (004's 19 boundary bases, compressed); \
      spp has no base solutions (docs/relight.md).";
 
@@ -146,7 +146,7 @@ pub struct RenderLightArgs {
         value_parser = clap::value_parser!(u32).range(0..=i64::from(sylva_render::gather::MAX_GATHER_RAYS))
     )]
     pub gather_rays: u32,
-    /// LB light from base solutions (always: the physical light's 16 parts per model or,
+    /// LB light from base solutions (always: the physical light's 28 parts per model or,
     /// with --light paper, 004's bases), solved for the sun (never), or (auto) the bases
     /// when all are cached, else solved for the sun.
     #[arg(long, value_enum, default_value = "auto")]

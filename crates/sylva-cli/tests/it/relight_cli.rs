@@ -164,10 +164,10 @@ fn the_physical_light_moves_with_the_sun_from_its_bases() {
     let cache = cache.to_str().unwrap();
     let common = ["--cache-dir", cache, "--global-grid", "24"];
 
-    // 13 sun parts and 3 diffuse parts per model, each one job.
+    // 25 sun parts and 3 diffuse parts per model, each one job.
     let (ok, stdout, stderr) = sylva(&["basis", scene, "--list-jobs"]);
     assert!(ok, "{stderr}");
-    assert_eq!(stdout.lines().count(), 1 + 16, "{stdout}");
+    assert_eq!(stdout.lines().count(), 1 + 28, "{stdout}");
     let mut args = vec!["basis", scene, "--device", "cpu"];
     args.extend(common);
     let (ok, stdout, stderr) = sylva(&args);

@@ -11,7 +11,7 @@
 //!   scales it gives ([`GlobalLight`]).
 //! * [`light`]: [`RelitLight`], the [`crate::IndirectLight`] that combines each instance's
 //!   base solutions for the current sun.
-//! * [`physical_basis`]: the physical light's bases: per model its 13 sun parts and 3
+//! * [`physical_basis`]: the physical light's bases: per model its 25 sun parts and 3
 //!   diffuse parts ([`PhysicalBasis`]), compressed with the codecs above (the sun parts and
 //!   the diffuse parts each with its own, [`PhysicalTarget`]) and cached per model.
 //! * [`physical`]: the physical light relit: [`physical::PhysicalRelitLight`] weighs each

@@ -5,17 +5,18 @@
 //! part `S` (its first collisions and the sunlit floor), a unit sky's through the top face
 //! `D_top` and through the sides `D_side`, a unit ground's `G`. Only `S` depends on the sun's
 //! direction. Per model, [`PhysicalBasis`] holds `S_j` for a unit sun travelling along each
-//! lattice direction `j` that a sun above the horizon can travel along
-//! ([`SUN_DIRECTIONS`]: the 13 with `c_y ≤ 0`; the polyhedron faces such a direction crosses
-//! have only these as vertices) beside the three diffuse parts: 16 parts, solved once.
+//! of [`SUN_PARTS`] directions ([`sun_directions`]: the 13 lattice directions with `c_y ≤ 0`
+//! and two rings between their elevations, [`super::sun_parts`]) beside the three diffuse
+//! parts: 28 parts, solved once.
 //!
 //! Per instance and sun, the sun's direction in the instance's model space (its rotation
-//! included) picks the polyhedron face it crosses, and its barycentric weights weigh the
-//! face's three `S_j` (004 §3.1); times the sun's irradiance and the forest's transmittance
-//! `τ`; the diffuse parts take the forest grid's weights ([`crate::forest::ForestBases`],
-//! relit the same way) or, for a lone model, the sky's radiance and the open ground's. At a
-//! lattice direction this is the direct solve up to rounding (tested); between them the
-//! sun's first-collision pattern is interpolated, the error docs/relight.md measures.
+//! included) picks the face of the parts' triangulated hull it crosses, and its barycentric
+//! weights weigh the face's three `S_j` (as 004 §3.1 weighs its polyhedron's); times the
+//! sun's irradiance and the forest's transmittance `τ`; the diffuse parts take the forest
+//! grid's weights ([`crate::forest::ForestBases`], relit the same way) or, for a lone model,
+//! the sky's radiance and the open ground's. At a part's direction this is the direct solve
+//! up to rounding (tested); between them the sun's first-collision pattern is interpolated,
+//! the error docs/relight.md measures.
 //!
 //! The exact weights of the paper light (`max(0, n_j · d)`) are not used: they are exact for
 //! a boundary sun, while the physical sun enters as its first collisions along the exact
@@ -33,7 +34,10 @@ pub use super::physical_basis::{
     BakedLight, CompressedPhysicalBasis, PartTerms, PhysicalBasis, PhysicalTarget, PhysicalTerms,
     StoredPhysicalBasis, PARTS,
 };
-pub use super::sun_parts::{overhead_part, sun_part_weights, SUN_DIRECTIONS, SUN_PARTS};
+pub use super::sun_parts::{
+    lattice_direction, overhead_part, sun_directions, sun_part_weights, LATTICE_SUN_DIRECTIONS,
+    SUN_PARTS,
+};
 use crate::device::{
     DeviceKind, DeviceLight, NoDevice, PackedLight, Packer, SunWords, LIGHT_HEADER, NONE,
     RELIT_ENTRY, RELIT_TERM,
@@ -45,10 +49,10 @@ use crate::lighting::{
     ModelLighting, OpenField, PartWeights,
 };
 
-/// The illumination sun part `part` is solved under: a unit sun travelling along its lattice
-/// direction, `scene`'s sky and ground (the floor's albedo).
+/// The illumination sun part `part` is solved under: a unit sun travelling along its
+/// direction ([`sun_directions`]), `scene`'s sky and ground (the floor's albedo).
 pub fn sun_part_illumination(scene: &Illumination, part: usize) -> Illumination {
-    let d = sylva_lb::lattice::unit(SUN_DIRECTIONS[part]);
+    let d = sun_directions()[part];
     Illumination {
         sun_to: -Vec3::new(d[0] as f32, d[1] as f32, d[2] as f32),
         sun: Vec3::ONE,
@@ -99,6 +103,15 @@ struct Baked {
     instances: Vec<Option<Arc<BakedLight>>>,
     summary: BakeSummary,
 }
+
+/// [`PhysicalRelitLight::bake_for_frame`] decodes when a frame's lookups are at least
+/// `1 / BAKE_SITES_PER_LOOKUP` of the sites to decode. A site decodes in 9.6 ns and a decoded
+/// lookup saves 0.21 µs of a compressed one (104.6 M sites/s; 4.40 against 47.3 M lookups/s:
+/// `benches/relight_lookup.rs`, relight_decoded), so decoding pays from about one lookup per
+/// 21 sites; the count takes every pixel as a lookup where about half miss the plants and the
+/// ground under them, hence 8. A 512² frame at one sample reads a catalpa at grid 128 (1.6 M
+/// sites) decoded; a viewer's preview (a fifth of the size) does not.
+const BAKE_SITES_PER_LOOKUP: u64 = 8;
 
 /// Bytes of decoded light [`PhysicalRelitLight::bake_for_frame`] may hold by default: a lone tree at
 /// grid 128 takes 19 MB, so a dozen distinct instances fit.
@@ -288,7 +301,7 @@ impl PhysicalRelitLight {
     /// Before a frame of about `lookups` plant lookups (pixels × samples × (1 + gather
     /// rays)): decodes the current sun's light at every site for as many instances as
     /// `budget` bytes hold (the largest groups of instances sharing a model and terms first)
-    /// when the frame reads it at least a quarter as often as there are sites, so their lookups
+    /// when the frame reads it at least once per [`BAKE_SITES_PER_LOOKUP`] sites, so their lookups
     /// read 3 values instead of every part's (or, compressed, a Haar kernel per field).
     /// Once per sun: the next [`PhysicalRelitLight::relight`] drops it. `None` when nothing
     /// is decoded (not worth it, nothing fits, or memory refused: lookups decode the parts).
@@ -303,7 +316,7 @@ impl PhysicalRelitLight {
             .flatten()
             .map(|b| b.dims().sites() as u64)
             .min()?;
-        if lookups.saturating_mul(4) < smallest {
+        if lookups.saturating_mul(BAKE_SITES_PER_LOOKUP) < smallest {
             return None;
         }
         let (groups, of) = self.bake_groups();
@@ -319,12 +332,7 @@ impl PhysicalRelitLight {
             sites += basis.dims().sites() as u64;
             chosen.push(group);
         }
-        // A site decodes in about an eighth of a compressed lookup's CPU time (one Haar
-        // block's inverse shared by its 27 sites) and a decoded lookup takes a tenth of one
-        // (`benches/relight_lookup.rs`, relight_decoded): decoding pays once the frame reads
-        // about a quarter as many lookups as there are sites (counting every pixel, not only
-        // the plants').
-        if chosen.is_empty() || lookups.saturating_mul(4) < sites {
+        if chosen.is_empty() || lookups.saturating_mul(BAKE_SITES_PER_LOOKUP) < sites {
             return None;
         }
         let baked = self.baked.get_or_init(|| {

@@ -1,6 +1,6 @@
 //! The physical light's base solutions (issue 27, docs/relight.md "The physical light
-//! relit"): per model its 16 parts ([`PhysicalBasis`], as solved), and compressed
-//! ([`CompressedPhysicalBasis`]): its 13 sun parts as one set of 39 channels and its 3
+//! relit"): per model its 28 parts ([`PhysicalBasis`], as solved), and compressed
+//! ([`CompressedPhysicalBasis`]): its 25 sun parts as one set of 75 channels and its 3
 //! diffuse parts as another of 9 ([`sylva_lb::relight::compress_channels`], today's codecs: Haar,
 //! PCA, PCA + Haar, colour-decorrelated Haar), each set with its own codec
 //! ([`PhysicalTarget`]): the sun parts are smooth and alike (neighbouring directions light a
@@ -13,7 +13,7 @@
 //!   each set's fields ([`StoredPhysicalBasis::project`]); a lookup decodes only the
 //!   trilinear footprint of the fields with non-zero weight ([`PhysicalTerms`]).
 //! * **Cache.** The compressed basis is cached as one entry per model
-//!   (`<model>-physical-<key>.spbasis`, sylva's checked container): the key hashes the 16
+//!   (`<model>-physical-<key>.spbasis`, sylva's checked container): the key hashes the 28
 //!   parts' own cache keys (model, medium, sun direction, sky, ground, solver, neighbours'
 //!   foliage) and both targets; the entry records the parts' solve seconds when they were
 //!   solved in the run that wrote it. A damaged or stale entry is reported and made again.
@@ -47,7 +47,7 @@ pub struct PhysicalBasis {
     dims: Dims,
     bounds: Bounds,
     placement: Placement,
-    /// Per site: the sun's parts ([`SUN_DIRECTIONS`] order, a unit sun each), then a unit
+    /// Per site: the sun's parts ([`sun_directions`](super::sun_parts::sun_directions) order, a unit sun each), then a unit
     /// sky's through the top, through the sides, a unit ground's; RGB each.
     values: Vec<[[f32; 3]; PARTS]>,
 }
@@ -56,7 +56,7 @@ pub struct PhysicalBasis {
 pub type PartTerms = Vec<(usize, Vec3)>;
 
 impl PhysicalBasis {
-    /// From the sun's parts (one grid per [`SUN_DIRECTIONS`] entry, a unit sun) and the
+    /// From the sun's parts (one grid per [`sun_directions`](super::sun_parts::sun_directions) entry, a unit sun) and the
     /// diffuse ones as solved (`sky` through every face, `ground`, `skytop` through the top:
     /// `crate::lighting::PARTS` 1..3); all on one grid.
     pub fn new(
@@ -584,7 +584,7 @@ impl TargetKey {
     }
 }
 
-/// Everything a compressed physical basis depends on: its 16 parts (their own cache keys)
+/// Everything a compressed physical basis depends on: its 28 parts (their own cache keys)
 /// and both targets, the region and units compression uses.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub(crate) struct CompressedPhysicalKey {
@@ -1041,8 +1041,8 @@ mod tests {
         assert_eq!(two.name(), "pcahaar:12:0.002,haar:0.01");
         assert_eq!(two.diffuse.precision, Precision::F16);
         assert_eq!(PhysicalTarget::parse("none", p).unwrap(), None);
-        // The sun parts have 39 channels, the diffuse ones 9: a rank above is refused.
-        assert!(PhysicalTarget::parse("pca:40", Precision::F16).is_err());
+        // The sun parts have 75 channels, the diffuse ones 9: a rank above is refused.
+        assert!(PhysicalTarget::parse("pca:76,haar:0.01", Precision::F16).is_err());
         let e = PhysicalTarget::parse("pca:12", Precision::F16).unwrap_err();
         assert!(e.contains("1..=9"), "{e}");
         assert!(PhysicalTarget::parse("zip", p).is_err());

@@ -394,7 +394,7 @@ pub struct PhysicalRelightBench {
     pub basis_seconds: Option<f64>,
     /// The forest grid's parts (45 coarse solves, made in every preparation).
     pub forest_basis_seconds: Option<f64>,
-    /// Bytes of the models' bases uncompressed (16 parts × 3 colours, f32).
+    /// Bytes of the models' bases uncompressed (28 parts × 3 colours, f32).
     pub basis_bytes: u64,
     /// The parts' compression (`--codec`: the sun parts' and the diffuse parts'), or `none`.
     pub codec: String,
@@ -580,9 +580,10 @@ pub struct SunAgainstDirect {
     /// The sun's elevation and azimuth, degrees.
     pub elevation_deg: f64,
     pub azimuth_deg: f64,
-    /// Whether the sun travels along a lattice direction (in the world's frame), where the
-    /// relit light of an unrotated instance is its direct solve.
-    pub lattice: bool,
+    /// Whether the sun travels along a sun part's direction (a lattice direction or one on
+    /// the rings between, in the world's frame), where the relit light of an unrotated
+    /// instance is its direct solve.
+    pub on_part: bool,
     /// RMSE of the tone-mapped sRGB values in [0, 1] (the direct frame's exposure).
     pub image_rmse: f64,
     /// Over plant pixels: RMS luminance difference over the direct frame's mean luminance.
@@ -689,7 +690,7 @@ impl Tally {
         self.per_sun.push(SunAgainstDirect {
             elevation_deg: s.y.clamp(-1.0, 1.0).asin().to_degrees(),
             azimuth_deg: s.z.atan2(s.x).to_degrees(),
-            lattice: sun_part_weights(travel).is_ok_and(|w| w.len() == 1),
+            on_part: sun_part_weights(travel).is_ok_and(|w| w.len() == 1),
             image_rmse: sums.image_rmse(),
             plant_rel_rmse: sums.plant_rel_rmse(),
             plant_ratio: sums.plant_ratio(),
@@ -722,7 +723,7 @@ impl Tally {
 /// of the light solved for each of `suns` (towards the sun) as a scene that does not relight
 /// is lit ([`PreparedScene::per_sun_light`], from the LB cache when it can), both rendered
 /// with `settings`: per sun and over all, the image RMSE (tone-mapped sRGB) and the plant
-/// pixels' relative RMSE and mean ratio. At a lattice sun the two lights agree for unrotated
+/// pixels' relative RMSE and mean ratio. At a part's direction the two lights agree for unrotated
 /// instances (float noise); between them the difference is the sun parts' interpolation.
 /// The bases in use, and (when the uncompressed bases are kept beside compressed ones) the
 /// uncompressed bases too.
@@ -823,7 +824,7 @@ impl fmt::Display for PhysicalRelightBench {
         )?;
         writeln!(
             f,
-            "base solutions: {} uncompressed (16 parts per model), {}{}; prepared in {:.1} s",
+            "base solutions: {} uncompressed (28 parts per model), {}{}; prepared in {:.1} s",
             format_bytes(self.basis_bytes),
             self.basis_seconds
                 .map(|s| format!("{s:.1} s of solves"))

@@ -445,9 +445,9 @@ fn distributed_physical_bases_are_the_one_process_ones() {
     assert_eq!(want.cached, 0);
     assert!(want.solve_seconds.is_some());
     let want_entries = physical_cache_entries(&one);
-    // Per model 16 parts (13 sun parts, the overhead sun's plan's sky, ground and top sky)
+    // Per model 28 parts (25 sun parts, the overhead sun's plan's sky, ground and top sky)
     // and the compressed basis.
-    assert_eq!(want_entries.len(), 2 * (13 + 3 + 1));
+    assert_eq!(want_entries.len(), 2 * (25 + 3 + 1));
     for ranks in [2, 3] {
         let cache = dir.path().join(format!("ranks{ranks}"));
         for pass in 0..2 {

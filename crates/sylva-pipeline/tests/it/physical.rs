@@ -1,7 +1,7 @@
-//! The physical light relit (issue 27, docs/relight.md): at a lattice direction the relit
-//! light is the light solved for that sun (the forest grid's weights and whole frames, final
-//! gather included), moving the sun solves nothing, and the sun's parts interpolate between
-//! lattice directions.
+//! The physical light relit (issue 27, docs/relight.md): at a sun part's direction (a lattice
+//! one or one on the rings between) the relit light is the light solved for that sun (the
+//! forest grid's weights and whole frames, final gather included), moving the sun solves
+//! nothing, and the sun's parts interpolate between their directions.
 
 use std::sync::atomic::Ordering;
 
@@ -12,7 +12,9 @@ use sylva_lb::light::Environment;
 use sylva_lb::{CpuSolver, LbSolver};
 use sylva_light::forest::{ForestBases, ForestLight};
 use sylva_light::lighting::{physical_environment, PartWeights};
-use sylva_light::relight::physical::{sun_part_weights, SUN_DIRECTIONS};
+use sylva_light::relight::physical::{
+    sun_directions, sun_part_weights, LATTICE_SUN_DIRECTIONS, SUN_PARTS,
+};
 use sylva_light::relight::{
     GlobalGridOptions, PhysicalBasis, PhysicalTarget, StoredPhysicalBasis, SunWeights,
 };
@@ -31,7 +33,7 @@ const FOREST: GlobalGridOptions = GlobalGridOptions { sites: 32 };
 
 /// The lattice direction `c` as a sun (towards it).
 fn lattice_sun(c: [i32; 3]) -> Vec3 {
-    let k = SUN_DIRECTIONS
+    let k = LATTICE_SUN_DIRECTIONS
         .iter()
         .copied()
         .find(|&k| sylva_lb::lattice::C[k] == c)
@@ -57,31 +59,42 @@ fn weights_close(a: &PartWeights, b: &PartWeights) -> bool {
 
 #[test]
 fn sun_parts_are_the_face_of_a_sun_above_the_horizon() {
-    assert_eq!(SUN_DIRECTIONS.len(), 13);
+    assert_eq!(sun_directions().len(), SUN_PARTS);
     for elevation in [0.5f64, 10.0, 35.0, 60.0, 89.0] {
         for azimuth in [0.0f64, 20.0, 45.0, 133.0, 271.0] {
             let sun = Sun::from_angles(elevation, azimuth).unwrap().to_sun();
             let w = sun_part_weights([-sun.x, -sun.y, -sun.z]).unwrap();
             let total: f64 = w.iter().map(|x| x.1).sum();
             assert!((total - 1.0).abs() < 1e-9, "{elevation} {azimuth}: {w:?}");
-            assert!(w.len() <= 3 && w.iter().all(|&(p, x)| p < 13 && x > 0.0));
+            assert!(w.len() <= 3 && w.iter().all(|&(p, x)| p < SUN_PARTS && x > 0.0));
         }
     }
-    // A lattice direction is its own part; below the horizon there is none.
+    // A part's direction (a lattice one, one on a ring) is its own part; below the horizon
+    // there is none.
     let w = sun_part_weights([1.0, -1.0, 0.0]).unwrap();
     assert_eq!(w.len(), 1, "{w:?}");
+    let w = sun_part_weights(sun_directions()[20]).unwrap();
+    assert_eq!(w, vec![(20, 1.0)]);
     assert!(sun_part_weights([0.3, 0.5, 0.1]).unwrap().is_empty());
 }
 
 #[test]
-fn the_forest_relit_at_a_lattice_sun_is_the_forest_solved_for_it() {
+fn the_forest_relit_at_a_part_direction_is_the_forest_solved_for_it() {
     let (scene, fine) = shade_parts();
     let insts = instances(&scene, &fine, &[0, 1, 2]);
     let base = physical_environment(&scene_illumination(&scene)).unwrap();
     let bases =
         ForestBases::solve(&insts, base.ground_albedo, 0.0, &FOREST, &mut |_, _| {}).unwrap();
-    for c in [[0, -1, 0], [-1, -1, 0], [0, -1, 1], [1, 0, 0]] {
-        let to_sun = lattice_sun(c);
+    let ring = |k: usize| -Vec3::from_array(sun_directions()[k].map(|c| c as f32));
+    let suns = [
+        lattice_sun([0, -1, 0]),
+        lattice_sun([-1, -1, 0]),
+        lattice_sun([0, -1, 1]),
+        lattice_sun([1, 0, 0]),
+        ring(14),
+        ring(23),
+    ];
+    for (c, to_sun) in suns.into_iter().enumerate() {
         let env = Environment {
             sun_travel: (-to_sun).as_dvec3().to_array(),
             ..base
@@ -171,7 +184,7 @@ fn compare(a: &sylva_render::Frame, b: &sylva_render::Frame) -> (f32, f32) {
 }
 
 #[test]
-fn relit_at_a_lattice_sun_the_frame_is_the_solved_one_and_moving_the_sun_solves_nothing() {
+fn relit_at_a_part_direction_the_frame_is_the_solved_one_and_moving_the_sun_solves_nothing() {
     let mut scene = load_scene("shade", None).unwrap();
     // The per-sun light solves each model for the world's sun; the relit light turns it into
     // each instance's frame. Unrotated instances see the same sun in both.
@@ -185,8 +198,8 @@ fn relit_at_a_lattice_sun_the_frame_is_the_solved_one_and_moving_the_sun_solves_
     let mut relit = prepare(&scene, &counting, true);
     assert!(relit.physical.is_some() && solved.physical.is_none());
     let solves = counting.0.load(Ordering::SeqCst);
-    // 13 sun parts and 3 diffuse ones per model (their colours in one solve each).
-    assert_eq!(solves, 2 * 16);
+    // 25 sun parts and 3 diffuse ones per model (their colours in one solve each).
+    assert_eq!(solves, 2 * 28);
 
     let frame = |p: &PreparedScene| {
         let camera = p.camera(40, 30);
@@ -221,12 +234,25 @@ fn relit_at_a_lattice_sun_the_frame_is_the_solved_one_and_moving_the_sun_solves_
     relit.set_sun(to_sun).unwrap();
     let (_, again) = compare(&b, &frame(&relit));
     assert!(again <= 1e-6 * peak, "{again}");
+    // At a part's direction on the low ring (22.5° up, no lattice direction) the relit frame
+    // is the light solved for that sun too.
+    let ring = -Vec3::from_array(sun_directions()[15].map(|c| c as f32));
+    scene.sun = Sun::from_direction(ring.x as f64, ring.y as f64, ring.z as f64).unwrap();
+    let solved = prepare(&scene, &CpuSolver, false);
+    relit.set_sun(ring).unwrap();
+    let (a, b) = (frame(&solved), frame(&relit));
+    let (peak, worst) = compare(&a, &b);
+    assert!(peak > 0.0);
+    assert!(
+        worst <= 1e-3 * peak,
+        "relit on the ring differs by {worst} (peak {peak})"
+    );
+    assert_eq!(counting.0.load(Ordering::SeqCst), solves);
     // Below the horizon: refused, not lit from below.
     assert!(relit.set_sun(Vec3::new(0.3, -0.5, 0.1)).is_err());
 }
 
-/// A frame that reads the relit light at least a quarter as often as its grids have sites
-/// decodes the sun's light once ([`PreparedScene::bake_summary`]): from the parts it is the same frame
+/// A frame that reads the relit light at least once per 8 sites of its grids decodes the sun's light once ([`PreparedScene::bake_summary`]): from the parts it is the same frame
 /// bit for bit, from compressed ones the same within the codec's error; a small frame, or a
 /// budget of 0, decodes nothing.
 #[test]
@@ -246,7 +272,7 @@ fn the_relit_light_decoded_for_a_sun_renders_the_same_frame() {
         Vec3::new(second.x as f32, second.y as f32, second.z as f32),
     );
     relit.set_sun(first).unwrap();
-    // 10 × 8 pixels at 1 sample and 2 gather rays: 240 lookups, not a quarter of a grid.
+    // 10 × 8 pixels at 1 sample and 2 gather rays: 240 lookups, not an eighth of a grid.
     frame(&relit, (10, 8), 1);
     assert_eq!(relit.bake_summary(), None);
     relit.set_bake_budget(0);
@@ -302,13 +328,14 @@ fn the_physical_light_takes_no_exact_weights_and_no_ambient() {
 }
 
 #[test]
-fn the_bench_against_direct_solves_is_exact_at_lattice_suns_and_not_between() {
+fn the_bench_against_direct_solves_is_exact_at_part_suns_and_not_between() {
     let mut scene = load_scene("shade", None).unwrap();
     for i in &mut scene.instances {
         i.rotation_deg = 0.0;
     }
     // Azimuth 0: the path's ends (45° either side of the zenith) and its middle (the zenith)
-    // are lattice directions, the two suns between them are not.
+    // are lattice directions, the two suns between them (67.5° at azimuths 0 and 180) are no
+    // part's (the high ring's lie at the diagonal azimuths).
     scene.sun = Sun::from_angles(50.0, 0.0).unwrap();
     let mut relit = prepare(&scene, &CpuSolver, true);
     let plan = RelightBenchPlan {
@@ -335,13 +362,13 @@ fn the_bench_against_direct_solves_is_exact_at_lattice_suns_and_not_between() {
     assert_eq!(report.rmse_vs_direct, Some(a.image_rmse));
     assert_eq!(a.per_sun.len(), 5);
     assert!(a.plant_pixels > 0);
-    let lattice: Vec<bool> = a.per_sun.iter().map(|s| s.lattice).collect();
+    let lattice: Vec<bool> = a.per_sun.iter().map(|s| s.on_part).collect();
     assert_eq!(lattice, [true, false, true, false, true], "{a:#?}");
-    let exact = a.per_sun.iter().filter(|s| s.lattice);
+    let exact = a.per_sun.iter().filter(|s| s.on_part);
     let noise = exact.fold(0.0f64, |m, s| m.max(s.image_rmse).max(s.plant_rel_rmse));
     // Measured: about 5e-9 (f32 rounding of the same light summed in another order).
     assert!(noise < 1e-6, "at lattice suns: {a:#?}");
-    for s in a.per_sun.iter().filter(|s| !s.lattice) {
+    for s in a.per_sun.iter().filter(|s| !s.on_part) {
         assert!(
             s.plant_rel_rmse > 1e-3 && s.image_rmse > 1e3 * noise,
             "between lattice suns the parts are interpolated: {s:?}"
@@ -349,7 +376,7 @@ fn the_bench_against_direct_solves_is_exact_at_lattice_suns_and_not_between() {
         assert!((s.plant_ratio - 1.0).abs() < 0.2, "{s:?}");
     }
     // The largest errors are the interpolated suns', and the overall figures pool them.
-    assert!(a.largest.len() == 3 && !a.per_sun[a.largest[0]].lattice);
+    assert!(a.largest.len() == 3 && !a.per_sun[a.largest[0]].on_part);
     assert!(a.image_rmse > 0.0 && a.plant_rel_rmse > 0.0);
     // The bench left the scene's own sun in place.
     assert!((relit.to_sun - scene_to_sun(&scene)).length() < 1e-6);
@@ -367,7 +394,7 @@ fn the_compressed_physical_light_is_cached_and_relit_close_to_the_parts() {
     assert_eq!(plan.physical, Some(PhysicalTarget::recommended()));
     let counting = Counting::default();
     let mut first = prepare_with(&scene, &counting, Some(plan), Some(dir.path())).unwrap();
-    assert_eq!(counting.0.load(Ordering::SeqCst), 2 * 16);
+    assert_eq!(counting.0.load(Ordering::SeqCst), 2 * 28);
     let frame = |p: &PreparedScene| {
         let camera = p.camera(40, 30);
         p.render(&p.settings(camera, 1, 7), &Silent).unwrap()

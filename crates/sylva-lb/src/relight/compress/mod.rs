@@ -3,7 +3,7 @@
 //! Every codec stores a few scalar *fields* over the grid and a linear map back to the
 //! channels: `channel ≈ mean + Σ_f component[channel][f] · field_f`. A paper basis set has 57
 //! channels (19 bases × 3 colours, [`CompressedBasis`]); any set of parts of three colours
-//! each compresses the same way ([`CompressedChannels`]: the physical light's 13 sun parts,
+//! each compresses the same way ([`CompressedChannels`]: the physical light's 25 sun parts,
 //! or its 3 diffuse parts), channel `3 part + colour`, each channel measured in units of its
 //! own scale (a basis's free-space value; a physical part's mean where light matters).
 //!
