@@ -249,6 +249,18 @@ impl fmt::Display for RenderSummary<'_> {
             frame.stats.restarts,
             sylva_core::format_bytes(self.prepared.tracer.cpu().accel.memory().total()),
             sylva_core::format_bytes(self.prepared.lighting_bytes()),
-        )
+        )?;
+        if let Some(b) = self.prepared.bake_summary() {
+            writeln!(
+                o,
+                "relit light decoded for this sun: {} of {} instances in {} grids, {} in {:.3} s",
+                b.instances,
+                b.of,
+                b.grids,
+                sylva_core::format_bytes(b.bytes),
+                b.seconds
+            )?;
+        }
+        Ok(())
     }
 }
