@@ -832,19 +832,18 @@ impl PreparedScene {
         // The frame kernel shades with the light's device side; the media and a light without
         // one say why they cannot be shaded there (the GPU still answers their ray queries).
         let gpu_on = tracer.gpu().is_some() && opts.shade_on_gpu;
-        if let Some(p) = physical
-            .as_ref()
-            .filter(|p| gpu_on && p.decodes_for_device())
-        {
-            // The kernel reads compressed bases decoded for the sun.
-            p.bake_for_device(DEFAULT_BAKE_BUDGET);
-        }
         let indirect: &dyn IndirectLight = match (&relit, &physical) {
             (Some(r), _) => r,
             (_, Some(p)) => p,
             _ => &light,
         };
-        let device = media.device().and_then(|()| indirect.device());
+        let device = media.device().and_then(|()| match &physical {
+            // The kernel reads compressed bases decoded for the sun.
+            Some(p) if gpu_on && relit.is_none() && p.decodes_for_device() => p
+                .bake_for_device(DEFAULT_BAKE_BUDGET)
+                .and_then(|_| indirect.device()),
+            _ => indirect.device(),
+        });
         let gpu_shading_note = match &device {
             Err(why) if gpu_on => Some(why.0),
             _ => None,
@@ -1045,10 +1044,13 @@ impl PreparedScene {
         if !self.shade_on_gpu || self.media.device().is_err() {
             return Ok(());
         }
-        if p.decodes_for_device() {
-            p.bake_for_device(self.bake_budget);
-        }
-        let device = match p.device() {
+        // Compressed bases: decoded for the sun first, or refused beyond the budget.
+        let decoded = if p.decodes_for_device() {
+            p.bake_for_device(self.bake_budget).map(|_| ())
+        } else {
+            Ok(())
+        };
+        let device = match decoded.and_then(|()| p.device()) {
             Ok(d) => d,
             Err(why) => {
                 self.gpu_frame = None;

@@ -135,6 +135,11 @@ pub struct BakeSummary {
     pub seconds: f64,
 }
 
+/// Why compressed bases are not shaded on the GPU when their grids decoded for the sun do not
+/// fit the bake budget.
+const BEYOND_BUDGET: &str = "the physical light's compressed bases, decoded for the sun, do not \
+     fit the bake budget for every instance (--codec none shades the uncompressed bases on the GPU)";
+
 /// A key equal for equal terms (their bits).
 fn terms_key(terms: &PhysicalTerms) -> Vec<u32> {
     let mut key = Vec::new();
@@ -414,16 +419,30 @@ impl PhysicalRelitLight {
     }
 
     /// Decodes the current sun's light for the GPU frame, whatever the frame: the kernel
-    /// reads compressed bases only decoded ([`DeviceLight`] here), so every grid that fits
-    /// `budget` bytes is decoded (the same grids [`PhysicalRelitLight::bake_for_frame`]
-    /// chooses, so the CPU's frames read what the GPU's do). Whether every instance is
-    /// covered: [`BakeSummary::instances`] against [`BakeSummary::of`].
-    pub fn bake_for_device(&self, budget: u64) -> BakeSummary {
+    /// reads compressed bases only decoded ([`DeviceLight`] here), so every grid lookups read
+    /// is decoded (the grids [`PhysicalRelitLight::bake_for_frame`] chooses, so the CPU's
+    /// frames read what the GPU's do). Refused, decoding nothing, when they do not all fit
+    /// `budget` bytes: the frames are shaded on the CPU, which decodes what a frame needs.
+    pub fn bake_for_device(&self, budget: u64) -> Result<BakeSummary, NoDevice> {
+        let covered = |s: BakeSummary| {
+            if s.instances < s.of {
+                Err(NoDevice(BEYOND_BUDGET))
+            } else {
+                Ok(s)
+            }
+        };
         if let Some(b) = self.baked.get() {
-            return b.summary;
+            return covered(b.summary);
         }
         let (chosen, of, _) = self.chosen_groups(budget);
-        self.bake_chosen(chosen, of).summary
+        let mut read = vec![[false; 2]; self.instances.len()];
+        for (i, ground) in chosen.iter().flat_map(|g| &g.uses) {
+            read[*i][*ground as usize] = true;
+        }
+        if read.iter().filter(|r| r[0] && r[1]).count() < of {
+            return Err(NoDevice(BEYOND_BUDGET));
+        }
+        covered(self.bake_chosen(chosen, of).summary)
     }
 
     /// Whether the GPU reads this light decoded per sun ([`PhysicalRelitLight::bake_for_device`]):
@@ -598,11 +617,7 @@ impl IndirectLight for PhysicalRelitLight {
                 "the physical light's compressed bases are read on the GPU decoded for the sun, \
                  and they were not decoded for this sun",
             )),
-            Some(b) if b.summary.instances < b.summary.of => Err(NoDevice(
-                "the physical light's compressed bases, decoded for the sun, do not fit the \
-                 bake budget for every instance (--codec none shades the uncompressed bases on \
-                 the GPU)",
-            )),
+            Some(b) if b.summary.instances < b.summary.of => Err(NoDevice(BEYOND_BUDGET)),
             Some(_) => Ok(self),
         }
     }

@@ -494,7 +494,8 @@ fn the_physical_light_relit_from_compressed_bases_is_shaded_on_the_gpu_as_on_the
             .physical
             .as_ref()
             .unwrap()
-            .bake_for_device(DEFAULT_BAKE_BUDGET);
+            .bake_for_device(DEFAULT_BAKE_BUDGET)
+            .unwrap();
         assert_eq!(
             (on_cpu.instances, on_cpu.grids, on_cpu.bytes),
             (on_gpu.instances, on_gpu.grids, on_gpu.bytes)
