@@ -123,6 +123,12 @@ pub trait DeviceLight: Sync {
 
     /// Words the sun words can take, whatever the sun (the sun buffer's size).
     fn sun_capacity(&self) -> usize;
+
+    /// Whether what [`DeviceLight::pack`] appends changes with the sun (a light decoded per
+    /// sun), so that moving the sun packs it again, not only its sun words.
+    fn pool_per_sun(&self) -> bool {
+        false
+    }
 }
 
 /// Appends to the pool: words, f32 bits, vectors, record headers.
@@ -867,7 +873,7 @@ mod tests {
             sky: Vec3::new(0.2, 0.25, 0.35),
             ground: Some(Vec3::splat(0.2)),
         };
-        // As solved; compressed, it has no device side (the kernel reads no physical codec).
+        // As solved, and compressed: the kernel reads compressed bases decoded for the sun.
         let dims = basis.dims();
         let density = sylva_lb::DensityGrid {
             dims,
@@ -878,7 +884,7 @@ mod tests {
         let compressed =
             CompressedPhysicalBasis::compress(&basis, &density, &PhysicalTarget::recommended())
                 .unwrap();
-        let light = PhysicalRelitLight::new(
+        let mut light = PhysicalRelitLight::new(
             vec![
                 Some(StoredPhysicalBasis::Compressed(Box::new(compressed))),
                 None,
@@ -889,7 +895,58 @@ mod tests {
             lit(Vec3::new(0.3, 0.8, -0.2)),
         )
         .unwrap();
+        let why = light.device().err().expect("not decoded for the sun yet");
+        assert!(why.0.contains("decoded"), "{why}");
+        assert!(light.pool_per_sun());
+        // A budget below one grid decodes nothing: refused, saying why.
+        let one = crate::relight::BakedLight::memory_needed(dims);
+        let why = light
+            .bake_for_device(one - 1)
+            .expect_err("beyond the budget");
+        assert!(why.0.contains("bake budget"), "{why}");
+        assert_eq!(light.bake_summary(), None, "nothing decoded");
         assert!(light.device().is_err());
+        // Decoded: the CPU's lookups and the device's words read the same grids. Without a
+        // forest grid an instance's plants and ground share one; the four instances of
+        // model 0, each turned its own way, share none.
+        let mut moved_words = None;
+        for sun in [Vec3::new(0.3, 0.8, -0.2), Vec3::new(-0.5, 0.6, 0.4)] {
+            light.relight(lit(sun)).unwrap();
+            assert!(light.device().is_err(), "the sun moved: decode again");
+            let summary = light
+                .bake_for_device(crate::relight::DEFAULT_BAKE_BUDGET)
+                .unwrap();
+            assert_eq!((summary.instances, summary.of), (4, 4));
+            assert_eq!(summary.grids, 4, "one per instance of model 0");
+            let dev = agrees_as(&light, &placed, 1e-6, true);
+            let g = dev.packed.records[0];
+            assert_eq!(
+                dev.w(g + RELIT_KIND as u32),
+                0,
+                "decoded fields at every site"
+            );
+            assert_eq!(dev.w(g + RELIT_KIND as u32 + 1), 3 * 4);
+            assert_eq!(dev.packed.records[1], NONE);
+            // Each instance's three terms pick its grid's fields, one colour each.
+            let e = 8 * 3;
+            let first = dev.sun.words[e];
+            assert_eq!(dev.sun.words[e + 1], 3);
+            let fields: Vec<u32> = (0..3)
+                .map(|k| dev.sun.words[(first + 4 * k) as usize])
+                .collect();
+            assert_eq!(fields[1], fields[0] + 1);
+            assert_eq!(dev.sun_v3(first + 1), Vec3::X);
+            assert_eq!(
+                dev.sun.words[e + 5],
+                first + 12,
+                "ground terms after the plants'"
+            );
+            if let Some(before) = moved_words.replace(dev.pool.clone()) {
+                // Another sun decodes other grids, of the same size.
+                assert_eq!(before.len(), dev.pool.len());
+                assert_ne!(before, dev.pool);
+            }
+        }
         let (stored, tol) = (StoredPhysicalBasis::Full(basis), 1e-5);
         let mut light = PhysicalRelitLight::new(
             vec![Some(stored), None],

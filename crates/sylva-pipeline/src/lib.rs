@@ -500,6 +500,9 @@ pub struct PreparedScene {
     pub media: Media,
     /// Why frames traced on a GPU are shaded on the CPU, when they are.
     gpu_shading_note: Option<&'static str>,
+    /// Whether frames are to be shaded on the GPU when the tracer is one
+    /// ([`PrepareOptions::shade_on_gpu`]).
+    shade_on_gpu: bool,
     /// Per-instance light from base solutions, when the scene was prepared with them.
     pub relit: Option<RelitLight>,
     /// The physical light relit from its base solutions, when the scene was prepared with
@@ -834,7 +837,13 @@ impl PreparedScene {
             (_, Some(p)) => p,
             _ => &light,
         };
-        let device = media.device().and_then(|()| indirect.device());
+        let device = media.device().and_then(|()| match &physical {
+            // The kernel reads compressed bases decoded for the sun.
+            Some(p) if gpu_on && relit.is_none() && p.decodes_for_device() => p
+                .bake_for_device(DEFAULT_BAKE_BUDGET)
+                .and_then(|_| indirect.device()),
+            _ => indirect.device(),
+        });
         let gpu_shading_note = match &device {
             Err(why) if gpu_on => Some(why.0),
             _ => None,
@@ -857,6 +866,7 @@ impl PreparedScene {
             materials,
             gpu_frame,
             gpu_shading_note,
+            shade_on_gpu: opts.shade_on_gpu,
             tracer,
             light,
             media,
@@ -936,9 +946,7 @@ impl PreparedScene {
                     scene: self.scene.name.clone(),
                     source,
                 })?;
-                if let Some(f) = &self.gpu_frame {
-                    f.relight(&*p)?;
-                }
+                self.refresh_physical_device(false)?;
             }
             None if (0..self.scene.models.len()).any(|m| self.light.model(m).is_some()) => {
                 return Err(PipelineError::NeedsBasis);
@@ -1008,6 +1016,8 @@ impl PreparedScene {
                 source,
             })?;
             self.uncompressed = yes;
+            // Other bases: the GPU frame packs them (or their decoding) again.
+            self.refresh_physical_device(true)?;
             return Ok(());
         }
         let r = self.relit.as_mut().expect("checked above");
@@ -1018,6 +1028,50 @@ impl PreparedScene {
             // Other fields: the GPU frame decodes and uploads them again.
             self.rebuild_gpu_frame()?;
         }
+        Ok(())
+    }
+
+    /// The physical light's device side for its current sun, where frames are shaded on the
+    /// GPU: compressed bases decoded for the sun (within the bake budget) and the frame's
+    /// light words packed again over the uploaded ones (the frame made again when their size
+    /// changed, or `rebuild`); uncompressed ones only their new terms. When the decoding does
+    /// not cover every instance, frames are shaded on the CPU and the note says why (the next
+    /// sun may fit again).
+    fn refresh_physical_device(&mut self, rebuild: bool) -> Result<(), PipelineError> {
+        let (Some(t), Some(p)) = (self.tracer.gpu(), &self.physical) else {
+            return Ok(());
+        };
+        if !self.shade_on_gpu || self.media.device().is_err() {
+            return Ok(());
+        }
+        // Compressed bases: decoded for the sun first, or refused beyond the budget.
+        let decoded = if p.decodes_for_device() {
+            p.bake_for_device(self.bake_budget).map(|_| ())
+        } else {
+            Ok(())
+        };
+        let device = match decoded.and_then(|()| p.device()) {
+            Ok(d) => d,
+            Err(why) => {
+                self.gpu_frame = None;
+                self.gpu_shading_note = Some(why.0);
+                return Ok(());
+            }
+        };
+        let current = match (&self.gpu_frame, rebuild) {
+            (Some(f), false) if device.pool_per_sun() => f.repack(device)?,
+            (Some(f), false) => {
+                f.relight(device)?;
+                true
+            }
+            _ => false,
+        };
+        if !current {
+            let _span = tracing::info_span!(stage::ACCEL_BUILD).entered();
+            self.gpu_frame = None;
+            self.gpu_frame = Some(GpuFrame::new(t, &self.scene, &self.materials, device)?);
+        }
+        self.gpu_shading_note = None;
         Ok(())
     }
 

@@ -102,6 +102,10 @@ struct ShadeParams {
 struct Pool {
     words: Vec<u32>,
     params: ShadeParams,
+    /// Where the models' records start, and the light's words (the pool's last).
+    models: u32,
+    light_at: u32,
+    ground: Option<sylva_light::device::DeviceGround>,
 }
 
 /// Words of a material record (shade.wgsl: MATERIAL_WORDS).
@@ -194,7 +198,10 @@ impl Pool {
             p.words[at..at + 8].copy_from_slice(&rec);
         }
         // The LB light after the meshes; each model's record says where its part starts.
+        p.models = models;
+        p.light_at = p.at();
         let packed = light.pack(&mut p.words);
+        p.ground = packed.ground;
         for m in 0..scene.models.len() {
             let at = models as usize + 8 * m + 6;
             p.words[at] = packed.records.get(m).copied().unwrap_or(NONE);
@@ -238,6 +245,12 @@ pub struct GpuFrame {
     /// The light's free-space luminance as f32 bits (the relit light's ambient may change).
     free_space: AtomicU32,
     pool: SplitArray,
+    /// Models, where their records start, and where the light's words start in the pool
+    /// and its ground index (for [`GpuFrame::repack`]).
+    models: usize,
+    models_at: u32,
+    light_at: u32,
+    ground: Option<sylva_light::device::DeviceGround>,
     params: wgpu::Buffer,
     base: ShadeParams,
     shade_group: wgpu::BindGroup,
@@ -291,6 +304,7 @@ impl GpuFrame {
             shading_bytes(scene, light),
         )?;
         let pool = Pool::build(scene, materials, light);
+        let (models_at, light_at, ground) = (pool.models, pool.light_at, pool.ground);
         if pool.words.len() > u32::MAX as usize {
             return Err(TraceGpuError::TooLarge(format!(
                 "the scene's shading data ({}) exceed the kernel's 32-bit word offsets",
@@ -416,6 +430,10 @@ impl GpuFrame {
             relit_capacity: relit_words,
             free_space: AtomicU32::new(1f32.to_bits()),
             pool: words,
+            models: scene.models.len(),
+            models_at,
+            light_at,
+            ground,
             params,
             base: pool.params,
             shade_group,
@@ -450,6 +468,32 @@ impl GpuFrame {
         self.free_space
             .store(sun.free_space.to_bits(), Ordering::Relaxed);
         Ok(())
+    }
+
+    /// Packs `light` again for its current sun over its words in the pool as uploaded (a
+    /// light decoded per sun, [`DeviceLight::pool_per_sun`]), then its sun words: the kernel
+    /// and the rest of the pool stay. `Ok(false)`, nothing written: its words no longer have
+    /// the uploaded size (other grids for this sun); the frame must be made again.
+    pub fn repack(&self, light: &dyn DeviceLight) -> Result<bool, GpuError> {
+        let at = self.light_at as usize;
+        let mut words = vec![0u32; at];
+        let packed = light.pack(&mut words);
+        if words.len() as u64 != self.pool.len()
+            || packed.ground != self.ground
+            || light.sun_capacity() > self.relit_capacity
+        {
+            return Ok(false);
+        }
+        // Each model's record says where its light starts.
+        for m in 0..self.models {
+            let r = packed.records.get(m).copied().unwrap_or(NONE);
+            let word = self.models_at as u64 + 8 * m as u64 + 6;
+            self.pool.write(&self.ctx, word, bytemuck::bytes_of(&r))?;
+        }
+        self.pool
+            .write(&self.ctx, at as u64, bytemuck::cast_slice(&words[at..]))?;
+        self.relight(light)?;
+        Ok(true)
     }
 
     /// Bytes of shading data on the device.

@@ -10,6 +10,7 @@ pub struct SplitArray {
     wgsl_type: &'static str,
     /// Elements per part (every part but the last is full).
     per_part: u64,
+    elem_bytes: u64,
     len: u64,
     parts: Vec<wgpu::Buffer>,
 }
@@ -60,9 +61,40 @@ impl SplitArray {
             name,
             wgsl_type,
             per_part,
+            elem_bytes,
             len,
             parts,
         })
+    }
+
+    /// Overwrites the elements from `first` with `data` (whole elements) in place: the
+    /// array keeps its length and bindings, so kernels built over it stay valid.
+    pub fn write(&self, ctx: &GpuContext, first: u64, data: &[u8]) -> Result<(), GpuError> {
+        let n = data.len() as u64 / self.elem_bytes;
+        if !(data.len() as u64).is_multiple_of(self.elem_bytes) || first + n > self.len {
+            return Err(GpuError::TooLarge(format!(
+                "{}: {} bytes from element {first} do not fit its {} elements of {} bytes",
+                self.name,
+                data.len(),
+                self.len,
+                self.elem_bytes
+            )));
+        }
+        let (mut at, mut rest) = (first, data);
+        while !rest.is_empty() {
+            let (part, within) = (at / self.per_part, at % self.per_part);
+            let take = ((self.per_part - within) * self.elem_bytes).min(rest.len() as u64);
+            let (chunk, tail) = rest.split_at(take as usize);
+            ctx.queue
+                .write_buffer(&self.parts[part as usize], within * self.elem_bytes, chunk);
+            // Bound the staging memory of large writes.
+            ctx.queue.submit([]);
+            ctx.wait()?;
+            at += take / self.elem_bytes;
+            rest = tail;
+        }
+        ctx.check(&format!("writing {}", self.name))?;
+        Ok(())
     }
 
     /// Storage bindings it takes.

@@ -23,10 +23,11 @@
 //! direction, which no lattice direction's solve holds.
 
 use std::collections::HashMap;
-use std::sync::{Arc, OnceLock};
+use std::sync::OnceLock;
 
 use glam::{Affine3A, Vec3};
 use sylva_geom::{Aabb, Model};
+use sylva_lb::relight::Placement;
 use sylva_lb::LightingGrid;
 use sylva_trace::TraceInstance;
 
@@ -91,7 +92,8 @@ struct InstanceLight {
     /// Under the free weights (the model's light alone), as the per-sun grids' ground
     /// lookup reads its model's grid.
     ground: PhysicalTerms,
-    /// Both as parts' weights, for the device side (which reads every part decoded).
+    /// Both as parts' weights, for the device side over uncompressed bases (which reads
+    /// every part).
     plant_parts: PartTerms,
     ground_parts: PartTerms,
 }
@@ -99,8 +101,14 @@ struct InstanceLight {
 /// The current sun's light decoded at every site ([`PhysicalRelitLight::bake_for_frame`]).
 #[derive(Debug)]
 struct Baked {
-    /// Per instance (shared by the instances of one model with the same terms).
-    instances: Vec<Option<Arc<BakedLight>>>,
+    /// The grids decoded, each with its model: one per model and terms, shared by the
+    /// instances of that model whose plants' (or ground's) terms are those; without a forest
+    /// grid an instance's plants and ground have the same terms, so one grid serves both.
+    grids: Vec<(u32, BakedLight)>,
+    /// Per instance, the grid its plants' lookups read and the one its ground's read (`None`:
+    /// not decoded, its lookups decode the basis).
+    plants: Vec<Option<usize>>,
+    ground: Vec<Option<usize>>,
     summary: BakeSummary,
 }
 
@@ -113,6 +121,15 @@ struct Baked {
 /// sites) decoded; a viewer's preview (a fifth of the size) does not.
 const BAKE_SITES_PER_LOOKUP: u64 = 8;
 
+/// A grid [`PhysicalRelitLight::bake_for_frame`] may decode: the terms of `terms.0`'s plants
+/// (`terms.1`: of its ground), and every lookup that reads them (instance, whether its
+/// ground's).
+struct BakeGroup {
+    model: u32,
+    terms: (usize, bool),
+    uses: Vec<(usize, bool)>,
+}
+
 /// Bytes of decoded light [`PhysicalRelitLight::bake_for_frame`] may hold by default: a lone tree at
 /// grid 128 takes 19 MB, so a dozen distinct instances fit.
 pub const DEFAULT_BAKE_BUDGET: u64 = 256 << 20;
@@ -120,15 +137,21 @@ pub const DEFAULT_BAKE_BUDGET: u64 = 256 << 20;
 /// What [`PhysicalRelitLight::bake_for_frame`] did.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct BakeSummary {
-    /// Instances whose lookups read decoded light.
+    /// Instances whose lookups (plants' and ground's) read decoded light.
     pub instances: usize,
     /// Of all instances with a basis.
     pub of: usize,
-    /// Grids decoded (instances of one model with equal terms share one).
+    /// Grids decoded (one per model and terms: instances of one model with equal terms
+    /// share one, and so do an instance's plants and ground without a forest grid).
     pub grids: usize,
     pub bytes: u64,
     pub seconds: f64,
 }
+
+/// Why compressed bases are not shaded on the GPU when their grids decoded for the sun do not
+/// fit the bake budget.
+const BEYOND_BUDGET: &str = "the physical light's compressed bases, decoded for the sun, do not \
+     fit the bake budget for every instance (--codec none shades the uncompressed bases on the GPU)";
 
 /// A key equal for equal terms (their bits).
 fn terms_key(terms: &PhysicalTerms) -> Vec<u32> {
@@ -273,38 +296,115 @@ impl PhysicalRelitLight {
         self.illumination
     }
 
-    /// Groups of instances sharing a model and terms, largest first (ties in instance
-    /// order), and the instances with a basis.
-    fn bake_groups(&self) -> (Vec<Vec<usize>>, usize) {
-        let mut groups: HashMap<(u32, Vec<u32>), Vec<usize>> = HashMap::new();
-        let mut order = Vec::new();
+    /// The grids lookups read, one per model and terms (an instance's plants and its
+    /// ground each read one), the most read first (ties in order of first use), and the
+    /// instances with a basis.
+    fn bake_groups(&self) -> (Vec<BakeGroup>, usize) {
+        let mut index: HashMap<(u32, Vec<u32>), usize> = HashMap::new();
+        let mut groups: Vec<BakeGroup> = Vec::new();
+        let mut of = 0;
         for (i, inst) in self.instances.iter().enumerate() {
             if self.models[inst.model as usize].is_none() {
                 continue;
             }
-            let key = (inst.model, terms_key(&inst.terms));
-            let group = groups.entry(key.clone()).or_default();
-            if group.is_empty() {
-                order.push(key);
+            of += 1;
+            for (ground, terms) in [(false, &inst.terms), (true, &inst.ground)] {
+                let g = *index
+                    .entry((inst.model, terms_key(terms)))
+                    .or_insert_with(|| {
+                        groups.push(BakeGroup {
+                            model: inst.model,
+                            terms: (i, ground),
+                            uses: Vec::new(),
+                        });
+                        groups.len() - 1
+                    });
+                groups[g].uses.push((i, ground));
             }
-            group.push(i);
         }
-        let of = groups.values().map(Vec::len).sum();
-        let mut order: Vec<Vec<usize>> = order
-            .into_iter()
-            .map(|k| groups.remove(&k).expect("every key has a group"))
-            .collect();
-        order.sort_by_key(|g| std::cmp::Reverse(g.len()));
-        (order, of)
+        // Stable: ties keep their order of first use.
+        groups.sort_by_key(|g| std::cmp::Reverse(g.uses.len()));
+        (groups, of)
+    }
+
+    /// The groups whose grids fit `budget` bytes, the most read first, and their sites.
+    fn chosen_groups(&self, budget: u64) -> (Vec<BakeGroup>, usize, u64) {
+        let (groups, of) = self.bake_groups();
+        let mut chosen = Vec::new();
+        let (mut bytes, mut sites) = (0u64, 0u64);
+        for group in groups {
+            let Some(basis) = self.models[group.model as usize].as_ref() else {
+                continue;
+            };
+            let b = BakedLight::memory_needed(basis.dims());
+            if bytes + b > budget {
+                continue;
+            }
+            bytes += b;
+            sites += basis.dims().sites() as u64;
+            chosen.push(group);
+        }
+        (chosen, of, sites)
+    }
+
+    /// Decodes the `chosen` groups' grids for the current sun (once: a sun already decoded
+    /// keeps its grids).
+    fn bake_chosen(&self, chosen: Vec<BakeGroup>, of: usize) -> &Baked {
+        self.baked.get_or_init(|| {
+            let t = std::time::Instant::now();
+            let n = self.instances.len();
+            let mut baked = Baked {
+                grids: Vec::new(),
+                plants: vec![None; n],
+                ground: vec![None; n],
+                summary: BakeSummary {
+                    of,
+                    ..BakeSummary::default()
+                },
+            };
+            for group in chosen {
+                let basis = self.models[group.model as usize]
+                    .as_ref()
+                    .expect("grouped instances have a basis");
+                let (i, ground) = group.terms;
+                let terms = if ground {
+                    &self.instances[i].ground
+                } else {
+                    &self.instances[i].terms
+                };
+                // Memory refused: this group's lookups decode the parts.
+                let Ok(light) = basis.bake(terms) else {
+                    continue;
+                };
+                baked.summary.bytes += light.bytes();
+                let at = baked.grids.len();
+                baked.grids.push((group.model, light));
+                for (i, ground) in group.uses {
+                    let slot = if ground {
+                        &mut baked.ground[i]
+                    } else {
+                        &mut baked.plants[i]
+                    };
+                    *slot = Some(at);
+                }
+            }
+            baked.summary.grids = baked.grids.len();
+            baked.summary.instances = (0..n)
+                .filter(|&i| baked.plants[i].is_some() && baked.ground[i].is_some())
+                .count();
+            baked.summary.seconds = t.elapsed().as_secs_f64();
+            baked
+        })
     }
 
     /// Before a frame of about `lookups` plant lookups (pixels × samples × (1 + gather
     /// rays)): decodes the current sun's light at every site for as many instances as
-    /// `budget` bytes hold (the largest groups of instances sharing a model and terms first)
-    /// when the frame reads it at least once per [`BAKE_SITES_PER_LOOKUP`] sites, so their lookups
-    /// read 3 values instead of every part's (or, compressed, a Haar kernel per field).
-    /// Once per sun: the next [`PhysicalRelitLight::relight`] drops it. `None` when nothing
-    /// is decoded (not worth it, nothing fits, or memory refused: lookups decode the parts).
+    /// `budget` bytes hold (the most read grids first: the instances of one model with equal
+    /// terms share one, and their plants and ground one without a forest grid) when the
+    /// frame reads it at least once per [`BAKE_SITES_PER_LOOKUP`] sites, so their lookups read
+    /// 3 values instead of every part's (or, compressed, a Haar kernel per field). Once per
+    /// sun: the next [`PhysicalRelitLight::relight`] drops it. `None` when nothing is decoded
+    /// (not worth it, nothing fits, or memory refused: lookups decode the parts).
     pub fn bake_for_frame(&self, lookups: u64, budget: u64) -> Option<BakeSummary> {
         if let Some(b) = self.baked.get() {
             return Some(b.summary);
@@ -319,50 +419,47 @@ impl PhysicalRelitLight {
         if lookups.saturating_mul(BAKE_SITES_PER_LOOKUP) < smallest {
             return None;
         }
-        let (groups, of) = self.bake_groups();
-        let mut chosen = Vec::new();
-        let (mut bytes, mut sites) = (0u64, 0u64);
-        for group in groups {
-            let basis = self.models[self.instances[group[0]].model as usize].as_ref()?;
-            let b = BakedLight::memory_needed(basis.dims());
-            if bytes + b > budget {
-                continue;
-            }
-            bytes += b;
-            sites += basis.dims().sites() as u64;
-            chosen.push(group);
-        }
+        let (chosen, of, sites) = self.chosen_groups(budget);
         if chosen.is_empty() || lookups.saturating_mul(BAKE_SITES_PER_LOOKUP) < sites {
             return None;
         }
-        let baked = self.baked.get_or_init(|| {
-            let t = std::time::Instant::now();
-            let mut instances = vec![None; self.instances.len()];
-            let mut summary = BakeSummary {
-                of,
-                ..BakeSummary::default()
-            };
-            for group in chosen {
-                let first = &self.instances[group[0]];
-                let basis = self.models[first.model as usize]
-                    .as_ref()
-                    .expect("grouped instances have a basis");
-                // Memory refused: this group's lookups decode the parts.
-                let Ok(light) = basis.bake(&first.terms) else {
-                    continue;
-                };
-                let light = Arc::new(light);
-                summary.bytes += light.bytes();
-                for &i in &group {
-                    instances[i] = Some(light.clone());
-                }
-                summary.instances += group.len();
-                summary.grids += 1;
+        Some(self.bake_chosen(chosen, of).summary)
+    }
+
+    /// Decodes the current sun's light for the GPU frame, whatever the frame: the kernel
+    /// reads compressed bases only decoded ([`DeviceLight`] here), so every grid lookups read
+    /// is decoded (the grids [`PhysicalRelitLight::bake_for_frame`] chooses, so the CPU's
+    /// frames read what the GPU's do). Refused, decoding nothing, when they do not all fit
+    /// `budget` bytes: the frames are shaded on the CPU, which decodes what a frame needs.
+    pub fn bake_for_device(&self, budget: u64) -> Result<BakeSummary, NoDevice> {
+        let covered = |s: BakeSummary| {
+            if s.instances < s.of {
+                Err(NoDevice(BEYOND_BUDGET))
+            } else {
+                Ok(s)
             }
-            summary.seconds = t.elapsed().as_secs_f64();
-            Baked { instances, summary }
-        });
-        Some(baked.summary)
+        };
+        if let Some(b) = self.baked.get() {
+            return covered(b.summary);
+        }
+        let (chosen, of, _) = self.chosen_groups(budget);
+        let mut read = vec![[false; 2]; self.instances.len()];
+        for (i, ground) in chosen.iter().flat_map(|g| &g.uses) {
+            read[*i][*ground as usize] = true;
+        }
+        if read.iter().filter(|r| r[0] && r[1]).count() < of {
+            return Err(NoDevice(BEYOND_BUDGET));
+        }
+        covered(self.bake_chosen(chosen, of).summary)
+    }
+
+    /// Whether the GPU reads this light decoded per sun ([`PhysicalRelitLight::bake_for_device`]):
+    /// some basis is compressed, and the kernel reads no physical codec.
+    pub fn decodes_for_device(&self) -> bool {
+        self.models
+            .iter()
+            .flatten()
+            .any(|b| matches!(b, StoredPhysicalBasis::Compressed(_)))
     }
 
     /// What the current sun's decoding did, once a frame made it.
@@ -453,15 +550,25 @@ impl PhysicalRelitLight {
     #[inline]
     pub fn sample_instance(&self, instance: usize, p: Vec3) -> Option<Vec3> {
         let inst = self.instances.get(instance)?;
-        if let Some(b) = self
-            .baked
-            .get()
-            .and_then(|b| b.instances[instance].as_ref())
-        {
-            return Some(b.sample(p));
+        if let Some(b) = self.baked.get() {
+            if let Some(g) = b.plants[instance] {
+                return Some(b.grids[g].1.sample(p));
+            }
         }
         let basis = self.models[inst.model as usize].as_ref()?;
         Some(basis.sample(p, &inst.terms))
+    }
+
+    /// Instance `i`'s ground terms (its model's light alone) at model-space point `p` of
+    /// `basis`: decoded for the sun when it is, as its plants'.
+    #[inline]
+    fn ground_light(&self, i: usize, basis: &StoredPhysicalBasis, p: Vec3) -> Vec3 {
+        if let Some(b) = self.baked.get() {
+            if let Some(g) = b.ground[i] {
+                return b.grids[g].1.sample(p);
+            }
+        }
+        basis.sample(p, &self.instances[i].ground)
     }
 }
 
@@ -481,12 +588,11 @@ impl IndirectLight for PhysicalRelitLight {
             point,
             |i, model, pm| {
                 let basis = self.models[model as usize].as_ref()?;
-                let terms = &self.instances[i].ground;
                 let origin = Vec3::from_array(basis.placement().origin());
                 let inv = Vec3::from_array(basis.placement().inv_cell());
                 let cell_y = if inv.y > 0.0 { 1.0 / inv.y } else { 0.0 };
-                let floor = basis.sample(Vec3::new(pm.x, origin.y, pm.z), terms);
-                let lowest = basis.sample(Vec3::new(pm.x, origin.y + cell_y, pm.z), terms);
+                let floor = self.ground_light(i, basis, Vec3::new(pm.x, origin.y, pm.z));
+                let lowest = self.ground_light(i, basis, Vec3::new(pm.x, origin.y + cell_y, pm.z));
                 Some(physical_ground_sky(floor, lowest, &self.open))
             },
         )
@@ -504,22 +610,24 @@ impl IndirectLight for PhysicalRelitLight {
         true
     }
 
-    /// Uncompressed bases only: a compressed set's lookups (a block's kept coefficients
-    /// against the footprint) are not its decoded sites' trilinear ones, and the kernel
-    /// reads no physical codec yet.
+    /// Uncompressed bases as stored (every part at every site); compressed ones decoded
+    /// for the current sun ([`PhysicalRelitLight::bake_for_device`]): the kernel reads no
+    /// physical codec, and a compressed set's lookups (a block's kept coefficients against
+    /// the footprint) are not its decoded sites' trilinear ones, so the GPU reads the grids
+    /// the CPU's lookups read once decoded. Refused when the decoding does not cover every
+    /// instance (the bake budget), or was not made for this sun.
     fn device(&self) -> Result<&dyn DeviceLight, NoDevice> {
-        if self
-            .models
-            .iter()
-            .flatten()
-            .any(|b| matches!(b, StoredPhysicalBasis::Compressed(_)))
-        {
-            return Err(NoDevice(
-                "the physical light's compressed bases are read on the CPU (--codec none \
-                 shades them on the GPU)",
-            ));
+        if !self.decodes_for_device() {
+            return Ok(self);
         }
-        Ok(self)
+        match self.baked.get() {
+            None => Err(NoDevice(
+                "the physical light's compressed bases are read on the GPU decoded for the sun, \
+                 and they were not decoded for this sun",
+            )),
+            Some(b) if b.summary.instances < b.summary.of => Err(NoDevice(BEYOND_BUDGET)),
+            Some(_) => Ok(self),
+        }
     }
 }
 
@@ -572,33 +680,129 @@ fn field_terms(terms: &PartTerms, words: &mut Vec<u32>) -> u32 {
     n
 }
 
+/// A kind-0 relit record of the grids decoded for the sun of one model (`grids`: its slots'
+/// grids in order): field `3 slot + colour`, site after site. Returns where it starts.
+fn pack_baked(grids: &[&BakedLight], p: &mut Packer, placement: &Placement, bounds: Aabb) -> u32 {
+    let dims = grids[0].dims();
+    let mut extra = [0u32; 9];
+    extra[1] = (3 * grids.len()) as u32;
+    extra[2] = dims.sites() as u32;
+    let start = p.light_header(
+        dims,
+        (
+            Vec3::from_array(placement.origin()),
+            Vec3::from_array(placement.inv_cell()),
+        ),
+        bounds,
+        extra,
+    );
+    for g in grids {
+        for colour in 0..3 {
+            p.words
+                .extend(g.values().iter().map(|v| v[colour].to_bits()));
+        }
+    }
+    start
+}
+
+/// A decoded grid's terms (its slot in its model's record): one per colour, its field's
+/// weight 1 on that colour alone, so the kernel's sum is the grid's trilinear lookup.
+fn slot_terms(slot: usize, words: &mut Vec<u32>) -> u32 {
+    for c in 0..3 {
+        let mut only = [0.0f32; 3];
+        only[c] = 1.0;
+        words.push((3 * slot + c) as u32);
+        words.extend(only.map(f32::to_bits));
+    }
+    3
+}
+
+impl PhysicalRelitLight {
+    /// The grids decoded for the device: per model its grids (indices into `baked.grids`),
+    /// and per grid its slot in its model's record.
+    fn device_slots(&self, baked: &Baked) -> (Vec<Vec<usize>>, Vec<usize>) {
+        let mut per_model = vec![Vec::new(); self.models.len()];
+        let mut slots = Vec::with_capacity(baked.grids.len());
+        for (g, (model, _)) in baked.grids.iter().enumerate() {
+            let list: &mut Vec<usize> = &mut per_model[*model as usize];
+            slots.push(list.len());
+            list.push(g);
+        }
+        (per_model, slots)
+    }
+
+    /// The decoded grids the device reads, when it reads them (compressed bases).
+    fn device_baked(&self) -> Option<&Baked> {
+        if self.decodes_for_device() {
+            self.baked.get()
+        } else {
+            None
+        }
+    }
+}
+
 /// The GPU side: the kernel's relit lookup (`relit_sample`) over kind-0 records, with the
 /// physical light's ground (shade.wgsl `relit_physical_ground_sky`: the share of the open
 /// sky's light under a tree from its grid's two lowest layers, as [`IndirectLight::ground_sky`]
-/// here). Parity: `device::tests` unpacks the words as the shader reads them; the pipeline's
-/// GPU tests compare whole frames.
+/// here). Uncompressed bases: per model every part at every site, each instance's terms over
+/// them. Compressed ones: per model its grids decoded for the sun, each instance's plants and
+/// ground reading their grid's three fields, as the CPU's lookups read the same grids. Parity:
+/// `device::tests` unpacks the words as the shader reads them; the pipeline's GPU tests
+/// compare whole frames.
 impl DeviceLight for PhysicalRelitLight {
     fn kind(&self) -> DeviceKind {
         DeviceKind::Relit
     }
 
     fn pool_words(&self) -> u64 {
-        let records: u64 = self.models.iter().flatten().map(device_words).sum();
+        let records: u64 = match self.device_baked() {
+            Some(b) => {
+                let (per_model, _) = self.device_slots(b);
+                per_model
+                    .iter()
+                    .filter(|g| !g.is_empty())
+                    .map(|g| {
+                        LIGHT_HEADER as u64
+                            + (3 * g.len()) as u64 * b.grids[g[0]].1.dims().sites() as u64
+                    })
+                    .sum()
+            }
+            None => self.models.iter().flatten().map(device_words).sum(),
+        };
         records + self.ground_index.words()
     }
 
     fn pack(&self, pool: &mut Vec<u32>) -> PackedLight {
         let mut p = Packer::new(pool);
-        let records = self
-            .models
-            .iter()
-            .zip(&self.model_bounds)
-            .map(|(b, &bounds)| match b {
-                Some(StoredPhysicalBasis::Full(b)) => pack_basis(b, &mut p, bounds),
-                // Refused by `device` (and no basis: no LB light).
-                _ => NONE,
-            })
-            .collect();
+        let records = match self.device_baked() {
+            Some(b) => {
+                let (per_model, _) = self.device_slots(b);
+                per_model
+                    .iter()
+                    .zip(&self.models)
+                    .zip(&self.model_bounds)
+                    .map(|((grids, basis), &bounds)| match basis {
+                        Some(basis) if !grids.is_empty() => {
+                            let grids: Vec<&BakedLight> =
+                                grids.iter().map(|&g| &b.grids[g].1).collect();
+                            pack_baked(&grids, &mut p, basis.placement(), bounds)
+                        }
+                        // No instance reads it (or no basis: no LB light).
+                        _ => NONE,
+                    })
+                    .collect()
+            }
+            None => self
+                .models
+                .iter()
+                .zip(&self.model_bounds)
+                .map(|(b, &bounds)| match b {
+                    Some(StoredPhysicalBasis::Full(b)) => pack_basis(b, &mut p, bounds),
+                    // Compressed: decoded above (and no basis: no LB light).
+                    _ => NONE,
+                })
+                .collect(),
+        };
         PackedLight {
             records,
             ground: self.ground_index.pack(pool),
@@ -614,6 +818,7 @@ impl DeviceLight for PhysicalRelitLight {
         let open = words.len() as u32;
         words.extend(self.open.sky.to_array().map(f32::to_bits));
         words.extend(self.open.bottom.to_array().map(f32::to_bits));
+        let baked = self.device_baked().map(|b| (b, self.device_slots(b).1));
         for (i, inst) in self.instances.iter().enumerate() {
             let e = RELIT_ENTRY * i;
             words[e + 7] = open;
@@ -621,9 +826,15 @@ impl DeviceLight for PhysicalRelitLight {
                 continue;
             }
             let first = words.len() as u32;
-            let count = field_terms(&inst.plant_parts, &mut words);
+            let count = match &baked {
+                Some((b, slots)) => b.plants[i].map_or(0, |g| slot_terms(slots[g], &mut words)),
+                None => field_terms(&inst.plant_parts, &mut words),
+            };
             let ground_first = words.len() as u32;
-            let ground_count = field_terms(&inst.ground_parts, &mut words);
+            let ground_count = match &baked {
+                Some((b, slots)) => b.ground[i].map_or(0, |g| slot_terms(slots[g], &mut words)),
+                None => field_terms(&inst.ground_parts, &mut words),
+            };
             words[e] = first;
             words[e + 1] = count;
             words[e + 5] = ground_first;
@@ -637,7 +848,7 @@ impl DeviceLight for PhysicalRelitLight {
     }
 
     /// Every part of every instance's model in every colour, twice (plants and ground),
-    /// and the open field.
+    /// and the open field (a decoded grid's three terms are fewer).
     fn sun_capacity(&self) -> usize {
         self.instances
             .iter()
@@ -649,5 +860,10 @@ impl DeviceLight for PhysicalRelitLight {
             })
             .sum::<usize>()
             + 6
+    }
+
+    /// The grids decoded for the sun change with it.
+    fn pool_per_sun(&self) -> bool {
+        self.decodes_for_device()
     }
 }

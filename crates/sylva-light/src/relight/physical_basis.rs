@@ -193,6 +193,15 @@ impl BakedLight {
         Self::memory_needed(self.dims)
     }
 
+    pub fn dims(&self) -> Dims {
+        self.dims
+    }
+
+    /// RGB per site, in the grid's site order.
+    pub fn values(&self) -> &[[f32; 3]] {
+        &self.values
+    }
+
     /// The light at model-space point `p` (trilinear, clamped to the grid).
     #[inline]
     pub fn sample(&self, p: Vec3) -> Vec3 {

@@ -10,9 +10,11 @@ use std::path::Path;
 use sylva_lb::relight::{Codec, CompressTarget, Precision};
 use sylva_lb::CpuSolver;
 use sylva_light::device::DeviceKind;
+use sylva_light::relight::PhysicalTarget;
 use sylva_light::{Light, Silent, SunWeights};
 use sylva_pipeline::{
     load_scene, tone_map_modes, BasisUse, LbPlan, PrepareOptions, PreparedScene, RelightPlan,
+    DEFAULT_BAKE_BUDGET,
 };
 use sylva_render::{Frame, Mode, Radiance, Region, ToneMap};
 use sylva_wgpu::{AdapterChoice, ContextOptions, GpuContext};
@@ -388,8 +390,19 @@ fn relit_light_is_shaded_on_the_gpu_as_on_the_cpu() {
     frames_agree(&ctx, &cpu, &gpu, tight, "relit, exact weights, ambient 0.3");
 }
 
-/// The scene under the physical light relit from its base solutions, with the final gather.
+/// The scene under the physical light relit from its base solutions (uncompressed), with the
+/// final gather.
 fn prepare_physical_relit(dir: &Path, gpu: Option<&GpuContext>, forest: bool) -> PreparedScene {
+    prepare_physical_relit_as(dir, gpu, forest, None)
+}
+
+/// [`prepare_physical_relit`] with the bases compressed to `target` (`None`: as solved).
+fn prepare_physical_relit_as(
+    dir: &Path,
+    gpu: Option<&GpuContext>,
+    forest: bool,
+    target: Option<PhysicalTarget>,
+) -> PreparedScene {
     let path = dir.join("roses.toml");
     std::fs::write(&path, SCENE).unwrap();
     let scene = load_scene(path.to_str().unwrap(), None).unwrap();
@@ -408,9 +421,7 @@ fn prepare_physical_relit(dir: &Path, gpu: Option<&GpuContext>, forest: bool) ->
             basis: BasisUse::Always,
             sun: SunWeights::ThreeBasis,
             ambient: 0.0,
-            // Uncompressed: the kernel reads no physical codec (compressed bases shade on
-            // the CPU).
-            physical: None,
+            physical: target,
             ..RelightPlan::default()
         }),
         forest: forest.then_some(sylva_light::relight::GlobalGridOptions { sites: 24 }),
@@ -445,6 +456,86 @@ fn the_physical_light_relit_is_shaded_on_the_gpu_as_on_the_cpu() {
             &format!("physical relit, sun {sun}"),
         );
     }
+}
+
+#[test]
+fn the_physical_light_relit_from_compressed_bases_is_shaded_on_the_gpu_as_on_the_cpu() {
+    // The default codec: the kernel reads each instance's light decoded for the sun, the
+    // grids the CPU's lookups read once decoded (a compressed lookup between sites differs
+    // from them within the codec's error, far above the tolerance here).
+    let Some(ctx) = context() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let target = Some(PhysicalTarget::recommended());
+    // With the forest grid: an instance's plants and its ground read different grids.
+    let mut cpu = prepare_physical_relit_as(dir.path(), None, true, target);
+    let mut gpu = prepare_physical_relit_as(dir.path(), Some(&ctx), true, target);
+    assert!(gpu.physical.is_some() && gpu.gpu_frame.is_some());
+    assert!(
+        gpu.gpu_shading_note().is_none(),
+        "{:?}",
+        gpu.gpu_shading_note()
+    );
+    let physical = gpu.physical.as_ref().unwrap();
+    assert!(physical.decodes_for_device() && physical.has_forest());
+    let mut frames = Vec::new();
+    for sun in [
+        glam::Vec3::new(0.3, 0.8, -0.2),
+        glam::Vec3::new(-0.5, 0.6, 0.4),
+    ] {
+        // The sun moves: the GPU's grids are decoded for it and packed over the last sun's.
+        cpu.set_sun(sun).unwrap();
+        gpu.set_sun(sun).unwrap();
+        let on_gpu = gpu.bake_summary().expect("decoded for the GPU");
+        assert_eq!(on_gpu.instances, on_gpu.of);
+        assert!(on_gpu.grids > gpu.scene.instances.len(), "{on_gpu:?}");
+        // The CPU decodes for frames that read the light often; these small ones may not, so
+        // it decodes as a large frame would (the same grids).
+        let on_cpu = cpu
+            .physical
+            .as_ref()
+            .unwrap()
+            .bake_for_device(DEFAULT_BAKE_BUDGET)
+            .unwrap();
+        assert_eq!(
+            (on_cpu.instances, on_cpu.grids, on_cpu.bytes),
+            (on_gpu.instances, on_gpu.grids, on_gpu.bytes)
+        );
+        frames_agree(
+            &ctx,
+            &cpu,
+            &gpu,
+            (1e-4, 1e-3),
+            &format!("physical relit, compressed, sun {sun}"),
+        );
+        let cam = gpu.camera(64, 48);
+        frames.push(gpu.render(&gpu.settings(cam, 1, 1), &Silent).unwrap());
+    }
+    // The suns light the frame differently: the second frame read its own grids.
+    let moved = frames[0]
+        .pixels
+        .iter()
+        .zip(&frames[1].pixels)
+        .filter(|(a, b)| part_difference(a, b, 1e-3) > 1e-2)
+        .count();
+    assert!(moved * 4 > frames[0].pixels.len(), "{moved} pixels changed");
+    // A bake budget below the sun's grids: shaded on the CPU, saying why; the next sun that
+    // fits goes back to the GPU.
+    gpu.set_bake_budget(1);
+    gpu.set_sun(glam::Vec3::new(0.2, 0.9, 0.1)).unwrap();
+    assert!(gpu.gpu_frame.is_none());
+    let why = gpu.gpu_shading_note().expect("a reason");
+    assert!(why.contains("bake budget"), "{why}");
+    let cam = gpu.camera(64, 48);
+    let frame = gpu.render(&gpu.settings(cam, 1, 1), &Silent).unwrap();
+    assert_eq!(frame.timings.fused_seconds, 0.0);
+    gpu.set_bake_budget(DEFAULT_BAKE_BUDGET);
+    gpu.set_sun(glam::Vec3::new(-0.5, 0.6, 0.4)).unwrap();
+    assert!(gpu.gpu_frame.is_some() && gpu.gpu_shading_note().is_none());
+    let again = gpu.render(&gpu.settings(cam, 1, 1), &Silent).unwrap();
+    assert!(
+        again.pixels == frames[1].pixels,
+        "the same sun, the same frame"
+    );
 }
 
 #[test]
