@@ -394,12 +394,8 @@ mod tests {
         assert_eq!(m.optics.transmit, Optics::FOREST_LEAF.transmit);
         m.set_leaf_optics(LeafOptics::Measured).unwrap();
         let mean = m.mean_colour();
-        for c in 0..3 {
-            assert_eq!(
-                m.optics.reflect[c],
-                KNAPP_CARTER_LEAF.reflectance[c] / mean[c]
-            );
-        }
+        let want: [f32; 3] = std::array::from_fn(|c| KNAPP_CARTER_LEAF.reflectance[c] / mean[c]);
+        assert_eq!(m.optics.reflect, want);
         // Materials without measured values (imports) keep their own factors in both modes.
         for mode in LeafOptics::ALL {
             let mut own = patterned_leaf(Optics::leaf([0.3, 0.6, 0.9]));

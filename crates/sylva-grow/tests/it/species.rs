@@ -310,8 +310,8 @@ fn every_species_leaf_is_measured_and_averages_to_it() {
             }
             n += 1;
         }
-        for c in 0..3 {
-            let (r, t) = (sums[0][c] / n as f64, sums[1][c] / n as f64);
+        for (c, (sum_r, sum_t)) in sums[0].iter().zip(sums[1]).enumerate() {
+            let (r, t) = (sum_r / n as f64, sum_t / n as f64);
             let (wr, wt) = (want.reflectance[c] as f64, want.transmittance[c] as f64);
             assert!((r - wr).abs() < 1e-6 * wr, "{name} R[{c}]: {r} vs {wr}");
             assert!((t - wt).abs() < 1e-6 * wt, "{name} T[{c}]: {t} vs {wt}");
@@ -331,8 +331,13 @@ fn texture_mode_gives_back_the_leaves_of_before() {
         leaf.set_leaf_optics(LeafOptics::Texture).unwrap();
         assert_eq!(leaf.optics.reflect, [1.0; 3], "{name}");
         if *name == "dogrose" {
-            for c in 0..3 {
-                let (got, want) = (leaf.optics.transmit[c], DOGROSE_LEAF_TRANSMISSION[c]);
+            for (c, (got, want)) in leaf
+                .optics
+                .transmit
+                .iter()
+                .zip(DOGROSE_LEAF_TRANSMISSION)
+                .enumerate()
+            {
                 assert!((got - want).abs() < 1e-6 * want, "{c}: {got} vs {want}");
             }
         } else {
