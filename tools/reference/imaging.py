@@ -37,12 +37,14 @@ def log_average(lum, delta=1e-6):
 
 def tonemap(rgb, exposure_lum, key=0.18):
     """Reinhard's global operator (as `sylva render`): the log-average `exposure_lum` maps to
-    `key`, white = the brightest scaled pixel of the image. Pass the same `exposure_lum` to
-    images that should be compared, so a brighter image looks brighter."""
+    `key`, white = the largest scaled colour value (any channel) of the image's lit pixels, so
+    a blue sky that is the brightest thing in view keeps its hue. Pass the same `exposure_lum`
+    to images that should be compared, so a brighter image looks brighter."""
     rgb = np.asarray(rgb, dtype=np.float64)[..., :3]
     lw = rgb @ LUMA
     scaled = key * lw / max(exposure_lum, 1e-12)
-    white2 = max(float(scaled.max()), 1e-12) ** 2
+    top = np.where(lw > 0.0, rgb.max(axis=-1), 0.0)
+    white2 = max(float(top.max()) * key / max(exposure_lum, 1e-12), 1e-12) ** 2
     ld = scaled * (1.0 + scaled / white2) / (1.0 + scaled)
     ratio = np.where(lw > 0.0, ld / np.maximum(lw, 1e-30), 0.0)
     return srgb8(rgb * ratio[..., None])

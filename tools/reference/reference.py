@@ -522,7 +522,7 @@ def run_scene(a, mitsuba, scene):
         a.rpp,
         a.width,
         a.indirect,
-        shlex.split(a.sylva_args),
+        ["--leaf-optics", a.leaf_optics] + shlex.split(a.sylva_args),
     )
     sy = {
         m: read_exr(mi, out / "sylva" / f"sylva-{m}.exr")
@@ -533,7 +533,8 @@ def run_scene(a, mitsuba, scene):
     # 2. Export; the renders are cached under the export's content hash.
     export_dir = out / "export"
     export_args = ["export", scene, "--format", "mitsuba", "-o", str(export_dir)]
-    export_args += shlex.split(a.export_args)
+    # The same leaves on both sides, whatever the mode: like for like.
+    export_args += ["--leaf-optics", a.leaf_optics] + shlex.split(a.export_args)
     run_sylva(a.sylva, export_args, "sylva export")
     key = export_hash(export_dir)
     cache = out / "mitsuba" / f"{key}-mitsuba{mi.__version__}"
@@ -654,6 +655,7 @@ def run_scene(a, mitsuba, scene):
             "export": shlex.join(["sylva"] + export_args),
             "rpp": a.rpp,
             "indirect": indirect,
+            "leaf_optics": a.leaf_optics,
             "seconds": round(sylva_seconds, 2),
         },
         "reference": {
@@ -701,6 +703,13 @@ def main(argv=None):
     )
     p.add_argument(
         "--indirect", type=float, help="sylva's --indirect (default: sylva's own default)"
+    )
+    p.add_argument(
+        "--leaf-optics",
+        choices=["measured", "texture"],
+        default="measured",
+        help="the leaves of both the render and the export (measured: the species' measured "
+        "R and T, sylva's default; texture: the look before issue 29)",
     )
     p.add_argument("--sylva-args", default="", help="more arguments for `sylva render`, one string")
     p.add_argument(

@@ -3,7 +3,8 @@
 //! * [`mesh`]: [`Aabb`], indexed triangle [`Mesh`]es and [`Model`]s (mesh + materials +
 //!   bounds).
 //! * [`material`]: leaf, wood and solid [`Material`]s and their [`Optics`] (per-colour
-//!   reflectance and transmittance: the one material model of renderer, LB and export).
+//!   reflectance and transmittance: the one material model of renderer, LB and export), a
+//!   species' [`Measured`] leaf and which [`LeafOptics`] a run forms the factors from.
 //! * [`medium`]: participating [`Medium`]s (clouds): density grids placed in the world.
 //! * [`texture`]: RGBA8 [`Texture`]s with their wrap and filter modes, and THE texel opacity
 //!   rule ([`is_opaque`]) the voxelizer, the tracer's alpha test and the cache keys share.
@@ -24,7 +25,10 @@ pub mod params;
 pub mod scene;
 pub mod texture;
 
-pub use material::{Material, MaterialKind, Optics, FOREST_LEAF_TRANSMISSION};
+pub use material::{
+    LeafOptics, Material, MaterialKind, Measured, Optics, FOREST_LEAF_TRANSMISSION,
+    KNAPP_CARTER_LEAF,
+};
 pub use medium::Medium;
 pub use mesh::{Aabb, Mesh, Model};
 pub use params::{ColourParams, MediumParams, ParamError, Preset};

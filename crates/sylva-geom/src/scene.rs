@@ -115,6 +115,20 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// Forms every material's optics for `mode` from its measured values
+    /// ([`crate::Material::set_leaf_optics`]; imported materials keep their own). Every
+    /// command that lights, renders or exports a scene calls this once after loading it, so
+    /// the renderer, the LB and the export read the same factors.
+    pub fn set_leaf_optics(&mut self, mode: crate::LeafOptics) -> Result<(), String> {
+        for model in &mut self.models {
+            for m in &mut model.materials {
+                m.set_leaf_optics(mode)
+                    .map_err(|e| format!("model '{}': {e}", model.name))?;
+            }
+        }
+        Ok(())
+    }
+
     /// World bounds of all instances (the ground excluded).
     pub fn instance_bounds(&self) -> Aabb {
         self.instances.iter().fold(Aabb::EMPTY, |b, i| {

@@ -11,7 +11,7 @@ fn main() {
     let (w, h) = (species.len() * 192, 128);
     let mut img = vec![255u8; w * h * 3];
     for (k, s) in species.iter().enumerate() {
-        let mats = s.materials();
+        let mats = s.materials().expect("built-in species");
         let leaf = mats[1].texture.as_ref().unwrap();
         let bark = mats[0].texture.as_ref().unwrap();
         for y in 0..128u32 {

@@ -137,7 +137,11 @@ pub struct SpeciesSheet {
     pub size: [f32; 3],
     pub leaf_outline: LeafOutline,
     pub leaf_color_srgb: [u8; 3],
-    pub leaf_transmission: [f32; 3],
+    /// The leaf's measured mean reflectance and transmittance (linear R, G, B) and where
+    /// they come from.
+    pub leaf_reflectance: [f32; 3],
+    pub leaf_transmittance: [f32; 3],
+    pub leaf_source: String,
     pub bark_pattern: BarkPattern,
     pub bark_color_srgb: [u8; 3],
     /// Arbaro's parameter names and values, in [`crate::weber_penn::Params::entries`]' order.
@@ -168,7 +172,9 @@ impl SpeciesSheet {
             size: b.size().to_array(),
             leaf_outline: s.leaf_outline,
             leaf_color_srgb: s.leaf_color,
-            leaf_transmission: s.leaf_transmission,
+            leaf_reflectance: s.leaf.reflectance,
+            leaf_transmittance: s.leaf.transmittance,
+            leaf_source: s.leaf_source.clone(),
             bark_pattern: s.bark_pattern,
             bark_color_srgb: s.bark_color,
             params: s.params.entries(),
@@ -204,11 +210,17 @@ impl fmt::Display for SpeciesSheet {
             self.bark_color_srgb,
             self.seed
         )?;
-        let t = self.leaf_transmission;
+        let (r, t) = (self.leaf_reflectance, self.leaf_transmittance);
         writeln!(
             o,
-            "  leaf T/R    {:.3}, {:.3}, {:.3} (transmittance / reflectance, R, G, B)",
-            t[0], t[1], t[2]
+            "  leaf R, T   reflectance {:.3}, {:.3}, {:.3}; transmittance {:.3}, {:.3}, {:.3} \
+             (measured, linear R, G, B; the texture shapes only the pattern)",
+            r[0], r[1], r[2], t[0], t[1], t[2]
+        )?;
+        writeln!(o, "  leaf source {}", self.leaf_source)?;
+        writeln!(
+            o,
+            "  bark R      its texture's colour (no measured bark in the papers yet)"
         )?;
         writeln!(o, "  parameters (Arbaro names):")?;
         for (k, v) in &self.params {

@@ -6,7 +6,9 @@
 use crate::textures::{bark_texture, leaf_texture, BarkPattern, LeafOutline};
 use crate::weber_penn::{self, GenerateError, Params, LEAF, WOOD};
 use std::sync::Arc;
-use sylva_geom::{Material, MaterialKind, Mesh, Model, Optics, FOREST_LEAF_TRANSMISSION};
+use sylva_geom::{
+    LeafOptics, Material, MaterialKind, Measured, Mesh, Model, Optics, KNAPP_CARTER_LEAF,
+};
 
 /// A plant species: how to grow it and how it looks.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -21,9 +23,12 @@ pub struct Species {
     pub leaf_outline: LeafOutline,
     /// Leaf colour, sRGB.
     pub leaf_color: [u8; 3],
-    /// Leaf transmittance / reflectance per colour (linear R, G, B): a leaf reflects its
-    /// texture colour and transmits this much of it (docs/light.md).
-    pub leaf_transmission: [f32; 3],
+    /// The leaf's measured mean reflectance and transmittance per colour (linear R, G, B):
+    /// the texture only shapes its pattern (docs/light.md, "Leaf optics").
+    #[serde(serialize_with = "serialize_measured")]
+    pub leaf: Measured,
+    /// Where [`Species::leaf`] comes from.
+    pub leaf_source: String,
     pub bark_pattern: BarkPattern,
     /// Bark colour, sRGB.
     pub bark_color: [u8; 3],
@@ -98,7 +103,8 @@ impl Species {
             params,
             seed,
             leaf_color: [75, 125, 45],
-            leaf_transmission: FOREST_LEAF_TRANSMISSION,
+            leaf: KNAPP_CARTER_LEAF,
+            leaf_source: KNAPP_CARTER_SOURCE.into(),
             bark_pattern: BarkPattern::Furrowed,
             bark_color: [105, 85, 65],
             reference_triangles: None,
@@ -111,8 +117,11 @@ impl Species {
         weber_penn::generate(&self.params, self.seed)
     }
 
-    /// Bark (index 0) and leaf (index 1) materials with their textures.
-    pub fn materials(&self) -> Vec<Material> {
+    /// Bark (index 0) and leaf (index 1) materials with their textures, the leaf's optics
+    /// formed from its measured values ([`LeafOptics::Measured`]; a scene's
+    /// `set_leaf_optics` re-forms them for another mode). Bark has no measured values yet:
+    /// its reflectance is its texture's colour.
+    pub fn materials(&self) -> Result<Vec<Material>, GenerateError> {
         let tex_seed = (self.seed as u32).wrapping_mul(2654435761);
         let bark = Arc::new(bark_texture(self.bark_pattern, self.bark_color, tex_seed));
         let leaf = Arc::new(leaf_texture(
@@ -120,6 +129,9 @@ impl Species {
             self.leaf_color,
             tex_seed ^ 0x5a5a,
         ));
+        let leaf_optics =
+            Optics::measured_leaf(self.leaf, LeafOptics::Measured, leaf.mean_opaque_albedo())
+                .map_err(|e| GenerateError::Optics(format!("{} leaf: {e}", self.name)))?;
         let mut m = vec![
             Material {
                 name: format!("{} bark", self.display_name),
@@ -135,19 +147,20 @@ impl Species {
                 base_color: leaf.mean_opaque_linear(),
                 texture: Some(leaf),
                 two_sided: true,
-                optics: Optics::leaf(self.leaf_transmission),
+                optics: leaf_optics,
             },
         ];
         debug_assert_eq!(m[WOOD as usize].kind, MaterialKind::Wood);
         debug_assert_eq!(m[LEAF as usize].kind, MaterialKind::Leaf);
         m.shrink_to_fit();
-        m
+        Ok(m)
     }
 
-    /// The species with leaves of transmittance / reflectance `t` per colour.
-    pub fn with_leaf_transmission(self, t: [f32; 3]) -> Species {
+    /// The species with leaves measured as `leaf`, from `source`.
+    pub fn with_leaf(self, leaf: Measured, source: &str) -> Species {
         Species {
-            leaf_transmission: t,
+            leaf,
+            leaf_source: source.to_string(),
             ..self
         }
     }
@@ -160,7 +173,7 @@ impl Species {
         mesh.uvs.shrink_to_fit();
         mesh.indices.shrink_to_fit();
         mesh.material_ids.shrink_to_fit();
-        Ok(Model::new(self.name.clone(), mesh, self.materials()))
+        Ok(Model::new(self.name.clone(), mesh, self.materials()?))
     }
 }
 
@@ -180,7 +193,8 @@ fn builtin(
         seed,
         leaf_outline: leaf.0,
         leaf_color: leaf.1,
-        leaf_transmission: FOREST_LEAF_TRANSMISSION,
+        leaf: KNAPP_CARTER_LEAF,
+        leaf_source: KNAPP_CARTER_SOURCE.into(),
         bark_pattern: bark.0,
         bark_color: bark.1,
         reference_triangles,
@@ -189,6 +203,18 @@ fn builtin(
 }
 
 const TABLE2: &str = "paper 000 Table 2 (beech scene)";
+
+/// The source of [`KNAPP_CARTER_LEAF`], as `species show` prints it.
+pub const KNAPP_CARTER_SOURCE: &str = "paper 000 Table 1: Knapp & Carter's leaves, R = bs, T = fs \
+     (000 §3: one set for all species, their variation across 26 species being small)";
+
+fn serialize_measured<S: serde::Serializer>(m: &Measured, s: S) -> Result<S::Ok, S::Error> {
+    use serde::ser::SerializeStruct;
+    let mut st = s.serialize_struct("Measured", 2)?;
+    st.serialize_field("reflectance", &m.reflectance)?;
+    st.serialize_field("transmittance", &m.transmittance)?;
+    st.end()
+}
 
 /// Oval crown, three-lobed toothed leaves, smooth grey bark.
 fn red_maple() -> Species {
@@ -559,7 +585,7 @@ fn dogrose() -> Species {
         None,
         "paper 002 §3.2.2 (Xfrog dogrose, Rosa canina)",
     )
-    .with_leaf_transmission(DOGROSE_LEAF_TRANSMISSION)
+    .with_leaf(DOGROSE_LEAF, DOGROSE_SOURCE)
 }
 
 /// Triangles of 003's Table 3 tree (§4.2: "The tree model consisted of 18K triangles").
@@ -586,8 +612,38 @@ fn sparse_maple() -> Species {
     }
 }
 
-/// The dogrose's leaf transmittance / reflectance, `(1 + g) / (1 - g)` from the asymmetry
-/// `g = (T - R) / (T + R)` = (-0.231, 0.103, -0.750) of 002 Table 1.
+/// The dogrose's leaf (002 Table 1, derived from Knapp & Carter as 000 derives its own): the
+/// albedo `R + T = 1 − σ_a / 0.125` from its `σ_a` = (0.109, 0.091, 0.118) (000 §3 scales
+/// absorptance by 0.125), split by its asymmetry `g = (T − R) / (T + R)` = (−0.231, 0.103,
+/// −0.750): `R = (R + T)(1 − g) / 2`, `T = (R + T)(1 + g) / 2`.
+pub const DOGROSE_LEAF: Measured = {
+    let albedo = [
+        1.0 - 0.109 / 0.125,
+        1.0 - 0.091 / 0.125,
+        1.0 - 0.118 / 0.125,
+    ];
+    let g = [-0.231, 0.103, -0.750];
+    Measured {
+        reflectance: [
+            albedo[0] * (1.0 - g[0]) / 2.0,
+            albedo[1] * (1.0 - g[1]) / 2.0,
+            albedo[2] * (1.0 - g[2]) / 2.0,
+        ],
+        transmittance: [
+            albedo[0] * (1.0 + g[0]) / 2.0,
+            albedo[1] * (1.0 + g[1]) / 2.0,
+            albedo[2] * (1.0 + g[2]) / 2.0,
+        ],
+    }
+};
+
+/// The source of [`DOGROSE_LEAF`], as `species show` prints it.
+pub const DOGROSE_SOURCE: &str = "paper 002 Table 1 (dogrose, from Knapp & Carter): \
+     R + T = 1 − σ_a / 0.125, split by g = (T − R) / (T + R)";
+
+/// The dogrose's leaf transmittance / reflectance before issue 29, `(1 + g) / (1 - g)` from
+/// the asymmetry `g` = (-0.231, 0.103, -0.750) of 002 Table 1: what `--leaf-optics texture`
+/// reproduces from [`DOGROSE_LEAF`].
 pub const DOGROSE_LEAF_TRANSMISSION: [f32; 3] = [
     (1.0 - 0.231) / (1.0 + 0.231),
     (1.0 + 0.103) / (1.0 - 0.103),

@@ -1896,6 +1896,7 @@ pub fn model_medium_variants() -> Vec<(String, ModelMediumKey)> {
 mod tests {
     use super::*;
     use sylva_core::cache::assert_each_field_changes_the_key;
+    use sylva_geom::LeafOptics;
     use sylva_geom::{Material, Mesh};
     use sylva_lb::Bounds;
     use sylva_lb::CpuSolver;
@@ -2115,6 +2116,39 @@ mod tests {
         }
         file.write(&path).unwrap();
         assert_recomputed(&m, &o, &orig, &path);
+    }
+
+    #[test]
+    fn key_changes_with_the_leaf_optics() {
+        // A light solved with the texture's colour as the leaves' reflectance must not be
+        // reused for measured leaves, nor the other way round; either mode again is a hit.
+        let measured = |mode| {
+            let mut m = model(1.0);
+            m.materials[0].optics = sylva_geom::Optics::measured_leaf(
+                sylva_geom::KNAPP_CARTER_LEAF,
+                mode,
+                m.materials[0].mean_colour(),
+            )
+            .unwrap();
+            m
+        };
+        let o = opts(None);
+        let key = |m: &Model| cache_key(m, &illum(sun()), &o, &CpuSolver).unwrap();
+        let (k_measured, k_texture) = (
+            key(&measured(LeafOptics::Measured)),
+            key(&measured(LeafOptics::Texture)),
+        );
+        assert_ne!(k_measured, k_texture);
+        assert_eq!(k_measured, key(&measured(LeafOptics::Measured)));
+        // The texture mode is the colour look of before: the same key as a leaf that had
+        // those factors without measured values.
+        assert_eq!(k_texture, key(&model(1.0)));
+        // Through a scene, as every command sets them.
+        let mut scene_model = measured(LeafOptics::Measured);
+        let mut m = scene_model.materials[0].clone();
+        m.set_leaf_optics(LeafOptics::Texture).unwrap();
+        scene_model.materials[0] = m;
+        assert_eq!(key(&scene_model), k_texture);
     }
 
     #[test]

@@ -4,6 +4,11 @@
 //! World luminance `L_w` is scaled by `key / L̄_w`, where `L̄_w` is the log-average luminance;
 //! the scaled `L` is compressed by `L_d = L (1 + L / L_white²) / (1 + L)`, so `L_white` (in
 //! scaled units) maps exactly to 1. Colours keep their ratios: `rgb_d = rgb · L_d / L_w`.
+//!
+//! The default `L_white` is the image's largest scaled colour value (any channel), not its
+//! largest luminance: a saturated brightest colour (the blue sky, once measured leaves made
+//! the sky the brightest thing in view) would otherwise map its luminance to 1 and its blue
+//! channel above it, burning out as cyan-white.
 
 use sylva_core::colour::{linear_to_srgb8, luminance};
 
@@ -15,8 +20,8 @@ const LOG_DELTA: f64 = 1e-6;
 pub struct ToneMap {
     /// The key `a`: the scaled luminance the log-average maps to (0.18: "middle grey").
     pub key: f32,
-    /// `L_white` in scaled units; `None` uses the largest scaled luminance of the image, so
-    /// nothing burns out.
+    /// `L_white` in scaled units; `None` uses the largest scaled colour value of the image
+    /// (any channel), so the brightest pixels keep their hue.
     pub white: Option<f32>,
 }
 
@@ -54,7 +59,17 @@ pub fn log_average_luminance(pixels: &[[f32; 3]]) -> f32 {
 pub struct ToneAccumulator {
     log_sum: f64,
     count: u64,
-    max_luminance: f32,
+    max_value: f32,
+}
+
+/// What the default white point takes the maximum of: a pixel's largest channel where its
+/// luminance is positive (the pixels the operator maps), else 0.
+fn white_value(p: [f32; 3]) -> f32 {
+    if luminance(p) > 0.0 {
+        p[0].max(p[1]).max(p[2])
+    } else {
+        0.0
+    }
 }
 
 impl ToneAccumulator {
@@ -64,7 +79,7 @@ impl ToneAccumulator {
         for p in pixels {
             let l = luminance(*p);
             self.log_sum += (LOG_DELTA + l.max(0.0) as f64).ln();
-            self.max_luminance = self.max_luminance.max(l);
+            self.max_value = self.max_value.max(white_value(*p));
         }
         self.count += pixels.len() as u64;
     }
@@ -91,7 +106,7 @@ impl ToneMap {
         let white = self.white.unwrap_or_else(|| {
             pixels
                 .iter()
-                .map(|p| luminance(*p) * scale)
+                .map(|p| white_value(*p) * scale)
                 .fold(0.0f32, f32::max)
                 .max(f32::MIN_POSITIVE)
         });
@@ -107,11 +122,11 @@ impl ToneMap {
             (acc.log_sum / acc.count as f64).exp() as f32
         };
         let scale = self.scale(log_average);
-        // Scaling by a positive factor keeps the order of luminances (rounding is monotonic):
-        // the brightest scaled pixel is the brightest pixel scaled.
+        // Scaling by a positive factor keeps the order of values (rounding is monotonic):
+        // the brightest scaled value is the brightest value scaled.
         let white = self
             .white
-            .unwrap_or_else(|| (acc.max_luminance * scale).max(f32::MIN_POSITIVE));
+            .unwrap_or_else(|| (acc.max_value * scale).max(f32::MIN_POSITIVE));
         ToneStats { log_average, white }
     }
 
@@ -186,6 +201,40 @@ mod tests {
             }
             assert_eq!(tm.measure_accumulated(&acc), tm.measure(&all));
         }
+    }
+
+    #[test]
+    fn a_blue_sky_brightest_keeps_its_hue() {
+        // Catalpa with measured leaves: the sky (radiance (0.55, 0.70, 0.95)) is the
+        // brightest thing in view, over dark leaves and a grey ground. Its blue is 1.385 × its
+        // luminance: with the white point at the largest luminance it would map above 1 and
+        // clip (cyan-white); with the largest channel its colour ratios survive, blue just
+        // below 1 (`M (1 + L / M²) / (1 + L)` ≤ 1 for a pixel's luminance L ≤ its largest
+        // channel M ≤ 1, scaled).
+        let sky = [0.55f32, 0.70, 0.95];
+        let mut px = vec![sky; 37];
+        px.extend(vec![[0.15f32, 0.15, 0.13]; 33]);
+        px.extend(vec![[0.02f32, 0.05, 0.015]; 30]);
+        let (out, st) = ToneMap::default().apply(&px);
+        let s = out[0];
+        assert!(s.iter().all(|&c| c < 1.0 + 1e-6), "{s:?}");
+        assert!(s[2] > 0.95, "{s:?}");
+        for c in 0..2 {
+            assert!(close(s[c] / s[2], sky[c] / sky[2], 1e-5), "{s:?}");
+        }
+        // The luminance white point (still available as `white`) clips that blue.
+        let lum_white = luminance(sky) * 0.18 / st.log_average;
+        let clipped = ToneMap {
+            white: Some(lum_white),
+            ..ToneMap::default()
+        }
+        .apply(&px)
+        .0[0];
+        assert_eq!(clipped[2], 1.0);
+        assert!(
+            clipped[1] / clipped[2] > sky[1] / sky[2] + 0.05,
+            "{clipped:?}"
+        );
     }
 
     fn close(a: f32, b: f32, tol: f32) -> bool {

@@ -14,7 +14,9 @@ use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use sylva_core::limits;
 use sylva_core::Sun;
-use sylva_geom::{Aabb, Camera, Ground, Instance, LbSettings, Medium, Model, ModelOrigin, Scene};
+use sylva_geom::{
+    Aabb, Camera, Ground, Instance, LbSettings, Measured, Medium, Model, ModelOrigin, Scene,
+};
 use sylva_grow::arbaro::{self, ArbaroError};
 use sylva_grow::cloud::{cumulus, CloudError, CumulusParams};
 use sylva_grow::species::{normalize_name, Species, BUILTIN_NAMES};
@@ -114,6 +116,9 @@ struct RawModel {
     preset: Option<String>,
     // Built-in shapes only.
     color: Option<[f32; 3]>,
+    // Grown models only: measured leaf optics replacing the species' (both or neither).
+    leaf_reflectance: Option<[f32; 3]>,
+    leaf_transmittance: Option<[f32; 3]>,
     // Imported meshes only.
     leaf_materials: Option<Vec<String>>,
     wood_materials: Option<Vec<String>>,
@@ -518,6 +523,44 @@ impl SceneDesc {
                     invalid(Some(l), format!("model '{}': {message}", m.name))
                 })?;
             }
+            // A grown model's measured leaf, checked here so a bad one names the line.
+            let leaf = match (m.leaf_reflectance, m.leaf_transmittance) {
+                (None, None) => None,
+                (Some(reflectance), Some(transmittance)) => {
+                    if m.species.is_none() && m.arbaro.is_none() {
+                        return Err(invalid(
+                            Some(l),
+                            format!(
+                                "model '{}': 'leaf_reflectance' and 'leaf_transmittance' apply \
+                                 to grown models ('species' or 'arbaro') only; imported meshes \
+                                 keep their own materials",
+                                m.name
+                            ),
+                        ));
+                    }
+                    let leaf = Measured {
+                        reflectance,
+                        transmittance,
+                    };
+                    leaf.validate(&format!("model '{}': leaf", m.name))
+                        .map_err(|e| invalid(Some(l), e))?;
+                    Some(leaf)
+                }
+                _ => {
+                    return Err(invalid(
+                        Some(l),
+                        format!(
+                            "model '{}': give both 'leaf_reflectance' and 'leaf_transmittance' \
+                             (measured, linear R, G, B) or neither",
+                            m.name
+                        ),
+                    ))
+                }
+            };
+            let with_leaf = |s: Species| match leaf {
+                Some(leaf) => s.with_leaf(leaf, &format!("scene file {origin}")),
+                None => s,
+            };
             if m.mesh.is_none() {
                 let import_keys = [
                     ("leaf_materials", m.leaf_materials.is_some()),
@@ -586,7 +629,7 @@ impl SceneDesc {
                 if let Some(seed) = m.seed {
                     s.seed = seed;
                 }
-                ModelSource::Species(Box::new(s))
+                ModelSource::Species(Box::new(with_leaf(s)))
             } else if let Some(file) = &m.arbaro {
                 let p: PathBuf = match base_dir {
                     Some(d) => d.join(file),
@@ -599,12 +642,12 @@ impl SceneDesc {
                     source: Box::new(source),
                 })?;
                 let seed = m.seed.or(a.seed).unwrap_or(0);
-                ModelSource::Species(Box::new(Species::from_params(
+                ModelSource::Species(Box::new(with_leaf(Species::from_params(
                     &normalize_name(&a.name),
                     a.params,
                     seed,
                     p.display().to_string(),
-                )))
+                ))))
             } else {
                 let file = m.mesh.as_deref().unwrap_or_default();
                 let path: PathBuf = match base_dir {

@@ -58,7 +58,10 @@ pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
     );
     let light_name = settings.name(true)?;
     let physical = light_name == "physical";
-    let scene = load_scene(&a.scene, None)?;
+    let mut scene = load_scene(&a.scene, None)?;
+    scene
+        .set_leaf_optics(a.lb.leaf_optics.into())
+        .map_err(anyhow::Error::msg)?;
     let plan = settings
         .plan(true, a.keep_raw, light_name)?
         .expect("forced plans exist");

@@ -45,6 +45,10 @@ pub struct ExportArgs {
     /// like sylva's local shading with a sun of intensity 1.
     #[arg(long, value_name = "E")]
     pub sun_irradiance: Option<f32>,
+    /// Leaves as measured or as their texture, as `render --leaf-optics` (export with the
+    /// same choice as the render compared against).
+    #[arg(long, value_enum, default_value = "measured")]
+    pub leaf_optics: super::render::LeafOpticsArg,
 }
 
 /// False once Ctrl-C arrived (sylva-core's one handler, installed by `main`): the writers
@@ -65,7 +69,10 @@ pub fn run(args: ExportArgs) -> Result<()> {
     };
     sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&[args.output.join(main_file)])?;
     let t0 = Instant::now();
-    let scene = sylva_scene::load(&args.scene)?;
+    let mut scene = sylva_scene::load(&args.scene)?;
+    scene
+        .set_leaf_optics(args.leaf_optics.into())
+        .map_err(anyhow::Error::msg)?;
     let triangles = scene.instanced_triangles();
     eprintln!(
         "scene '{}': {} instances, {} instanced triangles (built in {:.1} s)",

@@ -25,6 +25,28 @@ use sylva_trace::TraversalConfig;
 use super::progress::Bars;
 use super::sun_time::SunTimeArgs;
 
+/// `--leaf-optics`: which leaf optics the LB, the frames and the export form from a
+/// species' measured leaf (docs/light.md, "Leaf optics").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Default)]
+pub enum LeafOpticsArg {
+    /// The species' measured mean reflectance and transmittance; the texture shapes only the
+    /// pattern (texel / mean texel).
+    #[default]
+    Measured,
+    /// The look before issue 29: the texture's colour is the reflectance, the transmittance
+    /// that times the measured T / R.
+    Texture,
+}
+
+impl From<LeafOpticsArg> for sylva_geom::LeafOptics {
+    fn from(a: LeafOpticsArg) -> Self {
+        match a {
+            LeafOpticsArg::Measured => sylva_geom::LeafOptics::Measured,
+            LeafOpticsArg::Texture => sylva_geom::LeafOptics::Texture,
+        }
+    }
+}
+
 /// Whether the LB light of plants comes from base solutions (paper 004): the physical light's
 /// (25 sun parts and 3 diffuse parts per model) or, with --light paper, 004's (docs/relight.md).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -193,6 +215,12 @@ pub struct LbArgs {
     /// GPU state storage of the LB solve: f32, or f16 (half the memory traffic).
     #[arg(long, value_enum, default_value = "f32")]
     pub precision: super::device::PrecisionArg,
+    /// Physical light: leaves as measured (each species' mean reflectance and transmittance,
+    /// the texture shaping only the pattern) or as their texture (its colour the reflectance:
+    /// the look before issue 29, to compare). Imported meshes keep their own materials; the
+    /// paper light shades with the texture either way.
+    #[arg(long, value_enum, default_value = "measured")]
+    pub leaf_optics: LeafOpticsArg,
 }
 
 /// How relit light is combined for a sun (frames from base solutions).
@@ -464,7 +492,10 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
         None => Sun::given(a.sun.sun.as_deref(), a.sun.elevation, a.sun.azimuth)?,
     };
     let traversal = TraversalConfig::checked(a.view.stack).map_err(anyhow::Error::msg)?;
-    let scene = load_scene(&a.scene, sun)?;
+    let mut scene = load_scene(&a.scene, sun)?;
+    scene
+        .set_leaf_optics(a.lb.leaf_optics.into())
+        .map_err(anyhow::Error::msg)?;
     let (width, height) = resolution(a.view.width, a.view.height, &scene.camera)?;
     let rays_per_pixel = rays_per_pixel.unwrap_or(scene.camera.rays_per_pixel);
     if let Some(check) = check_size {

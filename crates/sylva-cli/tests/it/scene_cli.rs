@@ -45,6 +45,23 @@ fn species_list_and_show() {
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     assert_eq!(v["params"]["Shape"], 0.0);
     assert!(v["triangles"].as_u64().unwrap() > 100_000);
+    // The measured leaf and its source (000 Table 1 for the forest species).
+    let r: Vec<f64> = serde_json::from_value(v["leaf_reflectance"].clone()).unwrap();
+    let t: Vec<f64> = serde_json::from_value(v["leaf_transmittance"].clone()).unwrap();
+    for (got, want) in r.iter().zip([0.070, 0.125, 0.040]) {
+        assert!((got - want).abs() < 1e-6, "{r:?}");
+    }
+    for (got, want) in t.iter().zip([0.055, 0.150, 0.020]) {
+        assert!((got - want).abs() < 1e-6, "{t:?}");
+    }
+    assert!(
+        v["leaf_source"].as_str().unwrap().contains("000 Table 1"),
+        "{v}"
+    );
+    let (ok, out, err) = sylva(&["species", "show", "dogrose"]);
+    assert!(ok, "{err}");
+    assert!(out.contains("reflectance 0.079, 0.122, 0.049"), "{out}");
+    assert!(out.contains("002 Table 1"), "{out}");
     let (ok, _, err) = sylva(&["species", "show", "baobab"]);
     assert!(!ok && err.contains("baobab"), "{err}");
 }

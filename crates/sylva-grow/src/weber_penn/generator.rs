@@ -27,6 +27,9 @@ pub enum GenerateError {
     TooManyTriangles { limit: usize },
     #[error(transparent)]
     Param(#[from] super::params::ParamError),
+    /// A leaf whose measured optics its texture cannot carry.
+    #[error("{0}")]
+    Optics(String),
 }
 
 /// Shape ratio of Weber & Penn, for `shape` 0-8 at position `ratio` in [0, 1].

@@ -1,8 +1,10 @@
 //! Built-in species: triangle counts against paper 000 Table 2 (and 003's 18K-triangle tree),
 //! determinism, materials, form.
 
-use sylva_geom::MaterialKind;
-use sylva_grow::species::BUILTIN_NAMES;
+use sylva_geom::{
+    is_opaque, LeafOptics, MaterialKind, FOREST_LEAF_TRANSMISSION, KNAPP_CARTER_LEAF,
+};
+use sylva_grow::species::{BUILTIN_NAMES, DOGROSE_LEAF, DOGROSE_LEAF_TRANSMISSION};
 use sylva_grow::weber_penn::{self, Params, LEAF, WOOD};
 use sylva_grow::Species;
 
@@ -149,7 +151,8 @@ fn forms_read_as_their_species() {
     let beech = size("american_beech");
     assert!(beech.y > 15.0, "american beech is a tall tree: {beech}");
     // Birch bark is light, pine bark reddish brown.
-    let bark = |n: &str| Species::builtin(n).unwrap().materials()[WOOD as usize].base_color;
+    let bark =
+        |n: &str| Species::builtin(n).unwrap().materials().unwrap()[WOOD as usize].base_color;
     let b = bark("paper_birch");
     assert!(b.iter().all(|&c| c > 0.4), "birch bark {b:?}");
     let p = bark("pine");
@@ -275,5 +278,87 @@ mod any_valid_parameters {
                 Err(e) => prop_assert!(false, "unexpected error {e}"),
             }
         }
+    }
+}
+
+#[test]
+fn every_species_leaf_is_measured_and_averages_to_it() {
+    for name in BUILTIN_NAMES {
+        let s = Species::builtin(name).unwrap();
+        // 000 Table 1 for the forest species (000 Table 2's and the pine of 000 Fig. 3b),
+        // the dogrose's own from 002 Table 1.
+        let want = if *name == "dogrose" {
+            DOGROSE_LEAF
+        } else {
+            KNAPP_CARTER_LEAF
+        };
+        assert_eq!(s.leaf, want, "{name}");
+        assert!(s.leaf.validate(name).is_ok());
+        let mats = s.materials().unwrap();
+        let leaf = &mats[LEAF as usize];
+        assert_eq!(leaf.optics.measured, Some(want));
+        // Over the leaf's opaque texels, decoded as the renderer decodes them, the mean
+        // reflectance and transmittance are the measured ones.
+        let tex = leaf.texture.as_ref().unwrap();
+        let mut sums = [[0f64; 3]; 2];
+        let mut n = 0usize;
+        for p in tex.pixels.iter().filter(|p| is_opaque(**p)) {
+            for c in 0..3 {
+                let t = sylva_core::colour::srgb_to_linear(p[c] as f32 / 255.0);
+                sums[0][c] += (t * leaf.optics.reflect[c]) as f64;
+                sums[1][c] += (t * leaf.optics.transmit[c]) as f64;
+            }
+            n += 1;
+        }
+        for (c, (sum_r, sum_t)) in sums[0].iter().zip(sums[1]).enumerate() {
+            let (r, t) = (sum_r / n as f64, sum_t / n as f64);
+            let (wr, wt) = (want.reflectance[c] as f64, want.transmittance[c] as f64);
+            assert!((r - wr).abs() < 1e-6 * wr, "{name} R[{c}]: {r} vs {wr}");
+            assert!((t - wt).abs() < 1e-6 * wt, "{name} T[{c}]: {t} vs {wt}");
+        }
+        // Bark has no measured value: its reflectance is its texture's colour.
+        assert_eq!(mats[WOOD as usize].optics, sylva_geom::Optics::OPAQUE);
+    }
+}
+
+#[test]
+fn texture_mode_gives_back_the_leaves_of_before() {
+    // Before issue 29 a species' leaf reflected its texture colour and transmitted its T/R
+    // of it: FOREST_LEAF_TRANSMISSION for the forest species (bit for bit), the dogrose's
+    // (1 + g) / (1 − g) of 002 Table 1 (to f32 rounding: R and T are formed from g first).
+    for name in BUILTIN_NAMES {
+        let mut leaf = Species::builtin(name).unwrap().materials().unwrap()[LEAF as usize].clone();
+        leaf.set_leaf_optics(LeafOptics::Texture).unwrap();
+        assert_eq!(leaf.optics.reflect, [1.0; 3], "{name}");
+        if *name == "dogrose" {
+            for (c, (got, want)) in leaf
+                .optics
+                .transmit
+                .iter()
+                .zip(DOGROSE_LEAF_TRANSMISSION)
+                .enumerate()
+            {
+                assert!((got - want).abs() < 1e-6 * want, "{c}: {got} vs {want}");
+            }
+        } else {
+            assert_eq!(leaf.optics.transmit, FOREST_LEAF_TRANSMISSION, "{name}");
+        }
+    }
+}
+
+#[test]
+fn the_dogrose_leaf_is_002_table_1() {
+    // g = (T − R) / (T + R) and σ_a = 0.125 (1 − R − T) give back the table's values.
+    let (g, sigma_a) = ([-0.231, 0.103, -0.750], [0.109, 0.091, 0.118]);
+    for c in 0..3 {
+        let (r, t) = (
+            DOGROSE_LEAF.reflectance[c] as f64,
+            DOGROSE_LEAF.transmittance[c] as f64,
+        );
+        assert!(((t - r) / (t + r) - g[c]).abs() < 1e-6, "g[{c}]");
+        assert!(
+            (0.125 * (1.0 - r - t) - sigma_a[c]).abs() < 1e-6,
+            "σ_a[{c}]"
+        );
     }
 }

@@ -338,6 +338,7 @@ fn optics(leaf: bool, diffuse_transmission: Option<(f32, [f32; 3])>) -> Optics {
         (true, Some((f, t))) => Optics {
             reflect: [1.0 - f; 3],
             transmit: t.map(|t| f * t),
+            measured: None,
         },
         (true, None) => Optics::FOREST_LEAF,
     }

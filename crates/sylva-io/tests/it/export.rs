@@ -672,6 +672,24 @@ fn leaf_reflectance_and_transmittance_round_trip_through_the_mitsuba_export() {
         }
         // Leaves transmit: the species' T/R is not zero.
         assert!(material.optics.transmit.iter().all(|&f| f > 0.0));
+        // A species' leaf is exported as measured: over its opaque texels the EXRs average
+        // to 2R and 2T of the species' measured leaf, what Mitsuba and sylva both see.
+        let m = material
+            .optics
+            .measured
+            .expect("a species' leaf carries its measurements");
+        let opaque: Vec<usize> = (0..t.pixels.len())
+            .filter(|&i| sylva_geom::is_opaque(t.pixels[i]))
+            .collect();
+        for c in 0..3 {
+            let mean = |img: &image::Rgb32FImage| {
+                let px: Vec<_> = img.pixels().collect();
+                opaque.iter().map(|&i| px[i][c] as f64).sum::<f64>() / opaque.len() as f64
+            };
+            let (r, tr) = (mean(&r2) / 2.0, mean(&t2) / 2.0);
+            assert!((r - m.reflectance[c] as f64).abs() < 1e-6, "R[{c}] {r}");
+            assert!((tr - m.transmittance[c] as f64).abs() < 1e-6, "T[{c}] {tr}");
+        }
         checked += 1;
     }
     assert_eq!(checked, leaves.len());

@@ -339,3 +339,53 @@ fn links_and_model_files_given_as_scenes_say_what_they_are() {
         );
     }
 }
+
+#[test]
+fn a_scene_file_can_give_a_grown_model_its_measured_leaves() {
+    let model = |extra: &str| {
+        format!("[[models]]\nname = \"m\"\nspecies = \"dogrose\"\n{extra}\n[[instances]]\nmodel = \"m\"\nposition = [0.0, 0.0, 0.0]\n")
+    };
+    let cases = [
+        (
+            model("leaf_reflectance = [0.6, 0.1, 0.1]\nleaf_transmittance = [0.5, 0.1, 0.1]\n"),
+            "model 'm': leaf: reflectance + transmittance in red is 0.6 + 0.5 > 1",
+        ),
+        (
+            model("leaf_reflectance = [0.1, -0.1, 0.1]\nleaf_transmittance = [0.1, 0.1, 0.1]\n"),
+            "model 'm': leaf: reflectance [0.1, -0.1, 0.1] must be finite and ≥ 0",
+        ),
+        (
+            model("leaf_reflectance = [0.1, 0.1, 0.1]\n"),
+            "give both 'leaf_reflectance' and 'leaf_transmittance'",
+        ),
+        (
+            "[[models]]\nname = \"t\"\nshape = \"teapot\"\nleaf_reflectance = [0.1, 0.1, 0.1]\nleaf_transmittance = [0.1, 0.1, 0.1]\n".to_string(),
+            "apply to grown models ('species' or 'arbaro') only",
+        ),
+        (
+            "[[models]]\nname = \"t\"\nmesh = \"tree.obj\"\nleaf_reflectance = [0.1, 0.1, 0.1]\nleaf_transmittance = [0.1, 0.1, 0.1]\n".to_string(),
+            "imported meshes keep their own materials",
+        ),
+    ];
+    for (text, want) in cases {
+        let e = err(&text);
+        assert!(e.contains(want), "{text:?}: {e}");
+        assert!(e.starts_with("test.toml: line 1: "), "{e}");
+        assert!(!e.contains('\n'), "{e}");
+    }
+    // A valid leaf replaces the species' own: its mean reflectance and transmittance over
+    // the texture are the given ones.
+    let (r, t) = ([0.08f32, 0.2, 0.05], [0.06f32, 0.25, 0.02]);
+    let s = parse(&model(&format!(
+        "leaf_reflectance = {r:?}\nleaf_transmittance = {t:?}\n"
+    )))
+    .unwrap()
+    .build()
+    .unwrap();
+    let leaf = s.models[0].materials.iter().find(|m| m.is_leaf()).unwrap();
+    let (mr, mt) = (leaf.mean_reflectance(), leaf.mean_transmittance());
+    for c in 0..3 {
+        assert!((mr[c] - r[c]).abs() < 1e-6 * r[c], "{mr:?}");
+        assert!((mt[c] - t[c]).abs() < 1e-6 * t[c], "{mt:?}");
+    }
+}
