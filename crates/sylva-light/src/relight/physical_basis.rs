@@ -846,10 +846,10 @@ mod tests {
                 Codec::Haar { threshold: 0.0 },
                 Codec::Haar { threshold: 0.0 },
             ),
-            (Codec::Pca { rank: 39 }, Codec::Pca { rank: 9 }),
+            (Codec::Pca { rank: SUN_CHANNELS }, Codec::Pca { rank: 9 }),
             (
                 Codec::PcaHaar {
-                    rank: 39,
+                    rank: SUN_CHANNELS,
                     threshold: 0.0,
                 },
                 Codec::ColourHaar { threshold: 0.0 },
