@@ -23,6 +23,7 @@
 
 use glam::Vec3;
 use sylva_geom::Aabb;
+use sylva_lb::relight::Placement;
 use sylva_lb::Dims;
 
 /// "No such entry" in the words.
@@ -168,6 +169,30 @@ impl<'a> Packer<'a> {
                 .enumerate()
                 .fold(0u32, |w, (k, &b)| w | (b as u32) << (8 * k))
         }));
+    }
+
+    /// A relit record's header ([`Packer::light_header`]) for `fields` scalar fields per site
+    /// on `dims` at `placement`; its kind (word `RELIT_KIND`) is 0, every field at every
+    /// site, until the caller sets another. Returns where it starts.
+    pub fn relit_header(
+        &mut self,
+        dims: Dims,
+        placement: &Placement,
+        bounds: Aabb,
+        fields: usize,
+    ) -> u32 {
+        let mut extra = [0u32; 9];
+        extra[1] = fields as u32;
+        extra[2] = dims.sites() as u32;
+        self.light_header(
+            dims,
+            (
+                Vec3::from_array(placement.origin()),
+                Vec3::from_array(placement.inv_cell()),
+            ),
+            bounds,
+            extra,
+        )
     }
 
     /// An LB light record's header ([`LIGHT_HEADER`] words): dims, where its values start

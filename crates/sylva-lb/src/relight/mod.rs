@@ -42,7 +42,7 @@ pub use compress::{
     COMPRESSED_EXTENSION,
 };
 pub use footprint::{Footprint, Placement};
-pub use polyhedron::{exact_weights, face_hit, faces, DirectionError, Face, FaceHit};
+pub use polyhedron::{exact_weights, face_hit, faces, normalise, DirectionError, Face, FaceHit};
 pub use region::Region;
 
 /// Base solutions per grid: `B_0` (ambient) and `B_1..B_18`.

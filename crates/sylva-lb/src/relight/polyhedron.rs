@@ -175,7 +175,7 @@ pub fn exact_weights(travel: [f64; 3]) -> Result<[f64; Q], DirectionError> {
 
 /// `v / |v|`, or `None` for a zero or non-finite vector. Scaled by the largest component
 /// first, so tiny and huge vectors neither underflow nor overflow.
-pub(crate) fn normalise(v: [f64; 3]) -> Option<[f64; 3]> {
+pub fn normalise(v: [f64; 3]) -> Option<[f64; 3]> {
     let big = v[0].abs().max(v[1].abs()).max(v[2].abs());
     if !(big.is_finite() && big > 0.0) || v.iter().any(|c| c.is_nan()) {
         return None;

@@ -103,19 +103,7 @@ impl StoredBasis {
     /// f32 values; packed: the u16 words 2 per word and a step per field). `placement`: this
     /// set's, `bounds`: the model's. Returns where it starts.
     fn pack(&self, p: &mut Packer, placement: &Placement, bounds: Aabb) -> u32 {
-        let dims = self.dims();
-        let mut extra = [0u32; 9];
-        extra[1] = self.field_count() as u32;
-        extra[2] = dims.sites() as u32;
-        let start = p.light_header(
-            dims,
-            (
-                Vec3::from_array(placement.origin()),
-                Vec3::from_array(placement.inv_cell()),
-            ),
-            bounds,
-            extra,
-        );
+        let start = p.relit_header(self.dims(), placement, bounds, self.field_count());
         let fields = |p: &mut Packer, fields: &[Vec<f32>]| {
             for f in fields {
                 p.words.extend(f.iter().map(|v| v.to_bits()));

@@ -113,12 +113,13 @@ struct Baked {
 }
 
 /// [`PhysicalRelitLight::bake_for_frame`] decodes when a frame's lookups are at least
-/// `1 / BAKE_SITES_PER_LOOKUP` of the sites to decode. A site decodes in 9.6 ns and a decoded
-/// lookup saves 0.21 µs of a compressed one (104.6 M sites/s; 4.40 against 47.3 M lookups/s:
-/// `benches/relight_lookup.rs`, relight_decoded), so decoding pays from about one lookup per
-/// 21 sites; the count takes every pixel as a lookup where about half miss the plants and the
-/// ground under them, hence 8. A 512² frame at one sample reads a catalpa at grid 128 (1.6 M
-/// sites) decoded; a viewer's preview (a fifth of the size) does not.
+/// `1 / BAKE_SITES_PER_LOOKUP` of the sites to decode. A decoded lookup saves 0.21 µs of a
+/// compressed one (4.40 against 47.3 M lookups/s, `benches/relight_lookup.rs`) and a site
+/// decodes in about 21 ns in a real frame (a catalpa's 28 parts at grid 128: 1.6 M sites in
+/// 30-40 ms), so decoding pays from about one lookup per 10 sites; the count takes every
+/// pixel as a lookup where about half miss the plants and the ground under them. At 8 a 512²
+/// frame at one sample reads a catalpa at grid 128 decoded (measured alike either way:
+/// docs/PERFORMANCE.md); a viewer's preview (a fifth of the size) does not.
 const BAKE_SITES_PER_LOOKUP: u64 = 8;
 
 /// A grid [`PhysicalRelitLight::bake_for_frame`] may decode: the terms of `terms.0`'s plants
@@ -640,20 +641,7 @@ fn device_words(basis: &StoredPhysicalBasis) -> u64 {
 /// site; a compressed basis decoded), the paper light's uncompressed layout: shade.wgsl's
 /// `relit_terms` reads both. `bounds`: the model's. Returns where it starts.
 fn pack_basis(basis: &PhysicalBasis, p: &mut Packer, bounds: Aabb) -> u32 {
-    let dims = basis.dims();
-    let mut extra = [0u32; 9];
-    extra[1] = (3 * PARTS) as u32;
-    extra[2] = dims.sites() as u32;
-    let placement = basis.placement();
-    let start = p.light_header(
-        dims,
-        (
-            Vec3::from_array(placement.origin()),
-            Vec3::from_array(placement.inv_cell()),
-        ),
-        bounds,
-        extra,
-    );
+    let start = p.relit_header(basis.dims(), basis.placement(), bounds, 3 * PARTS);
     for field in 0..3 * PARTS {
         let (part, colour) = (field / 3, field % 3);
         p.words
@@ -683,19 +671,7 @@ fn field_terms(terms: &PartTerms, words: &mut Vec<u32>) -> u32 {
 /// A kind-0 relit record of the grids decoded for the sun of one model (`grids`: its slots'
 /// grids in order): field `3 slot + colour`, site after site. Returns where it starts.
 fn pack_baked(grids: &[&BakedLight], p: &mut Packer, placement: &Placement, bounds: Aabb) -> u32 {
-    let dims = grids[0].dims();
-    let mut extra = [0u32; 9];
-    extra[1] = (3 * grids.len()) as u32;
-    extra[2] = dims.sites() as u32;
-    let start = p.light_header(
-        dims,
-        (
-            Vec3::from_array(placement.origin()),
-            Vec3::from_array(placement.inv_cell()),
-        ),
-        bounds,
-        extra,
-    );
+    let start = p.relit_header(grids[0].dims(), placement, bounds, 3 * grids.len());
     for g in grids {
         for colour in 0..3 {
             p.words

@@ -21,7 +21,9 @@
 
 use std::sync::OnceLock;
 
+use glam::DVec3;
 use sylva_lb::lattice::{unit, C, Q};
+use sylva_lb::relight::normalise;
 
 use crate::lighting::LightingError;
 
@@ -90,22 +92,20 @@ struct Face {
     vertices: [usize; 3],
     /// Rows of the inverse of `[a b c]` (columns the vertices): cone coordinate k of `d` is
     /// `rows[k] · d`.
-    rows: [[f64; 3]; 3],
+    rows: [DVec3; 3],
 }
 
 /// The hull's vertices: the sun parts' directions (part order, so vertex `k < SUN_PARTS` is
 /// part `k`), then the mirror images of those above the horizon.
-fn hull_vertices() -> &'static Vec<[f64; 3]> {
-    static VERTICES: OnceLock<Vec<[f64; 3]>> = OnceLock::new();
+fn hull_vertices() -> &'static Vec<DVec3> {
+    static VERTICES: OnceLock<Vec<DVec3>> = OnceLock::new();
     VERTICES.get_or_init(|| {
-        let mut v: Vec<[f64; 3]> = sun_directions().to_vec();
-        v.extend(
-            sun_directions()
-                .iter()
-                .filter(|d| d[1] < -1e-9)
-                .map(|d| [d[0], -d[1], d[2]]),
-        );
-        v
+        let parts = sun_directions().iter().map(|&d| DVec3::from_array(d));
+        let mirrored = parts
+            .clone()
+            .filter(|d| d.y < -1e-9)
+            .map(|d| d * DVec3::new(1.0, -1.0, 1.0));
+        parts.chain(mirrored).collect()
     })
 }
 
@@ -124,7 +124,7 @@ fn faces() -> &'static Vec<Face> {
         let mut push = |tri: [usize; 3]| {
             // Outward: det [a b c] > 0 (the origin is inside).
             let [a, b, c] = tri.map(|k| v[k]);
-            let tri = if dot(a, cross(b, c)) > 0.0 {
+            let tri = if a.dot(b.cross(c)) > 0.0 {
                 tri
             } else {
                 [tri[0], tri[2], tri[1]]
@@ -137,9 +137,9 @@ fn faces() -> &'static Vec<Face> {
         for a in 0..n {
             for b in a + 1..n {
                 for c in b + 1..n {
-                    let normal = cross(sub(v[b], v[a]), sub(v[c], v[a]));
-                    let offset = dot(normal, v[a]);
-                    let side = |p: [f64; 3]| (dot(normal, p) - offset) * offset.signum();
+                    let normal = (v[b] - v[a]).cross(v[c] - v[a]);
+                    let offset = normal.dot(v[a]);
+                    let side = |p: DVec3| (normal.dot(p) - offset) * offset.signum();
                     // Every vertex inside or on the plane, on the origin's side of it.
                     if (0..n).any(|k| side(v[k]) > 1e-9) {
                         continue;
@@ -153,14 +153,12 @@ fn faces() -> &'static Vec<Face> {
                     if on[..3] != [a, b, c] {
                         continue;
                     }
-                    let centre = on.iter().fold([0.0; 3], |s, &k| {
-                        [s[0] + v[k][0], s[1] + v[k][1], s[2] + v[k][2]]
-                    });
-                    let u = sub(v[a], centre.map(|x| x / on.len() as f64));
-                    let w = cross(normal, u);
+                    let centre = on.iter().map(|&k| v[k]).sum::<DVec3>() / on.len() as f64;
+                    let u = v[a] - centre;
+                    let w = normal.cross(u);
                     let angle = |k: usize| {
-                        let q = sub(v[k], centre.map(|x| x / on.len() as f64));
-                        dot(q, w).atan2(dot(q, u))
+                        let q = v[k] - centre;
+                        q.dot(w).atan2(q.dot(u))
                     };
                     let mut ring = on.clone();
                     ring.sort_by(|&x, &y| angle(x).total_cmp(&angle(y)));
@@ -178,26 +176,26 @@ fn faces() -> &'static Vec<Face> {
 }
 
 /// Rows of `[a b c]⁻¹` (columns `a`, `b`, `c`): `(b × c, c × a, a × b) / det`.
-fn inverse_rows([a, b, c]: [[f64; 3]; 3]) -> [[f64; 3]; 3] {
-    let rows = [cross(b, c), cross(c, a), cross(a, b)];
-    let det = dot(a, rows[0]);
-    rows.map(|r| r.map(|x| x / det))
+fn inverse_rows([a, b, c]: [DVec3; 3]) -> [DVec3; 3] {
+    let rows = [b.cross(c), c.cross(a), a.cross(b)];
+    let det = a.dot(rows[0]);
+    rows.map(|r| r / det)
 }
 
 /// The sun's parts and their weights for sunlight travelling along `travel` (any length): the
 /// hull face it crosses and its barycentric weights (module docs), as part indices. Empty
 /// when the sun is below the horizon (`travel` upward).
 pub fn sun_part_weights(travel: [f64; 3]) -> Result<Vec<(usize, f64)>, LightingError> {
-    let d = normalise(travel).ok_or_else(|| {
+    let d = normalise(travel).map(DVec3::from_array).ok_or_else(|| {
         LightingError::Illumination(format!(
             "sun direction {travel:?} must be a finite, non-zero vector"
         ))
     })?;
-    if d[1] > 0.0 {
+    if d.y > 0.0 {
         return Ok(Vec::new());
     }
     let faces = faces();
-    let coords = |f: &Face| f.rows.map(|r| dot(r, d));
+    let coords = |f: &Face| f.rows.map(|r| r.dot(d));
     let min = |a: [f64; 3]| a[0].min(a[1]).min(a[2]);
     let face = faces
         .iter()
@@ -236,36 +234,13 @@ pub fn sun_part_weights(travel: [f64; 3]) -> Result<Vec<(usize, f64)>, LightingE
     Ok(out)
 }
 
-/// `v / |v|`, or `None` for a zero or non-finite vector.
-fn normalise(v: [f64; 3]) -> Option<[f64; 3]> {
-    let big = v[0].abs().max(v[1].abs()).max(v[2].abs());
-    if !(big.is_finite() && big > 0.0) {
-        return None;
-    }
-    let u = v.map(|c| c / big);
-    let len = dot(u, u).sqrt();
-    Some(u.map(|c| c / len))
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+        DVec3::from_array(a).dot(DVec3::from_array(b))
+    }
 
     /// A deterministic spread of unit directions (a Fibonacci sphere).
     fn sphere(n: usize) -> impl Iterator<Item = [f64; 3]> {
@@ -302,11 +277,11 @@ mod tests {
         for d in sphere(4000) {
             let inside = faces()
                 .iter()
-                .filter(|f| f.rows.iter().all(|r| dot(*r, d) > 1e-9))
+                .filter(|f| f.rows.iter().all(|r| r.dot(DVec3::from_array(d)) > 1e-9))
                 .count();
             let touching = faces()
                 .iter()
-                .filter(|f| f.rows.iter().all(|r| dot(*r, d) >= -1e-9))
+                .filter(|f| f.rows.iter().all(|r| r.dot(DVec3::from_array(d)) >= -1e-9))
                 .count();
             assert!(inside <= 1 && touching >= 1, "{d:?}: {inside} {touching}");
         }
