@@ -1437,6 +1437,24 @@ pub struct ShadedDensity {
     pub added_depth: f64,
 }
 
+/// A model's light parts as [`PartsPlan::layout`] finds them before its density is made.
+#[derive(Debug, Clone)]
+pub struct PartsLayout {
+    /// Each part's cache key, in [`PARTS`] order.
+    pub keys: [CacheKey; 4],
+    /// The parts' grid and its box (model space).
+    pub dims: Dims,
+    pub bounds: sylva_lb::Bounds,
+    /// The medium the parts are solved with.
+    pub medium: MediumParams,
+}
+
+/// Where part `k` ([`PARTS`]) of `model`'s physical light keyed `key` is cached in `dir`.
+pub fn part_path(dir: &Path, model: &Model, k: usize, key: CacheKey) -> PathBuf {
+    let stem = sylva_core::file_stem(&model.name, "model");
+    Cache::new(dir).entry(&format!("{stem}-{}", PARTS[k]), key, CACHE_EXTENSION)
+}
+
 /// The physical light's parts as solved and cached, in order: the sun's, a unit sky's
 /// (through every face, with the floor's sky part), a unit ground's, a unit sky's through the
 /// top face (solved on the model mirrored in y).
@@ -1505,14 +1523,7 @@ impl<'a> PartsPlan<'a> {
                 )));
             }
         }
-        let keys = std::array::from_fn(|k| {
-            let key = LightPartKey {
-                model: plan.key.value(),
-                part: PARTS[k],
-                shade: shade.filter(|_| k == 0).map(|s| s.key.value()),
-            };
-            CacheKey::new(LIGHT_PART, &key)
-        });
+        let keys = Self::keys_of(&plan, shade.map(|s| s.key));
         Ok(PartsPlan {
             model,
             plan,
@@ -1521,6 +1532,39 @@ impl<'a> PartsPlan<'a> {
             own,
             shaded: shade.map(|s| s.density.clone()),
             keys,
+        })
+    }
+
+    /// What [`PartsPlan::new`]'s plan of `model` under `illum` with `opts` on `solver` keys
+    /// and solves its parts by (`shade`: the added foliage's key for the sun part), found
+    /// without its density, so the cache can be asked before any model is voxelized (the
+    /// parts' files: [`part_path`]).
+    pub fn layout(
+        model: &Model,
+        illum: &Illumination,
+        opts: &LightingOptions,
+        solver: &dyn LbSolver,
+        shade: Option<CacheKey>,
+    ) -> Result<PartsLayout, LightingError> {
+        let plan = LightingPlan::new(model, illum, opts, solver)?;
+        Ok(PartsLayout {
+            keys: Self::keys_of(&plan, shade),
+            dims: plan.dims(),
+            bounds: plan.placement.bounds(),
+            medium: plan.solve.medium.clone(),
+        })
+    }
+
+    /// Part `k`'s cache key: the model's lighting key, the part, and for the sun part the
+    /// added foliage's key.
+    fn keys_of(plan: &LightingPlan, shade: Option<CacheKey>) -> [CacheKey; 4] {
+        std::array::from_fn(|k| {
+            let key = LightPartKey {
+                model: plan.key.value(),
+                part: PARTS[k],
+                shade: shade.filter(|_| k == 0).map(|s| s.value()),
+            };
+            CacheKey::new(LIGHT_PART, &key)
         })
     }
 
@@ -1711,12 +1755,7 @@ impl<'a> PartsPlan<'a> {
         let Some(dir) = self.plan.opts.cache_dir.as_deref() else {
             return false;
         };
-        let stem = sylva_core::file_stem(&self.model.name, "model");
-        let path = Cache::new(dir).entry(
-            &format!("{stem}-{}", PARTS[k]),
-            self.keys[k],
-            CACHE_EXTENSION,
-        );
+        let path = part_path(dir, self.model, k, self.keys[k]);
         read_entry(
             &path,
             self.keys[k],
@@ -2479,6 +2518,21 @@ mod tests {
         let shaded = PartsPlan::new(&m, &illum(sun()), &o, &CpuSolver, own, Some(&shade)).unwrap();
         assert_ne!(shaded.key(0), keys[0], "the shade is the sun part's input");
         assert!((1..PARTS.len()).all(|k| shaded.key(k) == keys[k]));
+        // The layout found without a density keys, sizes and solves the parts as the plan
+        // does: the cache is asked with it before any model is voxelized.
+        for (il, shade_key, p) in [
+            (illum(sun()), None, &plan),
+            (other_sun, None, &moved),
+            (illum(sun()), Some(shade.key), &shaded),
+        ] {
+            let layout = PartsPlan::layout(&m, &il, &o, &CpuSolver, shade_key).unwrap();
+            assert_eq!(
+                layout.keys.to_vec(),
+                (0..PARTS.len()).map(|k| p.key(k)).collect::<Vec<_>>()
+            );
+            assert_eq!((layout.dims, layout.bounds), (p.dims(), p.bounds()));
+            assert_eq!(&layout.medium, p.medium());
+        }
     }
 
     #[test]

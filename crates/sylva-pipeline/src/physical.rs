@@ -16,7 +16,7 @@ use sylva_geom::Scene;
 use sylva_lb::{Bounds, DensityGrid, Dims};
 use sylva_light::forest::{ForestBases, ForestInstance};
 use sylva_light::lighting::{
-    model_density, LightingError, LightingReport, LightingSource, PartsPlan,
+    model_density, part_path, LightingError, LightingReport, LightingSource, PartsLayout, PartsPlan,
 };
 use sylva_light::relight::physical::{
     overhead_part, sun_part_illumination, PhysicalBasis, PARTS, SUN_PARTS,
@@ -68,13 +68,48 @@ pub struct PhysicalRelighting {
 /// The 28 parts' cache keys of a model in [`PhysicalBasis`]'s order: its sun parts' (one
 /// plan per direction), then the overhead plan's top sky, sky and ground (the side sky is
 /// the sky less the top's).
-fn part_keys(sun_plans: &[PlanParts], overhead: usize) -> [CacheKey; PARTS] {
-    let o = &sun_plans[overhead].plan;
-    let diffuse = [o.key(3), o.key(1), o.key(2)];
+fn part_keys(sun_parts: &[PartsLayout], overhead: usize) -> [CacheKey; PARTS] {
+    let o = &sun_parts[overhead].keys;
+    let diffuse = [o[3], o[1], o[2]];
     std::array::from_fn(|k| match k {
-        k if k < SUN_PARTS => sun_plans[k].plan.key(0),
+        k if k < SUN_PARTS => sun_parts[k].keys[0],
         k => diffuse[k - SUN_PARTS],
     })
+}
+
+/// Whether a model's basis has its files in `dir` (not yet read): the compressed entry
+/// `compressed` or every part (from which it is made), or every part when they are kept
+/// too or there is no target.
+fn basis_files_present(
+    dir: &std::path::Path,
+    model: &sylva_geom::Model,
+    layouts: &[PartsLayout],
+    compressed: Option<CacheKey>,
+    bplan: &PhysicalBasisPlan,
+) -> bool {
+    let parts_present = || {
+        part_keys(layouts, overhead_part())
+            .iter()
+            .enumerate()
+            .all(|(k, &key)| {
+                // The sun parts are each plan's part 0; the diffuse ones the top sky, sky
+                // and ground parts (3, 1, 2) of the overhead plan.
+                let part = if k < SUN_PARTS {
+                    0
+                } else {
+                    [3, 1, 2][k - SUN_PARTS]
+                };
+                part_path(dir, model, part, key).exists()
+            })
+    };
+    // With a target, a missing compressed entry is made from cached parts.
+    match compressed {
+        Some(key) if !bplan.keep_raw => {
+            physical_path(&sylva_core::cache::Cache::new(dir), model, key).exists()
+                || parts_present()
+        }
+        _ => parts_present(),
+    }
 }
 
 /// Every model's physical basis (compressed to `bplan`'s target and cached as such, or as
@@ -117,80 +152,78 @@ pub fn precompute_physical(
         source,
     };
     let in_forest = uses_forest(scene, lb.light, forest);
-    let (own, shades) = match (in_forest, forest) {
-        (true, Some(gopts)) => {
-            let d = forest_densities(scene, lb, gopts)?;
-            (d.own, d.shades)
-        }
-        _ => {
-            let own = scene
-                .models
-                .iter()
-                .enumerate()
-                .map(|(k, m)| {
-                    model_density(m, &illum, &opts.for_model(scene, k), lb.solver)
-                        .map(|(d, _)| d)
-                        .map_err(|e| lighting_err(k, e))
-                })
-                .collect::<Result<Vec<_>, _>>()?;
-            let shades = own.iter().map(|_| None).collect();
-            (own, shades)
-        }
+    // In a forest every model's density and the neighbours' foliage added to it are made
+    // first: the sun parts' keys hold the added foliage's, and the forest grid needs them all.
+    let forest_d = match (in_forest, forest) {
+        (true, Some(gopts)) => Some(forest_densities(scene, lb, gopts)?),
+        _ => None,
     };
-    for (model, shade) in scene.models.iter().zip(&shades) {
-        if let Some(s) = shade {
-            progress.neighbour_shade(model, s);
+    let shade_key = |m: usize| {
+        forest_d
+            .as_ref()
+            .and_then(|d| d.shades[m].as_ref())
+            .map(|s| s.key)
+    };
+    if let Some(d) = &forest_d {
+        for (model, shade) in scene.models.iter().zip(&d.shades) {
+            if let Some(s) = shade {
+                progress.neighbour_shade(model, s);
+            }
         }
     }
     // Per model, one plan per sun direction; the overhead sun's also solves the diffuse
-    // parts (they do not depend on the sun).
+    // parts (they do not depend on the sun). Their keys, grids and media first, without
+    // densities.
     let overhead = overhead_part();
-    let mut plans = Vec::with_capacity(scene.models.len() * SUN_PARTS);
-    // Per model, the medium its parts are solved with (the forest grid mixes them).
-    let mut media = Vec::with_capacity(scene.models.len());
+    let mut layouts: Vec<Vec<PartsLayout>> = Vec::with_capacity(scene.models.len());
     for (k, model) in scene.models.iter().enumerate() {
         let mopts = opts.for_model(scene, k);
-        for part in 0..SUN_PARTS {
-            let plan = PartsPlan::new(
-                model,
-                &sun_part_illumination(&illum, part),
-                &mopts,
-                lb.solver,
-                own[k].clone(),
-                shades[k].as_ref(),
-            )
-            .map_err(|e| lighting_err(k, e))?;
-            if part == 0 {
-                media.push(plan.medium().clone());
-            }
-            plans.push(PlanParts {
-                model: k,
-                plan,
-                parts: if part == overhead {
-                    vec![0, 1, 2, 3]
-                } else {
-                    vec![0]
-                },
-            });
-        }
+        let model_layouts = (0..SUN_PARTS)
+            .map(|part| {
+                PartsPlan::layout(
+                    model,
+                    &sun_part_illumination(&illum, part),
+                    &mopts,
+                    lb.solver,
+                    shade_key(k),
+                )
+                .map_err(|e| lighting_err(k, e))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        layouts.push(model_layouts);
     }
-    let model_plans = |m: usize| &plans[m * SUN_PARTS..(m + 1) * SUN_PARTS];
-    let keys: Vec<Option<CacheKey>> = (0..scene.models.len())
-        .map(|m| {
+    // Per model, the medium its parts are solved with (the forest grid mixes them).
+    let media: Vec<_> = layouts.iter().map(|l| l[0].medium.clone()).collect();
+    let keys: Vec<Option<CacheKey>> = layouts
+        .iter()
+        .map(|l| {
             bplan
                 .target
-                .map(|t| compressed_physical_key(&part_keys(model_plans(m), overhead), &t))
+                .map(|t| compressed_physical_key(&part_keys(l, overhead), &t))
         })
         .collect();
     // Per model, its parts' grid and box.
-    let grids: Vec<(Dims, Bounds)> = (0..scene.models.len())
-        .map(|m| {
-            (
-                model_plans(m)[0].plan.dims(),
-                model_plans(m)[0].plan.bounds(),
-            )
-        })
-        .collect();
+    let grids: Vec<(Dims, Bounds)> = layouts.iter().map(|l| (l[0].dims, l[0].bounds)).collect();
+    // Cached bases only, and no forest: the cache's files answer before any model is
+    // voxelized (seconds each) for a basis that is not there, a default render's usual case.
+    if bplan.basis == BasisUse::IfCached && !in_forest {
+        let present = from_root(
+            runner,
+            "whether every basis may be cached",
+            || {
+                Ok::<_, PipelineError>(opts.cache_dir.as_deref().is_some_and(|dir| {
+                    (0..scene.models.len()).all(|m| {
+                        basis_files_present(dir, &scene.models[m], &layouts[m], keys[m], bplan)
+                    })
+                }))
+            },
+            |yes: &bool| vec![*yes as u8],
+            |data| Ok(data.first() == Some(&1)),
+        )?;
+        if !present {
+            return Ok(None);
+        }
+    }
 
     // The root: each model's compressed entry, when there is a target and a cache.
     let t_lookup = Instant::now();
@@ -232,10 +265,43 @@ pub fn precompute_physical(
             Ok(need)
         },
     )?;
-    let wanted: Vec<PlanParts> = plans
-        .into_iter()
-        .filter(|w| need.contains(&w.model))
-        .collect();
+    // The densities of the models whose parts are needed (a forest's are all made), and
+    // those models' plans.
+    let (mut own, shades): (Vec<Option<DensityGrid>>, Vec<_>) = match forest_d {
+        Some(d) => (d.own.into_iter().map(Some).collect(), d.shades),
+        None => scene.models.iter().map(|_| (None, None)).unzip(),
+    };
+    let mut wanted: Vec<PlanParts> = Vec::with_capacity(need.len() * SUN_PARTS);
+    for &k in &need {
+        let model = &scene.models[k];
+        let mopts = opts.for_model(scene, k);
+        if own[k].is_none() {
+            let (d, _) =
+                model_density(model, &illum, &mopts, lb.solver).map_err(|e| lighting_err(k, e))?;
+            own[k] = Some(d);
+        }
+        let density = own[k].as_ref().expect("made above");
+        for part in 0..SUN_PARTS {
+            let plan = PartsPlan::new(
+                model,
+                &sun_part_illumination(&illum, part),
+                &mopts,
+                lb.solver,
+                density.clone(),
+                shades[k].as_ref(),
+            )
+            .map_err(|e| lighting_err(k, e))?;
+            wanted.push(PlanParts {
+                model: k,
+                plan,
+                parts: if part == overhead {
+                    vec![0, 1, 2, 3]
+                } else {
+                    vec![0]
+                },
+            });
+        }
+    }
     if bplan.basis == BasisUse::IfCached {
         let all_cached = from_root(
             runner,
@@ -342,7 +408,8 @@ pub fn precompute_physical(
                 let parts = full[m]
                     .as_ref()
                     .expect("parts of a model not cached compressed");
-                let c = CompressedPhysicalBasis::compress(parts, &own[m], &target)
+                let density = own[m].as_ref().expect("a needed model's density");
+                let c = CompressedPhysicalBasis::compress(parts, density, &target)
                     .map_err(|e| lighting_err(m, e))?;
                 if let (Some(dir), Some(r)) = (&opts.cache_dir, report.as_mut()) {
                     let warning = store_physical(dir, model, key, &c, seconds[m]);
@@ -396,7 +463,11 @@ pub fn precompute_physical(
     let mut forest_seconds = None;
     let forest = match (in_forest, forest) {
         (true, Some(gopts)) => {
-            let fine: Vec<(&DensityGrid, _)> = own.iter().zip(&media).collect();
+            let fine: Vec<(&DensityGrid, _)> = own
+                .iter()
+                .map(|d| d.as_ref().expect("a forest's densities"))
+                .zip(&media)
+                .collect();
             let instances: Vec<ForestInstance> = scene
                 .instances
                 .iter()
