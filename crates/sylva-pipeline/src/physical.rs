@@ -23,7 +23,7 @@ use sylva_light::relight::physical::{
 };
 use sylva_light::relight::physical_basis::{
     compressed_physical_key, lookup_physical, physical_path, store_physical, CachedPhysical,
-    CompressedPhysicalBasis, PhysicalTarget, StoredPhysicalBasis,
+    CompressedPhysicalBasis, PhysicalTarget, StoredPhysicalBasis, PHYSICAL_EXTENSION,
 };
 use sylva_light::relight::GlobalGridOptions;
 use sylva_light::Progress;
@@ -112,6 +112,39 @@ fn basis_files_present(
     }
 }
 
+/// Whether model `k` of a forest may have its basis in `dir`, asked before its density: a
+/// compressed entry of any key (its key holds the neighbours' foliage), or its diffuse
+/// parts (whose keys do not). `false` means surely not.
+fn forest_basis_may_be_cached(
+    dir: &std::path::Path,
+    scene: &Scene,
+    k: usize,
+    lb: &LbPlan,
+    opts: &sylva_light::lighting::LightingOptions,
+) -> Result<bool, LightingError> {
+    let model = &scene.models[k];
+    let prefix = format!("{}-physical-", sylva_core::file_stem(&model.name, "model"));
+    let suffix = format!(".{PHYSICAL_EXTENSION}");
+    let compressed = std::fs::read_dir(dir).is_ok_and(|entries| {
+        entries.flatten().any(|e| {
+            let name = e.file_name();
+            let name = name.to_string_lossy();
+            name.starts_with(&prefix) && name.ends_with(&suffix)
+        })
+    });
+    if compressed {
+        return Ok(true);
+    }
+    let layout = PartsPlan::layout(
+        model,
+        &sun_part_illumination(&scene_illumination(scene), overhead_part()),
+        &opts.for_model(scene, k),
+        lb.solver,
+        None,
+    )?;
+    Ok((1..4).all(|part| part_path(dir, model, part, layout.keys[part]).exists()))
+}
+
 /// Every model's physical basis (compressed to `bplan`'s target and cached as such, or as
 /// parts; from the root's cache, or solved through `runner` and cached there) and, for a
 /// forest (`forest`, more than one instance), the coarse grid's parts. `None` when
@@ -152,6 +185,30 @@ pub fn precompute_physical(
         source,
     };
     let in_forest = uses_forest(scene, lb.light, forest);
+    // In a forest the parts' keys need every model voxelized and the neighbours' foliage
+    // measured (seconds). Cached bases only: first rule out what surely is not cached.
+    if bplan.basis == BasisUse::IfCached && in_forest {
+        let maybe = from_root(
+            runner,
+            "whether every basis may be cached",
+            || {
+                let Some(dir) = opts.cache_dir.as_deref() else {
+                    return Ok(false);
+                };
+                (0..scene.models.len()).try_fold(true, |all, k| {
+                    Ok::<_, PipelineError>(
+                        all && forest_basis_may_be_cached(dir, scene, k, lb, &opts)
+                            .map_err(|e| lighting_err(k, e))?,
+                    )
+                })
+            },
+            |yes: &bool| vec![*yes as u8],
+            |data| Ok(data.first() == Some(&1)),
+        )?;
+        if !maybe {
+            return Ok(None);
+        }
+    }
     // In a forest every model's density and the neighbours' foliage added to it are made
     // first: the sun parts' keys hold the added foliage's, and the forest grid needs them all.
     let forest_d = match (in_forest, forest) {
