@@ -731,7 +731,13 @@ pub fn cache_key(
     let plan = solve_plan(model, illum, sun, opts)?;
     Ok(CacheKey::new(
         MODEL_LIGHTING,
-        &ModelLightingKey::new(model, sun_q, opts, &plan, &solver.cache_tag()),
+        &ModelLightingKey::new(
+            ModelMediumKey::new(model, opts.grid, &plan.medium, plan.occupancy),
+            sun_q,
+            opts,
+            &plan,
+            &solver.cache_tag(),
+        ),
     ))
 }
 
@@ -768,7 +774,7 @@ const PAPERS_SCHEDULE: &str = "papers:2N";
 
 impl ModelLightingKey {
     fn new(
-        model: &Model,
+        model: ModelMediumKey,
         sun: [i64; 3],
         opts: &LightingOptions,
         plan: &SolvePlan,
@@ -777,7 +783,7 @@ impl ModelLightingKey {
         ModelLightingKey {
             light: opts.light.name(),
             solver: solver.to_string(),
-            model: ModelMediumKey::new(model, opts.grid, &plan.medium, plan.occupancy),
+            model,
             sun,
             boundaries: plan.boundaries.iter().map(|b| b.values).collect(),
             physical: plan.environment.as_ref().map(|env| PhysicalKey {
@@ -892,6 +898,9 @@ impl ModelMediumKey {
         }
     }
 }
+
+/// A model's medium key and the grid, medium and occupancy it was made for.
+type MediumKeyFor = ((usize, MediumParams, Occupancy), ModelMediumKey);
 
 /// The cache entry of `model` under `key` in `cache`.
 pub fn cache_path(cache: &Cache, model: &Model, key: CacheKey) -> PathBuf {
@@ -1090,11 +1099,33 @@ impl<'a> LightingPlan<'a> {
         opts: &LightingOptions,
         solver: &dyn LbSolver,
     ) -> Result<LightingPlan<'a>, LightingError> {
+        Self::new_reusing(model, illum, opts, solver, &mut None)
+    }
+
+    /// [`LightingPlan::new`], taking the model's medium key from `medium` when it was made
+    /// for the same grid, medium and occupancy (else making it and leaving it there): the
+    /// key hashes the whole mesh and every leaf texture's opacity, the same for every sun.
+    fn new_reusing(
+        model: &'a Model,
+        illum: &Illumination,
+        opts: &LightingOptions,
+        solver: &dyn LbSolver,
+        medium: &mut Option<MediumKeyFor>,
+    ) -> Result<LightingPlan<'a>, LightingError> {
         let (sun_q, sun) = quantise_sun(illum.sun_to)?;
         let solve = solve_plan(model, illum, sun, opts)?;
+        let inputs = (opts.grid, solve.medium.clone(), solve.occupancy);
+        let model_key = match medium {
+            Some((made_for, key)) if *made_for == inputs => key.clone(),
+            _ => {
+                let key = ModelMediumKey::new(model, opts.grid, &solve.medium, solve.occupancy);
+                *medium = Some((inputs, key.clone()));
+                key
+            }
+        };
         let key = CacheKey::new(
             MODEL_LIGHTING,
-            &ModelLightingKey::new(model, sun_q, opts, &solve, &solver.cache_tag()),
+            &ModelLightingKey::new(model_key, sun_q, opts, &solve, &solver.cache_tag()),
         );
         let placement = placement_for(model, opts.grid)?;
         let entry = opts.cache_dir.as_ref().map(|dir| {
@@ -1546,13 +1577,30 @@ impl<'a> PartsPlan<'a> {
         solver: &dyn LbSolver,
         shade: Option<CacheKey>,
     ) -> Result<PartsLayout, LightingError> {
-        let plan = LightingPlan::new(model, illum, opts, solver)?;
-        Ok(PartsLayout {
-            keys: Self::keys_of(&plan, shade),
-            dims: plan.dims(),
-            bounds: plan.placement.bounds(),
-            medium: plan.solve.medium.clone(),
-        })
+        Ok(Self::layouts(model, std::slice::from_ref(illum), opts, solver, shade)?.remove(0))
+    }
+
+    /// [`PartsPlan::layout`] for each of `illums` in turn, the model's medium key made once.
+    pub fn layouts(
+        model: &Model,
+        illums: &[Illumination],
+        opts: &LightingOptions,
+        solver: &dyn LbSolver,
+        shade: Option<CacheKey>,
+    ) -> Result<Vec<PartsLayout>, LightingError> {
+        let mut medium = None;
+        illums
+            .iter()
+            .map(|illum| {
+                let plan = LightingPlan::new_reusing(model, illum, opts, solver, &mut medium)?;
+                Ok(PartsLayout {
+                    keys: Self::keys_of(&plan, shade),
+                    dims: plan.dims(),
+                    bounds: plan.placement.bounds(),
+                    medium: plan.solve.medium.clone(),
+                })
+            })
+            .collect()
     }
 
     /// Part `k`'s cache key: the model's lighting key, the part, and for the sun part the
@@ -2533,6 +2581,27 @@ mod tests {
             assert_eq!((layout.dims, layout.bounds), (p.dims(), p.bounds()));
             assert_eq!(&layout.medium, p.medium());
         }
+        // Several suns at once (the medium key made once) key each as alone.
+        let suns = [
+            illum(sun()),
+            illum(Vec3::new(0.3, 0.8, 0.25)),
+            illum(Vec3::Y),
+        ];
+        let many = PartsPlan::layouts(&m, &suns, &o, &CpuSolver, None).unwrap();
+        for (il, l) in suns.iter().zip(&many) {
+            let alone = PartsPlan::layout(&m, il, &o, &CpuSolver, None).unwrap();
+            assert_eq!(l.keys, alone.keys);
+            assert_eq!(l.keys[0], cache_key_part(&m, il, &o));
+        }
+        assert_ne!(many[0].keys, many[1].keys);
+    }
+
+    /// Part 0's key as a plan made from scratch gives it.
+    fn cache_key_part(m: &Model, il: &Illumination, o: &LightingOptions) -> CacheKey {
+        let own = model_density(m, il, o, &CpuSolver).unwrap().0;
+        PartsPlan::new(m, il, o, &CpuSolver, own, None)
+            .unwrap()
+            .key(0)
     }
 
     #[test]

@@ -235,19 +235,13 @@ pub fn precompute_physical(
     let mut layouts: Vec<Vec<PartsLayout>> = Vec::with_capacity(scene.models.len());
     for (k, model) in scene.models.iter().enumerate() {
         let mopts = opts.for_model(scene, k);
-        let model_layouts = (0..SUN_PARTS)
-            .map(|part| {
-                PartsPlan::layout(
-                    model,
-                    &sun_part_illumination(&illum, part),
-                    &mopts,
-                    lb.solver,
-                    shade_key(k),
-                )
-                .map_err(|e| lighting_err(k, e))
-            })
-            .collect::<Result<Vec<_>, _>>()?;
-        layouts.push(model_layouts);
+        let suns: Vec<_> = (0..SUN_PARTS)
+            .map(|part| sun_part_illumination(&illum, part))
+            .collect();
+        layouts.push(
+            PartsPlan::layouts(model, &suns, &mopts, lb.solver, shade_key(k))
+                .map_err(|e| lighting_err(k, e))?,
+        );
     }
     // Per model, the medium its parts are solved with (the forest grid mixes them).
     let media: Vec<_> = layouts.iter().map(|l| l[0].medium.clone()).collect();
