@@ -75,6 +75,12 @@ pub const LIGHT_PART: CacheKind = CacheKind {
     name: "physical light part",
     version: CACHE_VERSION,
 };
+/// A model's voxelized density ([`LightingPlan::density`]): keyed by what the medium key
+/// holds of the mesh, its leaves' opacity, the occupancy rule and the grid.
+pub const MODEL_DENSITY: CacheKind = CacheKind {
+    name: "model density",
+    version: CACHE_VERSION,
+};
 /// Sun direction components are rounded to multiples of this.
 pub const SUN_QUANTUM: f64 = 1e-5;
 
@@ -1059,6 +1065,32 @@ fn read_entry(
 pub type CacheLookup = Lookup<LightingGrid>;
 
 /// Writes `grid` as a cache entry at `path` with `metadata` (the key first).
+/// The density grid cached at `path` under `key` for a `dims` grid over `bounds`; `Err` is
+/// why it is unusable, naming the file.
+fn read_density_entry(
+    path: &Path,
+    key: CacheKey,
+    dims: Dims,
+    bounds: Bounds,
+) -> Result<DensityGrid, String> {
+    let file = GridFile::read(path).map_err(|e| e.to_string())?;
+    let shown = path.display();
+    if file.kind != GridKind::Density {
+        return Err(format!(
+            "{shown} holds a {} grid, not a density grid",
+            file.kind.name()
+        ));
+    }
+    key.check(path, file.metadata_value(KEY_METADATA))?;
+    if file.dims != dims || file.bounds != bounds {
+        return Err(format!(
+            "{shown} holds a {} grid over {:?}..{:?}, the model's is {} over {:?}..{:?}",
+            file.dims, file.bounds.min, file.bounds.max, dims, bounds.min, bounds.max
+        ));
+    }
+    file.into_density(path).map_err(|e| e.to_string())
+}
+
 fn write_entry(
     grid: &LightingGrid,
     path: &Path,
@@ -1189,17 +1221,60 @@ impl<'a> LightingPlan<'a> {
                 + sylva_voxel::memory_needed(dims)
                 + light::uncollided_memory_needed(dims),
         )?;
-        let density = voxelize(
-            self.model,
-            &VoxelizeOptions {
-                grid: self.opts.grid,
-                alpha_test: true,
-                occupancy: self.solve.occupancy,
+        let voxelized = || {
+            voxelize(
+                self.model,
+                &VoxelizeOptions {
+                    grid: self.opts.grid,
+                    alpha_test: true,
+                    occupancy: self.solve.occupancy,
+                },
+            )
+        };
+        // Voxelizing takes seconds per model on every run of a forest (its keys hold the
+        // neighbours' foliage) and of any solve: with a cache, the grid is kept beside the
+        // light. The medium's optics are in the key though they do not change the density.
+        let Some((cache, _)) = &self.entry else {
+            return Ok(voxelized()?);
+        };
+        let key = CacheKey::new(
+            MODEL_DENSITY,
+            &ModelMediumKey::new(
+                self.model,
+                self.opts.grid,
+                &self.solve.medium,
+                self.solve.occupancy,
+            ),
+        );
+        let path = cache.entry(
+            &format!(
+                "{}-density",
+                sylva_core::file_stem(&self.model.name, "model")
+            ),
+            key,
+            CACHE_EXTENSION,
+        );
+        let bounds = self.placement.bounds();
+        let got = cache.get_or_compute(
+            &path,
+            |p| read_density_entry(p, key, dims, bounds),
+            voxelized,
+            |grid, p| {
+                let metadata = vec![
+                    key.metadata(),
+                    ("source".to_string(), self.model.name.clone()),
+                    ("grid".to_string(), self.opts.grid.to_string()),
+                ];
+                GridFile::from_density(grid, metadata)
+                    .write(p)
+                    .map_err(|e| e.to_string())
             },
         )?;
-        debug_assert_eq!(density.dims, dims);
-        debug_assert_eq!(density.bounds, self.placement.bounds());
-        Ok(density)
+        // A cache that cannot be written is reported by the light's own entries beside it.
+        let _ = got.write_warning;
+        debug_assert_eq!(got.value.dims, dims);
+        debug_assert_eq!(got.value.bounds, bounds);
+        Ok(got.value)
     }
 
     fn solve_error(&self, source: LbSolverError) -> LightingError {
@@ -2594,6 +2669,48 @@ mod tests {
             assert_eq!(l.keys[0], cache_key_part(&m, il, &o));
         }
         assert_ne!(many[0].keys, many[1].keys);
+    }
+
+    #[test]
+    fn the_density_is_voxelized_once_and_a_damaged_entry_is_made_again() {
+        let dir = tempfile::tempdir().unwrap();
+        let m = model(1.0);
+        let plan =
+            LightingPlan::new(&m, &illum(sun()), &opts(Some(dir.path())), &CpuSolver).unwrap();
+        let bare = LightingPlan::new(&m, &illum(sun()), &opts(None), &CpuSolver).unwrap();
+        let voxelized = bare.density().unwrap();
+        let entries = || {
+            std::fs::read_dir(dir.path())
+                .unwrap()
+                .map(|e| e.unwrap().path())
+                .filter(|p| p.to_string_lossy().contains("-density-"))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(plan.density().unwrap(), voxelized);
+        let [entry] = &entries()[..] else {
+            panic!("one density entry: {:?}", entries())
+        };
+        // Read back (the same grid); another sun's plan shares it.
+        let other = LightingPlan::new(
+            &m,
+            &illum(Vec3::new(0.3, 0.8, 0.25)),
+            &opts(Some(dir.path())),
+            &CpuSolver,
+        )
+        .unwrap();
+        assert_eq!(other.density().unwrap(), voxelized);
+        assert_eq!(entries().len(), 1);
+        // Truncated: voxelized again and rewritten whole.
+        let bytes = std::fs::read(entry).unwrap();
+        std::fs::write(entry, &bytes[..bytes.len() / 2]).unwrap();
+        assert_eq!(plan.density().unwrap(), voxelized);
+        assert_eq!(std::fs::read(entry).unwrap(), bytes);
+        // A denser model is another entry.
+        let denser = model(2.0);
+        let p2 =
+            LightingPlan::new(&denser, &illum(sun()), &opts(Some(dir.path())), &CpuSolver).unwrap();
+        assert_ne!(p2.density().unwrap(), voxelized);
+        assert_eq!(entries().len(), 2);
     }
 
     /// Part 0's key as a plan made from scratch gives it.

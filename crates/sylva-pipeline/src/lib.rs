@@ -627,7 +627,12 @@ fn solve_per_sun(
 ) -> Result<PerSunLight, PipelineError> {
     match forest {
         Some(gopts) if uses_forest(scene, lb.light, Some(gopts)) => {
-            let densities = forest_densities(scene, lb, gopts)?;
+            // Part of the LB stage (the voxelizing, or the cached densities, and the
+            // neighbours' foliage), timed as such.
+            let densities = {
+                let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
+                forest_densities(scene, lb, gopts)?
+            };
             let (models, cached, f) = light_forest(scene, lb, gopts, densities, runner, progress)?;
             Ok(PerSunLight {
                 models,

@@ -174,8 +174,12 @@ fn render_solves_lb_on_the_device_asked_for() {
     assert!(stdout.contains("LB solver: GPU"), "{stdout}");
     assert!(stdout.contains("ray tracer: GPU"), "{stdout}");
     // The GPU's entry records its solver; CPU and GPU light the model alike.
-    let entry = std::fs::read_dir(&cache).unwrap().next().unwrap().unwrap();
-    let file = sylva_lb::GridFile::read(&entry.path()).unwrap();
+    let entry = std::fs::read_dir(&cache)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| !p.to_string_lossy().contains("-density-"))
+        .unwrap();
+    let file = sylva_lb::GridFile::read(&entry).unwrap();
     assert!(file.metadata_value("solver").unwrap().starts_with("GPU"));
     let (a, b) = (
         image::open(&cpu_png).unwrap().to_rgb8(),

@@ -87,13 +87,13 @@ fn render_writes_images_caches_lb_and_recovers_from_a_corrupt_cache() {
     assert!(ok && stdout.contains("from cache"), "{stdout}");
     assert_eq!(image::open(&out).unwrap().to_rgb8(), png);
 
-    // A corrupted entry is reported, recomputed, and the image is unchanged.
+    // A corrupted light entry is reported, recomputed, and the image is unchanged (the
+    // model's voxelized density is cached beside it).
     let entry = fs::read_dir(&cache)
         .unwrap()
-        .next()
-        .unwrap()
-        .unwrap()
-        .path();
+        .map(|e| e.unwrap().path())
+        .find(|p| !p.to_string_lossy().contains("-density-"))
+        .unwrap();
     let mut bytes = fs::read(&entry).unwrap();
     let mid = bytes.len() / 2;
     bytes[mid] ^= 0x5a;
