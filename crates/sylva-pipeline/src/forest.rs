@@ -17,8 +17,8 @@ use sylva_geom::Scene;
 use sylva_lb::{DensityGrid, LightingGrid};
 use sylva_light::forest::{neighbour_shade, ForestInstance, ForestLight};
 use sylva_light::lighting::{
-    model_density, physical_environment, Light, LightingError, LightingReport, LightingSource,
-    ModelLighting, PartsPlan, ShadedDensity, PARTS,
+    model_density_cached, physical_environment, Light, LightingError, LightingReport,
+    LightingSource, ModelLighting, PartsPlan, ShadedDensity, PARTS,
 };
 use sylva_light::relight::{GlobalGridOptions, GlobalReport};
 use sylva_light::Progress;
@@ -57,7 +57,7 @@ pub fn forest_densities(
         .enumerate()
         .map(|(k, model)| {
             let lopts = lopts.for_model(scene, k);
-            model_density(model, &illum, &lopts, lb.solver)
+            model_density_cached(model, &illum, &lopts, lb.solver)
                 .map(|(density, _)| density)
                 .map_err(|source| PipelineError::Lighting {
                     model: model.name.clone(),
