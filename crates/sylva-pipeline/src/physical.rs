@@ -255,9 +255,10 @@ pub fn precompute_physical(
         .collect();
     // Per model, its parts' grid and box.
     let grids: Vec<(Dims, Bounds)> = layouts.iter().map(|l| (l[0].dims, l[0].bounds)).collect();
-    // Cached bases only, and no forest: the cache's files answer before any model is
-    // voxelized (seconds each) for a basis that is not there, a default render's usual case.
-    if bplan.basis == BasisUse::IfCached && !in_forest {
+    // Cached bases only: the cache's files answer from the keys before any plan is made or
+    // part read (without a forest, before any model is voxelized: seconds each), for a
+    // basis that is not there, a default render's usual case.
+    if bplan.basis == BasisUse::IfCached {
         let present = from_root(
             runner,
             "whether every basis may be cached",
