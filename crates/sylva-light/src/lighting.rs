@@ -1018,19 +1018,22 @@ fn to_model_lighting(grid: &LightingGrid, plan: &SolvePlan, sun_to: DVec3) -> Mo
     }
 }
 
-/// Reads and checks a cache entry; `Err` is the reason it is unusable, naming the file.
-fn read_entry(
+/// Reads a cached grid file and checks what every entry must match: its kind, its key, the
+/// model's grid and box; `Err` is the reason it is unusable, naming the file.
+fn read_checked(
     path: &Path,
+    kind: GridKind,
     key: CacheKey,
     dims: Dims,
     bounds: Bounds,
-) -> Result<LightingGrid, String> {
+) -> Result<GridFile, String> {
     let file = GridFile::read(path).map_err(|e| e.to_string())?;
     let shown = path.display();
-    if file.kind != GridKind::Lighting {
+    if file.kind != kind {
         return Err(format!(
-            "{shown} holds a {} grid, not a lighting grid",
-            file.kind.name()
+            "{shown} holds a {} grid, not a {} grid",
+            file.kind.name(),
+            kind.name()
         ));
     }
     key.check(path, file.metadata_value(KEY_METADATA))?;
@@ -1046,6 +1049,18 @@ fn read_entry(
             file.bounds.min, file.bounds.max, bounds.min, bounds.max
         ));
     }
+    Ok(file)
+}
+
+/// Reads and checks a cache entry; `Err` is the reason it is unusable, naming the file.
+fn read_entry(
+    path: &Path,
+    key: CacheKey,
+    dims: Dims,
+    bounds: Bounds,
+) -> Result<LightingGrid, String> {
+    let shown = path.display();
+    let file = read_checked(path, GridKind::Lighting, key, dims, bounds)?;
     let grid = file.into_lighting(path).map_err(|e| e.to_string())?;
     for (c, ch) in grid.colours.iter().enumerate() {
         if let Some(i) = ch.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
@@ -1064,7 +1079,6 @@ fn read_entry(
 /// reason an entry cannot be used, naming the file.
 pub type CacheLookup = Lookup<LightingGrid>;
 
-/// Writes `grid` as a cache entry at `path` with `metadata` (the key first).
 /// The density grid cached at `path` under `key` for a `dims` grid over `bounds`; `Err` is
 /// why it is unusable, naming the file.
 fn read_density_entry(
@@ -1073,24 +1087,12 @@ fn read_density_entry(
     dims: Dims,
     bounds: Bounds,
 ) -> Result<DensityGrid, String> {
-    let file = GridFile::read(path).map_err(|e| e.to_string())?;
-    let shown = path.display();
-    if file.kind != GridKind::Density {
-        return Err(format!(
-            "{shown} holds a {} grid, not a density grid",
-            file.kind.name()
-        ));
-    }
-    key.check(path, file.metadata_value(KEY_METADATA))?;
-    if file.dims != dims || file.bounds != bounds {
-        return Err(format!(
-            "{shown} holds a {} grid over {:?}..{:?}, the model's is {} over {:?}..{:?}",
-            file.dims, file.bounds.min, file.bounds.max, dims, bounds.min, bounds.max
-        ));
-    }
-    file.into_density(path).map_err(|e| e.to_string())
+    read_checked(path, GridKind::Density, key, dims, bounds)?
+        .into_density(path)
+        .map_err(|e| e.to_string())
 }
 
+/// Writes `grid` as a cache entry at `path` with `metadata` (the key first).
 fn write_entry(
     grid: &LightingGrid,
     path: &Path,
@@ -1118,6 +1120,8 @@ pub struct LightingPlan<'a> {
     /// The quantised unit sun direction.
     sun: DVec3,
     opts: LightingOptions,
+    /// The model's part of the key (also the key of its cached density).
+    medium_key: ModelMediumKey,
     /// The cache and the entry; `None` without a cache.
     entry: Option<(Cache, PathBuf)>,
 }
@@ -1155,10 +1159,10 @@ impl<'a> LightingPlan<'a> {
                 key
             }
         };
-        let key = CacheKey::new(
-            MODEL_LIGHTING,
-            &ModelLightingKey::new(model_key, sun_q, opts, &solve, &solver.cache_tag()),
-        );
+        let lighting_key =
+            ModelLightingKey::new(model_key, sun_q, opts, &solve, &solver.cache_tag());
+        let key = CacheKey::new(MODEL_LIGHTING, &lighting_key);
+        let medium_key = lighting_key.model;
         let placement = placement_for(model, opts.grid)?;
         let entry = opts.cache_dir.as_ref().map(|dir| {
             let cache = Cache::new(dir);
@@ -1172,6 +1176,7 @@ impl<'a> LightingPlan<'a> {
             solve,
             sun,
             opts: opts.clone(),
+            medium_key,
             entry,
         })
     }
@@ -1245,21 +1250,15 @@ impl<'a> LightingPlan<'a> {
     /// is an input). Every process of a run asks for it alike, so the cache holds the same
     /// entries under MPI as in one process. The medium's optics are in the key though they
     /// do not change the density.
-    pub fn density_cached(&self) -> Result<DensityGrid, LightingError> {
+    /// With the density, the warning to show: a damaged entry voxelized again (naming the
+    /// file and why), or an entry that could not be written.
+    pub fn density_cached(&self) -> Result<(DensityGrid, Option<String>), LightingError> {
         self.check_density_memory()?;
         let dims = self.dims();
         let Some((cache, _)) = &self.entry else {
-            return self.voxelized();
+            return Ok((self.voxelized()?, None));
         };
-        let key = CacheKey::new(
-            MODEL_DENSITY,
-            &ModelMediumKey::new(
-                self.model,
-                self.opts.grid,
-                &self.solve.medium,
-                self.solve.occupancy,
-            ),
-        );
+        let key = CacheKey::new(MODEL_DENSITY, &self.medium_key);
         let path = cache.entry(
             &format!(
                 "{}-density",
@@ -1284,11 +1283,14 @@ impl<'a> LightingPlan<'a> {
                     .map_err(|e| e.to_string())
             },
         )?;
-        // A cache that cannot be written is reported by the light's own entries beside it.
-        let _ = got.write_warning;
+        let warning = match got.outcome {
+            CacheOutcome::BadEntry(reason) => Some(format!("{reason}; voxelized again")),
+            _ => None,
+        }
+        .or(got.write_warning);
         debug_assert_eq!(got.value.dims, dims);
         debug_assert_eq!(got.value.bounds, bounds);
-        Ok(got.value)
+        Ok((got.value, warning))
     }
 
     fn solve_error(&self, source: LbSolverError) -> LightingError {
@@ -1503,15 +1505,15 @@ pub fn model_density(
     Ok((plan.density()?, plan.solve.medium.clone()))
 }
 
-/// [`model_density`], the density kept in the cache ([`LightingPlan::density_cached`]).
+/// [`model_density`]'s density kept in the cache, and the warning to show
+/// ([`LightingPlan::density_cached`]).
 pub fn model_density_cached(
     model: &Model,
     illum: &Illumination,
     opts: &LightingOptions,
     solver: &dyn LbSolver,
-) -> Result<(DensityGrid, MediumParams), LightingError> {
-    let plan = LightingPlan::new(model, illum, opts, solver)?;
-    Ok((plan.density_cached()?, plan.solve.medium.clone()))
+) -> Result<(DensityGrid, Option<String>), LightingError> {
+    LightingPlan::new(model, illum, opts, solver)?.density_cached()
 }
 
 /// [`model_lighting_parts`] on the model's `own` density ([`model_density`]), its sun part
@@ -2711,7 +2713,7 @@ mod tests {
                 .filter(|p| p.to_string_lossy().contains("-density-"))
                 .collect::<Vec<_>>()
         };
-        assert_eq!(plan.density_cached().unwrap(), voxelized);
+        assert_eq!(plan.density_cached().unwrap(), (voxelized.clone(), None));
         let [entry] = &entries()[..] else {
             panic!("one density entry: {:?}", entries())
         };
@@ -2723,18 +2725,21 @@ mod tests {
             &CpuSolver,
         )
         .unwrap();
-        assert_eq!(other.density_cached().unwrap(), voxelized);
+        assert_eq!(other.density_cached().unwrap(), (voxelized.clone(), None));
         assert_eq!(entries().len(), 1);
         // Truncated: voxelized again and rewritten whole.
         let bytes = std::fs::read(entry).unwrap();
         std::fs::write(entry, &bytes[..bytes.len() / 2]).unwrap();
-        assert_eq!(plan.density_cached().unwrap(), voxelized);
+        let (again, warning) = plan.density_cached().unwrap();
+        assert_eq!(again, voxelized);
+        let warning = warning.expect("a damaged entry is reported");
+        assert!(warning.contains(&entry.display().to_string()), "{warning}");
         assert_eq!(std::fs::read(entry).unwrap(), bytes);
         // A denser model is another entry.
         let denser = model(2.0);
         let p2 =
             LightingPlan::new(&denser, &illum(sun()), &opts(Some(dir.path())), &CpuSolver).unwrap();
-        assert_ne!(p2.density_cached().unwrap(), voxelized);
+        assert_ne!(p2.density_cached().unwrap().0, voxelized);
         assert_eq!(entries().len(), 2);
     }
 

@@ -28,6 +28,8 @@ pub trait Progress: Sync {
     fn global_grid(&self, _report: &GlobalReport) {}
     /// The neighbours' foliage added to a model's density in a forest.
     fn neighbour_shade(&self, _model: &Model, _shade: &ShadedDensity) {}
+    /// A model's cached density could not be used (voxelized again) or kept: why.
+    fn density_warning(&self, _model: &Model, _warning: &str) {}
 }
 
 /// Reports nothing.

@@ -19,6 +19,8 @@ pub enum LightEvent<'a> {
     /// A model's neighbours' foliage added to its density in a forest: (model, own optical
     /// depth, added).
     Shade(&'a str, f64, f64),
+    /// A model's cached density voxelized again or not kept: (model, why).
+    Density(&'a str, &'a str),
 }
 
 /// The warnings of an entry: a bad one recomputed, and one that could not be written (a
@@ -45,6 +47,7 @@ impl LightEvent<'_> {
             LightEvent::Basis(_, r) => warnings(&r.source, &r.cache_warning),
             LightEvent::Global(r) => warnings(&r.source, &r.cache_warning),
             LightEvent::Shade(..) => None,
+            LightEvent::Density(_, why) => Some(format!("warning: {why}")),
         }
     }
 
@@ -115,6 +118,7 @@ impl LightEvent<'_> {
                 "  {name}: neighbours' foliage inside its boxes adds {:.0} % to its optical depth",
                 100.0 * added / own.max(1e-12)
             ),
+            LightEvent::Density(name, _) => format!("  {name}: density voxelized"),
         }
     }
 }

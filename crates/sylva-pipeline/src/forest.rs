@@ -42,12 +42,14 @@ pub struct ForestDensities {
     pub shades: Vec<Option<ShadedDensity>>,
 }
 
-/// [`ForestDensities`] of `scene`: its models voxelized, the neighbours' foliage measured on
-/// the coarse grid of `gopts`.
+/// [`ForestDensities`] of `scene`: its models voxelized (or their densities from the cache,
+/// its troubles told to `progress`), the neighbours' foliage measured on the coarse grid of
+/// `gopts`.
 pub fn forest_densities(
     scene: &Scene,
     lb: &LbPlan,
     gopts: &GlobalGridOptions,
+    progress: &dyn Progress,
 ) -> Result<ForestDensities, PipelineError> {
     let illum = scene_illumination(scene);
     let lopts = lighting_options(scene, lb);
@@ -57,12 +59,15 @@ pub fn forest_densities(
         .enumerate()
         .map(|(k, model)| {
             let lopts = lopts.for_model(scene, k);
-            model_density_cached(model, &illum, &lopts, lb.solver)
-                .map(|(density, _)| density)
+            let (density, warning) = model_density_cached(model, &illum, &lopts, lb.solver)
                 .map_err(|source| PipelineError::Lighting {
                     model: model.name.clone(),
                     source,
-                })
+                })?;
+            if let Some(w) = warning {
+                progress.density_warning(model, &w);
+            }
+            Ok::<_, PipelineError>(density)
         })
         .collect::<Result<Vec<_>, _>>()?;
     let grids: Vec<&DensityGrid> = own.iter().collect();

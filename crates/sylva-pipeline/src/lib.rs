@@ -631,7 +631,7 @@ fn solve_per_sun(
             // neighbours' foliage), timed as such.
             let densities = {
                 let _span = tracing::info_span!(stage::LB_PRECOMPUTE).entered();
-                forest_densities(scene, lb, gopts)?
+                forest_densities(scene, lb, gopts, progress)?
             };
             let (models, cached, f) = light_forest(scene, lb, gopts, densities, runner, progress)?;
             Ok(PerSunLight {

@@ -69,12 +69,19 @@ pub struct PhysicalRelighting {
 /// plan per direction), then the overhead plan's top sky, sky and ground (the side sky is
 /// the sky less the top's).
 fn part_keys(sun_parts: &[PartsLayout], overhead: usize) -> [CacheKey; PARTS] {
-    let o = &sun_parts[overhead].keys;
-    let diffuse = [o[3], o[1], o[2]];
-    std::array::from_fn(|k| match k {
-        k if k < SUN_PARTS => sun_parts[k].keys[0],
-        k => diffuse[k - SUN_PARTS],
+    std::array::from_fn(|k| {
+        let (plan, part) = basis_part(k, overhead);
+        sun_parts[plan].keys[part]
     })
+}
+
+/// Where part `k` of [`PhysicalBasis`]'s order comes from: (the sun plan, its light part):
+/// each sun plan's sun part, then the overhead plan's top sky, sky and ground.
+fn basis_part(k: usize, overhead: usize) -> (usize, usize) {
+    match k {
+        k if k < SUN_PARTS => (k, 0),
+        k => (overhead, [3, 1, 2][k - SUN_PARTS]),
+    }
 }
 
 /// Whether a model's basis has its files in `dir` (not yet read): the compressed entry
@@ -92,13 +99,7 @@ fn basis_files_present(
             .iter()
             .enumerate()
             .all(|(k, &key)| {
-                // The sun parts are each plan's part 0; the diffuse ones the top sky, sky
-                // and ground parts (3, 1, 2) of the overhead plan.
-                let part = if k < SUN_PARTS {
-                    0
-                } else {
-                    [3, 1, 2][k - SUN_PARTS]
-                };
+                let (_, part) = basis_part(k, overhead_part());
                 part_path(dir, model, part, key).exists()
             })
     };
@@ -112,11 +113,12 @@ fn basis_files_present(
     }
 }
 
-/// Whether model `k` of a forest may have its basis in `dir`, asked before its density: a
-/// compressed entry of any key (its key holds the neighbours' foliage), or its diffuse
-/// parts (whose keys do not). `false` means surely not.
+/// Whether model `k` of a forest may have its basis in `dir` (whose file `names` are given),
+/// asked before its density: a compressed entry of any key (its key holds the neighbours'
+/// foliage), or its diffuse parts (whose keys do not). `false` means surely not.
 fn forest_basis_may_be_cached(
     dir: &std::path::Path,
+    names: &[String],
     scene: &Scene,
     k: usize,
     lb: &LbPlan,
@@ -125,14 +127,10 @@ fn forest_basis_may_be_cached(
     let model = &scene.models[k];
     let prefix = format!("{}-physical-", sylva_core::file_stem(&model.name, "model"));
     let suffix = format!(".{PHYSICAL_EXTENSION}");
-    let compressed = std::fs::read_dir(dir).is_ok_and(|entries| {
-        entries.flatten().any(|e| {
-            let name = e.file_name();
-            let name = name.to_string_lossy();
-            name.starts_with(&prefix) && name.ends_with(&suffix)
-        })
-    });
-    if compressed {
+    if names
+        .iter()
+        .any(|n| n.starts_with(&prefix) && n.ends_with(&suffix))
+    {
         return Ok(true);
     }
     let layout = PartsPlan::layout(
@@ -142,7 +140,10 @@ fn forest_basis_may_be_cached(
         lb.solver,
         None,
     )?;
-    Ok((1..4).all(|part| part_path(dir, model, part, layout.keys[part]).exists()))
+    Ok((SUN_PARTS..PARTS).all(|k| {
+        let (_, part) = basis_part(k, overhead_part());
+        part_path(dir, model, part, layout.keys[part]).exists()
+    }))
 }
 
 /// Every model's physical basis (compressed to `bplan`'s target and cached as such, or as
@@ -195,9 +196,17 @@ pub fn precompute_physical(
                 let Some(dir) = opts.cache_dir.as_deref() else {
                     return Ok(false);
                 };
+                let names: Vec<String> = std::fs::read_dir(dir)
+                    .map(|entries| {
+                        entries
+                            .flatten()
+                            .map(|e| e.file_name().to_string_lossy().into_owned())
+                            .collect()
+                    })
+                    .unwrap_or_default();
                 (0..scene.models.len()).try_fold(true, |all, k| {
                     Ok::<_, PipelineError>(
-                        all && forest_basis_may_be_cached(dir, scene, k, lb, &opts)
+                        all && forest_basis_may_be_cached(dir, &names, scene, k, lb, &opts)
                             .map_err(|e| lighting_err(k, e))?,
                     )
                 })
@@ -212,7 +221,7 @@ pub fn precompute_physical(
     // In a forest every model's density and the neighbours' foliage added to it are made
     // first: the sun parts' keys hold the added foliage's, and the forest grid needs them all.
     let forest_d = match (in_forest, forest) {
-        (true, Some(gopts)) => Some(forest_densities(scene, lb, gopts)?),
+        (true, Some(gopts)) => Some(forest_densities(scene, lb, gopts, progress)?),
         _ => None,
     };
     let shade_key = |m: usize| {

@@ -101,4 +101,9 @@ impl<F: Fn(LightEvent) + Sync> Progress for Bars<F> {
             shade.added_depth,
         ));
     }
+
+    fn density_warning(&self, model: &Model, warning: &str) {
+        self.finish();
+        (self.on_report)(LightEvent::Density(&model.name, warning));
+    }
 }
