@@ -314,6 +314,7 @@ fn mpi_bench_trace_reports_per_rank_seconds() {
         "trace",
         &scene,
         "--no-lb",
+        "--no-cache",
         "--runs",
         "1",
         "--json",

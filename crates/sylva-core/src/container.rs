@@ -404,6 +404,15 @@ impl ByteWriter {
             self.bytes.extend_from_slice(&x.to_le_bytes());
         }
     }
+
+    /// A length (u64) and the values.
+    pub fn f64s(&mut self, v: &[f64]) {
+        self.u64(v.len() as u64);
+        self.bytes.reserve(8 * v.len());
+        for x in v {
+            self.bytes.extend_from_slice(&x.to_le_bytes());
+        }
+    }
 }
 
 /// Reads what a [`ByteWriter`] wrote; running out of bytes is an error naming what was being
@@ -501,6 +510,14 @@ impl<'a> ByteReader<'a> {
             .collect())
     }
 
+    pub fn f64s(&mut self, what: &str) -> Result<Vec<f64>, String> {
+        let n = self.len(8, what)?;
+        let b = self.take(8 * n, what)?;
+        Ok(b.chunks_exact(8)
+            .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
+            .collect())
+    }
+
     /// Errors unless every byte was read.
     pub fn finish(&self) -> Result<(), String> {
         if self.remaining() != 0 {
@@ -530,6 +547,7 @@ mod tests {
         w.u16s(&[1, 65535]);
         w.u8s(&[9, 8]);
         w.u32s(&[3]);
+        w.f64s(&[0.1, -1e300]);
         let meta = vec![("a".to_string(), "b=c".to_string())];
         write_container(&path, MAGIC, 3, &meta, &w.bytes).unwrap();
         let c = read_container(&path, MAGIC, 3, "test file").unwrap();
@@ -541,6 +559,7 @@ mod tests {
         assert_eq!(r.u16s("d").unwrap(), vec![1, 65535]);
         assert_eq!(r.u8s("e").unwrap(), vec![9, 8]);
         assert_eq!(r.u32s("f").unwrap(), vec![3]);
+        assert_eq!(r.f64s("g").unwrap(), vec![0.1, -1e300]);
         r.finish().unwrap();
         let e = r.u8("past the end").unwrap_err();
         assert!(e.contains("past the end"), "{e}");

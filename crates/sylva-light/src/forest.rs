@@ -44,23 +44,28 @@
 //! inside the box for the diffuse parts, and detail below the coarse cell.
 
 use std::collections::HashMap;
+use std::path::Path;
+use std::time::Instant;
 
 use rayon::prelude::*;
 
 use glam::{Affine3A, Vec3};
 use serde::Serialize;
-use sylva_core::cache::{CacheKey, CacheKind};
+use sylva_core::cache::{Cache, CacheKey, CacheKind};
+use sylva_core::container::{read_container, write_container, ByteReader, ByteWriter};
 use sylva_geom::Aabb;
 use sylva_lb::lattice::{C, Q};
 use sylva_lb::light::{self, Environment};
 use sylva_lb::relight::Footprint;
 use sylva_lb::solver::{Lattice, SolveOptions};
-use sylva_lb::{ColourParams, DensityGrid, Dims, MediumParams};
+use sylva_lb::{ColourParams, CpuSolver, DensityGrid, Dims, LbSolver, MediumParams};
 
-use crate::lighting::{LightingError, PartWeights, ShadedDensity};
+use crate::lighting::{
+    LightingError, LightingSource, MediumKey, PartWeights, ShadedDensity, KEY_METADATA,
+};
 use crate::relight::global::{
     coarse_density, instance_extinction, placed, shell_faces, ExtinctionBlock, GlobalGridOptions,
-    GlobalInstance, Placed, ShellFace, MARGIN,
+    GlobalInstance, GlobalReport, Placed, ShellFace, MARGIN,
 };
 
 /// Largest fine density used for the optical-depth weights of the coarse medium.
@@ -73,6 +78,134 @@ const SHADE_SAMPLES: usize = 33;
 /// Largest optical depth a fine cell may gain from the neighbours below which the model
 /// keeps its own density (and its cache keys).
 const SHADE_MIN: f64 = 1e-4;
+
+/// A forest grid's answer in the cache ([`ForestLight::solve_cached`],
+/// [`ForestBases::solve_cached`]): keyed by everything its coarse solves read.
+pub const FOREST_GRID: CacheKind = CacheKind {
+    name: "forest grid",
+    version: crate::lighting::CACHE_VERSION,
+};
+/// Extension of forest grid cache entries.
+pub const FOREST_EXTENSION: &str = "sforest";
+const FOREST_MAGIC: &[u8; 8] = b"SYLVAFOR";
+const FOREST_FILE_VERSION: u32 = 1;
+
+/// Everything a coarse forest solve reads ([`Coarse`]): the coarse medium as resampled from
+/// the instances' fine grids (so the key follows what the solve sees, not how the scene was
+/// written), the instances' boxes (their shells and the sun's transmittance), the schedule,
+/// the kernel, and the light.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+struct CoarseKey<'a> {
+    solver: String,
+    dims: [usize; 3],
+    origin: [f32; 3],
+    cell: f32,
+    ground_y: f32,
+    density: &'a [f32],
+    wood: &'a [f32],
+    medium: MediumKey,
+    boxes: Vec<Option<[[f32; 3]; 2]>>,
+    steps: usize,
+    step_optical_depth_factor: f64,
+    sun_samples: usize,
+    light: CoarseLight,
+}
+
+/// What a forest grid is solved under.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+enum CoarseLight {
+    /// One environment ([`ForestLight`]).
+    Environment {
+        sun_travel: [f64; 3],
+        sun_irradiance: [f64; 3],
+        sky_radiance: [f64; 3],
+        ground_albedo: Option<[f64; 3]>,
+    },
+    /// The relit parts: a unit sun along each direction, a unit sky, a unit ground
+    /// ([`ForestBases`]).
+    Parts {
+        suns: Vec<[f64; 3]>,
+        ground_albedo: Option<[f64; 3]>,
+    },
+}
+
+impl CoarseLight {
+    fn environment(env: &Environment) -> CoarseLight {
+        CoarseLight::Environment {
+            sun_travel: env.sun_travel,
+            sun_irradiance: env.sun_irradiance,
+            sky_radiance: env.sky_radiance,
+            ground_albedo: env.ground_albedo,
+        }
+    }
+}
+
+/// Where a forest grid's answer is cached: the cache and the scene's file stem.
+#[derive(Debug, Clone, Copy)]
+pub struct ForestCache<'a> {
+    pub cache: &'a Cache,
+    pub stem: &'a str,
+}
+
+/// `solve`d, or read from `cache` under `key` when it holds a valid entry (a bad one is
+/// solved again and replaced), with the report of what happened.
+#[allow(clippy::too_many_arguments)]
+fn cached_or_solved<T>(
+    what: &'static str,
+    cache: Option<ForestCache>,
+    key: CacheKey,
+    dims: Dims,
+    t0: Instant,
+    read: impl FnOnce(&Path) -> Result<T, String>,
+    solve: impl FnOnce() -> Result<T, LightingError>,
+    write: impl FnOnce(&T, &Path) -> Result<(), String>,
+) -> Result<(T, GlobalReport), LightingError> {
+    let report = |source, path, cache_warning| GlobalReport {
+        what,
+        source,
+        seconds: t0.elapsed().as_secs_f64(),
+        dims,
+        path,
+        cache_warning,
+    };
+    let Some(ForestCache { cache, stem }) = cache else {
+        let value = solve()?;
+        return Ok((value, report(LightingSource::Computed, None, None)));
+    };
+    let name = match what {
+        "forest grid" => format!("{stem}-forest"),
+        _ => format!("{stem}-forest-parts"),
+    };
+    let path = cache.entry(&name, key, FOREST_EXTENSION);
+    let got = cache.get_or_compute(&path, read, solve, write)?;
+    let r = report(got.outcome.into(), Some(path), got.write_warning);
+    Ok((got.value, r))
+}
+
+/// Reads a forest grid cache entry's payload under `key`; `Err` is why it is unusable,
+/// naming the file.
+fn read_forest_entry(path: &Path, key: CacheKey) -> Result<Vec<u8>, String> {
+    let c = read_container(
+        path,
+        FOREST_MAGIC,
+        FOREST_FILE_VERSION,
+        "forest grid cache entry",
+    )
+    .map_err(|e| e.to_string())?;
+    key.check(path, c.metadata_value(KEY_METADATA))?;
+    Ok(c.payload)
+}
+
+fn write_forest_entry(path: &Path, key: CacheKey, payload: &[u8]) -> Result<(), String> {
+    write_container(
+        path,
+        FOREST_MAGIC,
+        FOREST_FILE_VERSION,
+        &[key.metadata()],
+        payload,
+    )
+    .map_err(|e| e.to_string())
+}
 
 /// An instance as the forest grid sees it.
 #[derive(Debug, Clone, Copy)]
@@ -637,6 +770,52 @@ impl Coarse {
         }))
     }
 
+    /// The cache key of this grid's answer under `light` (the ground at `ground_y`).
+    fn key(&self, ground_y: f32, light: CoarseLight) -> CacheKey {
+        CacheKey::new(
+            FOREST_GRID,
+            &CoarseKey {
+                solver: CpuSolver.cache_tag(),
+                dims: [self.dims.nx, self.dims.ny, self.dims.nz],
+                origin: self.origin.to_array(),
+                cell: self.cell,
+                ground_y,
+                density: &self.grid.density,
+                wood: &self.grid.wood,
+                medium: MediumKey::new(&self.medium),
+                boxes: self
+                    .boxes
+                    .iter()
+                    .map(|b| b.map(|b| [b.min.to_array(), b.max.to_array()]))
+                    .collect(),
+                steps: self.steps(),
+                step_optical_depth_factor: light::step_optical_depth_factor(),
+                sun_samples: SUN_SAMPLES,
+                light,
+            },
+        )
+    }
+
+    /// The forest's light under `env`: one solve per colour, each instance's weights.
+    fn light(
+        &self,
+        env: &Environment,
+        free: PartWeights,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<ForestLight, LightingError> {
+        let total = 3 * self.steps();
+        let inflow = self.solve(env, env.diffuse_boundaries(), true, true, &mut |done| {
+            progress(done, total)
+        })?;
+        Ok(ForestLight {
+            dims: self.dims,
+            origin: self.origin.to_array(),
+            cell: self.cell,
+            weights: self.weights(&inflow, env, free),
+            free,
+        })
+    }
+
     /// Solves colour `c` under `boundary`, `floor` and `source` and measures every instance's
     /// inflows.
     fn solve_colour(
@@ -786,16 +965,116 @@ impl ForestLight {
         let Some(coarse) = Coarse::new(instances, ground_y, opts)? else {
             return Ok(ForestLight::alone(instances.len(), free));
         };
-        let total = 3 * coarse.steps();
-        let inflow = coarse.solve(env, env.diffuse_boundaries(), true, true, &mut |done| {
-            progress(done, total)
-        })?;
+        coarse.light(env, free, progress)
+    }
+
+    /// [`ForestLight::solve`], its answer read from `cache` when an entry holds it for the
+    /// same coarse medium, boxes and light, else solved and cached; and what happened.
+    pub fn solve_cached(
+        instances: &[ForestInstance],
+        env: &Environment,
+        ground_y: f32,
+        opts: &GlobalGridOptions,
+        cache: Option<ForestCache>,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<(ForestLight, GlobalReport), LightingError> {
+        let t0 = Instant::now();
+        env.validate().map_err(LightingError::Illumination)?;
+        let free = free_weights(env);
+        let Some(coarse) = Coarse::new(instances, ground_y, opts)? else {
+            let alone = ForestLight::alone(instances.len(), free);
+            let report = GlobalReport {
+                what: "forest grid",
+                source: LightingSource::Computed,
+                seconds: t0.elapsed().as_secs_f64(),
+                dims: alone.dims,
+                path: None,
+                cache_warning: None,
+            };
+            return Ok((alone, report));
+        };
+        let key = coarse.key(ground_y, CoarseLight::environment(env));
+        let n = instances.len();
+        cached_or_solved(
+            "forest grid",
+            cache,
+            key,
+            coarse.dims,
+            t0,
+            |p| {
+                ForestLight::from_bytes(&read_forest_entry(p, key)?, n)
+                    .map_err(|e| format!("{}: {e}", p.display()))
+            },
+            || coarse.light(env, free, progress),
+            |f, p| write_forest_entry(p, key, &f.to_bytes()),
+        )
+    }
+
+    /// The answer as bytes: a cache entry's payload, and what MPI processes send.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut w = ByteWriter::new();
+        for n in [self.dims.nx, self.dims.ny, self.dims.nz] {
+            w.u32(n as u32);
+        }
+        for v in self.origin {
+            w.f32(v);
+        }
+        w.f32(self.cell);
+        let flat = |p: &PartWeights| [p.sun, p.sky_top, p.sky, p.ground].map(|v| v.to_array());
+        w.f32s(flat(&self.free).as_flattened());
+        let weights: Vec<[[f32; 3]; 4]> = self.weights.iter().map(flat).collect();
+        w.f32s(weights.as_flattened().as_flattened());
+        w.bytes
+    }
+
+    /// The answer [`ForestLight::to_bytes`] encoded, for `instances` instances; `Err` says
+    /// what is wrong with the bytes.
+    pub fn from_bytes(bytes: &[u8], instances: usize) -> Result<ForestLight, String> {
+        let mut r = ByteReader::new(bytes);
+        let mut n = [0usize; 3];
+        for v in &mut n {
+            *v = r.u32("grid size")? as usize;
+        }
+        let dims = Dims::new(n[0], n[1], n[2]).map_err(|e| e.to_string())?;
+        let mut origin = [0f32; 3];
+        for v in &mut origin {
+            *v = r.f32("origin")?;
+        }
+        let cell = r.f32("cell")?;
+        let free = r.f32s("free weights")?;
+        let flat = r.f32s("weights")?;
+        r.finish()?;
+        if free.len() != 12 || flat.len() != 12 * instances {
+            return Err(format!(
+                "{} weights, {instances} instances need {}",
+                flat.len(),
+                12 * instances
+            ));
+        }
+        if flat
+            .iter()
+            .chain(&free)
+            .any(|v| !(v.is_finite() && *v >= 0.0))
+            || !(cell.is_finite() && cell > 0.0)
+            || origin.iter().any(|v| !v.is_finite())
+        {
+            return Err("a value is not finite or negative".into());
+        }
+        let weights = |c: &[f32]| {
+            let v = |i: usize| Vec3::new(c[3 * i], c[3 * i + 1], c[3 * i + 2]);
+            PartWeights {
+                sun: v(0),
+                sky_top: v(1),
+                sky: v(2),
+                ground: v(3),
+            }
+        };
         Ok(ForestLight {
-            dims: coarse.dims,
-            origin: coarse.origin.to_array(),
-            cell: coarse.cell,
-            weights: coarse.weights(&inflow, env, free),
-            free,
+            dims,
+            origin,
+            cell,
+            weights: flat.chunks_exact(12).map(weights).collect(),
+            free: weights(&free),
         })
     }
 
@@ -829,6 +1108,54 @@ pub struct ForestBases {
     ground_albedo: Option<[f64; 3]>,
 }
 
+/// The parts' measures (per part, per instance, per colour: three class inflows and the
+/// top's) as bytes.
+fn parts_to_bytes(parts: &[Vec<Inflow>], instances: usize) -> Vec<u8> {
+    let mut w = ByteWriter::new();
+    w.u32(parts.len() as u32);
+    w.u32(instances as u32);
+    let flat: Vec<f64> = parts
+        .iter()
+        .flatten()
+        .flat_map(|inflow| inflow.iter().flat_map(|(m, t)| [m[0], m[1], m[2], *t]))
+        .collect();
+    w.f64s(&flat);
+    w.bytes
+}
+
+/// [`parts_to_bytes`]'s parts for `instances` instances; `Err` says what is wrong.
+fn parts_from_bytes(bytes: &[u8], instances: usize) -> Result<Vec<Vec<Inflow>>, String> {
+    let mut r = ByteReader::new(bytes);
+    let parts = r.u32("part count")? as usize;
+    let stored = r.u32("instance count")? as usize;
+    let flat = r.f64s("inflows")?;
+    r.finish()?;
+    let want = crate::relight::sun_parts::SUN_PARTS + 2;
+    if parts != want && parts != 0 {
+        return Err(format!("{parts} parts, not {want}"));
+    }
+    if stored != instances {
+        return Err(format!("{stored} instances, the forest has {instances}"));
+    }
+    if flat.len() != parts * instances * 12 {
+        return Err(format!(
+            "{} values, {parts} parts of {instances} instances need {}",
+            flat.len(),
+            parts * instances * 12
+        ));
+    }
+    if flat.iter().any(|v| !v.is_finite()) {
+        return Err("a value is not finite".into());
+    }
+    let inflow = |c: &[f64]| -> Inflow {
+        std::array::from_fn(|k| ([c[4 * k], c[4 * k + 1], c[4 * k + 2]], c[4 * k + 3]))
+    };
+    Ok(flat
+        .chunks_exact(12 * instances.max(1))
+        .map(|part| part.chunks_exact(12).map(inflow).collect())
+        .collect())
+}
+
 impl ForestBases {
     /// Coarse solves: one per sun direction and colour, a unit sky's and a unit ground's.
     pub const SOLVES: usize = 3 * (crate::relight::sun_parts::SUN_PARTS + 2);
@@ -843,39 +1170,148 @@ impl ForestBases {
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<ForestBases, LightingError> {
         let coarse = Coarse::new(instances, ground_y, opts)?;
-        let mut parts = Vec::new();
-        if let Some(coarse) = &coarse {
-            let zero = [sylva_lb::Boundary { values: [0.0; Q] }; 3];
-            let sky = Environment {
-                sun_travel: [0.0, -1.0, 0.0],
-                sun_irradiance: [0.0; 3],
-                sky_radiance: [1.0; 3],
-                ground_albedo,
+        let parts = match &coarse {
+            Some(coarse) => Self::solve_parts(coarse, ground_albedo, progress)?,
+            None => Vec::new(),
+        };
+        Ok(ForestBases {
+            coarse,
+            instances: instances.len(),
+            parts,
+            ground_albedo,
+        })
+    }
+
+    /// The coarse solves of every part over `coarse`: per part, per instance, its inflows.
+    fn solve_parts(
+        coarse: &Coarse,
+        ground_albedo: Option<[f64; 3]>,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<Vec<Vec<Inflow>>, LightingError> {
+        let zero = [sylva_lb::Boundary { values: [0.0; Q] }; 3];
+        let sky = Environment {
+            sun_travel: [0.0, -1.0, 0.0],
+            sun_irradiance: [0.0; 3],
+            sky_radiance: [1.0; 3],
+            ground_albedo,
+        };
+        // The lights: a unit sun along each direction, a unit sky, a unit ground.
+        let mut lights: Vec<(Environment, [sylva_lb::Boundary; 3], bool, bool)> =
+            crate::relight::sun_parts::sun_directions()
+                .iter()
+                .map(|&d| {
+                    let env = Environment {
+                        sun_travel: d,
+                        sun_irradiance: [1.0; 3],
+                        sky_radiance: [0.0; 3],
+                        ground_albedo,
+                    };
+                    (env, zero, true, true)
+                })
+                .collect();
+        lights.push((sky, light::sky_boundaries([1.0; 3]), true, false));
+        lights.push((sky, light::ground_boundaries([1.0; 3]), false, false));
+        // Progress after every LB step over all of them.
+        let per_light = 3 * coarse.steps();
+        let total = lights.len() * per_light;
+        let mut parts = Vec::with_capacity(lights.len());
+        for (k, (env, boundaries, floor, sun)) in lights.into_iter().enumerate() {
+            parts.push(coarse.solve(&env, boundaries, floor, sun, &mut |done| {
+                progress(k * per_light + done, total)
+            })?);
+        }
+        Ok(parts)
+    }
+
+    /// [`ForestBases::solve`], the parts read from `cache` when an entry holds them for the
+    /// same coarse medium, boxes, directions and ground, else solved and cached; and what
+    /// happened.
+    pub fn solve_cached(
+        instances: &[ForestInstance],
+        ground_albedo: Option<[f64; 3]>,
+        ground_y: f32,
+        opts: &GlobalGridOptions,
+        cache: Option<ForestCache>,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<(ForestBases, GlobalReport), LightingError> {
+        let t0 = Instant::now();
+        let Some(coarse) = Coarse::new(instances, ground_y, opts)? else {
+            let report = GlobalReport {
+                what: "forest grid parts",
+                source: LightingSource::Computed,
+                seconds: t0.elapsed().as_secs_f64(),
+                dims: Dims::new(3, 3, 3).expect("valid"),
+                path: None,
+                cache_warning: None,
             };
-            // The lights: a unit sun along each direction, a unit sky, a unit ground.
-            let mut lights: Vec<(Environment, [sylva_lb::Boundary; 3], bool, bool)> =
-                crate::relight::sun_parts::sun_directions()
-                    .iter()
-                    .map(|&d| {
-                        let env = Environment {
-                            sun_travel: d,
-                            sun_irradiance: [1.0; 3],
-                            sky_radiance: [0.0; 3],
-                            ground_albedo,
-                        };
-                        (env, zero, true, true)
-                    })
-                    .collect();
-            lights.push((sky, light::sky_boundaries([1.0; 3]), true, false));
-            lights.push((sky, light::ground_boundaries([1.0; 3]), false, false));
-            // Progress after every LB step over all of them.
-            let per_light = 3 * coarse.steps();
-            let total = lights.len() * per_light;
-            for (k, (env, boundaries, floor, sun)) in lights.into_iter().enumerate() {
-                parts.push(coarse.solve(&env, boundaries, floor, sun, &mut |done| {
-                    progress(k * per_light + done, total)
-                })?);
-            }
+            return Ok((
+                ForestBases::without_grid(instances.len(), ground_albedo),
+                report,
+            ));
+        };
+        let key = coarse.key(
+            ground_y,
+            CoarseLight::Parts {
+                suns: crate::relight::sun_parts::sun_directions().to_vec(),
+                ground_albedo,
+            },
+        );
+        let n = instances.len();
+        let (parts, report) = cached_or_solved(
+            "forest grid parts",
+            cache,
+            key,
+            coarse.dims,
+            t0,
+            |p| {
+                parts_from_bytes(&read_forest_entry(p, key)?, n)
+                    .map_err(|e| format!("{}: {e}", p.display()))
+            },
+            || Self::solve_parts(&coarse, ground_albedo, progress),
+            |parts, p| write_forest_entry(p, key, &parts_to_bytes(parts, n)),
+        )?;
+        Ok((
+            ForestBases {
+                coarse: Some(coarse),
+                instances: n,
+                parts,
+                ground_albedo,
+            },
+            report,
+        ))
+    }
+
+    /// No coarse grid: every instance keeps the free weights.
+    fn without_grid(instances: usize, ground_albedo: Option<[f64; 3]>) -> ForestBases {
+        ForestBases {
+            coarse: None,
+            instances,
+            parts: Vec::new(),
+            ground_albedo,
+        }
+    }
+
+    /// The parts' measures as bytes: what MPI processes send ([`ForestBases::with_parts`]).
+    pub fn parts_bytes(&self) -> Vec<u8> {
+        parts_to_bytes(&self.parts, self.instances)
+    }
+
+    /// The parts over `instances` (as [`ForestBases::solve`] was given them) from
+    /// [`ForestBases::parts_bytes`]: the coarse grid laid out again, its solves not run.
+    pub fn with_parts(
+        instances: &[ForestInstance],
+        ground_albedo: Option<[f64; 3]>,
+        ground_y: f32,
+        opts: &GlobalGridOptions,
+        bytes: &[u8],
+    ) -> Result<ForestBases, LightingError> {
+        let coarse = Coarse::new(instances, ground_y, opts)?;
+        let parts = parts_from_bytes(bytes, instances.len())
+            .map_err(|e| LightingError::Global(format!("the forest grid's parts: {e}")))?;
+        if coarse.is_some() == parts.is_empty() {
+            return Err(LightingError::Global(
+                "the forest grid's parts do not match its instances".into(),
+            ));
         }
         Ok(ForestBases {
             coarse,

@@ -21,6 +21,8 @@ pub enum LightEvent<'a> {
     Shade(&'a str, f64, f64),
     /// A model's cached density voxelized again or not kept: (model, why).
     Density(&'a str, &'a str),
+    /// The models' kd-trees: (read from the cache, built, why an entry was not used or kept).
+    KdTrees(usize, usize, &'a [String]),
 }
 
 /// The warnings of an entry: a bad one recomputed, and one that could not be written (a
@@ -48,6 +50,13 @@ impl LightEvent<'_> {
             LightEvent::Global(r) => warnings(&r.source, &r.cache_warning),
             LightEvent::Shade(..) => None,
             LightEvent::Density(_, why) => Some(format!("warning: {why}")),
+            LightEvent::KdTrees(_, _, why) if !why.is_empty() => Some(
+                why.iter()
+                    .map(|w| format!("warning: {w}"))
+                    .collect::<Vec<_>>()
+                    .join("\n"),
+            ),
+            LightEvent::KdTrees(..) => None,
         }
     }
 
@@ -110,8 +119,8 @@ impl LightEvent<'_> {
                     LightingSource::Recomputed { .. } => "solved again",
                 };
                 format!(
-                    "  global grid: {} {how} in {:.2} s",
-                    report.dims, report.seconds
+                    "  {}: {} {how} in {:.2} s",
+                    report.what, report.dims, report.seconds
                 )
             }
             LightEvent::Shade(name, own, added) => format!(
@@ -119,6 +128,9 @@ impl LightEvent<'_> {
                 100.0 * added / own.max(1e-12)
             ),
             LightEvent::Density(name, _) => format!("  {name}: density voxelized"),
+            LightEvent::KdTrees(cached, built, _) => {
+                format!("  kd-trees: {cached} from cache, {built} built")
+            }
         }
     }
 }

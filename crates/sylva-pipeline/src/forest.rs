@@ -10,17 +10,18 @@
 //! weighs them through the forest grid itself.
 
 use std::time::Instant;
-
 use sylva_core::jobs::{from_root, Runner};
 use sylva_core::wire::{Reader, Writer};
 use sylva_geom::Scene;
 use sylva_lb::{DensityGrid, LightingGrid};
-use sylva_light::forest::{neighbour_shade, ForestInstance, ForestLight};
+
+use sylva_core::cache::Cache;
+use sylva_light::forest::{neighbour_shade, ForestCache, ForestInstance, ForestLight};
 use sylva_light::lighting::{
     model_density_cached, physical_environment, Light, LightingError, LightingReport,
     LightingSource, ModelLighting, PartsPlan, ShadedDensity, PARTS,
 };
-use sylva_light::relight::{GlobalGridOptions, GlobalReport};
+use sylva_light::relight::GlobalGridOptions;
 use sylva_light::Progress;
 use sylva_render::stages::stage;
 
@@ -177,9 +178,8 @@ pub fn light_forest(
     }
     let cached = root_count(runner, "cached models", cached)?;
 
-    // Every process weighs the parts through the forest grid (deterministic: the same
-    // weights everywhere).
-    let t0 = Instant::now();
+    // The forest grid's weights: the root's from its cache or solved (and cached), sent to
+    // every process.
     let env = physical_environment(&illum).map_err(global_err)?;
     let instances: Vec<ForestInstance> = scene
         .instances
@@ -192,19 +192,34 @@ pub fn light_forest(
             }
         })
         .collect();
-    progress.start("forest grid", 3);
-    let forest = ForestLight::solve(&instances, &env, 0.0, gopts, &mut |done, total| {
-        progress.set(done as u64, total as u64)
-    });
-    progress.finish();
-    let forest = forest.map_err(global_err)?;
-    progress.global_grid(&GlobalReport {
-        source: LightingSource::Computed,
-        seconds: t0.elapsed().as_secs_f64(),
-        dims: forest.dims,
-        path: None,
-        cache_warning: None,
-    });
+    let cache = opts.cache_dir.as_ref().map(Cache::new);
+    let stem = sylva_core::file_stem(&scene.name, "scene");
+    let forest = from_root(
+        runner,
+        "the forest grid",
+        || {
+            progress.start("forest grid", 3);
+            let got = ForestLight::solve_cached(
+                &instances,
+                &env,
+                0.0,
+                gopts,
+                cache
+                    .as_ref()
+                    .map(|cache| ForestCache { cache, stem: &stem }),
+                &mut |done, total| progress.set(done as u64, total as u64),
+            );
+            progress.finish();
+            let (forest, report) = got.map_err(global_err)?;
+            progress.global_grid(&report);
+            Ok::<_, PipelineError>(forest)
+        },
+        ForestLight::to_bytes,
+        |data| {
+            ForestLight::from_bytes(data, scene.instances.len())
+                .map_err(|e| global_err(LightingError::Global(format!("from the root: {e}"))))
+        },
+    )?;
     Ok((lighting, cached, forest))
 }
 

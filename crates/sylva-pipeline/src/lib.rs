@@ -367,6 +367,9 @@ pub struct PrepareOptions<'a> {
     /// The physical light's coarse forest grid ([`sylva_light::forest`]) for scenes of more than
     /// one instance; `None`: each instance keeps its model's light in the open.
     pub forest: Option<GlobalGridOptions>,
+    /// Where the models' kd-trees are cached (the LB cache's directory: `--cache-dir`);
+    /// `None`: built on every preparation.
+    pub accel_cache: Option<&'a Path>,
 }
 
 impl Default for PrepareOptions<'_> {
@@ -387,6 +390,7 @@ impl Default for PrepareOptions<'_> {
             relight: None,
             shadows: ShadowMethod::default(),
             forest: Some(GlobalGridOptions::default()),
+            accel_cache: None,
         }
     }
 }
@@ -781,7 +785,10 @@ impl PreparedScene {
         let media = prepare_media(&scene, opts, to_sun, &shading, progress)?;
         let tracer = {
             let _span = tracing::info_span!(stage::ACCEL_BUILD).entered();
-            let cpu = KdTracer::new(SceneAccel::build(&scene)?, opts.traversal);
+            let cache = opts.accel_cache.map(Cache::new);
+            let (accel, report) = SceneAccel::build_cached(&scene, cache.as_ref())?;
+            progress.kd_trees(report.cached, report.built, &report.warnings);
+            let cpu = KdTracer::new(accel, opts.traversal);
             match opts.trace_gpu {
                 Some(ctx) => Tracer::Gpu(Box::new(GpuTracer::new(ctx.clone(), cpu)?)),
                 None => Tracer::Cpu(Box::new(cpu)),
@@ -1443,6 +1450,7 @@ fn global_grid(
         _ => (solve()?, LightingSource::Computed, None),
     };
     progress.global_grid(&GlobalReport {
+        what: "global grid",
         source,
         seconds: t0.elapsed().as_secs_f64(),
         dims: g.dims,

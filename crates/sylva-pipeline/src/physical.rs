@@ -4,17 +4,17 @@
 //! per-sun light ([`PartsPlan`]) solved for a unit sun along that direction, so each is
 //! cached, solved as a job and shared exactly as a forest's parts are
 //! ([`crate::forest::solve_light_parts`]); then, with a forest, the coarse grid's parts
-//! ([`ForestBases`]), solved by every process (deterministic). Nothing here depends on the
+//! ([`ForestBases`]), from the root's cache or solved there and sent to every process. Nothing here depends on the
 //! sun's direction: the light it gives moves with the sun without a solve.
 
 use std::time::Instant;
 
-use sylva_core::cache::{CacheKey, Lookup};
+use sylva_core::cache::{Cache, CacheKey, Lookup};
 use sylva_core::jobs::{from_root, Runner};
 use sylva_core::wire::{Reader, Writer};
 use sylva_geom::Scene;
 use sylva_lb::{Bounds, DensityGrid, Dims};
-use sylva_light::forest::{ForestBases, ForestInstance};
+use sylva_light::forest::{ForestBases, ForestCache, ForestInstance};
 use sylva_light::lighting::{
     model_density, part_path, LightingError, LightingReport, LightingSource, PartsLayout, PartsPlan,
 };
@@ -58,8 +58,8 @@ pub struct PhysicalRelighting {
     /// Seconds the parts' solves took: solved now, or as recorded in the compressed entries
     /// (`None` when some came from the cache without a record).
     pub solve_seconds: Option<f64>,
-    /// Seconds the forest grid's parts took (solved in every preparation: they are small
-    /// and not cached); `None` without a forest grid.
+    /// Seconds the forest grid's parts took (from the cache or solved); `None` without a
+    /// forest grid.
     pub forest_seconds: Option<f64>,
     /// Bytes of every model's parts uncompressed (28 × 3 f32 per site).
     pub raw_bytes: u64,
@@ -230,13 +230,6 @@ pub fn precompute_physical(
             .and_then(|d| d.shades[m].as_ref())
             .map(|s| s.key)
     };
-    if let Some(d) = &forest_d {
-        for (model, shade) in scene.models.iter().zip(&d.shades) {
-            if let Some(s) = shade {
-                progress.neighbour_shade(model, s);
-            }
-        }
-    }
     // Per model, one plan per sun direction; the overhead sun's also solves the diffuse
     // parts (they do not depend on the sun). Their keys, grids and media first, without
     // densities.
@@ -283,6 +276,14 @@ pub fn precompute_physical(
         )?;
         if !present {
             return Ok(None);
+        }
+    }
+    // Told once the bases are used (a render that falls back to the per-sun light tells it).
+    if let Some(d) = &forest_d {
+        for (model, shade) in scene.models.iter().zip(&d.shades) {
+            if let Some(s) = shade {
+                progress.neighbour_shade(model, s);
+            }
         }
     }
 
@@ -520,7 +521,8 @@ pub fn precompute_physical(
         .map(|&(dims, _)| PhysicalBasis::memory_needed(dims))
         .sum();
 
-    // The forest grid's parts: every process solves them (deterministic, and small).
+    // The forest grid's parts: the root's from its cache or solved (and cached), sent to
+    // every process.
     let mut forest_seconds = None;
     let forest = match (in_forest, forest) {
         (true, Some(gopts)) => {
@@ -540,18 +542,42 @@ pub fn precompute_physical(
                     }
                 })
                 .collect();
-            progress.start("forest grid parts", ForestBases::SOLVES as u64);
-            let t = Instant::now();
-            let ground = illum.ground.map(|g| g.as_dvec3().to_array());
-            let bases = ForestBases::solve(&instances, ground, 0.0, gopts, &mut |done, total| {
-                progress.set(done as u64, total as u64)
-            });
-            progress.finish();
-            forest_seconds = Some(t.elapsed().as_secs_f64());
-            Some(bases.map_err(|source| PipelineError::Global {
+            let global_err = |source| PipelineError::Global {
                 scene: scene.name.clone(),
                 source,
-            })?)
+            };
+            let t = Instant::now();
+            let ground = illum.ground.map(|g| g.as_dvec3().to_array());
+            let cache = opts.cache_dir.as_ref().map(Cache::new);
+            let stem = sylva_core::file_stem(&scene.name, "scene");
+            let bases = from_root(
+                runner,
+                "the forest grid's parts",
+                || {
+                    progress.start("forest grid parts", ForestBases::SOLVES as u64);
+                    let got = ForestBases::solve_cached(
+                        &instances,
+                        ground,
+                        0.0,
+                        gopts,
+                        cache
+                            .as_ref()
+                            .map(|cache| ForestCache { cache, stem: &stem }),
+                        &mut |done, total| progress.set(done as u64, total as u64),
+                    );
+                    progress.finish();
+                    let (bases, report) = got.map_err(global_err)?;
+                    progress.global_grid(&report);
+                    Ok::<_, PipelineError>(bases)
+                },
+                ForestBases::parts_bytes,
+                |data| {
+                    ForestBases::with_parts(&instances, ground, 0.0, gopts, data)
+                        .map_err(global_err)
+                },
+            )?;
+            forest_seconds = Some(t.elapsed().as_secs_f64());
+            Some(bases)
         }
         _ => None,
     };

@@ -13,6 +13,8 @@
 
 use crate::ray::ray_box;
 use glam::{BVec4A, Vec3, Vec4};
+use serde::Serialize;
+use sylva_core::container::{ByteReader, ByteWriter};
 use sylva_geom::Aabb;
 
 /// Deepest tree the builder makes; the "unbounded" traversal stack holds this many entries,
@@ -471,7 +473,143 @@ impl<C: Clip> Builder<'_, C> {
     }
 }
 
+/// The rules a tree is built by: part of a cached tree's key ([`crate::scene::KD_TREE`]),
+/// so a change to the builder's constants makes new entries.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct BuildRules {
+    cost_traverse: f32,
+    cost_intersect: f32,
+    empty_bonus: f32,
+    depth_factor: f64,
+    max_depth: usize,
+    /// The builder's revision: raise it when a change alters the trees it makes.
+    revision: u32,
+}
+
+/// The rules [`KdTree::build`] follows.
+pub const BUILD_RULES: BuildRules = BuildRules {
+    cost_traverse: COST_TRAVERSE,
+    cost_intersect: COST_INTERSECT,
+    empty_bonus: EMPTY_BONUS,
+    depth_factor: DEPTH_FACTOR,
+    max_depth: MAX_DEPTH,
+    revision: 1,
+};
+
 impl KdTree {
+    /// The tree as bytes (a cache entry's payload): its box, statistics, nodes and leaf
+    /// index lists.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut w = ByteWriter::new();
+        for v in self
+            .bounds
+            .min
+            .to_array()
+            .into_iter()
+            .chain(self.bounds.max.to_array())
+        {
+            w.f32(v);
+        }
+        let s = &self.stats;
+        for n in [
+            s.primitives,
+            s.nodes,
+            s.leaves,
+            s.empty_leaves,
+            s.references,
+            s.max_depth,
+        ] {
+            w.u64(n as u64);
+        }
+        w.u64(s.sah_cost.to_bits());
+        let nodes: Vec<u32> = self.nodes.iter().flat_map(|n| n.raw()).collect();
+        w.u32s(&nodes);
+        w.u32s(&self.indices);
+        w.bytes
+    }
+
+    /// A tree over `primitives` primitives from [`KdTree::to_bytes`]; `Err` says what is wrong.
+    /// Every node is checked as traversal reads it (children after their parent and inside
+    /// the tree, leaf lists inside the index list, ids below `primitives`), so a damaged
+    /// tree is refused, never walked.
+    pub fn from_bytes(bytes: &[u8], primitives: usize) -> Result<KdTree, String> {
+        let mut r = ByteReader::new(bytes);
+        let mut corners = [0f32; 6];
+        for v in &mut corners {
+            *v = r.f32("box")?;
+        }
+        let mut counts = [0usize; 6];
+        for v in &mut counts {
+            *v = r.u64("statistics")? as usize;
+        }
+        let sah_cost = f64::from_bits(r.u64("SAH cost")?);
+        let raw = r.u32s("nodes")?;
+        let indices = r.u32s("leaf indices")?;
+        r.finish()?;
+        if corners.iter().any(|v| !v.is_finite()) && counts[0] > 0 {
+            return Err("the box is not finite".into());
+        }
+        if raw.is_empty() || raw.len() % 2 != 0 {
+            return Err(format!("{} node words", raw.len()));
+        }
+        let nodes: Vec<KdNode> = raw
+            .chunks_exact(2)
+            .map(|c| KdNode { a: c[0], b: c[1] })
+            .collect();
+        let n = nodes.len();
+        for (i, node) in nodes.iter().enumerate() {
+            if node.is_leaf() {
+                let (count, offset) = ((node.a >> 2) as usize, node.b as usize);
+                if offset + count > indices.len() {
+                    return Err(format!(
+                        "leaf {i} lists {count} ids from {offset}, past the {} ids",
+                        indices.len()
+                    ));
+                }
+            } else {
+                let above = (node.a >> 2) as usize;
+                if i + 1 >= n || above <= i + 1 || above >= n {
+                    return Err(format!(
+                        "node {i}'s children ({}, {above}) are not inside the tree's {n} nodes after it",
+                        i + 1
+                    ));
+                }
+                if !f32::from_bits(node.b).is_finite() {
+                    return Err(format!("node {i}'s split is not finite"));
+                }
+            }
+        }
+        if let Some(&id) = indices.iter().find(|&&id| id as usize >= primitives) {
+            return Err(format!("leaf id {id}, the mesh has {primitives} triangles"));
+        }
+        let stats = TreeStats {
+            primitives: counts[0],
+            nodes: counts[1],
+            leaves: counts[2],
+            empty_leaves: counts[3],
+            references: counts[4],
+            max_depth: counts[5],
+            sah_cost,
+        };
+        if stats.nodes != n || stats.references != indices.len() {
+            return Err(format!(
+                "the statistics say {} nodes and {} ids, the tree has {n} and {}",
+                stats.nodes,
+                stats.references,
+                indices.len()
+            ));
+        }
+        Ok(KdTree {
+            nodes,
+            indices,
+            bounds: Aabb {
+                min: Vec3::new(corners[0], corners[1], corners[2]),
+                max: Vec3::new(corners[3], corners[4], corners[5]),
+            },
+            stats,
+        })
+    }
+
     /// Builds the tree over `prims`.
     pub fn build<C: Clip>(prims: &C) -> KdTree {
         let n = prims.count();

@@ -29,5 +29,7 @@ pub use kdtree::{
 pub use model::{AlphaMask, ModelAccel};
 pub use query::{KdTracer, RayQuery, ShadowRay};
 pub use ray::{intersect_triangle, ray_box, Hit, Ray, TriangleData};
-pub use scene::{AccelMemory, OccluderCache, SceneAccel, TraceError, TraceInstance};
+pub use scene::{
+    AccelMemory, OccluderCache, SceneAccel, TraceError, TraceInstance, TreeCacheReport, KD_TREE,
+};
 pub use sun_grid::{SunGrid, SunGridQuery};

@@ -331,12 +331,27 @@ fn tree_parts(tree: &KdTree, tris: &[Tri]) -> Vec<Part> {
 impl ModelAccel {
     /// Builds the kd-tree over the model's triangles (in parallel, deterministic).
     pub fn build(model: &Model) -> ModelAccel {
+        ModelAccel::with_tree(model, ModelAccel::build_tree(model))
+    }
+
+    /// The kd-tree [`ModelAccel::build`] builds over `model`'s triangles (the slow part:
+    /// what the cache keeps, [`crate::scene::SceneAccel::build_cached`]).
+    pub fn build_tree(model: &Model) -> KdTree {
+        let mesh = &model.mesh;
+        KdTree::build(&TriClip {
+            positions: &mesh.positions,
+            indices: &mesh.indices,
+        })
+    }
+
+    /// The model's acceleration around `tree`, which must be [`ModelAccel::build_tree`]'s
+    /// for it (or one read back from it).
+    pub fn with_tree(model: &Model, tree: KdTree) -> ModelAccel {
         let mesh = &model.mesh;
         let clip = TriClip {
             positions: &mesh.positions,
             indices: &mesh.indices,
         };
-        let tree = KdTree::build(&clip);
         let mut masks = Vec::new();
         let mut mask_of: Vec<Option<u32>> = Vec::new();
         for m in &model.materials {

@@ -12,14 +12,106 @@
 //! entered nearest first, stopping at the first that starts beyond the closest hit.
 
 use crate::kdtree::{
-    lane, packet_compatible, sign_group, Clip, KdTree, TraceStats, TraversalConfig, TreeStats,
-    PACKET,
+    lane, packet_compatible, sign_group, BuildRules, Clip, KdTree, TraceStats, TraversalConfig,
+    TreeStats, BUILD_RULES, PACKET,
 };
 use crate::model::{Best, ModelAccel};
 use crate::ray::{inverse_dir, ray_box, Hit, Ray};
 use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
+use serde::Serialize;
+use std::path::Path;
+use sylva_core::cache::{Cache, CacheKey, CacheKind, CacheOutcome};
+use sylva_core::container::{read_container, write_container};
 use sylva_geom::{Aabb, Instance, Model, Scene};
+
+/// A model's kd-tree in the cache ([`SceneAccel::build_cached`]).
+pub const KD_TREE: CacheKind = CacheKind {
+    name: "kd-tree",
+    version: 1,
+};
+/// Extension of kd-tree cache entries.
+pub const KD_TREE_EXTENSION: &str = "skd";
+const KD_MAGIC: &[u8; 8] = b"SYLVAKDT";
+const KD_FILE_VERSION: u32 = 1;
+
+/// What a model's kd-tree depends on: its triangles (the mesh's geometry fingerprint and
+/// sizes) and the builder's rules.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+struct KdTreeKey {
+    rules: BuildRules,
+    geometry: u64,
+    vertices: usize,
+    triangles: usize,
+}
+
+/// What [`SceneAccel::build_cached`] did with the models' trees.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TreeCacheReport {
+    /// Trees read from the cache.
+    pub cached: usize,
+    /// Trees built (no cache, no entry, or a bad one).
+    pub built: usize,
+    /// Why an entry could not be used (it was built again) or kept, naming the file.
+    pub warnings: Vec<String>,
+}
+
+/// The cache entry of `model`'s kd-tree under `key`.
+fn kd_tree_path(cache: &Cache, model: &Model, key: CacheKey) -> std::path::PathBuf {
+    cache.entry(
+        &format!("{}-kdtree", sylva_core::file_stem(&model.name, "model")),
+        key,
+        KD_TREE_EXTENSION,
+    )
+}
+
+/// `model`'s tree from `cache` when a valid entry holds it, else built and stored; whether
+/// it was read, and any warning.
+fn cached_tree(model: &Model, cache: &Cache) -> (KdTree, bool, Vec<String>) {
+    let mesh = &model.mesh;
+    let key = CacheKey::new(
+        KD_TREE,
+        &KdTreeKey {
+            rules: BUILD_RULES,
+            geometry: mesh.geometry_hash(),
+            vertices: mesh.positions.len(),
+            triangles: mesh.indices.len(),
+        },
+    );
+    let path = kd_tree_path(cache, model, key);
+    let read = |p: &Path| {
+        let c = read_container(p, KD_MAGIC, KD_FILE_VERSION, "kd-tree cache entry")
+            .map_err(|e| e.to_string())?;
+        key.check(p, c.metadata_value(sylva_core::cache::KEY_METADATA))?;
+        KdTree::from_bytes(&c.payload, mesh.indices.len())
+            .map_err(|e| format!("{}: {e}", p.display()))
+    };
+    let got = cache
+        .get_or_compute(
+            &path,
+            read,
+            || Ok::<_, std::convert::Infallible>(ModelAccel::build_tree(model)),
+            |tree, p| {
+                write_container(
+                    p,
+                    KD_MAGIC,
+                    KD_FILE_VERSION,
+                    &[key.metadata()],
+                    &tree.to_bytes(),
+                )
+                .map_err(|e| e.to_string())
+            },
+        )
+        .unwrap_or_else(|never| match never {});
+    let mut warnings = Vec::new();
+    if let CacheOutcome::BadEntry(reason) = &got.outcome {
+        warnings.push(format!("{reason}; kd-tree built again"));
+    }
+    if let Some(w) = got.write_warning {
+        warnings.push(w);
+    }
+    (got.value, got.outcome == CacheOutcome::Hit, warnings)
+}
 
 #[derive(Debug, thiserror::Error)]
 pub enum TraceError {
@@ -222,6 +314,21 @@ fn estimate_bytes(triangles: usize) -> u64 {
     triangles as u64 * (40 + 8 + 8 + 2 * 28)
 }
 
+/// Refuses models the trees cannot index and a scene whose trees would not fit in memory.
+fn check_models(models: &[Model]) -> Result<(), TraceError> {
+    for m in models {
+        if m.triangle_count() >= 1 << 30 {
+            return Err(TraceError::TooLarge {
+                name: m.name.clone(),
+                triangles: m.triangle_count(),
+            });
+        }
+    }
+    let total: usize = models.iter().map(Model::triangle_count).sum();
+    sylva_core::check_memory("kd-trees of the scene's models", estimate_bytes(total))?;
+    Ok(())
+}
+
 impl SceneAccel {
     /// Builds the scene's structures: the models in parallel, then the top level.
     pub fn build(scene: &Scene) -> Result<SceneAccel, TraceError> {
@@ -235,24 +342,72 @@ impl SceneAccel {
         instances: &[Instance],
         ground: Option<[f32; 2]>,
     ) -> Result<SceneAccel, TraceError> {
-        for m in models {
-            if m.triangle_count() >= 1 << 30 {
-                return Err(TraceError::TooLarge {
-                    name: m.name.clone(),
-                    triangles: m.triangle_count(),
-                });
-            }
-        }
-        let total: usize = models.iter().map(Model::triangle_count).sum();
-        sylva_core::check_memory("kd-trees of the scene's models", estimate_bytes(total))?;
+        check_models(models)?;
         let built: Vec<ModelAccel> = models.par_iter().map(ModelAccel::build).collect();
+        SceneAccel::around(built, instances, ground)
+    }
+
+    /// [`SceneAccel::build`], each model's kd-tree read from `cache` when it holds one for
+    /// the same triangles and builder (else built and stored there); what it did.
+    pub fn build_cached(
+        scene: &Scene,
+        cache: Option<&Cache>,
+    ) -> Result<(SceneAccel, TreeCacheReport), TraceError> {
+        SceneAccel::from_parts_cached(
+            &scene.models,
+            &scene.instances,
+            scene.ground_half_extents(),
+            cache,
+        )
+    }
+
+    /// [`SceneAccel::from_parts`] with the models' kd-trees cached as
+    /// [`SceneAccel::build_cached`] caches them.
+    pub fn from_parts_cached(
+        models: &[Model],
+        instances: &[Instance],
+        ground: Option<[f32; 2]>,
+        cache: Option<&Cache>,
+    ) -> Result<(SceneAccel, TreeCacheReport), TraceError> {
+        let Some(cache) = cache else {
+            let accel = SceneAccel::from_parts(models, instances, ground)?;
+            let report = TreeCacheReport {
+                built: models.len(),
+                ..TreeCacheReport::default()
+            };
+            return Ok((accel, report));
+        };
+        check_models(models)?;
+        let trees: Vec<(KdTree, bool, Vec<String>)> =
+            models.par_iter().map(|m| cached_tree(m, cache)).collect();
+        let mut report = TreeCacheReport::default();
+        let mut built = Vec::with_capacity(trees.len());
+        for (m, (tree, hit, warnings)) in models.iter().zip(trees) {
+            match hit {
+                true => report.cached += 1,
+                false => report.built += 1,
+            }
+            report.warnings.extend(warnings);
+            built.push(ModelAccel::with_tree(m, tree));
+        }
+        let accel = SceneAccel::around(built, instances, ground)?;
+        Ok((accel, report))
+    }
+
+    /// The scene around its models' built structures.
+    fn around(
+        built: Vec<ModelAccel>,
+        instances: &[Instance],
+        ground: Option<[f32; 2]>,
+    ) -> Result<SceneAccel, TraceError> {
+        let models = built.len();
         let mut inst = Vec::with_capacity(instances.len());
         for (k, i) in instances.iter().enumerate() {
             let Some(m) = built.get(i.model as usize) else {
                 return Err(TraceError::BadModel {
                     instance: k,
                     model: i.model,
-                    models: models.len(),
+                    models,
                 });
             };
             let to_world = i.transform();

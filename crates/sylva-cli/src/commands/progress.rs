@@ -106,4 +106,9 @@ impl<F: Fn(LightEvent) + Sync> Progress for Bars<F> {
         self.finish();
         (self.on_report)(LightEvent::Density(&model.name, warning));
     }
+
+    fn kd_trees(&self, cached: usize, built: usize, warnings: &[String]) {
+        self.finish();
+        (self.on_report)(LightEvent::KdTrees(cached, built, warnings));
+    }
 }

@@ -532,6 +532,7 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
         relight: choice.relight,
         shadows: a.shadow_method(),
         forest: choice.forest,
+        accel_cache: (!a.lb.no_cache).then_some(a.lb.cache_dir.as_path()),
     };
     // Before any LB work: a coarse grid far costlier than the default's says so.
     let forest = opts.forest.as_ref().filter(|_| need_lb);

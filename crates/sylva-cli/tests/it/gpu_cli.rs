@@ -177,7 +177,10 @@ fn render_solves_lb_on_the_device_asked_for() {
     let entry = std::fs::read_dir(&cache)
         .unwrap()
         .map(|e| e.unwrap().path())
-        .find(|p| !p.to_string_lossy().contains("-density-"))
+        .find(|p| {
+            !p.to_string_lossy().contains("-density-")
+                && p.extension().is_some_and(|e| e == "sgrid")
+        })
         .unwrap();
     let file = sylva_lb::GridFile::read(&entry).unwrap();
     assert!(file.metadata_value("solver").unwrap().starts_with("GPU"));
@@ -214,6 +217,7 @@ fn bench_trace_reports_device_and_adapter() {
             "--runs",
             "1",
             "--no-lb",
+            "--no-cache",
             "--device",
             device,
             "--json",

@@ -92,7 +92,10 @@ fn render_writes_images_caches_lb_and_recovers_from_a_corrupt_cache() {
     let entry = fs::read_dir(&cache)
         .unwrap()
         .map(|e| e.unwrap().path())
-        .find(|p| !p.to_string_lossy().contains("-density-"))
+        .find(|p| {
+            !p.to_string_lossy().contains("-density-")
+                && p.extension().is_some_and(|e| e == "sgrid")
+        })
         .unwrap();
     let mut bytes = fs::read(&entry).unwrap();
     let mid = bytes.len() / 2;
@@ -153,8 +156,16 @@ fn render_refuses_bad_options_with_reasons() {
 fn bench_trace_json_has_the_fields() {
     let dir = tempfile::tempdir().unwrap();
     let scene = write_scene(dir.path());
-    let (ok, stdout, stderr) =
-        sylva(&["bench", "trace", &scene, "--no-lb", "--runs", "1", "--json"]);
+    let (ok, stdout, stderr) = sylva(&[
+        "bench",
+        "trace",
+        &scene,
+        "--no-lb",
+        "--no-cache",
+        "--runs",
+        "1",
+        "--json",
+    ]);
     assert!(ok, "{stderr}");
     let v: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
     assert_eq!(v["width"], 64);

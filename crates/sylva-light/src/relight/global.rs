@@ -696,6 +696,9 @@ impl GlobalLight {
 /// How long a global solve took and where its answer came from.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GlobalReport {
+    /// Which coarse grid: "global grid" (the paper light's), "forest grid" (the physical
+    /// light's for one sun) or "forest grid parts" (its relit parts).
+    pub what: &'static str,
     pub source: crate::lighting::LightingSource,
     pub seconds: f64,
     pub dims: Dims,

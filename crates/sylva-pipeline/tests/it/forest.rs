@@ -338,3 +338,74 @@ fn neighbours_inside_the_box_shade_only_the_sun_part() {
         "the sun part did not change: {changed} of {peak}"
     );
 }
+
+/// A forest grid's answer is cached: read back exactly as solved, keyed by what it was solved
+/// from (another sun, a moved instance: another entry), and a damaged entry is solved again
+/// and named.
+#[test]
+fn the_forest_grid_is_cached_and_a_damaged_entry_is_solved_again() {
+    use sylva_core::cache::Cache;
+    use sylva_light::forest::ForestCache;
+    use sylva_light::lighting::LightingSource;
+
+    let (scene, fine) = shade_parts();
+    let env = physical_environment(&scene_illumination(&scene)).unwrap();
+    let inst = instances(&scene, &fine, &[0, 1, 2]);
+    let gopts = GlobalGridOptions { sites: 32 };
+    let dir = tempfile::tempdir().unwrap();
+    let cache = Cache::new(dir.path());
+    let at = Some(ForestCache {
+        cache: &cache,
+        stem: "shade",
+    });
+    let cached = |inst: &[ForestInstance], env: &Environment| {
+        ForestLight::solve_cached(inst, env, 0.0, &gopts, at, &mut |_, _| {}).unwrap()
+    };
+    let solved = ForestLight::solve(&inst, &env, 0.0, &gopts, &mut |_, _| {}).unwrap();
+
+    let (first, r) = cached(&inst, &env);
+    assert_eq!(r.source, LightingSource::Computed);
+    assert_eq!(r.what, "forest grid");
+    let path = r.path.clone().expect("an entry");
+    assert!(path.exists(), "{}", path.display());
+    assert_eq!(first, solved);
+    let (again, r) = cached(&inst, &env);
+    assert_eq!(r.source, LightingSource::Cached);
+    assert_eq!(again, solved, "read back bit for bit");
+
+    // Another sun, and one instance moved, are other entries.
+    let low = Environment {
+        sun_travel: [-0.8, -0.6, 0.0],
+        ..env
+    };
+    let (other, r) = cached(&inst, &low);
+    assert_eq!(r.source, LightingSource::Computed);
+    assert_ne!(r.path.as_ref(), Some(&path));
+    assert_ne!(other, solved);
+    let mut moved = inst.clone();
+    moved[2].to_world = Affine3A::from_translation(Vec3::new(0.5, 0.0, 0.0)) * moved[2].to_world;
+    let (_, r) = cached(&moved, &env);
+    assert_eq!(r.source, LightingSource::Computed);
+    assert_ne!(r.path.as_ref(), Some(&path));
+
+    // A truncated entry and a foreign file are solved again, the file named, and replaced.
+    let bytes = std::fs::read(&path).unwrap();
+    for bad in [&bytes[..bytes.len() - 5], &b"garbage"[..]] {
+        std::fs::write(&path, bad).unwrap();
+        let (value, r) = cached(&inst, &env);
+        match &r.source {
+            LightingSource::Recomputed { reason } => {
+                assert!(reason.contains(&path.display().to_string()), "{reason}")
+            }
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(value, solved);
+        assert_eq!(std::fs::read(&path).unwrap(), bytes, "replaced");
+    }
+
+    // What the root sends: the same answer, and refused for another forest.
+    let sent = solved.to_bytes();
+    assert_eq!(ForestLight::from_bytes(&sent, 3).unwrap(), solved);
+    assert!(ForestLight::from_bytes(&sent, 2).is_err());
+    assert!(ForestLight::from_bytes(&sent[..sent.len() - 4], 3).is_err());
+}

@@ -322,12 +322,13 @@ fn media_and_model_presets_are_cached_by_what_they_depend_on() {
     let path = dir.path().join("cloudy.toml");
     fs::write(&path, CLOUD_AND_ROSES).unwrap();
     let cache = dir.path().join("cache");
-    // The light's entries (each model's voxelized density is cached beside them).
+    // The light's entries (each model's voxelized density, and a forest's grid, is cached
+    // beside them).
     let entries = || {
         let mut names: Vec<String> = fs::read_dir(&cache)
             .unwrap()
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .filter(|n| !n.contains("-density-"))
+            .filter(|n| n.ends_with(".sgrid") && !n.contains("-density-"))
             .collect();
         names.sort();
         names

@@ -446,3 +446,68 @@ fn the_compressed_physical_light_is_cached_and_relit_close_to_the_parts() {
     assert!(third.physical.is_some());
     assert_eq!(counting.0.load(Ordering::SeqCst), 0);
 }
+
+/// The forest grid's parts are cached: read back, they relight the forest bit for bit as
+/// solved; what the root sends makes the same; a damaged entry is solved again.
+#[test]
+fn the_forest_grid_parts_are_cached_and_relight_as_solved() {
+    use sylva_core::cache::Cache;
+    use sylva_light::forest::ForestCache;
+    use sylva_light::lighting::LightingSource;
+
+    let (scene, fine) = shade_parts();
+    let insts = instances(&scene, &fine, &[0, 1, 2]);
+    let base = physical_environment(&scene_illumination(&scene)).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let cache = Cache::new(dir.path());
+    let at = Some(ForestCache {
+        cache: &cache,
+        stem: "shade",
+    });
+    let cached = || {
+        ForestBases::solve_cached(&insts, base.ground_albedo, 0.0, &FOREST, at, &mut |_, _| {})
+            .unwrap()
+    };
+    let (solved, r) = cached();
+    assert_eq!(r.source, LightingSource::Computed);
+    let path = r.path.expect("an entry");
+    let (read, r) = cached();
+    assert_eq!(r.source, LightingSource::Cached);
+    let sent = ForestBases::with_parts(
+        &insts,
+        base.ground_albedo,
+        0.0,
+        &FOREST,
+        &solved.parts_bytes(),
+    )
+    .unwrap();
+    let env = Environment {
+        sun_travel: [-0.5, -0.8, -0.3],
+        ..base
+    };
+    let want = solved.light(&env).unwrap();
+    assert_eq!(read.light(&env).unwrap(), want);
+    assert_eq!(sent.light(&env).unwrap(), want);
+    // Another ground is another entry (its floors differ).
+    let (_, r) = ForestBases::solve_cached(&insts, None, 0.0, &FOREST, at, &mut |_, _| {}).unwrap();
+    assert_eq!(r.source, LightingSource::Computed);
+    assert_ne!(r.path.as_ref(), Some(&path));
+    // Parts for another forest are refused.
+    assert!(ForestBases::with_parts(
+        &insts[..2],
+        base.ground_albedo,
+        0.0,
+        &FOREST,
+        &solved.parts_bytes()
+    )
+    .is_err());
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &bytes[..100]).unwrap();
+    let (again, r) = cached();
+    assert!(
+        matches!(&r.source, LightingSource::Recomputed { reason } if reason.contains(&path.display().to_string())),
+        "{:?}",
+        r.source
+    );
+    assert_eq!(again.light(&env).unwrap(), want);
+}

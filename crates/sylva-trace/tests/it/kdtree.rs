@@ -437,3 +437,111 @@ fn forest_closest_hits_equal_brute_force_and_any_hit_agrees() {
         "{tree_hits} tree hits, {misses} misses"
     );
 }
+
+/// A model's kd-tree is cached: read back it answers every ray as the built one, another
+/// mesh is another entry, a damaged entry is built again (its file named and replaced), and
+/// a tree whose bytes break its structure is refused, never walked.
+#[test]
+fn cached_trees_answer_as_built_and_damaged_ones_are_built_again() {
+    use sylva_core::cache::Cache;
+    use sylva_trace::kdtree::KdTree;
+
+    let mut models = vec![soup(300, 41), soup(200, 42)];
+    models[0].name = "first".into();
+    models[1].name = "second".into();
+    let instances: Vec<Instance> = (0..3)
+        .map(|k| Instance {
+            model: (k % 2) as u32,
+            position: Vec3::new(k as f32, 1.0, 0.0),
+            rotation_deg: 30.0 * k as f32,
+            scale: 1.0,
+        })
+        .collect();
+    let dir = tempfile::tempdir().unwrap();
+    let cache = Cache::new(dir.path());
+    let build = |models: &[Model]| {
+        SceneAccel::from_parts_cached(models, &instances, Some([4.0, 4.0]), Some(&cache)).unwrap()
+    };
+    let plain = SceneAccel::from_parts(&models, &instances, Some([4.0, 4.0])).unwrap();
+    let (first, r) = build(&models);
+    assert_eq!((r.cached, r.built, r.warnings.len()), (0, 2, 0), "{r:?}");
+    let (second, r) = build(&models);
+    assert_eq!((r.cached, r.built), (2, 0), "{r:?}");
+    for (a, b) in second.models().iter().zip(plain.models()) {
+        assert_eq!(a.tree().nodes(), b.tree().nodes());
+        assert_eq!(a.tree().leaf_indices(), b.tree().leaf_indices());
+        assert_eq!(a.tree().stats(), b.tree().stats());
+    }
+    let mut r = rng(43);
+    for k in 0..400 {
+        let mut ray = random_ray(&mut r, 2.0);
+        ray.origin += Vec3::new(1.0, 1.0, 0.0);
+        let mut st = TraceStats::default();
+        let cfg = TraversalConfig::default();
+        let want = plain.closest_hit(&ray, cfg, &mut st);
+        assert!(same(first.closest_hit(&ray, cfg, &mut st), want), "ray {k}");
+        assert!(
+            same(second.closest_hit(&ray, cfg, &mut st), want),
+            "ray {k}"
+        );
+        assert_eq!(
+            second.any_hit(&ray, cfg, &mut st),
+            plain.any_hit(&ray, cfg, &mut st)
+        );
+    }
+    let entries = || {
+        let mut v: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        v.sort();
+        v
+    };
+    assert_eq!(entries().len(), 2);
+
+    // Another mesh (one vertex moved): its own entry.
+    let mut moved = models.clone();
+    moved[1].mesh.positions[0][0] += 0.01;
+    let (_, r) = build(&moved);
+    assert_eq!((r.cached, r.built), (1, 1), "{r:?}");
+    assert_eq!(entries().len(), 3);
+
+    // A truncated entry and a foreign file: built again, the file named, and replaced.
+    let path = entries()
+        .into_iter()
+        .find(|p| p.to_string_lossy().contains("first-kdtree"))
+        .unwrap();
+    let good = std::fs::read(&path).unwrap();
+    for bad in [&good[..good.len() / 2], &b"not a tree"[..]] {
+        std::fs::write(&path, bad).unwrap();
+        let (again, r) = build(&models);
+        assert_eq!(r.built, 1, "{r:?}");
+        assert_eq!(r.warnings.len(), 1, "{r:?}");
+        assert!(
+            r.warnings[0].contains(&path.display().to_string()),
+            "{:?}",
+            r.warnings
+        );
+        assert_eq!(again.models().len(), 2);
+        assert_eq!(std::fs::read(&path).unwrap(), good, "replaced");
+    }
+
+    // The bytes of a tree round-trip; broken structure is refused with the reason.
+    let tree = plain.models()[0].tree();
+    let n = models[0].mesh.indices.len();
+    let bytes = tree.to_bytes();
+    let back = KdTree::from_bytes(&bytes, n).unwrap();
+    assert_eq!(back.nodes(), tree.nodes());
+    assert!(KdTree::from_bytes(&bytes, 3)
+        .unwrap_err()
+        .contains("triangles"));
+    assert!(KdTree::from_bytes(&bytes[..bytes.len() - 1], n).is_err());
+    // The root's far child pointed back at itself: refused (a walk would never end).
+    let root = tree.nodes()[0].raw();
+    assert_ne!(root[0] & 3, 3, "the root is an inner node");
+    let at = 24 + 56 + 8; // box, statistics, node count
+    let mut looped = bytes.clone();
+    looped[at..at + 4].copy_from_slice(&(root[0] & 3).to_le_bytes());
+    let e = KdTree::from_bytes(&looped, n).unwrap_err();
+    assert!(e.contains("node 0"), "{e}");
+}
