@@ -37,7 +37,7 @@ pub use basis::{
 };
 pub use compress::haar::{HaarCoefs, HaarView};
 pub use compress::{
-    compress, compress_channels, relit_error, sky_directions, Codec, CompressTarget,
+    compress, compress_channels, relit_error, sky_directions, BlockCache, Codec, CompressTarget,
     CompressedBasis, CompressedChannels, ErrorReport, Precision, ProjectedWeights, StoredFields,
     COMPRESSED_EXTENSION,
 };

@@ -27,7 +27,7 @@ use std::sync::OnceLock;
 
 use glam::{Affine3A, Vec3};
 use sylva_geom::{Aabb, Model};
-use sylva_lb::relight::Placement;
+use sylva_lb::relight::{BlockCache, Placement};
 use sylva_lb::LightingGrid;
 use sylva_trace::TraceInstance;
 
@@ -113,7 +113,8 @@ struct Baked {
 }
 
 /// [`PhysicalRelitLight::bake_for_frame`] decodes when a frame's lookups are at least
-/// `1 / BAKE_SITES_PER_LOOKUP` of the sites to decode. A decoded lookup saves 0.21 µs of a
+/// `1 / BAKE_SITES_PER_LOOKUP` of the sites to decode, for bases whose lookups otherwise
+/// decode their footprint (uncompressed parts, PCA codecs). A decoded lookup saves 0.21 µs of a
 /// compressed one (4.40 against 47.3 M lookups/s, `benches/relight_lookup.rs`) and a site
 /// decodes in about 21 ns in a real frame (a catalpa's 28 parts at grid 128: 1.6 M sites in
 /// 30-40 ms), so decoding pays from about one lookup per 10 sites; the count takes every
@@ -121,6 +122,14 @@ struct Baked {
 /// frame at one sample reads a catalpa at grid 128 decoded (measured alike either way:
 /// docs/PERFORMANCE.md); a viewer's preview (a fifth of the size) does not.
 const BAKE_SITES_PER_LOOKUP: u64 = 8;
+
+/// The same for bases of Haar sets (the default codecs), whose lookups otherwise read blocks
+/// decoded on first use ([`BlockCache`]): a frame decodes every site only when it reads at
+/// least as many lookups as there are sites. A frame at one sample reads a crown's visible
+/// surface and the ground under it, a tenth of its blocks, each decoded once: the catalpa's
+/// 512² relit frame at K = 0 went from 1.14-1.16 to 1.04-1.05 times the static frame's
+/// (docs/PERFORMANCE.md); the default gather (K = 8) reads it everywhere and decodes it all.
+const BAKE_SITES_PER_LOOKUP_BLOCKS: u64 = 1;
 
 /// A grid [`PhysicalRelitLight::bake_for_frame`] may decode: the terms of `terms.0`'s plants
 /// (`terms.1`: of its ground), and every lookup that reads them (instance, whether its
@@ -195,6 +204,19 @@ pub struct PhysicalRelitLight {
     open: OpenField,
     /// The current sun's light decoded, once a frame asked for it.
     baked: OnceLock<Baked>,
+    /// The current sun's light decoded block by block as lookups reach it, for the
+    /// instances `baked` does not hold (made on the first such lookup).
+    blocks: OnceLock<LazyBlocks>,
+}
+
+/// Per group of lookups ([`BakeGroup`]: one model and terms) within the budget, the blocks
+/// its lookups decoded; per instance, the cache its plants' and its ground's lookups read
+/// (`None`: over the budget, or a basis without Haar blocks: they decode their footprint).
+#[derive(Debug)]
+struct LazyBlocks {
+    caches: Vec<BlockCache>,
+    plants: Vec<Option<usize>>,
+    ground: Vec<Option<usize>>,
 }
 
 impl PhysicalRelitLight {
@@ -242,6 +264,7 @@ impl PhysicalRelitLight {
             weights: Vec::new(),
             open: open_field(&env),
             baked: OnceLock::new(),
+            blocks: OnceLock::new(),
         };
         light.relight(illumination)?;
         Ok(light)
@@ -288,6 +311,7 @@ impl PhysicalRelitLight {
             inst.ground_parts = ground;
         }
         self.baked = OnceLock::new();
+        self.blocks = OnceLock::new();
         self.open = open_field(&env);
         self.illumination = illumination;
         Ok(())
@@ -402,7 +426,8 @@ impl PhysicalRelitLight {
     /// rays)): decodes the current sun's light at every site for as many instances as
     /// `budget` bytes hold (the most read grids first: the instances of one model with equal
     /// terms share one, and their plants and ground one without a forest grid) when the
-    /// frame reads it at least once per [`BAKE_SITES_PER_LOOKUP`] sites, so their lookups read
+    /// frame reads it at least once per [`BAKE_SITES_PER_LOOKUP`] sites (per site with Haar
+    /// bases: [`BAKE_SITES_PER_LOOKUP_BLOCKS`]), so their lookups read
     /// 3 values instead of every part's (or, compressed, a Haar kernel per field). Once per
     /// sun: the next [`PhysicalRelitLight::relight`] drops it. `None` when nothing is decoded
     /// (not worth it, nothing fits, or memory refused: lookups decode the parts).
@@ -410,6 +435,16 @@ impl PhysicalRelitLight {
         if let Some(b) = self.baked.get() {
             return Some(b.summary);
         }
+        // Without decoding, Haar bases' lookups read blocks decoded on first use.
+        let per = match self
+            .models
+            .iter()
+            .flatten()
+            .all(|b| b.block_count().is_some())
+        {
+            true => BAKE_SITES_PER_LOOKUP_BLOCKS,
+            false => BAKE_SITES_PER_LOOKUP,
+        };
         // A frame too small for even the smallest grid (a preview) skips the grouping.
         let smallest = self
             .models
@@ -417,11 +452,11 @@ impl PhysicalRelitLight {
             .flatten()
             .map(|b| b.dims().sites() as u64)
             .min()?;
-        if lookups.saturating_mul(BAKE_SITES_PER_LOOKUP) < smallest {
+        if lookups.saturating_mul(per) < smallest {
             return None;
         }
         let (chosen, of, sites) = self.chosen_groups(budget);
-        if chosen.is_empty() || lookups.saturating_mul(BAKE_SITES_PER_LOOKUP) < sites {
+        if chosen.is_empty() || lookups.saturating_mul(per) < sites {
             return None;
         }
         Some(self.bake_chosen(chosen, of).summary)
@@ -557,7 +592,10 @@ impl PhysicalRelitLight {
             }
         }
         let basis = self.models[inst.model as usize].as_ref()?;
-        Some(basis.sample(p, &inst.terms))
+        Some(match self.lazy_blocks().plants[instance] {
+            Some(c) => basis.sample_blocks(p, &inst.terms, &self.lazy_blocks().caches[c]),
+            None => basis.sample(p, &inst.terms),
+        })
     }
 
     /// Instance `i`'s ground terms (its model's light alone) at model-space point `p` of
@@ -569,7 +607,60 @@ impl PhysicalRelitLight {
                 return b.grids[g].1.sample(p);
             }
         }
-        basis.sample(p, &self.instances[i].ground)
+        let terms = &self.instances[i].ground;
+        match self.lazy_blocks().ground[i] {
+            Some(c) => basis.sample_blocks(p, terms, &self.lazy_blocks().caches[c]),
+            None => basis.sample(p, terms),
+        }
+    }
+
+    /// The block caches of the current sun, made on the first lookup that needs them: one
+    /// per group of lookups ([`PhysicalRelitLight::bake_groups`], the most read first) whose
+    /// blocks, all decoded, fit [`DEFAULT_BAKE_BUDGET`] with the groups before it. Chosen
+    /// before any block is decoded, so which lookups read blocks does not depend on the
+    /// order threads reach them.
+    fn lazy_blocks(&self) -> &LazyBlocks {
+        self.blocks.get_or_init(|| {
+            let n = self.instances.len();
+            let mut lazy = LazyBlocks {
+                caches: Vec::new(),
+                plants: vec![None; n],
+                ground: vec![None; n],
+            };
+            let (groups, _) = self.bake_groups();
+            let mut bytes = 0u64;
+            for group in groups {
+                let Some(count) = self.models[group.model as usize]
+                    .as_ref()
+                    .and_then(StoredPhysicalBasis::block_count)
+                else {
+                    continue;
+                };
+                let need = BlockCache::memory_needed(count);
+                if bytes + need > DEFAULT_BAKE_BUDGET {
+                    continue;
+                }
+                bytes += need;
+                let at = lazy.caches.len();
+                lazy.caches.push(BlockCache::new(count));
+                for (i, ground) in group.uses {
+                    let slot = match ground {
+                        true => &mut lazy.ground[i],
+                        false => &mut lazy.plants[i],
+                    };
+                    *slot = Some(at);
+                }
+            }
+            lazy
+        })
+    }
+
+    /// Blocks the current sun's lookups decoded one by one so far (a frame that decoded
+    /// every site reads none).
+    pub fn blocks_decoded(&self) -> usize {
+        self.blocks
+            .get()
+            .map_or(0, |l| l.caches.iter().map(BlockCache::decoded).sum())
     }
 }
 

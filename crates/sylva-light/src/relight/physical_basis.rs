@@ -27,8 +27,8 @@ use sylva_core::cache::{Cache, CacheKey, CacheKind, Lookup, KEY_METADATA};
 use sylva_core::container::{read_container, write_container, ByteReader, ByteWriter};
 use sylva_geom::Model;
 use sylva_lb::relight::{
-    compress_channels, Codec, CompressTarget, CompressedChannels, Footprint, Placement, Precision,
-    ProjectedWeights, Region,
+    compress_channels, BlockCache, Codec, CompressTarget, CompressedChannels, Footprint, Placement,
+    Precision, ProjectedWeights, Region,
 };
 use sylva_lb::{Bounds, DensityGrid, Dims};
 
@@ -515,6 +515,29 @@ impl StoredPhysicalBasis {
                 Vec3::from_array(c.sun.sample_grid_with(sun, &c.diffuse, diffuse, g))
             }
             _ => panic!("terms projected for another kind of physical basis"),
+        }
+    }
+
+    /// Blocks a [`BlockCache`] of this basis holds: `Some` for a compressed basis whose two
+    /// sets are Haar sets (the default codecs), whose lookups can read decoded blocks.
+    pub fn block_count(&self) -> Option<usize> {
+        match self {
+            StoredPhysicalBasis::Compressed(c) => c.sun.block_count_with(&c.diffuse),
+            StoredPhysicalBasis::Full(_) => None,
+        }
+    }
+
+    /// [`StoredPhysicalBasis::sample`] read from `cache`, which holds this basis's blocks for
+    /// `terms` alone, each decoded on its first lookup: the same light up to rounding, for a
+    /// frame that reads too few sites to decode them all ([`StoredPhysicalBasis::bake`]).
+    #[inline]
+    pub fn sample_blocks(&self, p: Vec3, terms: &PhysicalTerms, cache: &BlockCache) -> Vec3 {
+        match (self, terms) {
+            (StoredPhysicalBasis::Compressed(c), PhysicalTerms::Compressed(sun, diffuse)) => {
+                let g = c.placement.grid_coords(p.to_array());
+                Vec3::from_array(c.sun.sample_blocks_with(sun, &c.diffuse, diffuse, g, cache))
+            }
+            _ => self.sample(p, terms),
         }
     }
 

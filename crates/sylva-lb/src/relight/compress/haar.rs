@@ -144,7 +144,7 @@ fn sign(t: usize, q: usize) -> f32 {
 
 /// Local index of site (x, y, z) in a block's 4³ values.
 #[inline]
-fn local(x: usize, y: usize, z: usize) -> usize {
+pub(crate) fn local(x: usize, y: usize, z: usize) -> usize {
     (x * SIDE + y) * SIDE + z
 }
 
@@ -548,6 +548,53 @@ impl HaarFields {
             OWN * b + OWN - 1
         };
         OWN * b..=hi
+    }
+
+    /// Blocks stored.
+    pub fn block_count(&self) -> usize {
+        self.blocks.iter().product()
+    }
+
+    /// The block a lookup at `fp` reads, and the footprint's lower corner in it (each
+    /// coordinate 0 to 2: the footprint's eight sites lie in the block's 4³).
+    #[inline]
+    pub fn footprint_block(&self, fp: &Footprint) -> (usize, [usize; 3]) {
+        self.block_of(fp.corner)
+    }
+
+    /// Adds block `b`'s 4³ values of `Σ_terms w · field` to `out` (per colour, [`local`]
+    /// order): a lookup in block `b` ([`HaarFields::sample_into`]) is their trilinear
+    /// interpolation at the footprint, up to rounding, so lookups can read a block decoded
+    /// once. `terms` sorted by field.
+    pub fn add_block_combined(
+        &self,
+        b: usize,
+        terms: &[(u32, [f32; 3])],
+        out: &mut [[f32; BLOCK_VALUES]; 3],
+    ) {
+        let mut dense = [[0.0f32; BLOCK_VALUES]; 3];
+        let mut details = false;
+        for (f, w, range) in self.term_coefficients(b, terms) {
+            for i in range {
+                let (k, v) = self.coefs.get(f, i);
+                details |= k != 0;
+                for c in 0..3 {
+                    dense[c][k] += w[c] * v;
+                }
+            }
+        }
+        for c in 0..3 {
+            if details {
+                let v = inverse_dense(&dense[c]);
+                for (o, v) in out[c].iter_mut().zip(v) {
+                    *o += v;
+                }
+            } else {
+                for o in out[c].iter_mut() {
+                    *o += dense[c][0];
+                }
+            }
+        }
     }
 
     /// Adds `Σ_terms w · field` at every site to `out` (site order as [`Dims::index`]; each

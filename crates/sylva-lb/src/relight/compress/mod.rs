@@ -874,6 +874,89 @@ impl CompressedChannels {
     }
 }
 
+/// One combination of two compressed sets (a model's sun parts and diffuse parts) decoded
+/// block by block as lookups reach them ([`CompressedChannels::sample_blocks_with`]): a frame
+/// that reads few sites decodes only the blocks it reads, each once, where decoding every
+/// site would cost more than the frame saves. Each block holds its 4³ values per colour
+/// (both sets' terms and constants summed), so a lookup is 8 reads. Values depend only on
+/// the block and the weights: the same whichever thread decodes first.
+#[derive(Debug)]
+pub struct BlockCache {
+    blocks: Vec<std::sync::OnceLock<Box<[[f32; haar::BLOCK_VALUES]; 3]>>>,
+}
+
+impl BlockCache {
+    /// An empty cache for `count` blocks.
+    pub fn new(count: usize) -> BlockCache {
+        BlockCache {
+            blocks: (0..count).map(|_| std::sync::OnceLock::new()).collect(),
+        }
+    }
+
+    /// Bytes a cache of `count` blocks holds at most (every block decoded).
+    pub fn memory_needed(count: usize) -> u64 {
+        count as u64
+            * (std::mem::size_of::<std::sync::OnceLock<Box<[[f32; haar::BLOCK_VALUES]; 3]>>>()
+                + std::mem::size_of::<[[f32; haar::BLOCK_VALUES]; 3]>()) as u64
+    }
+
+    /// Blocks decoded so far.
+    pub fn decoded(&self) -> usize {
+        self.blocks.iter().filter(|b| b.get().is_some()).count()
+    }
+}
+
+impl CompressedChannels {
+    /// Blocks a [`BlockCache`] of this set and `other` holds: `Some` when both are Haar sets
+    /// on one grid (block lookups need the blocks).
+    pub fn block_count_with(&self, other: &CompressedChannels) -> Option<usize> {
+        match (&self.encoded.store, &other.encoded.store) {
+            (Store::Haar(a), Store::Haar(b)) if self.dims == other.dims => {
+                debug_assert_eq!(a.block_count(), b.block_count());
+                Some(a.block_count())
+            }
+            _ => None,
+        }
+    }
+
+    /// [`CompressedChannels::sample_grid_with`] read from `cache`, each block decoded on its
+    /// first lookup: the same value up to rounding. `cache` must hold this pair's blocks
+    /// ([`CompressedChannels::block_count_with`]) for these weights alone.
+    #[inline]
+    pub fn sample_blocks_with(
+        &self,
+        w: &ProjectedWeights,
+        other: &CompressedChannels,
+        v: &ProjectedWeights,
+        g: [f32; 3],
+        cache: &BlockCache,
+    ) -> [f32; 3] {
+        let (Store::Haar(a), Store::Haar(b)) = (&self.encoded.store, &other.encoded.store) else {
+            return self.sample_grid_with(w, other, v, g);
+        };
+        let fp = Footprint::at(self.dims, g);
+        let (block, o) = a.footprint_block(&fp);
+        let values = cache.blocks[block].get_or_init(|| {
+            let mut out: Box<[[f32; haar::BLOCK_VALUES]; 3]> = Box::new(std::array::from_fn(|c| {
+                [w.constant[c] + v.constant[c]; haar::BLOCK_VALUES]
+            }));
+            a.add_block_combined(block, &w.terms, &mut out);
+            b.add_block_combined(block, &v.terms, &mut out);
+            out
+        });
+        let wt = fp.weights();
+        let mut out = [0.0f32; 3];
+        for (corner, wt) in wt.into_iter().enumerate() {
+            let (dx, dy, dz) = (corner >> 2, corner >> 1 & 1, corner & 1);
+            let l = haar::local(o[0] + dx, o[1] + dy, o[2] + dz);
+            for c in 0..3 {
+                out[c] += wt * values[c][l];
+            }
+        }
+        out
+    }
+}
+
 /// Travel directions of `n` suns spread evenly over the sky (above the horizon, equal areas
 /// on the hemisphere, a Fibonacci spiral): light travelling down.
 pub fn sky_directions(n: usize) -> Vec<[f64; 3]> {
@@ -964,4 +1047,66 @@ pub fn relit_error(
         mean: sum / (3 * n) as f64,
         lookups: n,
     })
+}
+
+#[cfg(test)]
+mod block_cache_tests {
+    use super::*;
+
+    /// Lookups read from blocks decoded on first use equal the footprint lookups of the two
+    /// compressed sets (to rounding), on a grid whose sides are not whole blocks and with
+    /// coefficients dropped; only the blocks read are decoded; a PCA set has no blocks.
+    #[test]
+    fn block_lookups_equal_footprint_lookups() {
+        let dims = Dims::new(13, 8, 10).unwrap();
+        let value = |ch: usize, s: usize| {
+            let (x, y, z) = dims.coords(s);
+            (0.7 * x as f32 + ch as f32).sin() + 0.05 * (y * z) as f32 + 1.5
+        };
+        let target = |codec| CompressTarget {
+            precision: Precision::Packed,
+            ..CompressTarget::new(codec)
+        };
+        let haar = target(Codec::ColourHaar { threshold: 0.004 });
+        let region = Region::all(dims);
+        let sun = compress_channels(dims, 6, &value, &[1.0; 6], &region, &haar).unwrap();
+        let diffuse =
+            compress_channels(dims, 3, &|c, s| value(c + 6, s), &[1.0; 3], &region, &haar).unwrap();
+        let w = sun.project(&[(0, [0.5, 0.2, 1.0]), (1, [0.1, 0.0, 0.3])]);
+        let v = diffuse.project(&[(0, [1.0, 0.5, 2.0])]);
+        let count = sun
+            .block_count_with(&diffuse)
+            .expect("Haar sets have blocks");
+        let cache = BlockCache::new(count);
+        assert_eq!(cache.decoded(), 0);
+        let mut r = sylva_core::SplitMix64::new(5);
+        let mut worst = 0.0f32;
+        // A corner of the grid first: few blocks.
+        for k in 0..3000 {
+            let span = if k < 100 {
+                [2.0, 2.0, 2.0]
+            } else {
+                [13.0, 8.0, 10.0]
+            };
+            let g: [f32; 3] = std::array::from_fn(|a| r.next_f64() as f32 * span[a] - 0.5);
+            let a = sun.sample_grid_with(&w, &diffuse, &v, g);
+            let b = sun.sample_blocks_with(&w, &diffuse, &v, g, &cache);
+            for c in 0..3 {
+                worst = worst.max((a[c] - b[c]).abs() / (1.0 + a[c].abs()));
+            }
+            if k == 99 {
+                assert!(
+                    cache.decoded() <= 8,
+                    "{} blocks for a corner",
+                    cache.decoded()
+                );
+            }
+        }
+        assert!(worst < 1e-5, "block lookups differ by {worst}");
+        assert!(cache.decoded() > 8 && cache.decoded() <= count);
+        let pca = CompressTarget::new(Codec::Pca { rank: 2 });
+        let dense =
+            compress_channels(dims, 3, &|c, s| value(c, s), &[1.0; 3], &region, &pca).unwrap();
+        assert_eq!(sun.block_count_with(&dense), None);
+    }
 }
