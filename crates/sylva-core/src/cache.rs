@@ -78,6 +78,12 @@ impl CacheKey {
         self.0
     }
 
+    /// A key from its 64 bits, as [`CacheKey::value`] gave them (a key recorded inside an
+    /// entry and read back with it).
+    pub fn from_value(value: u64) -> CacheKey {
+        CacheKey(value)
+    }
+
     /// The metadata entry that records the key in a cache entry.
     pub fn metadata(self) -> (String, String) {
         (KEY_METADATA.to_string(), self.to_string())

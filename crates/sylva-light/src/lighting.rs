@@ -1258,7 +1258,7 @@ impl<'a> LightingPlan<'a> {
         let Some((cache, _)) = &self.entry else {
             return Ok((self.voxelized()?, None));
         };
-        let key = CacheKey::new(MODEL_DENSITY, &self.medium_key);
+        let key = self.density_key();
         let path = cache.entry(
             &format!(
                 "{}-density",
@@ -1291,6 +1291,12 @@ impl<'a> LightingPlan<'a> {
         debug_assert_eq!(got.value.dims, dims);
         debug_assert_eq!(got.value.bounds, bounds);
         Ok((got.value, warning))
+    }
+
+    /// The key of the model's voxelized density: the mesh, materials, voxelizer, grid and
+    /// medium it is made from (its medium key), whether or not it is cached.
+    pub fn density_key(&self) -> CacheKey {
+        CacheKey::new(MODEL_DENSITY, &self.medium_key)
     }
 
     fn solve_error(&self, source: LbSolverError) -> LightingError {
@@ -1507,13 +1513,16 @@ pub fn model_density(
 
 /// [`model_density`]'s density kept in the cache, and the warning to show
 /// ([`LightingPlan::density_cached`]).
+/// Also the density's key (what it was voxelized from: [`LightingPlan::density_key`]).
 pub fn model_density_cached(
     model: &Model,
     illum: &Illumination,
     opts: &LightingOptions,
     solver: &dyn LbSolver,
-) -> Result<(DensityGrid, Option<String>), LightingError> {
-    LightingPlan::new(model, illum, opts, solver)?.density_cached()
+) -> Result<(DensityGrid, CacheKey, Option<String>), LightingError> {
+    let plan = LightingPlan::new(model, illum, opts, solver)?;
+    let (density, warning) = plan.density_cached()?;
+    Ok((density, plan.density_key(), warning))
 }
 
 /// [`model_lighting_parts`] on the model's `own` density ([`model_density`]), its sun part

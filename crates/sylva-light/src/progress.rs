@@ -30,6 +30,8 @@ pub trait Progress: Sync {
     fn neighbour_shade(&self, _model: &Model, _shade: &ShadedDensity) {}
     /// A model's cached density could not be used (voxelized again) or kept: why.
     fn density_warning(&self, _model: &Model, _warning: &str) {}
+    /// A forest's cached neighbours' foliage could not be used (measured again) or kept: why.
+    fn shade_warning(&self, _warning: &str) {}
     /// The models' kd-trees are ready: `cached` read from the cache, `built` built; why an
     /// entry could not be used (built again) or kept, naming the file.
     fn kd_trees(&self, _cached: usize, _built: usize, _warnings: &[String]) {}

@@ -21,6 +21,8 @@ pub enum LightEvent<'a> {
     Shade(&'a str, f64, f64),
     /// A model's cached density voxelized again or not kept: (model, why).
     Density(&'a str, &'a str),
+    /// A forest's cached neighbours' foliage measured again or not kept: why.
+    Shades(&'a str),
     /// The models' kd-trees: (read from the cache, built, why an entry was not used or kept).
     KdTrees(usize, usize, &'a [String]),
 }
@@ -50,6 +52,7 @@ impl LightEvent<'_> {
             LightEvent::Global(r) => warnings(&r.source, &r.cache_warning),
             LightEvent::Shade(..) => None,
             LightEvent::Density(_, why) => Some(format!("warning: {why}")),
+            LightEvent::Shades(why) => Some(format!("warning: {why}")),
             LightEvent::KdTrees(_, _, why) if !why.is_empty() => Some(
                 why.iter()
                     .map(|w| format!("warning: {w}"))
@@ -128,6 +131,7 @@ impl LightEvent<'_> {
                 100.0 * added / own.max(1e-12)
             ),
             LightEvent::Density(name, _) => format!("  {name}: density voxelized"),
+            LightEvent::Shades(_) => "  the neighbours' foliage measured".to_string(),
             LightEvent::KdTrees(cached, built, _) => {
                 format!("  kd-trees: {cached} from cache, {built} built")
             }

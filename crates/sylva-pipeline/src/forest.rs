@@ -16,7 +16,7 @@ use sylva_geom::Scene;
 use sylva_lb::{DensityGrid, LightingGrid};
 
 use sylva_core::cache::Cache;
-use sylva_light::forest::{neighbour_shade, ForestCache, ForestInstance, ForestLight};
+use sylva_light::forest::{neighbour_shade_cached, ForestCache, ForestInstance, ForestLight};
 use sylva_light::lighting::{
     model_density_cached, physical_environment, Light, LightingError, LightingReport,
     LightingSource, ModelLighting, PartsPlan, ShadedDensity, PARTS,
@@ -60,7 +60,7 @@ pub fn forest_densities(
         .enumerate()
         .map(|(k, model)| {
             let lopts = lopts.for_model(scene, k);
-            let (density, warning) = model_density_cached(model, &illum, &lopts, lb.solver)
+            let (density, key, warning) = model_density_cached(model, &illum, &lopts, lb.solver)
                 .map_err(|source| PipelineError::Lighting {
                     model: model.name.clone(),
                     source,
@@ -68,20 +68,37 @@ pub fn forest_densities(
             if let Some(w) = warning {
                 progress.density_warning(model, &w);
             }
-            Ok::<_, PipelineError>(density)
+            Ok::<_, PipelineError>((density, key))
         })
         .collect::<Result<Vec<_>, _>>()?;
+    let (own, keys): (Vec<DensityGrid>, Vec<_>) = own.into_iter().unzip();
     let grids: Vec<&DensityGrid> = own.iter().collect();
     let placed: Vec<(usize, glam::Affine3A)> = scene
         .instances
         .iter()
         .map(|i| (i.model as usize, i.transform()))
         .collect();
-    let shades =
-        neighbour_shade(&grids, &placed, 0.0, gopts).map_err(|source| PipelineError::Global {
-            scene: scene.name.clone(),
-            source,
-        })?;
+    // Every process reads or measures it alike (the same entry, byte for byte), as the
+    // densities.
+    let cache = lopts.cache_dir.as_ref().map(Cache::new);
+    let stem = sylva_core::file_stem(&scene.name, "scene");
+    let (shades, warning) = neighbour_shade_cached(
+        &grids,
+        &keys,
+        &placed,
+        0.0,
+        gopts,
+        cache
+            .as_ref()
+            .map(|cache| ForestCache { cache, stem: &stem }),
+    )
+    .map_err(|source| PipelineError::Global {
+        scene: scene.name.clone(),
+        source,
+    })?;
+    if let Some(w) = warning {
+        progress.shade_warning(&w);
+    }
     Ok(ForestDensities { own, shades })
 }
 

@@ -107,6 +107,11 @@ impl<F: Fn(LightEvent) + Sync> Progress for Bars<F> {
         (self.on_report)(LightEvent::Density(&model.name, warning));
     }
 
+    fn shade_warning(&self, warning: &str) {
+        self.finish();
+        (self.on_report)(LightEvent::Shades(warning));
+    }
+
     fn kd_trees(&self, cached: usize, built: usize, warnings: &[String]) {
         self.finish();
         (self.on_report)(LightEvent::KdTrees(cached, built, warnings));
