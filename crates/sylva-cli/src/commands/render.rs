@@ -261,7 +261,7 @@ pub struct GridArgs {
     )]
     pub global_grid: usize,
     /// Compression of cached base solutions: colour:T (per-basis colour decorrelation +
-    /// Haar), haar:T, pca:K or pcahaar:K:T. The physical light: one codec for its 13 sun
+    /// Haar), haar:T, pca:K or pcahaar:K:T. The physical light: one codec for its 25 sun
     /// parts and 3 diffuse parts, or two separated by a comma (sun parts, then diffuse
     /// parts, e.g. pcahaar:12:0.002,colour:0.004), or none (kept as solved).
     #[arg(long, default_value = "colour:0.004")]
