@@ -37,9 +37,9 @@ pub use basis::{
 };
 pub use compress::haar::{HaarCoefs, HaarView};
 pub use compress::{
-    compress, compress_channels, relit_error, sky_directions, BlockCache, Codec, CompressTarget,
-    CompressedBasis, CompressedChannels, ErrorReport, Precision, ProjectedWeights, StoredFields,
-    COMPRESSED_EXTENSION,
+    compress, compress_channels, relit_error, sky_directions, BlockBudget, BlockCache, Codec,
+    CompressTarget, CompressedBasis, CompressedChannels, ErrorReport, Precision, ProjectedWeights,
+    StoredFields, COMPRESSED_EXTENSION,
 };
 pub use footprint::{Footprint, Placement};
 pub use polyhedron::{exact_weights, face_hit, faces, normalise, DirectionError, Face, FaceHit};

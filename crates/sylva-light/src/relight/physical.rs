@@ -27,7 +27,7 @@ use std::sync::OnceLock;
 
 use glam::{Affine3A, Vec3};
 use sylva_geom::{Aabb, Model};
-use sylva_lb::relight::{BlockCache, Placement};
+use sylva_lb::relight::{BlockBudget, BlockCache, Placement};
 use sylva_lb::LightingGrid;
 use sylva_trace::TraceInstance;
 
@@ -615,9 +615,11 @@ impl PhysicalRelitLight {
     }
 
     /// The block caches of the current sun, made on the first lookup that needs them: one
-    /// per group of lookups ([`PhysicalRelitLight::bake_groups`], the most read first) whose
-    /// blocks, all decoded, fit [`DEFAULT_BAKE_BUDGET`] with the groups before it. Chosen
-    /// before any block is decoded, so which lookups read blocks does not depend on the
+    /// per group of lookups ([`PhysicalRelitLight::bake_groups`]: a model and its terms) of
+    /// a basis with Haar blocks, the most read first while their chunk indices take at most a
+    /// quarter of [`DEFAULT_BAKE_BUDGET`]; the blocks they keep share the rest (past it a
+    /// block is decoded for its lookup and not kept: the same value, [`BlockCache`]). Which
+    /// lookups read blocks is chosen before any is read, so a frame does not depend on the
     /// order threads reach them.
     fn lazy_blocks(&self) -> &LazyBlocks {
         self.blocks.get_or_init(|| {
@@ -628,7 +630,8 @@ impl PhysicalRelitLight {
                 ground: vec![None; n],
             };
             let (groups, _) = self.bake_groups();
-            let mut bytes = 0u64;
+            let mut index = 0u64;
+            let mut counts = Vec::new();
             for group in groups {
                 let Some(count) = self.models[group.model as usize]
                     .as_ref()
@@ -636,13 +639,13 @@ impl PhysicalRelitLight {
                 else {
                     continue;
                 };
-                let need = BlockCache::memory_needed(count);
-                if bytes + need > DEFAULT_BAKE_BUDGET {
+                let need = BlockCache::index_bytes(count);
+                if index + need > DEFAULT_BAKE_BUDGET / 4 {
                     continue;
                 }
-                bytes += need;
-                let at = lazy.caches.len();
-                lazy.caches.push(BlockCache::new(count));
+                index += need;
+                counts.push(count);
+                let at = counts.len() - 1;
                 for (i, ground) in group.uses {
                     let slot = match ground {
                         true => &mut lazy.ground[i],
@@ -651,6 +654,11 @@ impl PhysicalRelitLight {
                     *slot = Some(at);
                 }
             }
+            let budget = BlockBudget::new(DEFAULT_BAKE_BUDGET - index);
+            lazy.caches = counts
+                .into_iter()
+                .map(|count| BlockCache::new(count, budget.clone()))
+                .collect();
             lazy
         })
     }

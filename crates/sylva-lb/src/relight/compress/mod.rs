@@ -878,31 +878,130 @@ impl CompressedChannels {
 /// block by block as lookups reach them ([`CompressedChannels::sample_blocks_with`]): a frame
 /// that reads few sites decodes only the blocks it reads, each once, where decoding every
 /// site would cost more than the frame saves. Each block holds its 4³ values per colour
-/// (both sets' terms and constants summed), so a lookup is 8 reads. Values depend only on
-/// the block and the weights: the same whichever thread decodes first.
+/// (both sets' terms and constants summed), so a lookup is 8 reads. Sparse: a chunk of
+/// [`BLOCK_CHUNK`] block slots is made when a lookup first reaches it, so a cache costs
+/// memory only for the blocks read. Every cache of one frame draws on one [`BlockBudget`];
+/// past it a block is decoded for its lookup and not kept. A lookup's value is the same
+/// either way, and whichever thread decodes first: only the time depends on the budget.
 #[derive(Debug)]
 pub struct BlockCache {
-    blocks: Vec<std::sync::OnceLock<Box<[[f32; haar::BLOCK_VALUES]; 3]>>>,
+    chunks: Vec<std::sync::OnceLock<Box<BlockChunk>>>,
+    count: usize,
+    budget: std::sync::Arc<BlockBudget>,
 }
 
+/// Block slots made together in a [`BlockCache`].
+pub const BLOCK_CHUNK: usize = 16;
+
+type DecodedBlock = [[f32; haar::BLOCK_VALUES]; 3];
+type BlockChunk = [std::sync::OnceLock<Box<DecodedBlock>>; BLOCK_CHUNK];
+
+/// Bytes the [`BlockCache`]s of one sun may keep, shared between them.
+#[derive(Debug)]
+pub struct BlockBudget {
+    left: std::sync::atomic::AtomicI64,
+}
+
+impl BlockBudget {
+    pub fn new(bytes: u64) -> std::sync::Arc<BlockBudget> {
+        std::sync::Arc::new(BlockBudget {
+            left: std::sync::atomic::AtomicI64::new(bytes.min(i64::MAX as u64) as i64),
+        })
+    }
+
+    /// Takes `bytes` if they are left.
+    fn take(&self, bytes: u64) -> bool {
+        use std::sync::atomic::Ordering;
+        let bytes = bytes as i64;
+        self.left
+            .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |left| {
+                (left >= bytes).then_some(left - bytes)
+            })
+            .is_ok()
+    }
+
+    fn give_back(&self, bytes: u64) {
+        self.left
+            .fetch_add(bytes as i64, std::sync::atomic::Ordering::Relaxed);
+    }
+
+    /// Bytes left.
+    pub fn left(&self) -> u64 {
+        self.left.load(std::sync::atomic::Ordering::Relaxed).max(0) as u64
+    }
+}
+
+const CHUNK_BYTES: u64 = std::mem::size_of::<BlockChunk>() as u64;
+const BLOCK_BYTES: u64 = std::mem::size_of::<DecodedBlock>() as u64;
+
 impl BlockCache {
-    /// An empty cache for `count` blocks.
-    pub fn new(count: usize) -> BlockCache {
+    /// An empty cache for `count` blocks drawing on `budget`.
+    pub fn new(count: usize, budget: std::sync::Arc<BlockBudget>) -> BlockCache {
         BlockCache {
-            blocks: (0..count).map(|_| std::sync::OnceLock::new()).collect(),
+            chunks: (0..count.div_ceil(BLOCK_CHUNK))
+                .map(|_| std::sync::OnceLock::new())
+                .collect(),
+            count,
+            budget,
         }
     }
 
-    /// Bytes a cache of `count` blocks holds at most (every block decoded).
-    pub fn memory_needed(count: usize) -> u64 {
-        count as u64
-            * (std::mem::size_of::<std::sync::OnceLock<Box<[[f32; haar::BLOCK_VALUES]; 3]>>>()
-                + std::mem::size_of::<[[f32; haar::BLOCK_VALUES]; 3]>()) as u64
+    /// Bytes an empty cache of `count` blocks holds (its chunk index).
+    pub fn index_bytes(count: usize) -> u64 {
+        count.div_ceil(BLOCK_CHUNK) as u64
+            * std::mem::size_of::<std::sync::OnceLock<Box<BlockChunk>>>() as u64
     }
 
-    /// Blocks decoded so far.
+    /// Blocks decoded and kept so far.
     pub fn decoded(&self) -> usize {
-        self.blocks.iter().filter(|b| b.get().is_some()).count()
+        self.chunks
+            .iter()
+            .flat_map(|c| c.get())
+            .map(|c| c.iter().filter(|b| b.get().is_some()).count())
+            .sum()
+    }
+
+    /// `read` of block `b`'s values: kept, or `decode`d (and kept while the budget lasts).
+    #[inline]
+    fn with_block<R>(
+        &self,
+        b: usize,
+        decode: impl Fn() -> DecodedBlock,
+        read: impl FnOnce(&DecodedBlock) -> R,
+    ) -> R {
+        debug_assert!(b < self.count);
+        let slot = &self.chunks[b / BLOCK_CHUNK];
+        let chunk = match slot.get() {
+            Some(c) => c,
+            None if self.budget.take(CHUNK_BYTES) => {
+                let mut made = false;
+                let c = slot.get_or_init(|| {
+                    made = true;
+                    Box::new(std::array::from_fn(|_| std::sync::OnceLock::new()))
+                });
+                if !made {
+                    self.budget.give_back(CHUNK_BYTES);
+                }
+                c
+            }
+            None => return read(&decode()),
+        };
+        let cell = &chunk[b % BLOCK_CHUNK];
+        if let Some(v) = cell.get() {
+            return read(v);
+        }
+        if !self.budget.take(BLOCK_BYTES) {
+            return read(&decode());
+        }
+        let mut made = false;
+        let v = cell.get_or_init(|| {
+            made = true;
+            Box::new(decode())
+        });
+        if !made {
+            self.budget.give_back(BLOCK_BYTES);
+        }
+        read(v)
     }
 }
 
@@ -936,24 +1035,24 @@ impl CompressedChannels {
         };
         let fp = Footprint::at(self.dims, g);
         let (block, o) = a.footprint_block(&fp);
-        let values = cache.blocks[block].get_or_init(|| {
-            let mut out: Box<[[f32; haar::BLOCK_VALUES]; 3]> = Box::new(std::array::from_fn(|c| {
-                [w.constant[c] + v.constant[c]; haar::BLOCK_VALUES]
-            }));
+        let decode = || {
+            let mut out: DecodedBlock =
+                std::array::from_fn(|c| [w.constant[c] + v.constant[c]; haar::BLOCK_VALUES]);
             a.add_block_combined(block, &w.terms, &mut out);
             b.add_block_combined(block, &v.terms, &mut out);
             out
-        });
-        let wt = fp.weights();
-        let mut out = [0.0f32; 3];
-        for (corner, wt) in wt.into_iter().enumerate() {
-            let (dx, dy, dz) = (corner >> 2, corner >> 1 & 1, corner & 1);
-            let l = haar::local(o[0] + dx, o[1] + dy, o[2] + dz);
-            for c in 0..3 {
-                out[c] += wt * values[c][l];
+        };
+        cache.with_block(block, decode, |values| {
+            let mut out = [0.0f32; 3];
+            for (corner, wt) in fp.weights().into_iter().enumerate() {
+                let (dx, dy, dz) = (corner >> 2, corner >> 1 & 1, corner & 1);
+                let l = haar::local(o[0] + dx, o[1] + dy, o[2] + dz);
+                for c in 0..3 {
+                    out[c] += wt * values[c][l];
+                }
             }
-        }
-        out
+            out
+        })
     }
 }
 
@@ -1077,7 +1176,7 @@ mod block_cache_tests {
         let count = sun
             .block_count_with(&diffuse)
             .expect("Haar sets have blocks");
-        let cache = BlockCache::new(count);
+        let cache = BlockCache::new(count, BlockBudget::new(u64::MAX));
         assert_eq!(cache.decoded(), 0);
         let mut r = sylva_core::SplitMix64::new(5);
         let mut worst = 0.0f32;
@@ -1104,6 +1203,17 @@ mod block_cache_tests {
         }
         assert!(worst < 1e-5, "block lookups differ by {worst}");
         assert!(cache.decoded() > 8 && cache.decoded() <= count);
+        // Past its budget a cache keeps nothing more, and reads the same values.
+        let budget = BlockBudget::new(0);
+        let spent = BlockCache::new(count, budget.clone());
+        let mut r = sylva_core::SplitMix64::new(5);
+        for _ in 0..500 {
+            let g: [f32; 3] = std::array::from_fn(|_| r.next_f64() as f32 * 12.0 - 0.5);
+            let a = sun.sample_blocks_with(&w, &diffuse, &v, g, &cache);
+            let b = sun.sample_blocks_with(&w, &diffuse, &v, g, &spent);
+            assert_eq!(a, b, "the same value kept or not");
+        }
+        assert_eq!((spent.decoded(), budget.left()), (0, 0));
         let pca = CompressTarget::new(Codec::Pca { rank: 2 });
         let dense =
             compress_channels(dims, 3, &|c, s| value(c, s), &[1.0; 3], &region, &pca).unwrap();
