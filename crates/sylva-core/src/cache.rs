@@ -141,6 +141,17 @@ pub struct Cached<T> {
     pub write_warning: Option<String>,
 }
 
+impl<T> Cached<T> {
+    /// The warning to show, if any: why the entry could not be used (`redone` says what was
+    /// done instead, e.g. "voxelized again"), else why the value could not be stored.
+    pub fn warning(&self, redone: &str) -> Option<String> {
+        match &self.outcome {
+            CacheOutcome::BadEntry(reason) => Some(format!("{reason}; {redone}")),
+            _ => self.write_warning.clone(),
+        }
+    }
+}
+
 /// A cache directory. It need not exist: it is created on the first store.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Cache {

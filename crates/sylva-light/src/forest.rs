@@ -60,12 +60,10 @@ use sylva_lb::relight::Footprint;
 use sylva_lb::solver::{Lattice, SolveOptions};
 use sylva_lb::{ColourParams, CpuSolver, DensityGrid, Dims, LbSolver, MediumParams};
 
-use crate::lighting::{
-    LightingError, LightingSource, MediumKey, PartWeights, ShadedDensity, KEY_METADATA,
-};
+use crate::lighting::{LightingError, MediumKey, PartWeights, ShadedDensity, KEY_METADATA};
 use crate::relight::global::{
-    coarse_density, instance_extinction, placed, shell_faces, ExtinctionBlock, GlobalGridOptions,
-    GlobalInstance, GlobalReport, Placed, ShellFace, MARGIN,
+    coarse_density, instance_extinction, placed, read_layout, shell_faces, write_layout,
+    ExtinctionBlock, GlobalGridOptions, GlobalInstance, GlobalReport, Placed, ShellFace, MARGIN,
 };
 
 /// Largest fine density used for the optical-depth weights of the coarse medium.
@@ -140,19 +138,39 @@ impl CoarseLight {
     }
 }
 
-/// Where a forest grid's answer is cached: the cache and the scene's file stem.
-#[derive(Debug, Clone, Copy)]
-pub struct ForestCache<'a> {
-    pub cache: &'a Cache,
-    pub stem: &'a str,
+/// Where a forest's answers are cached: the cache and the scene's file stem.
+#[derive(Debug, Clone)]
+pub struct ForestCache {
+    cache: Cache,
+    stem: String,
 }
+
+impl ForestCache {
+    /// The cache in `dir` for the forest of the scene named `scene`.
+    pub fn new(dir: &Path, scene: &str) -> ForestCache {
+        ForestCache {
+            cache: Cache::new(dir),
+            stem: sylva_core::file_stem(scene, "scene"),
+        }
+    }
+
+    /// The entry `<stem>-<name>-<key>.<extension>`.
+    fn entry(&self, name: &str, key: CacheKey, extension: &str) -> std::path::PathBuf {
+        self.cache
+            .entry(&format!("{}-{name}", self.stem), key, extension)
+    }
+}
+
+/// A forest grid's answers in the cache: (what reports call it, its entries' name).
+const LIGHT_ENTRY: (&str, &str) = ("forest grid", "forest");
+const PARTS_ENTRY: (&str, &str) = ("forest grid parts", "forest-parts");
 
 /// `solve`d, or read from `cache` under `key` when it holds a valid entry (a bad one is
 /// solved again and replaced), with the report of what happened.
 #[allow(clippy::too_many_arguments)]
 fn cached_or_solved<T>(
-    what: &'static str,
-    cache: Option<ForestCache>,
+    (what, name): (&'static str, &str),
+    cache: Option<&ForestCache>,
     key: CacheKey,
     dims: Dims,
     t0: Instant,
@@ -160,26 +178,21 @@ fn cached_or_solved<T>(
     solve: impl FnOnce() -> Result<T, LightingError>,
     write: impl FnOnce(&T, &Path) -> Result<(), String>,
 ) -> Result<(T, GlobalReport), LightingError> {
-    let report = |source, path, cache_warning| GlobalReport {
+    let Some(at) = cache else {
+        let value = solve()?;
+        return Ok((value, GlobalReport::computed(what, dims, t0)));
+    };
+    let path = at.entry(name, key, FOREST_EXTENSION);
+    let got = at.cache.get_or_compute(&path, read, solve, write)?;
+    let report = GlobalReport {
         what,
-        source,
+        source: got.outcome.into(),
         seconds: t0.elapsed().as_secs_f64(),
         dims,
-        path,
-        cache_warning,
+        path: Some(path),
+        cache_warning: got.write_warning,
     };
-    let Some(ForestCache { cache, stem }) = cache else {
-        let value = solve()?;
-        return Ok((value, report(LightingSource::Computed, None, None)));
-    };
-    let name = match what {
-        "forest grid" => format!("{stem}-forest"),
-        _ => format!("{stem}-forest-parts"),
-    };
-    let path = cache.entry(&name, key, FOREST_EXTENSION);
-    let got = cache.get_or_compute(&path, read, solve, write)?;
-    let r = report(got.outcome.into(), Some(path), got.write_warning);
-    Ok((got.value, r))
+    Ok((got.value, report))
 }
 
 /// Reads a forest grid cache entry's payload under `key`; `Err` is why it is unusable,
@@ -721,9 +734,9 @@ pub fn neighbour_shade_cached(
     instances: &[(usize, Affine3A)],
     ground_y: f32,
     opts: &GlobalGridOptions,
-    cache: Option<ForestCache>,
+    cache: Option<&ForestCache>,
 ) -> Result<(Vec<Option<ShadedDensity>>, Option<String>), LightingError> {
-    let Some(ForestCache { cache, stem }) = cache else {
+    let Some(at) = cache else {
         return Ok((neighbour_shade(models, instances, ground_y, opts)?, None));
     };
     if density_keys.len() != models.len() {
@@ -747,7 +760,7 @@ pub fn neighbour_shade_cached(
             min: SHADE_MIN,
         },
     );
-    let path = cache.entry(&format!("{stem}-shade"), key, SHADE_EXTENSION);
+    let path = at.entry("shade", key, SHADE_EXTENSION);
     let read = |p: &Path| {
         let c = read_container(
             p,
@@ -759,7 +772,7 @@ pub fn neighbour_shade_cached(
         key.check(p, c.metadata_value(KEY_METADATA))?;
         shades_from_bytes(&c.payload, models).map_err(|e| format!("{}: {e}", p.display()))
     };
-    let got = cache.get_or_compute(
+    let got = at.cache.get_or_compute(
         &path,
         read,
         || neighbour_shade(models, instances, ground_y, opts),
@@ -774,13 +787,7 @@ pub fn neighbour_shade_cached(
             .map_err(|e| e.to_string())
         },
     )?;
-    let warning = match got.outcome {
-        sylva_core::cache::CacheOutcome::BadEntry(reason) => {
-            Some(format!("{reason}; measured again"))
-        }
-        _ => None,
-    }
-    .or(got.write_warning);
+    let warning = got.warning("measured again");
     Ok((got.value, warning))
 }
 
@@ -1145,7 +1152,7 @@ impl ForestLight {
         env: &Environment,
         ground_y: f32,
         opts: &GlobalGridOptions,
-        cache: Option<ForestCache>,
+        cache: Option<&ForestCache>,
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<(ForestLight, GlobalReport), LightingError> {
         let t0 = Instant::now();
@@ -1153,20 +1160,13 @@ impl ForestLight {
         let free = free_weights(env);
         let Some(coarse) = Coarse::new(instances, ground_y, opts)? else {
             let alone = ForestLight::alone(instances.len(), free);
-            let report = GlobalReport {
-                what: "forest grid",
-                source: LightingSource::Computed,
-                seconds: t0.elapsed().as_secs_f64(),
-                dims: alone.dims,
-                path: None,
-                cache_warning: None,
-            };
+            let report = GlobalReport::computed(LIGHT_ENTRY.0, alone.dims, t0);
             return Ok((alone, report));
         };
         let key = coarse.key(ground_y, CoarseLight::environment(env));
         let n = instances.len();
         cached_or_solved(
-            "forest grid",
+            LIGHT_ENTRY,
             cache,
             key,
             coarse.dims,
@@ -1183,13 +1183,7 @@ impl ForestLight {
     /// The answer as bytes: a cache entry's payload, and what MPI processes send.
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut w = ByteWriter::new();
-        for n in [self.dims.nx, self.dims.ny, self.dims.nz] {
-            w.u32(n as u32);
-        }
-        for v in self.origin {
-            w.f32(v);
-        }
-        w.f32(self.cell);
+        write_layout(&mut w, self.dims, self.origin, self.cell);
         let flat = |p: &PartWeights| [p.sun, p.sky_top, p.sky, p.ground].map(|v| v.to_array());
         w.f32s(flat(&self.free).as_flattened());
         let weights: Vec<[[f32; 3]; 4]> = self.weights.iter().map(flat).collect();
@@ -1201,16 +1195,7 @@ impl ForestLight {
     /// what is wrong with the bytes.
     pub fn from_bytes(bytes: &[u8], instances: usize) -> Result<ForestLight, String> {
         let mut r = ByteReader::new(bytes);
-        let mut n = [0usize; 3];
-        for v in &mut n {
-            *v = r.u32("grid size")? as usize;
-        }
-        let dims = Dims::new(n[0], n[1], n[2]).map_err(|e| e.to_string())?;
-        let mut origin = [0f32; 3];
-        for v in &mut origin {
-            *v = r.f32("origin")?;
-        }
-        let cell = r.f32("cell")?;
+        let (dims, origin, cell) = read_layout(&mut r)?;
         let free = r.f32s("free weights")?;
         let flat = r.f32s("weights")?;
         r.finish()?;
@@ -1225,8 +1210,6 @@ impl ForestLight {
             .iter()
             .chain(&free)
             .any(|v| !(v.is_finite() && *v >= 0.0))
-            || !(cell.is_finite() && cell > 0.0)
-            || origin.iter().any(|v| !v.is_finite())
         {
             return Err("a value is not finite or negative".into());
         }
@@ -1401,19 +1384,13 @@ impl ForestBases {
         ground_albedo: Option<[f64; 3]>,
         ground_y: f32,
         opts: &GlobalGridOptions,
-        cache: Option<ForestCache>,
+        cache: Option<&ForestCache>,
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<(ForestBases, GlobalReport), LightingError> {
         let t0 = Instant::now();
         let Some(coarse) = Coarse::new(instances, ground_y, opts)? else {
-            let report = GlobalReport {
-                what: "forest grid parts",
-                source: LightingSource::Computed,
-                seconds: t0.elapsed().as_secs_f64(),
-                dims: Dims::new(3, 3, 3).expect("valid"),
-                path: None,
-                cache_warning: None,
-            };
+            let none = Dims::new(3, 3, 3).expect("valid");
+            let report = GlobalReport::computed(PARTS_ENTRY.0, none, t0);
             return Ok((
                 ForestBases::without_grid(instances.len(), ground_albedo),
                 report,
@@ -1428,7 +1405,7 @@ impl ForestBases {
         );
         let n = instances.len();
         let (parts, report) = cached_or_solved(
-            "forest grid parts",
+            PARTS_ENTRY,
             cache,
             key,
             coarse.dims,
@@ -1727,11 +1704,7 @@ mod tests {
         let placed = [(0, at(0.0)), (1, at(1.0))];
         let keys = [CacheKey::from_value(1), CacheKey::from_value(2)];
         let dir = tempfile::tempdir().unwrap();
-        let cache = Cache::new(dir.path());
-        let at_cache = Some(ForestCache {
-            cache: &cache,
-            stem: "pair",
-        });
+        let at_cache = ForestCache::new(dir.path(), "pair");
         let want = neighbour_shade(&[&a, &b], &placed, 0.0, &opts).unwrap();
         let same = |got: &[Option<ShadedDensity>]| {
             got.len() == want.len()
@@ -1746,7 +1719,7 @@ mod tests {
                 })
         };
         let cached = |keys: &[CacheKey]| {
-            neighbour_shade_cached(&[&a, &b], keys, &placed, 0.0, &opts, at_cache).unwrap()
+            neighbour_shade_cached(&[&a, &b], keys, &placed, 0.0, &opts, Some(&at_cache)).unwrap()
         };
         let entries = || std::fs::read_dir(dir.path()).unwrap().count();
         for _ in 0..2 {
@@ -1760,13 +1733,9 @@ mod tests {
         assert_eq!(entries(), 2);
         // A damaged entry (the only one in its cache): measured again, named, replaced.
         let dir = tempfile::tempdir().unwrap();
-        let cache = Cache::new(dir.path());
-        let one = Some(ForestCache {
-            cache: &cache,
-            stem: "pair",
-        });
+        let one = ForestCache::new(dir.path(), "pair");
         let measure =
-            || neighbour_shade_cached(&[&a, &b], &keys, &placed, 0.0, &opts, one).unwrap();
+            || neighbour_shade_cached(&[&a, &b], &keys, &placed, 0.0, &opts, Some(&one)).unwrap();
         assert!(measure().1.is_none());
         let path = std::fs::read_dir(dir.path())
             .unwrap()

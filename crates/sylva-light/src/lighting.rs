@@ -1283,11 +1283,7 @@ impl<'a> LightingPlan<'a> {
                     .map_err(|e| e.to_string())
             },
         )?;
-        let warning = match got.outcome {
-            CacheOutcome::BadEntry(reason) => Some(format!("{reason}; voxelized again")),
-            _ => None,
-        }
-        .or(got.write_warning);
+        let warning = got.warning("voxelized again");
         debug_assert_eq!(got.value.dims, dims);
         debug_assert_eq!(got.value.bounds, bounds);
         Ok((got.value, warning))

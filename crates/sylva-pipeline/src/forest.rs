@@ -13,15 +13,15 @@ use std::time::Instant;
 use sylva_core::jobs::{from_root, Runner};
 use sylva_core::wire::{Reader, Writer};
 use sylva_geom::Scene;
-use sylva_lb::{DensityGrid, LightingGrid};
+use sylva_lb::{DensityGrid, LightingGrid, MediumParams};
 
-use sylva_core::cache::Cache;
 use sylva_light::forest::{neighbour_shade_cached, ForestCache, ForestInstance, ForestLight};
 use sylva_light::lighting::{
     model_density_cached, physical_environment, Light, LightingError, LightingReport,
     LightingSource, ModelLighting, PartsPlan, ShadedDensity, PARTS,
 };
 use sylva_light::relight::GlobalGridOptions;
+use sylva_light::relight::GlobalReport;
 use sylva_light::Progress;
 use sylva_render::stages::stage;
 
@@ -80,22 +80,14 @@ pub fn forest_densities(
         .collect();
     // Every process reads or measures it alike (the same entry, byte for byte), as the
     // densities.
-    let cache = lopts.cache_dir.as_ref().map(Cache::new);
-    let stem = sylva_core::file_stem(&scene.name, "scene");
-    let (shades, warning) = neighbour_shade_cached(
-        &grids,
-        &keys,
-        &placed,
-        0.0,
-        gopts,
-        cache
-            .as_ref()
-            .map(|cache| ForestCache { cache, stem: &stem }),
-    )
-    .map_err(|source| PipelineError::Global {
-        scene: scene.name.clone(),
-        source,
-    })?;
+    let cache = forest_cache(scene, lopts.cache_dir.as_deref());
+    let (shades, warning) =
+        neighbour_shade_cached(&grids, &keys, &placed, 0.0, gopts, cache.as_ref()).map_err(
+            |source| PipelineError::Global {
+                scene: scene.name.clone(),
+                source,
+            },
+        )?;
     if let Some(w) = warning {
         progress.shade_warning(&w);
     }
@@ -198,46 +190,94 @@ pub fn light_forest(
     // The forest grid's weights: the root's from its cache or solved (and cached), sent to
     // every process.
     let env = physical_environment(&illum).map_err(global_err)?;
-    let instances: Vec<ForestInstance> = scene
-        .instances
-        .iter()
-        .map(|i| {
-            let (d, m) = &fine[i.model as usize];
-            ForestInstance {
-                model: Some((d, m)),
-                to_world: i.transform(),
-            }
-        })
-        .collect();
-    let cache = opts.cache_dir.as_ref().map(Cache::new);
-    let stem = sylva_core::file_stem(&scene.name, "scene");
-    let forest = from_root(
+    let fine: Vec<_> = fine.iter().map(|(d, m)| (d, m)).collect();
+    let instances = forest_instances(scene, &fine);
+    let cache = forest_cache(scene, opts.cache_dir.as_deref());
+    let forest = coarse_at_root(
         runner,
-        "the forest grid",
-        || {
-            progress.start("forest grid", 3);
-            let got = ForestLight::solve_cached(
-                &instances,
-                &env,
-                0.0,
-                gopts,
-                cache
-                    .as_ref()
-                    .map(|cache| ForestCache { cache, stem: &stem }),
-                &mut |done, total| progress.set(done as u64, total as u64),
-            );
-            progress.finish();
-            let (forest, report) = got.map_err(global_err)?;
-            progress.global_grid(&report);
-            Ok::<_, PipelineError>(forest)
-        },
+        progress,
+        ("the forest grid", "forest grid", 3),
+        |step| ForestLight::solve_cached(&instances, &env, 0.0, gopts, cache.as_ref(), step),
         ForestLight::to_bytes,
         |data| {
             ForestLight::from_bytes(data, scene.instances.len())
-                .map_err(|e| global_err(LightingError::Global(format!("from the root: {e}"))))
+                .map_err(|e| LightingError::Global(format!("from the root: {e}")))
         },
-    )?;
+    )
+    .map_err(|source| match source {
+        CoarseError::Light(e) => global_err(e),
+        CoarseError::Pipeline(e) => e,
+    })?;
     Ok((lighting, cached, forest))
+}
+
+/// Where a forest's answers are cached: beside its light in `dir` (`None`: no cache).
+pub(crate) fn forest_cache(scene: &Scene, dir: Option<&std::path::Path>) -> Option<ForestCache> {
+    dir.map(|dir| ForestCache::new(dir, &scene.name))
+}
+
+/// `scene`'s instances as the forest grid sees them: each with its model's density and
+/// medium (`fine`, scene order).
+pub(crate) fn forest_instances<'a>(
+    scene: &Scene,
+    fine: &[(&'a DensityGrid, &'a MediumParams)],
+) -> Vec<ForestInstance<'a>> {
+    scene
+        .instances
+        .iter()
+        .map(|i| ForestInstance {
+            model: Some(fine[i.model as usize]),
+            to_world: i.transform(),
+        })
+        .collect()
+}
+
+/// Why [`coarse_at_root`] failed: the coarse grid's own error, or passing it around.
+pub(crate) enum CoarseError {
+    Light(LightingError),
+    Pipeline(PipelineError),
+}
+
+impl From<sylva_core::jobs::JobError> for CoarseError {
+    fn from(e: sylva_core::jobs::JobError) -> CoarseError {
+        CoarseError::Pipeline(e.into())
+    }
+}
+
+impl std::fmt::Display for CoarseError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            CoarseError::Light(e) => e.fmt(f),
+            CoarseError::Pipeline(e) => e.fmt(f),
+        }
+    }
+}
+
+/// A coarse grid's answer made at the root by `solve` (from its cache or solved; under a
+/// progress bar `bar` of `steps`, its report told) and sent to every process of `runner`
+/// (`what` names it there).
+pub(crate) fn coarse_at_root<T>(
+    runner: &dyn Runner,
+    progress: &dyn Progress,
+    (what, bar, steps): (&str, &str, u64),
+    solve: impl FnOnce(&mut dyn FnMut(usize, usize)) -> Result<(T, GlobalReport), LightingError>,
+    encode: impl FnOnce(&T) -> Vec<u8>,
+    decode: impl FnOnce(&[u8]) -> Result<T, LightingError>,
+) -> Result<T, CoarseError> {
+    from_root(
+        runner,
+        what,
+        || {
+            progress.start(bar, steps);
+            let got = solve(&mut |done, total| progress.set(done as u64, total as u64));
+            progress.finish();
+            let (value, report) = got.map_err(CoarseError::Light)?;
+            progress.global_grid(&report);
+            Ok(value)
+        },
+        encode,
+        |data| decode(data).map_err(CoarseError::Light),
+    )
 }
 
 /// A plan's wanted parts, in its order, and (at the root) what its report says of them.

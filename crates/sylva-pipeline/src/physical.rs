@@ -9,12 +9,12 @@
 
 use std::time::Instant;
 
-use sylva_core::cache::{Cache, CacheKey, Lookup};
+use sylva_core::cache::{CacheKey, Lookup};
 use sylva_core::jobs::{from_root, Runner};
 use sylva_core::wire::{Reader, Writer};
 use sylva_geom::Scene;
 use sylva_lb::{Bounds, DensityGrid, Dims};
-use sylva_light::forest::{ForestBases, ForestCache, ForestInstance};
+use sylva_light::forest::ForestBases;
 use sylva_light::lighting::{
     model_density, part_path, LightingError, LightingReport, LightingSource, PartsLayout, PartsPlan,
 };
@@ -29,7 +29,10 @@ use sylva_light::relight::GlobalGridOptions;
 use sylva_light::Progress;
 use sylva_render::stages::stage;
 
-use crate::forest::{forest_densities, solve_light_parts, uses_forest, PlanParts};
+use crate::forest::{
+    coarse_at_root, forest_cache, forest_densities, forest_instances, solve_light_parts,
+    uses_forest, CoarseError, PlanParts,
+};
 use crate::jobs::root_count;
 use crate::{lighting_options, scene_illumination, BasisUse, LbPlan, PipelineError};
 
@@ -531,51 +534,31 @@ pub fn precompute_physical(
                 .map(|d| d.as_ref().expect("a forest's densities"))
                 .zip(&media)
                 .collect();
-            let instances: Vec<ForestInstance> = scene
-                .instances
-                .iter()
-                .map(|i| {
-                    let (d, m) = fine[i.model as usize];
-                    ForestInstance {
-                        model: Some((d, m)),
-                        to_world: i.transform(),
-                    }
-                })
-                .collect();
-            let global_err = |source| PipelineError::Global {
-                scene: scene.name.clone(),
-                source,
-            };
+            let instances = forest_instances(scene, &fine);
             let t = Instant::now();
             let ground = illum.ground.map(|g| g.as_dvec3().to_array());
-            let cache = opts.cache_dir.as_ref().map(Cache::new);
-            let stem = sylva_core::file_stem(&scene.name, "scene");
-            let bases = from_root(
+            let cache = forest_cache(scene, opts.cache_dir.as_deref());
+            let bases = coarse_at_root(
                 runner,
-                "the forest grid's parts",
-                || {
-                    progress.start("forest grid parts", ForestBases::SOLVES as u64);
-                    let got = ForestBases::solve_cached(
-                        &instances,
-                        ground,
-                        0.0,
-                        gopts,
-                        cache
-                            .as_ref()
-                            .map(|cache| ForestCache { cache, stem: &stem }),
-                        &mut |done, total| progress.set(done as u64, total as u64),
-                    );
-                    progress.finish();
-                    let (bases, report) = got.map_err(global_err)?;
-                    progress.global_grid(&report);
-                    Ok::<_, PipelineError>(bases)
+                progress,
+                (
+                    "the forest grid's parts",
+                    "forest grid parts",
+                    ForestBases::SOLVES as u64,
+                ),
+                |step| {
+                    ForestBases::solve_cached(&instances, ground, 0.0, gopts, cache.as_ref(), step)
                 },
                 ForestBases::parts_bytes,
-                |data| {
-                    ForestBases::with_parts(&instances, ground, 0.0, gopts, data)
-                        .map_err(global_err)
+                |data| ForestBases::with_parts(&instances, ground, 0.0, gopts, data),
+            )
+            .map_err(|source| match source {
+                CoarseError::Light(source) => PipelineError::Global {
+                    scene: scene.name.clone(),
+                    source,
                 },
-            )?;
+                CoarseError::Pipeline(e) => e,
+            })?;
             forest_seconds = Some(t.elapsed().as_secs_f64());
             Some(bases)
         }

@@ -103,13 +103,7 @@ fn cached_tree(model: &Model, cache: &Cache) -> (KdTree, bool, Vec<String>) {
             },
         )
         .unwrap_or_else(|never| match never {});
-    let mut warnings = Vec::new();
-    if let CacheOutcome::BadEntry(reason) = &got.outcome {
-        warnings.push(format!("{reason}; kd-tree built again"));
-    }
-    if let Some(w) = got.write_warning {
-        warnings.push(w);
-    }
+    let warnings = got.warning("kd-tree built again").into_iter().collect();
     (got.value, got.outcome == CacheOutcome::Hit, warnings)
 }
 

@@ -641,13 +641,7 @@ impl GlobalLight {
     /// The grid's answer as bytes: a cache entry's payload, and what MPI ranks send.
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut w = ByteWriter::new();
-        for n in [self.dims.nx, self.dims.ny, self.dims.nz] {
-            w.u32(n as u32);
-        }
-        for v in self.origin {
-            w.f32(v);
-        }
-        w.f32(self.cell);
+        write_layout(&mut w, self.dims, self.origin, self.cell);
         w.f32s(self.inflow.as_flattened());
         w.bytes
     }
@@ -656,16 +650,7 @@ impl GlobalLight {
     /// what is wrong with the bytes.
     pub fn from_bytes(bytes: &[u8], instances: usize) -> Result<GlobalLight, String> {
         let mut r = ByteReader::new(bytes);
-        let mut n = [0usize; 3];
-        for v in &mut n {
-            *v = r.u32("grid size")? as usize;
-        }
-        let dims = Dims::new(n[0], n[1], n[2]).map_err(|e| e.to_string())?;
-        let mut origin = [0f32; 3];
-        for v in &mut origin {
-            *v = r.f32("origin")?;
-        }
-        let cell = r.f32("cell")?;
+        let (dims, origin, cell) = read_layout(&mut r)?;
         let flat = r.f32s("inflow")?;
         r.finish()?;
         if flat.len() != instances * BASES {
@@ -675,10 +660,7 @@ impl GlobalLight {
                 instances * BASES
             ));
         }
-        if flat.iter().any(|v| !(v.is_finite() && *v >= 0.0))
-            || !(cell.is_finite() && cell > 0.0)
-            || origin.iter().any(|v| !v.is_finite())
-        {
+        if flat.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
             return Err("a value is not finite or negative".into());
         }
         Ok(GlobalLight {
@@ -693,6 +675,37 @@ impl GlobalLight {
     }
 }
 
+/// Writes a coarse grid's layout (sites per axis, the world position of site 0, the cell):
+/// the head of [`GlobalLight::to_bytes`] and of the forest grid's answers.
+pub(crate) fn write_layout(w: &mut ByteWriter, dims: Dims, origin: [f32; 3], cell: f32) {
+    for n in [dims.nx, dims.ny, dims.nz] {
+        w.u32(n as u32);
+    }
+    for v in origin {
+        w.f32(v);
+    }
+    w.f32(cell);
+}
+
+/// Reads what [`write_layout`] wrote; `Err` when it is no valid layout (a grid too small,
+/// an origin or cell not finite, a cell not positive).
+pub(crate) fn read_layout(r: &mut ByteReader) -> Result<(Dims, [f32; 3], f32), String> {
+    let mut n = [0usize; 3];
+    for v in &mut n {
+        *v = r.u32("grid size")? as usize;
+    }
+    let dims = Dims::new(n[0], n[1], n[2]).map_err(|e| e.to_string())?;
+    let mut origin = [0f32; 3];
+    for v in &mut origin {
+        *v = r.f32("origin")?;
+    }
+    let cell = r.f32("cell")?;
+    if !(cell.is_finite() && cell > 0.0) || origin.iter().any(|v| !v.is_finite()) {
+        return Err("the grid's origin or cell is not finite, or the cell not positive".into());
+    }
+    Ok((dims, origin, cell))
+}
+
 /// How long a global solve took and where its answer came from.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GlobalReport {
@@ -705,6 +718,20 @@ pub struct GlobalReport {
     pub path: Option<std::path::PathBuf>,
     /// Why the solved grid could not be cached (it is good, only not kept).
     pub cache_warning: Option<String>,
+}
+
+impl GlobalReport {
+    /// A grid of `dims` solved now, not cached, `t0` when it began.
+    pub(crate) fn computed(what: &'static str, dims: Dims, t0: std::time::Instant) -> GlobalReport {
+        GlobalReport {
+            what,
+            source: crate::lighting::LightingSource::Computed,
+            seconds: t0.elapsed().as_secs_f64(),
+            dims,
+            path: None,
+            cache_warning: None,
+        }
+    }
 }
 
 #[cfg(test)]

@@ -592,8 +592,9 @@ impl PhysicalRelitLight {
             }
         }
         let basis = self.models[inst.model as usize].as_ref()?;
-        Some(match self.lazy_blocks().plants[instance] {
-            Some(c) => basis.sample_blocks(p, &inst.terms, &self.lazy_blocks().caches[c]),
+        let lazy = self.lazy_blocks();
+        Some(match lazy.plants[instance] {
+            Some(c) => basis.sample_blocks(p, &inst.terms, &lazy.caches[c]),
             None => basis.sample(p, &inst.terms),
         })
     }
@@ -608,8 +609,9 @@ impl PhysicalRelitLight {
             }
         }
         let terms = &self.instances[i].ground;
-        match self.lazy_blocks().ground[i] {
-            Some(c) => basis.sample_blocks(p, terms, &self.lazy_blocks().caches[c]),
+        let lazy = self.lazy_blocks();
+        match lazy.ground[i] {
+            Some(c) => basis.sample_blocks(p, terms, &lazy.caches[c]),
             None => basis.sample(p, terms),
         }
     }

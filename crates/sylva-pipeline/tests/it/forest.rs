@@ -344,7 +344,6 @@ fn neighbours_inside_the_box_shade_only_the_sun_part() {
 /// and named.
 #[test]
 fn the_forest_grid_is_cached_and_a_damaged_entry_is_solved_again() {
-    use sylva_core::cache::Cache;
     use sylva_light::forest::ForestCache;
     use sylva_light::lighting::LightingSource;
 
@@ -353,11 +352,8 @@ fn the_forest_grid_is_cached_and_a_damaged_entry_is_solved_again() {
     let inst = instances(&scene, &fine, &[0, 1, 2]);
     let gopts = GlobalGridOptions { sites: 32 };
     let dir = tempfile::tempdir().unwrap();
-    let cache = Cache::new(dir.path());
-    let at = Some(ForestCache {
-        cache: &cache,
-        stem: "shade",
-    });
+    let cache = ForestCache::new(dir.path(), "shade");
+    let at = Some(&cache);
     let cached = |inst: &[ForestInstance], env: &Environment| {
         ForestLight::solve_cached(inst, env, 0.0, &gopts, at, &mut |_, _| {}).unwrap()
     };

@@ -455,7 +455,6 @@ fn the_compressed_physical_light_is_cached_and_relit_close_to_the_parts() {
 /// solved; what the root sends makes the same; a damaged entry is solved again.
 #[test]
 fn the_forest_grid_parts_are_cached_and_relight_as_solved() {
-    use sylva_core::cache::Cache;
     use sylva_light::forest::ForestCache;
     use sylva_light::lighting::LightingSource;
 
@@ -463,11 +462,8 @@ fn the_forest_grid_parts_are_cached_and_relight_as_solved() {
     let insts = instances(&scene, &fine, &[0, 1, 2]);
     let base = physical_environment(&scene_illumination(&scene)).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let cache = Cache::new(dir.path());
-    let at = Some(ForestCache {
-        cache: &cache,
-        stem: "shade",
-    });
+    let cache = ForestCache::new(dir.path(), "shade");
+    let at = Some(&cache);
     let cached = || {
         ForestBases::solve_cached(&insts, base.ground_albedo, 0.0, &FOREST, at, &mut |_, _| {})
             .unwrap()

@@ -583,6 +583,8 @@ impl HaarFields {
                 }
             }
         }
+        // A block of its mean alone (most blocks away from the crown) is that mean at every
+        // site: no transform.
         for c in 0..3 {
             if details {
                 let v = inverse_dense(&dense[c]);
@@ -624,37 +626,15 @@ impl HaarFields {
             for by in 0..self.blocks[1] {
                 for bz in 0..self.blocks[2] {
                     let b = (bx * self.blocks[1] + by) * self.blocks[2] + bz;
-                    let mut dense = [[0.0f32; BLOCK_VALUES]; 3];
-                    let mut details = false;
-                    for (f, w, range) in self.term_coefficients(b, terms) {
-                        for i in range {
-                            let (k, v) = self.coefs.get(f, i);
-                            details |= k != 0;
-                            for c in 0..3 {
-                                dense[c][k] += w[c] * v;
-                            }
-                        }
-                    }
-                    // A block of its mean alone (most blocks away from the crown) is that
-                    // mean at every site: no transform.
-                    let values = details.then(|| dense.map(|d| inverse_dense(&d)));
+                    let mut values = [[0.0f32; BLOCK_VALUES]; 3];
+                    self.add_block_combined(b, terms, &mut values);
                     for x in self.span(0, bx) {
                         for y in self.span(1, by) {
                             let row = ((x - OWN * bx) * d.ny + y) * d.nz;
                             for z in self.span(2, bz) {
-                                let o = &mut slab[row + z];
-                                match &values {
-                                    Some(v) => {
-                                        let l = local(x - OWN * bx, y - OWN * by, z - OWN * bz);
-                                        for c in 0..3 {
-                                            o[c] += v[c][l];
-                                        }
-                                    }
-                                    None => {
-                                        for c in 0..3 {
-                                            o[c] += dense[c][0];
-                                        }
-                                    }
+                                let l = local(x - OWN * bx, y - OWN * by, z - OWN * bz);
+                                for c in 0..3 {
+                                    slab[row + z][c] += values[c][l];
                                 }
                             }
                         }
