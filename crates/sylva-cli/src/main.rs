@@ -40,6 +40,11 @@ enum Command {
     /// Plane-parallel scattering (paper 003): radiance in slabs, Tables 1 and 2, and Table 3
     /// on a scene's trees (`spp trees`).
     Spp(commands::spp::SppArgs),
+    /// The canopy radiation budget of an abstract stand (crowns of flat leaves or a
+    /// homogeneous layer, in a cyclic plot): per band the sunlight absorbed by the canopy,
+    /// reflected, transmitted to the ground and absorbed by it, and fAPAR, e.g. `sylva budget
+    /// crowns --sun-zenith 30` (docs/budget.md).
+    Budget(commands::budget::BudgetArgs),
     /// Write a scene for other renderers: OBJ (flattened) or Mitsuba 3 (instanced), e.g.
     /// `sylva export demo --format mitsuba -o out/`.
     Export(commands::export::ExportArgs),
@@ -81,6 +86,7 @@ fn distributed(command: &Command) -> Result<(), &'static str> {
         Command::Voxelize(_) => Err("voxelize"),
         Command::Lb(_) => Err("lb"),
         Command::Spp(_) => Err("spp"),
+        Command::Budget(_) => Err("budget"),
         Command::Export(_) => Err("export"),
         Command::View(_) => Err("view"),
     }
@@ -93,6 +99,7 @@ fn run(command: Command, runner: &dyn sylva_core::jobs::Runner) -> anyhow::Resul
         Command::Lb(a) => commands::lb::run(a),
         Command::Voxelize(a) => commands::voxelize::run(a),
         Command::Spp(a) => commands::spp::run(a),
+        Command::Budget(a) => commands::budget::run(a),
         Command::Scene(a) => commands::scene::run(a),
         Command::Species(a) => commands::species::run(a),
         Command::Bench(a) => commands::bench::run(a, runner),

@@ -21,6 +21,7 @@ pub const TARGETS: &[(&str, Target)] = &[
     ("arbaro_xml", arbaro_xml),
     ("sgrid", sgrid),
     ("raw_grid", raw_grid),
+    ("canopy_toml", canopy_toml),
 ];
 
 /// Separates the OBJ text from the MTL text in an `obj_mtl` input.
@@ -66,6 +67,15 @@ pub fn scene_toml(data: &[u8]) -> bool {
         return false;
     };
     sylva_scene::SceneDesc::parse(text, "fuzz.toml", Some(&scratch())).is_ok()
+}
+
+/// A canopy file as `sylva budget` parses and checks it (the stand is not built: that is
+/// generation, not parsing).
+pub fn canopy_toml(data: &[u8]) -> bool {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return false;
+    };
+    sylva_budget::CanopySpec::parse(text).is_ok()
 }
 
 /// An OBJ file and the MTL file it may name (`mtllib m.mtl`), split at [`MTL_SEPARATOR`],

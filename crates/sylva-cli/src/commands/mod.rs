@@ -54,6 +54,7 @@ pub mod bench_scene;
 pub mod bench_spp;
 pub mod bench_trace;
 pub mod bench_voxel;
+pub mod budget;
 pub mod device;
 pub mod export;
 pub mod lb;

@@ -5,6 +5,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod budget_cli;
 mod export_cli;
 mod gpu_cli;
 mod hostile_cli;

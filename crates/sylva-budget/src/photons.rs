@@ -1,0 +1,518 @@
+//! The Monte Carlo budget: photons of unit total power enter the plot's top uniformly along
+//! the sun's direction and are followed until the sky or an absorber takes them. At a leaf a
+//! photon is reflected with probability r, transmitted with probability t (both Lambertian,
+//! about the face it leaves from), else absorbed by the canopy; at the soil (y = 0) it is
+//! reflected with probability ρ (Lambertian, upwards), else absorbed by the soil; leaving
+//! through the top it is reflected light. In a cyclic plot a photon leaving through a side
+//! re-enters through the opposite one in the same direction; in an isolated plot it is lost
+//! sideways. This is 003's photon tracer (sylva-spp's `trees::photons`) extended with the
+//! soil, the sides and the fates a budget needs.
+//!
+//! Analog tallies: every fraction is a mean over independent photons, and its standard
+//! error comes from the spread of the means of the chunks of [`CHUNK`] photons. Chunks are
+//! seeded from the run's seed, the band and the chunk's index, so a result depends on the
+//! seed only, never on the thread count.
+
+use crate::spec::{Band, BudgetError};
+use crate::stand::Stand;
+use glam::Vec3;
+use rayon::prelude::*;
+use serde::Serialize;
+use sylva_core::SplitMix64;
+use sylva_trace::{Ray, SceneAccel, TraceStats, TraversalConfig};
+
+/// Photons per chunk: the unit of parallel work, seeding and the error estimate.
+pub const CHUNK: u64 = 4096;
+/// A photon still bouncing after this many events (scatterings and side crossings) is
+/// counted as unfinished.
+pub const MAX_EVENTS: u32 = 100_000;
+
+/// The sun's zenith and azimuth angles, degrees (azimuth from +z towards +x).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SunAngles {
+    pub zenith_deg: f64,
+    pub azimuth_deg: f64,
+}
+
+impl SunAngles {
+    pub fn validate(&self) -> Result<(), BudgetError> {
+        if !(self.zenith_deg.is_finite() && (0.0..90.0).contains(&self.zenith_deg)) {
+            return Err(BudgetError::invalid(
+                "--sun-zenith",
+                self.zenith_deg,
+                "degrees from the vertical, 0 to below 90 (the sun must be up)",
+            ));
+        }
+        if !self.azimuth_deg.is_finite() {
+            return Err(BudgetError::invalid(
+                "--sun-azimuth",
+                self.azimuth_deg,
+                "must be a finite number of degrees",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The direction sunlight travels (unit, downwards).
+    pub fn travel(&self) -> Vec3 {
+        let (z, a) = (self.zenith_deg.to_radians(), self.azimuth_deg.to_radians());
+        Vec3::new(
+            -(z.sin() * a.sin()) as f32,
+            -z.cos() as f32,
+            -(z.sin() * a.cos()) as f32,
+        )
+        .normalize()
+    }
+}
+
+/// What to simulate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BudgetConfig {
+    /// Photons per band.
+    pub photons: u64,
+    pub seed: u64,
+    pub sun: SunAngles,
+}
+
+impl BudgetConfig {
+    pub fn validate(&self) -> Result<(), BudgetError> {
+        if !(2 * CHUNK..=1_000_000_000_000).contains(&self.photons) {
+            return Err(BudgetError::invalid(
+                "--photons",
+                self.photons,
+                format!(
+                    "must be {} to 10^12 (two chunks of {CHUNK} at least, for the error estimate)",
+                    2 * CHUNK
+                ),
+            ));
+        }
+        self.sun.validate()
+    }
+}
+
+/// A fraction of the incoming sunlight and its standard error.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Fraction {
+    pub value: f64,
+    pub std_error: f64,
+}
+
+/// One band's budget: fractions of the sunlight entering the plot's top.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BandBudget {
+    pub band: String,
+    /// Absorbed by the leaves (fAPAR in a PAR band).
+    pub canopy_absorbed: Fraction,
+    /// Left through the top: the stand's albedo.
+    pub reflected: Fraction,
+    /// Arriving at the soil, every arrival counted (the downward flux at the ground).
+    pub ground_arrived: Fraction,
+    /// Arriving at the soil before meeting anything: the direct transmission.
+    pub ground_direct: Fraction,
+    /// Absorbed by the soil.
+    pub soil_absorbed: Fraction,
+    /// Lost through the sides (isolated plots only).
+    pub side_lost: Fraction,
+    /// Still bouncing after [`MAX_EVENTS`] events.
+    pub unfinished: Fraction,
+    /// Leaf interactions per photon.
+    pub leaf_events: f64,
+    /// 1 − the sum of the fates: 0 up to rounding (every photon ends in exactly one fate).
+    pub balance: f64,
+    pub photons: u64,
+    pub rays: u64,
+    pub seconds: f64,
+}
+
+/// Per-chunk sums (fates are counts; arrivals may exceed the photons).
+#[derive(Default, Clone, Copy)]
+struct Counts {
+    canopy: u64,
+    reflected: u64,
+    arrived: u64,
+    direct: u64,
+    soil: u64,
+    side: u64,
+    unfinished: u64,
+    leaf_events: u64,
+    rays: u64,
+}
+
+impl Counts {
+    fn fields(&self) -> [u64; 7] {
+        [
+            self.canopy,
+            self.reflected,
+            self.arrived,
+            self.direct,
+            self.soil,
+            self.side,
+            self.unfinished,
+        ]
+    }
+}
+
+/// A direction cosine-distributed about unit `n`.
+fn lambert(n: Vec3, rng: &mut SplitMix64) -> Vec3 {
+    let a = if n.x.abs() > 0.9 { Vec3::Y } else { Vec3::X };
+    let u = n.cross(a).normalize();
+    let v = n.cross(u);
+    let u1 = rng.next_f64();
+    let phi = std::f64::consts::TAU * rng.next_f64();
+    let r = u1.sqrt();
+    let (x, y, z) = (r * phi.cos(), r * phi.sin(), (1.0 - u1).max(0.0).sqrt());
+    (u * x as f32 + v * y as f32 + n * z as f32).normalize()
+}
+
+/// The budget of every band of `bands` for `stand` traced through `accel` (built from the
+/// stand's models and instances). `progress(n)` hears every finished chunk of `n` photons.
+pub fn trace_budget(
+    stand: &Stand,
+    accel: &SceneAccel,
+    bands: &[Band],
+    cyclic: bool,
+    cfg: &BudgetConfig,
+    progress: &(dyn Fn(u64) + Sync),
+) -> Result<Vec<BandBudget>, BudgetError> {
+    cfg.validate()?;
+    bands
+        .iter()
+        .enumerate()
+        .map(|(b, band)| {
+            let t0 = std::time::Instant::now();
+            let chunks = cfg.photons.div_ceil(CHUNK);
+            let counts: Vec<Counts> = (0..chunks)
+                .into_par_iter()
+                .map(|c| {
+                    let n = CHUNK.min(cfg.photons - c * CHUNK);
+                    let seed = cfg.seed ^ (b as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+                    let mut rng = SplitMix64::for_chunk(seed, c);
+                    let k = trace_chunk(stand, accel, band, cyclic, cfg.sun.travel(), n, &mut rng);
+                    progress(n);
+                    k
+                })
+                .collect();
+            Ok(summarise(
+                band,
+                &counts,
+                cfg.photons,
+                t0.elapsed().as_secs_f64(),
+            ))
+        })
+        .collect()
+}
+
+fn summarise(band: &Band, counts: &[Counts], photons: u64, seconds: f64) -> BandBudget {
+    let n = photons as f64;
+    let fraction = |k: usize| {
+        let total: u64 = counts.iter().map(|c| c.fields()[k]).sum();
+        let value = total as f64 / n;
+        // The spread of the chunks' means about the whole mean, weighted by chunk size.
+        let m = counts.len() as f64;
+        let sizes: Vec<f64> = (0..counts.len())
+            .map(|i| CHUNK.min(photons - i as u64 * CHUNK) as f64)
+            .collect();
+        let var: f64 = counts
+            .iter()
+            .zip(&sizes)
+            .map(|(c, &s)| {
+                let d = c.fields()[k] as f64 / s - value;
+                s * s * d * d
+            })
+            .sum::<f64>()
+            / (n * n)
+            * m
+            / (m - 1.0).max(1.0);
+        Fraction {
+            value,
+            std_error: var.sqrt(),
+        }
+    };
+    let f: Vec<Fraction> = (0..7).map(fraction).collect();
+    let fates = f[0].value + f[1].value + f[4].value + f[5].value + f[6].value;
+    BandBudget {
+        band: band.name.clone(),
+        canopy_absorbed: f[0],
+        reflected: f[1],
+        ground_arrived: f[2],
+        ground_direct: f[3],
+        soil_absorbed: f[4],
+        side_lost: f[5],
+        unfinished: f[6],
+        leaf_events: counts.iter().map(|c| c.leaf_events).sum::<u64>() as f64 / n,
+        balance: 1.0 - fates,
+        photons,
+        rays: counts.iter().map(|c| c.rays).sum(),
+        seconds,
+    }
+}
+
+/// `n` photons of one band.
+fn trace_chunk(
+    stand: &Stand,
+    accel: &SceneAccel,
+    band: &Band,
+    cyclic: bool,
+    travel: Vec3,
+    n: u64,
+    rng: &mut SplitMix64,
+) -> Counts {
+    let [hx, hz] = [stand.half[0] as f32, stand.half[1] as f32];
+    let top = stand.top as f32;
+    let (r, t, rho) = (
+        band.leaf_reflectance,
+        band.leaf_transmittance,
+        band.soil_albedo,
+    );
+    let mut k = Counts::default();
+    let mut stats = TraceStats::default();
+    'photon: for _ in 0..n {
+        let mut o = Vec3::new(
+            (2.0 * rng.next_f64() as f32 - 1.0) * hx,
+            top,
+            (2.0 * rng.next_f64() as f32 - 1.0) * hz,
+        );
+        let mut d = travel;
+        let mut scattered = false;
+        for _ in 0..MAX_EVENTS {
+            // Where the photon leaves the plot's box: the soil, the top or a side.
+            let t_soil = if d.y < 0.0 { -o.y / d.y } else { f32::INFINITY };
+            let t_top = if d.y > 0.0 {
+                (top - o.y) / d.y
+            } else {
+                f32::INFINITY
+            };
+            let side = |p: f32, v: f32, h: f32| {
+                if v > 0.0 {
+                    (h - p) / v
+                } else if v < 0.0 {
+                    (-h - p) / v
+                } else {
+                    f32::INFINITY
+                }
+            };
+            let (t_x, t_z) = (side(o.x, d.x, hx).max(0.0), side(o.z, d.z, hz).max(0.0));
+            let t_end = t_soil.min(t_top).min(t_x).min(t_z);
+            k.rays += 1;
+            let ray = Ray::segment(o, d, 0.0, t_end);
+            if let Some(hit) = accel.closest_hit(&ray, TraversalConfig::default(), &mut stats) {
+                let p = ray.at(hit.t);
+                let ng = accel.geometric_normal(&hit);
+                let facing = if ng.dot(d) < 0.0 { ng } else { -ng };
+                k.leaf_events += 1;
+                scattered = true;
+                let x = rng.next_f64();
+                let leave = if x < r {
+                    facing
+                } else if x < r + t {
+                    -facing
+                } else {
+                    k.canopy += 1;
+                    continue 'photon;
+                };
+                let eps = 1e-4 * p.abs().max_element().max(1.0);
+                o = p + leave * eps;
+                d = lambert(leave, rng);
+                continue;
+            }
+            if t_end == t_soil {
+                k.arrived += 1;
+                if !scattered {
+                    k.direct += 1;
+                }
+                if rng.next_f64() < rho {
+                    scattered = true;
+                    let p = o + d * t_soil;
+                    o = Vec3::new(p.x, 0.0, p.z);
+                    d = lambert(Vec3::Y, rng);
+                    continue;
+                }
+                k.soil += 1;
+                continue 'photon;
+            }
+            if t_end == t_top {
+                k.reflected += 1;
+                continue 'photon;
+            }
+            if !cyclic {
+                k.side += 1;
+                continue 'photon;
+            }
+            // Through a side: in again on the opposite one, the crossed coordinate set to
+            // that side exactly.
+            let mut p = o + d * t_end;
+            if t_end == t_x {
+                p.x = if d.x > 0.0 { -hx } else { hx };
+            }
+            if t_end == t_z {
+                p.z = if d.z > 0.0 { -hz } else { hz };
+            }
+            p.x = p.x.clamp(-hx, hx);
+            p.z = p.z.clamp(-hz, hz);
+            p.y = p.y.clamp(0.0, top);
+            o = p;
+        }
+        k.unfinished += 1;
+    }
+    k
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::spec::CanopySpec;
+
+    fn layer(lai: f64, size: f64) -> (CanopySpec, Stand, SceneAccel) {
+        let spec = CanopySpec::parse(&format!(
+            "[plot]\nsize = [{size}, {size}]\n[layer]\nlai = {lai}\nheight = 1.0\n[leaves]\nsize = 0.04\n"
+        ))
+        .unwrap();
+        let stand = Stand::build(&spec).unwrap();
+        let accel = SceneAccel::from_parts(&stand.models, &stand.instances, None).unwrap();
+        (spec, stand, accel)
+    }
+
+    fn band(r: f64, t: f64, soil: f64) -> Band {
+        Band {
+            name: "b".into(),
+            leaf_reflectance: r,
+            leaf_transmittance: t,
+            soil_albedo: soil,
+            par: false,
+            weight: 1.0,
+        }
+    }
+
+    fn config(photons: u64, zenith: f64) -> BudgetConfig {
+        BudgetConfig {
+            photons,
+            seed: 7,
+            sun: SunAngles {
+                zenith_deg: zenith,
+                azimuth_deg: 30.0,
+            },
+        }
+    }
+
+    /// E_3(x) = ∫_1^∞ e^(−x s) / s³ ds, by the midpoint rule in u = 1/s.
+    fn e3(x: f64) -> f64 {
+        let n = 200_000;
+        (0..n)
+            .map(|i| {
+                let u = (i as f64 + 0.5) / n as f64;
+                u * (-x / u).exp() / n as f64
+            })
+            .sum()
+    }
+
+    #[test]
+    fn black_leaves_let_through_beers_law_and_the_soil_reflects_through_the_gaps() {
+        // Black leaves of random orientation (G = 1/2): the direct transmission is
+        // exp(−L / (2 cos θ)); light the soil reflects escapes without meeting a leaf with
+        // probability 2 E_3(L/2) (cosine-weighted gaps), and black leaves absorb the rest.
+        let (_, stand, accel) = layer(2.0, 3.0);
+        let lai = stand.lai;
+        for zenith in [0.0, 45.0, 70.0] {
+            let cfg = config(120 * CHUNK, zenith);
+            let soil = 0.5;
+            let b = trace_budget(&stand, &accel, &[band(0.0, 0.0, soil)], true, &cfg, &|_| {})
+                .unwrap()
+                .remove(0);
+            let mu = zenith.to_radians().cos();
+            let direct = (-0.5 * lai / mu).exp();
+            let err = (b.ground_direct.value - direct).abs();
+            assert!(
+                err < 0.005 && err < 4.0 * b.ground_direct.std_error + 0.002,
+                "θ {zenith}: T {} ± {} against {direct}",
+                b.ground_direct.value,
+                b.ground_direct.std_error
+            );
+            // Only direct light reaches the soil, and only once.
+            assert_eq!(b.ground_arrived, b.ground_direct);
+            let up = 2.0 * e3(0.5 * lai);
+            let want = soil * direct * up;
+            assert!(
+                (b.reflected.value - want).abs() < 4.0 * b.reflected.std_error + 0.002,
+                "θ {zenith}: R {} ± {} against {want}",
+                b.reflected.value,
+                b.reflected.std_error
+            );
+            assert!(
+                (b.soil_absorbed.value - (1.0 - soil) * direct).abs()
+                    < 4.0 * b.soil_absorbed.std_error + 0.002
+            );
+            assert!(b.balance.abs() < 1e-12 && b.side_lost.value == 0.0);
+        }
+    }
+
+    #[test]
+    fn lossless_leaves_over_a_white_soil_send_everything_back_to_the_sky() {
+        // Nothing absorbs, and in a cyclic plot nothing leaves through the sides: every
+        // photon ends in the sky.
+        let (_, stand, accel) = layer(1.5, 2.0);
+        let cfg = config(4 * CHUNK, 40.0);
+        let b = trace_budget(&stand, &accel, &[band(0.6, 0.4, 1.0)], true, &cfg, &|_| {})
+            .unwrap()
+            .remove(0);
+        assert_eq!(b.reflected.value, 1.0);
+        assert_eq!(b.canopy_absorbed.value + b.soil_absorbed.value, 0.0);
+        assert!(b.leaf_events > 1.0 && b.ground_arrived.value > 0.5);
+        // The same plot isolated loses light through its sides.
+        let iso = trace_budget(&stand, &accel, &[band(0.6, 0.4, 1.0)], false, &cfg, &|_| {})
+            .unwrap()
+            .remove(0);
+        assert!(iso.side_lost.value > 0.1, "{}", iso.side_lost.value);
+        assert!((iso.reflected.value + iso.side_lost.value - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_soil_absorbs_its_share_of_what_arrives() {
+        // Every arrival at the soil is absorbed with probability 1 − ρ.
+        let (_, stand, accel) = layer(1.0, 2.0);
+        let cfg = config(40 * CHUNK, 30.0);
+        let b = trace_budget(&stand, &accel, &[band(0.45, 0.4, 0.3)], true, &cfg, &|_| {})
+            .unwrap()
+            .remove(0);
+        let want = 0.7 * b.ground_arrived.value;
+        assert!(
+            (b.soil_absorbed.value - want).abs() < 4.0 * b.soil_absorbed.std_error,
+            "{} vs {want}",
+            b.soil_absorbed.value
+        );
+        assert!(b.balance.abs() < 1e-12);
+    }
+
+    #[test]
+    fn results_depend_on_the_seed_only() {
+        let (spec, stand, accel) = layer(1.0, 2.0);
+        let cfg = config(3 * CHUNK + 11, 20.0);
+        let run = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| trace_budget(&stand, &accel, &spec.bands, true, &cfg, &|_| {}).unwrap())
+        };
+        let (mut a, mut b) = (run(1), run(3));
+        for x in a.iter_mut().chain(b.iter_mut()) {
+            x.seconds = 0.0;
+        }
+        assert_eq!(a, b);
+        let other = BudgetConfig { seed: 8, ..cfg };
+        let c = trace_budget(&stand, &accel, &spec.bands, true, &other, &|_| {}).unwrap();
+        assert_ne!(a[0].reflected, c[0].reflected);
+    }
+
+    #[test]
+    fn bad_settings_are_errors() {
+        let (spec, stand, accel) = layer(1.0, 2.0);
+        for cfg in [
+            config(10, 30.0),
+            config(4 * CHUNK, 90.0),
+            config(4 * CHUNK, f64::NAN),
+        ] {
+            let e = trace_budget(&stand, &accel, &spec.bands, true, &cfg, &|_| {}).unwrap_err();
+            assert!(!e.to_string().contains('\n'));
+        }
+    }
+}

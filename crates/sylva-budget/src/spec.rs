@@ -1,0 +1,641 @@
+//! An abstract canopy as TOML: the plot, crowns of flat leaves or a homogeneous layer, the
+//! leaves, the bands (docs/budget.md has every key).
+//!
+//! ```toml
+//! name = "crowns"
+//! seed = 1
+//! [plot]
+//! size = [100.0, 100.0]      # x and z, metres
+//! cyclic = true              # light leaving a side re-enters on the opposite side
+//! [crowns]
+//! shape = "sphere"           # or "ellipsoid" (half_height is then the vertical semi-axis)
+//! radius = 2.5               # horizontal radius, m
+//! centre_height = 6.0        # m above the soil
+//! lai = 5.0                  # crown LAI: one-sided leaf area over the crown's cross-section
+//! cover = 0.3                # fraction of the plot under crowns
+//! [leaves]
+//! shape = "disc"             # or "square"
+//! size = 0.1                 # disc diameter or square side, m
+//! [[bands]]
+//! name = "red"
+//! leaf_reflectance = 0.07
+//! leaf_transmittance = 0.06
+//! soil_albedo = 0.12
+//! par = true                 # counts towards fAPAR
+//! ```
+//!
+//! A homogeneous layer replaces `[crowns]` with `[layer] lai = 3.0, height = 2.0`.
+
+use serde::Deserialize;
+use std::path::Path;
+use thiserror::Error;
+
+/// Why a canopy or a budget was refused: one line naming the file or setting and the problem.
+#[derive(Debug, Error)]
+pub enum BudgetError {
+    #[error("{path}: {message}")]
+    File { path: String, message: String },
+    #[error("{at}{message}")]
+    Toml { at: String, message: String },
+    #[error("{what} = {value}: {why}")]
+    Invalid {
+        what: String,
+        value: String,
+        why: String,
+    },
+    #[error(transparent)]
+    Memory(#[from] sylva_core::MemoryError),
+    #[error("building the stand's kd-trees: {0}")]
+    Trace(#[from] sylva_trace::TraceError),
+}
+
+impl BudgetError {
+    pub fn invalid(what: impl Into<String>, value: impl ToString, why: impl Into<String>) -> Self {
+        BudgetError::Invalid {
+            what: what.into(),
+            value: value.to_string(),
+            why: why.into(),
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum CrownShape {
+    Sphere,
+    Ellipsoid,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LeafShape {
+    /// A regular octagon of the disc's area.
+    Disc,
+    Square,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Plot {
+    /// Extent along x and z, metres.
+    #[serde(default = "default_plot")]
+    pub size: [f64; 2],
+    /// Light leaving a side re-enters on the opposite side (an infinite stand); false: it is
+    /// lost (an isolated plot).
+    #[serde(default = "yes")]
+    pub cyclic: bool,
+}
+
+fn default_plot() -> [f64; 2] {
+    [100.0, 100.0]
+}
+
+fn yes() -> bool {
+    true
+}
+
+impl Default for Plot {
+    fn default() -> Self {
+        Plot {
+            size: default_plot(),
+            cyclic: true,
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Crowns {
+    #[serde(default = "sphere")]
+    pub shape: CrownShape,
+    /// Horizontal radius, m.
+    pub radius: f64,
+    /// Vertical semi-axis of an ellipsoid, m (a sphere's is its radius).
+    pub half_height: Option<f64>,
+    /// Height of the crown's centre above the soil, m.
+    pub centre_height: f64,
+    /// One-sided leaf area over the crown's horizontal cross-section (π r²).
+    pub lai: f64,
+    /// Fraction of the plot's area under crowns (their vertical projections).
+    pub cover: f64,
+}
+
+fn sphere() -> CrownShape {
+    CrownShape::Sphere
+}
+
+impl Crowns {
+    pub fn half_height(&self) -> f64 {
+        match self.shape {
+            CrownShape::Sphere => self.radius,
+            CrownShape::Ellipsoid => self.half_height.unwrap_or(self.radius),
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Layer {
+    /// One-sided leaf area per unit ground area.
+    pub lai: f64,
+    /// Thickness of the layer, m (it stands on the soil).
+    pub height: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Leaves {
+    #[serde(default = "disc")]
+    pub shape: LeafShape,
+    /// Disc diameter or square side, m.
+    #[serde(default = "leaf_size")]
+    pub size: f64,
+}
+
+fn disc() -> LeafShape {
+    LeafShape::Disc
+}
+
+fn leaf_size() -> f64 {
+    0.1
+}
+
+impl Default for Leaves {
+    fn default() -> Self {
+        Leaves {
+            shape: LeafShape::Disc,
+            size: leaf_size(),
+        }
+    }
+}
+
+impl Leaves {
+    /// One leaf's (one-sided) area, m².
+    pub fn area(&self) -> f64 {
+        match self.shape {
+            LeafShape::Disc => std::f64::consts::PI * 0.25 * self.size * self.size,
+            LeafShape::Square => self.size * self.size,
+        }
+    }
+
+    /// How far a leaf reaches from its centre, m.
+    pub fn reach(&self) -> f64 {
+        match self.shape {
+            LeafShape::Disc => 0.5 * self.size * octagon_scale(),
+            LeafShape::Square => self.size * std::f64::consts::FRAC_1_SQRT_2,
+        }
+    }
+}
+
+/// Circumradius of the regular octagon of a unit-radius disc's area: π = 4 R² sin(π/4)·... =
+/// (8/2) R² sin(2π/8).
+pub fn octagon_scale() -> f64 {
+    (std::f64::consts::PI / (4.0 * std::f64::consts::FRAC_1_SQRT_2)).sqrt()
+}
+
+/// One spectral band: the leaves' and the soil's optics in it.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Band {
+    pub name: String,
+    /// Hemispherical reflectance of a leaf (Lambertian, either face).
+    pub leaf_reflectance: f64,
+    /// Hemispherical transmittance of a leaf (Lambertian).
+    pub leaf_transmittance: f64,
+    /// Lambertian albedo of the soil.
+    pub soil_albedo: f64,
+    /// Counts towards fAPAR (photosynthetically active radiation, 400-700 nm).
+    #[serde(default)]
+    pub par: bool,
+    /// The band's share of the sun's irradiance within the PAR bands (fAPAR's weights).
+    #[serde(default = "one")]
+    pub weight: f64,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+impl Band {
+    /// Red and near-infrared leaves of issue 29's validation cases (r, t about 0.07, 0.06 and
+    /// 0.45, 0.4) over a soil of albedo `soil` in both.
+    pub fn red_nir(soil: f64) -> Vec<Band> {
+        vec![
+            Band {
+                name: "red".into(),
+                leaf_reflectance: 0.07,
+                leaf_transmittance: 0.06,
+                soil_albedo: soil,
+                par: true,
+                weight: 1.0,
+            },
+            Band {
+                name: "nir".into(),
+                leaf_reflectance: 0.45,
+                leaf_transmittance: 0.40,
+                soil_albedo: soil,
+                par: false,
+                weight: 1.0,
+            },
+        ]
+    }
+}
+
+/// A stand to take the budget of.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CanopySpec {
+    #[serde(default = "stand_name")]
+    pub name: String,
+    /// Seed of the crowns' placement and of every leaf's position and orientation.
+    #[serde(default = "seed")]
+    pub seed: u64,
+    #[serde(default)]
+    pub plot: Plot,
+    pub crowns: Option<Crowns>,
+    pub layer: Option<Layer>,
+    #[serde(default)]
+    pub leaves: Leaves,
+    /// Default: red and near-infrared over a soil of albedo 0.12.
+    #[serde(default)]
+    pub bands: Vec<Band>,
+}
+
+fn stand_name() -> String {
+    "stand".into()
+}
+
+fn seed() -> u64 {
+    1
+}
+
+/// Leaf triangles a stand may hold (discs are 6 triangles, squares 2), across its distinct
+/// models: about 100 bytes each with their kd-tree.
+pub const MAX_TRIANGLES: u64 = 60_000_000;
+
+/// Random sequential placement of equal discs jams near this cover (Feder 1980: 0.547).
+pub const JAMMING_COVER: f64 = 0.547;
+
+impl CanopySpec {
+    /// Reads and checks a canopy file.
+    pub fn load(path: &Path) -> Result<CanopySpec, BudgetError> {
+        let file = |message: String| BudgetError::File {
+            path: path.display().to_string(),
+            message,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| file(e.to_string()))?;
+        let spec = CanopySpec::parse(&text).map_err(|e| file(e.to_string()))?;
+        Ok(spec)
+    }
+
+    /// Parses and checks TOML text.
+    pub fn parse(text: &str) -> Result<CanopySpec, BudgetError> {
+        let mut spec: CanopySpec = toml::from_str(text).map_err(|e| {
+            let line = e
+                .span()
+                .map(|r| text[..r.start.min(text.len())].matches('\n').count() + 1);
+            BudgetError::Toml {
+                at: line.map_or(String::new(), |l| format!("line {l}: ")),
+                message: e.message().trim().to_string(),
+            }
+        })?;
+        if spec.bands.is_empty() {
+            spec.bands = Band::red_nir(0.12);
+        }
+        spec.validate()?;
+        Ok(spec)
+    }
+
+    /// The built-in stands: `crowns` (issue 29's validation stand: spheres of crown LAI 5 at
+    /// cover 0.3 over 100 m × 100 m, red and near-infrared) and `layer` (a homogeneous layer of
+    /// LAI 3, 2 m thick, on a 10 m cyclic plot).
+    pub fn builtin(name: &str) -> Option<CanopySpec> {
+        let text = match name {
+            "crowns" => BUILTIN_CROWNS,
+            "layer" => BUILTIN_LAYER,
+            _ => return None,
+        };
+        Some(CanopySpec::parse(text).expect("built-in canopies are valid"))
+    }
+
+    pub const BUILTIN: [&'static str; 2] = ["crowns", "layer"];
+
+    /// Every setting within its range: one error naming the first that is not.
+    pub fn validate(&self) -> Result<(), BudgetError> {
+        let positive = |what: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(BudgetError::invalid(what, v, "must be a positive number"))
+            }
+        };
+        positive("plot.size[0]", self.plot.size[0])?;
+        positive("plot.size[1]", self.plot.size[1])?;
+        positive("leaves.size", self.leaves.size)?;
+        match (&self.crowns, &self.layer) {
+            (Some(_), Some(_)) => {
+                return Err(BudgetError::invalid(
+                    "canopy",
+                    "[crowns] and [layer]",
+                    "give one of them, not both",
+                ))
+            }
+            (None, None) => {
+                return Err(BudgetError::invalid(
+                    "canopy",
+                    "no [crowns] or [layer]",
+                    "give crowns (radius, centre_height, lai, cover) or a layer (lai, height)",
+                ))
+            }
+            (Some(c), None) => {
+                positive("crowns.radius", c.radius)?;
+                positive("crowns.half_height", c.half_height())?;
+                positive("crowns.lai", c.lai)?;
+                if !(c.centre_height.is_finite() && c.centre_height >= c.half_height()) {
+                    return Err(BudgetError::invalid(
+                        "crowns.centre_height",
+                        c.centre_height,
+                        format!(
+                            "a crown reaches {} m below its centre: it must not go into the soil",
+                            c.half_height()
+                        ),
+                    ));
+                }
+                if !(c.cover.is_finite() && c.cover > 0.0 && c.cover <= 1.0) {
+                    return Err(BudgetError::invalid(
+                        "crowns.cover",
+                        c.cover,
+                        "must be in (0, 1]",
+                    ));
+                }
+                if c.cover > JAMMING_COVER {
+                    return Err(BudgetError::invalid(
+                        "crowns.cover",
+                        c.cover,
+                        format!("non-overlapping crowns placed at random cannot reach it (random placement jams near {JAMMING_COVER})"),
+                    ));
+                }
+                if self.leaves.reach() >= c.radius.min(c.half_height()) {
+                    return Err(BudgetError::invalid(
+                        "leaves.size",
+                        self.leaves.size,
+                        "a leaf must be smaller than its crown",
+                    ));
+                }
+                let [x, z] = self.plot.size;
+                if 2.0 * c.radius > x.min(z) {
+                    return Err(BudgetError::invalid(
+                        "crowns.radius",
+                        c.radius,
+                        format!("a crown must fit the {x} m × {z} m plot"),
+                    ));
+                }
+            }
+            (None, Some(l)) => {
+                positive("layer.lai", l.lai)?;
+                positive("layer.height", l.height)?;
+                if 2.0 * self.leaves.reach() >= l.height {
+                    return Err(BudgetError::invalid(
+                        "layer.height",
+                        l.height,
+                        format!(
+                            "must exceed a leaf's extent ({:.3} m)",
+                            2.0 * self.leaves.reach()
+                        ),
+                    ));
+                }
+            }
+        }
+        let mut names = std::collections::HashSet::new();
+        for b in &self.bands {
+            let what = |k: &str| format!("bands.{}.{k}", b.name);
+            if b.name.trim().is_empty() {
+                return Err(BudgetError::invalid(
+                    "bands.name",
+                    "\"\"",
+                    "a band needs a name",
+                ));
+            }
+            if !names.insert(b.name.clone()) {
+                return Err(BudgetError::invalid(
+                    "bands.name",
+                    &b.name,
+                    "names a band twice",
+                ));
+            }
+            for (k, v) in [
+                ("leaf_reflectance", b.leaf_reflectance),
+                ("leaf_transmittance", b.leaf_transmittance),
+                ("soil_albedo", b.soil_albedo),
+            ] {
+                if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
+                    return Err(BudgetError::invalid(what(k), v, "must be in [0, 1]"));
+                }
+            }
+            if b.leaf_reflectance + b.leaf_transmittance > 1.0 {
+                return Err(BudgetError::invalid(
+                    what("leaf_reflectance + leaf_transmittance"),
+                    b.leaf_reflectance + b.leaf_transmittance,
+                    "must not exceed 1 (a leaf cannot give out more light than it receives)",
+                ));
+            }
+            if !(b.weight.is_finite() && b.weight > 0.0) {
+                return Err(BudgetError::invalid(
+                    what("weight"),
+                    b.weight,
+                    "must be a positive number",
+                ));
+            }
+        }
+        let triangles = self.triangles();
+        if triangles > MAX_TRIANGLES {
+            return Err(BudgetError::invalid(
+                "canopy",
+                format!("{triangles} leaf triangles"),
+                format!("more than {MAX_TRIANGLES}: use larger leaves, a smaller plot or fewer crown variants"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Leaves per crown (or in the layer).
+    pub fn leaves_per_unit(&self) -> u64 {
+        let area = self.leaves.area();
+        match (&self.crowns, &self.layer) {
+            (Some(c), _) => {
+                (c.lai * std::f64::consts::PI * c.radius * c.radius / area).round() as u64
+            }
+            (_, Some(l)) => (l.lai * self.plot.size[0] * self.plot.size[1] / area).round() as u64,
+            _ => 0,
+        }
+    }
+
+    /// Crowns on the plot: the cover's share of its area over one crown's cross-section.
+    pub fn crown_count(&self) -> u64 {
+        self.crowns.as_ref().map_or(0, |c| {
+            (c.cover * self.plot.size[0] * self.plot.size[1]
+                / (std::f64::consts::PI * c.radius * c.radius))
+                .round()
+                .max(1.0) as u64
+        })
+    }
+
+    /// Distinct crown models (the crowns are their instances, each turned at random).
+    pub fn crown_variants(&self) -> u64 {
+        self.crown_count().clamp(1, CROWN_VARIANTS)
+    }
+
+    /// Leaf triangles of the distinct models.
+    pub fn triangles(&self) -> u64 {
+        let per_leaf = match self.leaves.shape {
+            LeafShape::Disc => 6,
+            LeafShape::Square => 2,
+        };
+        let units = if self.crowns.is_some() {
+            self.crown_variants()
+        } else {
+            1
+        };
+        units
+            .saturating_mul(self.leaves_per_unit())
+            .saturating_mul(per_leaf)
+    }
+}
+
+/// Distinct crowns generated at most; more crowns instance them.
+pub const CROWN_VARIANTS: u64 = 16;
+
+const BUILTIN_CROWNS: &str = r#"
+name = "crowns"
+seed = 1
+[plot]
+size = [100.0, 100.0]
+[crowns]
+shape = "sphere"
+radius = 2.5
+centre_height = 6.0
+lai = 5.0
+cover = 0.3
+[leaves]
+shape = "disc"
+size = 0.1
+[[bands]]
+name = "red"
+leaf_reflectance = 0.07
+leaf_transmittance = 0.06
+soil_albedo = 0.12
+par = true
+[[bands]]
+name = "nir"
+leaf_reflectance = 0.45
+leaf_transmittance = 0.40
+soil_albedo = 0.12
+"#;
+
+const BUILTIN_LAYER: &str = r#"
+name = "layer"
+seed = 1
+[plot]
+size = [10.0, 10.0]
+[layer]
+lai = 3.0
+height = 2.0
+[leaves]
+shape = "disc"
+size = 0.1
+[[bands]]
+name = "red"
+leaf_reflectance = 0.07
+leaf_transmittance = 0.06
+soil_albedo = 0.12
+par = true
+[[bands]]
+name = "nir"
+leaf_reflectance = 0.45
+leaf_transmittance = 0.40
+soil_albedo = 0.12
+"#;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn built_in_stands_parse_and_count_their_leaves() {
+        let c = CanopySpec::builtin("crowns").unwrap();
+        // 0.3 × 10⁴ m² / (π 2.5²) = 152.8 crowns; 5 × π 2.5² / (π 0.05²) = 12,500 leaves.
+        assert_eq!(c.crown_count(), 153);
+        assert_eq!(c.leaves_per_unit(), 12_500);
+        assert_eq!(c.triangles(), 16 * 12_500 * 6);
+        let l = CanopySpec::builtin("layer").unwrap();
+        assert_eq!(
+            l.leaves_per_unit(),
+            (300.0 / (std::f64::consts::PI * 0.0025)).round() as u64
+        );
+        assert_eq!(l.bands.len(), 2);
+        assert!(CanopySpec::builtin("nothing").is_none());
+    }
+
+    #[test]
+    fn the_octagon_has_the_disc_area() {
+        let r = octagon_scale();
+        let area = 4.0 * r * r * (std::f64::consts::FRAC_PI_4).sin();
+        assert!((area - std::f64::consts::PI).abs() < 1e-12);
+    }
+
+    #[test]
+    fn bad_canopies_are_one_line_errors() {
+        let base = BUILTIN_CROWNS;
+        let cases = [
+            (
+                base.replace("leaf_reflectance = 0.45", "leaf_reflectance = 0.75"),
+                "must not exceed 1",
+            ),
+            (
+                base.replace("soil_albedo = 0.12\npar", "soil_albedo = -0.1\npar"),
+                "must be in [0, 1]",
+            ),
+            (base.replace("lai = 5.0", "lai = 0.0"), "crowns.lai"),
+            (base.replace("cover = 0.3", "cover = 0.6"), "jams near"),
+            (base.replace("cover = 0.3", "cover = nan"), "crowns.cover"),
+            (
+                base.replace("centre_height = 6.0", "centre_height = 1.0"),
+                "into the soil",
+            ),
+            (
+                base.replace("size = 0.1", "size = 6.0"),
+                "smaller than its crown",
+            ),
+            (
+                base.replace(
+                    "radius = 2.5\ncentre_height = 6.0",
+                    "radius = 60.0\ncentre_height = 70.0",
+                ),
+                "fit the",
+            ),
+            (
+                base.replace("name = \"nir\"", "name = \"red\""),
+                "names a band twice",
+            ),
+            (
+                base.replace("shape = \"sphere\"", "shape = \"cube\""),
+                "unknown variant",
+            ),
+            (
+                base.replace("lai = 5.0", "lai = 5.0\nheight = 3.0"),
+                "unknown field",
+            ),
+            (
+                format!("{base}\n[layer]\nlai = 1.0\nheight = 1.0\n"),
+                "not both",
+            ),
+            ("name = \"x\"\n".to_string(), "no [crowns] or [layer]"),
+            (base.replace("size = 0.1", "size = 0.001"), "leaf triangles"),
+        ];
+        for (text, needle) in cases {
+            let e = CanopySpec::parse(&text).unwrap_err().to_string();
+            assert!(e.contains(needle), "{needle}: {e}");
+            assert!(!e.contains('\n'), "{e}");
+        }
+    }
+}

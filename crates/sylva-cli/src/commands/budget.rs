@@ -1,0 +1,84 @@
+//! `sylva budget`: the canopy radiation budget of an abstract stand (crowns of flat leaves or
+//! a homogeneous layer, `sylva-budget`): per band the fractions of the sunlight absorbed by
+//! the canopy, reflected to the sky, transmitted to the ground and absorbed by it, and fAPAR.
+
+use super::output::{bench_bar, emit_to};
+use anyhow::{bail, Context, Result};
+use std::path::{Path, PathBuf};
+use sylva_budget::{
+    budget_json, budget_text, trace_budget, Budget, BudgetConfig, CanopySpec, Stand, SunAngles,
+};
+
+#[derive(clap::Args)]
+pub struct BudgetArgs {
+    /// A canopy file (TOML: `[plot]`, `[crowns]` or `[layer]`, `[leaves]`, `[[bands]]`;
+    /// docs/budget.md) or a built-in stand: `crowns` (spheres of crown LAI 5 at cover 0.3 over
+    /// 100 m × 100 m) or `layer` (a homogeneous layer of LAI 3).
+    canopy: String,
+    /// The sun's zenith angle, degrees from the vertical (0 to below 90).
+    #[arg(long, default_value_t = 30.0, allow_hyphen_values = true)]
+    sun_zenith: f64,
+    /// The sun's azimuth, degrees from +z towards +x.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    sun_azimuth: f64,
+    /// Photons per band (the standard error of a fraction falls as 1/√photons).
+    #[arg(long, default_value_t = 1_000_000)]
+    photons: u64,
+    /// Seed of the photons (the stand's own seed is in its file). Results depend on the
+    /// seeds only, not on the thread count.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Print JSON instead of a text table.
+    #[arg(long)]
+    json: bool,
+    /// Write the output to this file (atomically) instead of standard output.
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+pub fn run(a: BudgetArgs) -> Result<()> {
+    let spec = match CanopySpec::builtin(&a.canopy) {
+        Some(spec) => spec,
+        None => {
+            let path = Path::new(&a.canopy);
+            if !path.exists() {
+                bail!(
+                    "{}: no such canopy file, and not a built-in stand ({})",
+                    a.canopy,
+                    CanopySpec::BUILTIN.join(", ")
+                );
+            }
+            CanopySpec::load(path)?
+        }
+    };
+    let cfg = BudgetConfig {
+        photons: a.photons,
+        seed: a.seed,
+        sun: SunAngles {
+            zenith_deg: a.sun_zenith,
+            azimuth_deg: a.sun_azimuth,
+        },
+    };
+    cfg.validate()?;
+    let t0 = std::time::Instant::now();
+    let stand = Stand::build(&spec)?;
+    let accel = sylva_trace::SceneAccel::from_parts(&stand.models, &stand.instances, None)
+        .context("building the stand's kd-trees")?;
+    let build_seconds = t0.elapsed().as_secs_f64();
+    let bar = bench_bar(
+        a.json || a.out.is_some(),
+        (a.photons * spec.bands.len() as u64) as usize,
+        "photons",
+    );
+    let bands = trace_budget(&stand, &accel, &spec.bands, spec.plot.cyclic, &cfg, &|n| {
+        bar.inc(n)
+    })?;
+    bar.finish_and_clear();
+    let budget = Budget::new(&spec, &stand, cfg.sun, bands, build_seconds);
+    let text = if a.json {
+        format!("{}\n", budget_json(&budget))
+    } else {
+        budget_text(&budget)
+    };
+    emit_to(&text, a.out)
+}

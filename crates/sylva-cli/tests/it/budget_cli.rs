@@ -1,0 +1,106 @@
+//! `sylva budget` as a user runs it: a built-in stand and a canopy file, JSON and text, and
+//! bad input (docs/budget.md).
+
+use crate::common;
+use common::sylva;
+
+#[test]
+fn a_canopy_file_gets_a_budget_whose_fates_add_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("grove.toml");
+    std::fs::write(
+        &path,
+        "name = \"grove\"\n[plot]\nsize = [12.0, 12.0]\n[crowns]\nshape = \"ellipsoid\"\nradius = 1.5\nhalf_height = 2.0\ncentre_height = 3.0\nlai = 3.0\ncover = 0.3\n[leaves]\nshape = \"square\"\nsize = 0.15\n\n[[bands]]\nname = \"red\"\nleaf_reflectance = 0.07\nleaf_transmittance = 0.06\nsoil_albedo = 0.12\npar = true\n\n[[bands]]\nname = \"green\"\nleaf_reflectance = 0.12\nleaf_transmittance = 0.1\nsoil_albedo = 0.12\npar = true\nweight = 0.5\n\n[[bands]]\nname = \"nir\"\nleaf_reflectance = 0.45\nleaf_transmittance = 0.4\nsoil_albedo = 0.3\n",
+    )
+    .unwrap();
+    let out = dir.path().join("grove.json");
+    let (ok, stdout, err) = sylva(&[
+        "budget",
+        path.to_str().unwrap(),
+        "--sun-zenith",
+        "40",
+        "--photons",
+        "40000",
+        "--json",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(stdout.is_empty());
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(r["stand"], "grove");
+    assert_eq!(r["cyclic"], true);
+    let bands = r["bands"].as_array().unwrap();
+    assert_eq!(bands.len(), 3);
+    let f = |b: &serde_json::Value, k: &str| b[k]["value"].as_f64().unwrap();
+    for b in bands {
+        // Every photon ends absorbed or in the sky; none leaves a cyclic plot sideways.
+        let sum = f(b, "canopy_absorbed") + f(b, "reflected") + f(b, "soil_absorbed");
+        assert!((sum - 1.0).abs() < 1e-9, "{b}");
+        assert_eq!(f(b, "side_lost"), 0.0);
+        // The soil absorbs 1 − ρ of every arrival (within the noise).
+        let rho = if b["band"] == "nir" { 0.3 } else { 0.12 };
+        let se = b["soil_absorbed"]["std_error"].as_f64().unwrap();
+        assert!(
+            (f(b, "soil_absorbed") - (1.0 - rho) * f(b, "ground_arrived")).abs() < 4.0 * se + 1e-3,
+            "{b}"
+        );
+        assert!(f(b, "ground_direct") <= f(b, "ground_arrived"));
+    }
+    // Brighter leaves absorb less and reflect more; fAPAR weighs red 1 and green 0.5.
+    assert!(f(&bands[2], "canopy_absorbed") < f(&bands[0], "canopy_absorbed"));
+    assert!(f(&bands[2], "reflected") > f(&bands[0], "reflected"));
+    let fapar = (f(&bands[0], "canopy_absorbed") + 0.5 * f(&bands[1], "canopy_absorbed")) / 1.5;
+    assert!((r["fapar"].as_f64().unwrap() - fapar).abs() < 1e-12);
+    // The same stand and seed give the same numbers; the text names the bands.
+    let (ok, text, err) = sylva(&[
+        "budget",
+        path.to_str().unwrap(),
+        "--sun-zenith",
+        "40",
+        "--photons",
+        "40000",
+    ]);
+    assert!(ok, "{err}");
+    assert!(text.contains("| nir |") && text.contains("fAPAR"), "{text}");
+    let red = format!("{:.4}", f(&bands[0], "canopy_absorbed"));
+    assert!(text.contains(&red), "{text}");
+}
+
+#[test]
+fn bad_canopies_and_suns_get_one_line_errors_naming_the_problem() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        ("[layer]\nlai = 0.0\nheight = 1.0\n", "layer.lai"),
+        (
+            "[layer]\nlai = 1.0\nheight = 1.0\n[[bands]]\nname = \"x\"\nleaf_reflectance = 0.7\nleaf_transmittance = 0.4\nsoil_albedo = 0.1\n",
+            "must not exceed 1",
+        ),
+        ("[crowns]\nradius = 1.0\ncentre_height = 2.0\nlai = 3.0\ncover = 0.8\n", "jams"),
+        ("[layer\n", "line 1"),
+    ];
+    for (k, (text, needle)) in cases.iter().enumerate() {
+        let path = dir.path().join(format!("bad{k}.toml"));
+        std::fs::write(&path, text).unwrap();
+        let (ok, _, err) = sylva(&["budget", path.to_str().unwrap()]);
+        assert!(!ok);
+        assert!(
+            err.contains(needle) && err.contains(&format!("bad{k}.toml")),
+            "{err}"
+        );
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    }
+    for (args, needle) in [
+        (
+            vec!["budget", "layer", "--sun-zenith", "90"],
+            "--sun-zenith",
+        ),
+        (vec!["budget", "layer", "--photons", "100"], "--photons"),
+        (vec!["budget", "no-such-stand"], "not a built-in stand"),
+    ] {
+        let (ok, _, err) = sylva(&args);
+        assert!(!ok && err.contains(needle), "{err}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+    }
+}
