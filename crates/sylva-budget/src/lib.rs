@@ -9,7 +9,8 @@
 //! layer; the bands with their leaf reflectance and transmittance and soil albedo; and the
 //! Monte Carlo photon budget of such a stand in a cyclic plot ([`photons`]: light leaving a
 //! side re-enters on the opposite one, so the plot stands for an infinite stand), the
-//! reference the other methods are held to ([`report`] formats it).
+//! reference the other methods are held to, with the BRF towards chosen view directions by
+//! local estimates ([`report`] formats it).
 //!
 //! May import `sylva-core`, `sylva-geom` (meshes, models, instances) and `sylva-trace` (the
 //! kd-trees the photons are traced through).
@@ -19,7 +20,9 @@ pub mod report;
 pub mod spec;
 pub mod stand;
 
-pub use photons::{trace_budget, BandBudget, BudgetConfig, Fraction, SunAngles};
+pub use photons::{
+    trace_budget, BandBudget, BudgetConfig, Fraction, SunAngles, ViewAngles, ViewBrf, MAX_VIEWS,
+};
 pub use report::{budget_json, budget_text, Budget};
 pub use spec::{Band, BudgetError, CanopySpec, CrownShape, LeafShape};
 pub use stand::Stand;

@@ -8,6 +8,14 @@
 //! sideways. This is 003's photon tracer (sylva-spp's `trees::photons`) extended with the
 //! soil, the sides and the fates a budget needs.
 //!
+//! **BRF** (the bidirectional reflectance factor towards a view direction v) by local
+//! estimates: at every scattering event the photon's expected contribution towards v is
+//! added, whatever its fate: the probability density of leaving towards v (r |n·v|/π on the
+//! leaf's lit side, t |n·v|/π through it, ρ cos θ_v/π off the soil) times whether a ray from
+//! there towards v reaches the sky (through the cyclic sides). With unit power over the plot's
+//! area A the radiance leaving the top towards v is Σ p_v T_v / (N A cos θ_v), and the BRF, π
+//! times it over the irradiance 1/A, is π Σ p_v T_v / (N cos θ_v).
+//!
 //! Analog tallies: every fraction is a mean over independent photons, and its standard
 //! error comes from the spread of the means of the chunks of [`CHUNK`] photons. Chunks are
 //! seeded from the run's seed, the band and the chunk's index, so a result depends on the
@@ -65,14 +73,74 @@ impl SunAngles {
     }
 }
 
+/// A direction seen from above the stand, towards the viewer: zenith and azimuth as the
+/// sun's ([`SunAngles`]), so the view of the sun's own direction is the hot spot.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ViewAngles {
+    pub zenith_deg: f64,
+    pub azimuth_deg: f64,
+}
+
+impl ViewAngles {
+    /// Parses `ZENITH:AZIMUTH` in degrees.
+    pub fn parse(s: &str) -> Result<ViewAngles, BudgetError> {
+        let bad = || {
+            BudgetError::invalid(
+                "--brf",
+                s,
+                "expected ZENITH:AZIMUTH in degrees, e.g. 30:180",
+            )
+        };
+        let (z, a) = s.split_once(':').ok_or_else(bad)?;
+        let v = ViewAngles {
+            zenith_deg: z.trim().parse().map_err(|_| bad())?,
+            azimuth_deg: a.trim().parse().map_err(|_| bad())?,
+        };
+        v.validate()?;
+        Ok(v)
+    }
+
+    pub fn validate(&self) -> Result<(), BudgetError> {
+        if !(self.zenith_deg.is_finite() && (0.0..90.0).contains(&self.zenith_deg)) {
+            return Err(BudgetError::invalid(
+                "--brf zenith",
+                self.zenith_deg,
+                "degrees from the vertical, 0 to below 90",
+            ));
+        }
+        if !self.azimuth_deg.is_finite() {
+            return Err(BudgetError::invalid(
+                "--brf azimuth",
+                self.azimuth_deg,
+                "must be a finite number of degrees",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The unit direction towards the viewer (upwards).
+    pub fn towards(&self) -> Vec3 {
+        -SunAngles {
+            zenith_deg: self.zenith_deg,
+            azimuth_deg: self.azimuth_deg,
+        }
+        .travel()
+    }
+}
+
 /// What to simulate.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct BudgetConfig {
     /// Photons per band.
     pub photons: u64,
     pub seed: u64,
     pub sun: SunAngles,
+    /// Directions to estimate the BRF towards (none: no BRF).
+    pub views: Vec<ViewAngles>,
 }
+
+/// Views a run may estimate the BRF towards (each adds a ray per scattering event).
+pub const MAX_VIEWS: usize = 64;
 
 impl BudgetConfig {
     pub fn validate(&self) -> Result<(), BudgetError> {
@@ -86,8 +154,25 @@ impl BudgetConfig {
                 ),
             ));
         }
+        if self.views.len() > MAX_VIEWS {
+            return Err(BudgetError::invalid(
+                "--brf",
+                format!("{} directions", self.views.len()),
+                format!("at most {MAX_VIEWS} (each adds a ray per scattering event)"),
+            ));
+        }
+        for v in &self.views {
+            v.validate()?;
+        }
         self.sun.validate()
     }
+}
+
+/// The BRF towards one view direction.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct ViewBrf {
+    pub view: ViewAngles,
+    pub brf: Fraction,
 }
 
 /// A fraction of the incoming sunlight and its standard error.
@@ -119,14 +204,18 @@ pub struct BandBudget {
     pub leaf_events: f64,
     /// 1 − the sum of the fates: 0 up to rounding (every photon ends in exactly one fate).
     pub balance: f64,
+    /// The BRF towards each of the run's views.
+    pub brf: Vec<ViewBrf>,
     pub photons: u64,
     pub rays: u64,
     pub seconds: f64,
 }
 
 /// Per-chunk sums (fates are counts; arrivals may exceed the photons).
-#[derive(Default, Clone, Copy)]
+#[derive(Default, Clone)]
 struct Counts {
+    /// Σ π p_v T_v / cos θ_v per view.
+    brf: Vec<f64>,
     canopy: u64,
     reflected: u64,
     arrived: u64,
@@ -187,26 +276,22 @@ pub fn trace_budget(
                     let n = CHUNK.min(cfg.photons - c * CHUNK);
                     let seed = cfg.seed ^ (b as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
                     let mut rng = SplitMix64::for_chunk(seed, c);
-                    let k = trace_chunk(stand, accel, band, cyclic, cfg.sun.travel(), n, &mut rng);
+                    let k = trace_chunk(stand, accel, band, cyclic, cfg, n, &mut rng);
                     progress(n);
                     k
                 })
                 .collect();
-            Ok(summarise(
-                band,
-                &counts,
-                cfg.photons,
-                t0.elapsed().as_secs_f64(),
-            ))
+            Ok(summarise(band, &counts, cfg, t0.elapsed().as_secs_f64()))
         })
         .collect()
 }
 
-fn summarise(band: &Band, counts: &[Counts], photons: u64, seconds: f64) -> BandBudget {
+fn summarise(band: &Band, counts: &[Counts], cfg: &BudgetConfig, seconds: f64) -> BandBudget {
+    let photons = cfg.photons;
     let n = photons as f64;
-    let fraction = |k: usize| {
-        let total: u64 = counts.iter().map(|c| c.fields()[k]).sum();
-        let value = total as f64 / n;
+    let mean = |get: &dyn Fn(&Counts) -> f64| {
+        let total: f64 = counts.iter().map(get).sum();
+        let value = total / n;
         // The spread of the chunks' means about the whole mean, weighted by chunk size.
         let m = counts.len() as f64;
         let sizes: Vec<f64> = (0..counts.len())
@@ -216,7 +301,7 @@ fn summarise(band: &Band, counts: &[Counts], photons: u64, seconds: f64) -> Band
             .iter()
             .zip(&sizes)
             .map(|(c, &s)| {
-                let d = c.fields()[k] as f64 / s - value;
+                let d = get(c) / s - value;
                 s * s * d * d
             })
             .sum::<f64>()
@@ -228,7 +313,18 @@ fn summarise(band: &Band, counts: &[Counts], photons: u64, seconds: f64) -> Band
             std_error: var.sqrt(),
         }
     };
-    let f: Vec<Fraction> = (0..7).map(fraction).collect();
+    let f: Vec<Fraction> = (0..7)
+        .map(|k| mean(&|c: &Counts| c.fields()[k] as f64))
+        .collect();
+    let brf = cfg
+        .views
+        .iter()
+        .enumerate()
+        .map(|(v, &view)| ViewBrf {
+            view,
+            brf: mean(&|c: &Counts| c.brf[v]),
+        })
+        .collect();
     let fates = f[0].value + f[1].value + f[4].value + f[5].value + f[6].value;
     BandBudget {
         band: band.name.clone(),
@@ -241,6 +337,7 @@ fn summarise(band: &Band, counts: &[Counts], photons: u64, seconds: f64) -> Band
         unfinished: f[6],
         leaf_events: counts.iter().map(|c| c.leaf_events).sum::<u64>() as f64 / n,
         balance: 1.0 - fates,
+        brf,
         photons,
         rays: counts.iter().map(|c| c.rays).sum(),
         seconds,
@@ -253,10 +350,16 @@ fn trace_chunk(
     accel: &SceneAccel,
     band: &Band,
     cyclic: bool,
-    travel: Vec3,
+    cfg: &BudgetConfig,
     n: u64,
     rng: &mut SplitMix64,
 ) -> Counts {
+    let travel = cfg.sun.travel();
+    let views: Vec<(Vec3, f32)> = cfg
+        .views
+        .iter()
+        .map(|v| (v.towards(), v.towards().y))
+        .collect();
     let [hx, hz] = [stand.half[0] as f32, stand.half[1] as f32];
     let top = stand.top as f32;
     let (r, t, rho) = (
@@ -264,7 +367,10 @@ fn trace_chunk(
         band.leaf_transmittance,
         band.soil_albedo,
     );
-    let mut k = Counts::default();
+    let mut k = Counts {
+        brf: vec![0.0; views.len()],
+        ..Counts::default()
+    };
     let mut stats = TraceStats::default();
     'photon: for _ in 0..n {
         let mut o = Vec3::new(
@@ -300,6 +406,17 @@ fn trace_chunk(
                 let ng = accel.geometric_normal(&hit);
                 let facing = if ng.dot(d) < 0.0 { ng } else { -ng };
                 k.leaf_events += 1;
+                let eps = 1e-4 * p.abs().max_element().max(1.0);
+                for (j, &(v, mu)) in views.iter().enumerate() {
+                    let c = facing.dot(v);
+                    let (share, side) = if c > 0.0 { (r, facing) } else { (t, -facing) };
+                    if share > 0.0 && c != 0.0 {
+                        let from = p + side * eps;
+                        if reaches_sky(stand, accel, cyclic, from, v, &mut k.rays) {
+                            k.brf[j] += share * c.abs() as f64 / mu as f64;
+                        }
+                    }
+                }
                 scattered = true;
                 let x = rng.next_f64();
                 let leave = if x < r {
@@ -310,7 +427,6 @@ fn trace_chunk(
                     k.canopy += 1;
                     continue 'photon;
                 };
-                let eps = 1e-4 * p.abs().max_element().max(1.0);
                 o = p + leave * eps;
                 d = lambert(leave, rng);
                 continue;
@@ -319,6 +435,16 @@ fn trace_chunk(
                 k.arrived += 1;
                 if !scattered {
                     k.direct += 1;
+                }
+                if rho > 0.0 && !views.is_empty() {
+                    // ρ cos θ_v / π towards v, times π / cos θ_v: ρ, where the view is open.
+                    let p = o + d * t_soil;
+                    let from = Vec3::new(p.x, 0.0, p.z);
+                    for (j, &(v, _)) in views.iter().enumerate() {
+                        if reaches_sky(stand, accel, cyclic, from, v, &mut k.rays) {
+                            k.brf[j] += rho;
+                        }
+                    }
                 }
                 if rng.next_f64() < rho {
                     scattered = true;
@@ -357,6 +483,55 @@ fn trace_chunk(
     k
 }
 
+/// Whether a ray from `o` along `d` (upwards) leaves through the plot's top (or, in an
+/// isolated plot, through a side) without meeting a leaf, crossing the cyclic sides.
+fn reaches_sky(
+    stand: &Stand,
+    accel: &SceneAccel,
+    cyclic: bool,
+    mut o: Vec3,
+    d: Vec3,
+    rays: &mut u64,
+) -> bool {
+    let [hx, hz] = [stand.half[0] as f32, stand.half[1] as f32];
+    let top = stand.top as f32;
+    let mut stats = TraceStats::default();
+    for _ in 0..MAX_EVENTS {
+        let t_top = (top - o.y) / d.y;
+        let side = |p: f32, v: f32, h: f32| {
+            if v > 0.0 {
+                (h - p) / v
+            } else if v < 0.0 {
+                (-h - p) / v
+            } else {
+                f32::INFINITY
+            }
+        };
+        let (t_x, t_z) = (side(o.x, d.x, hx).max(0.0), side(o.z, d.z, hz).max(0.0));
+        let t_end = t_top.min(t_x).min(t_z);
+        *rays += 1;
+        if accel.any_hit(
+            &Ray::segment(o, d, 0.0, t_end),
+            TraversalConfig::default(),
+            &mut stats,
+        ) {
+            return false;
+        }
+        if t_end == t_top || !cyclic {
+            return true;
+        }
+        let mut p = o + d * t_end;
+        if t_end == t_x {
+            p.x = if d.x > 0.0 { -hx } else { hx };
+        }
+        if t_end == t_z {
+            p.z = if d.z > 0.0 { -hz } else { hz };
+        }
+        o = Vec3::new(p.x.clamp(-hx, hx), p.y.clamp(0.0, top), p.z.clamp(-hz, hz));
+    }
+    false
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -391,6 +566,7 @@ mod tests {
                 zenith_deg: zenith,
                 azimuth_deg: 30.0,
             },
+            views: Vec::new(),
         }
     }
 
@@ -446,6 +622,58 @@ mod tests {
     }
 
     #[test]
+    fn the_brf_of_black_leaves_over_a_soil_is_the_soil_seen_through_both_gaps() {
+        // Black leaves, a Lambertian soil of albedo ρ: the BRF towards v is ρ times the gap
+        // fraction towards the sun times that towards v (views far from the sun's direction,
+        // where the two gaps are independent); towards the sun itself the gaps coincide and
+        // the BRF is higher (the hot spot).
+        let (_, stand, accel) = layer(1.5, 3.0);
+        let lai = stand.lai;
+        let mut cfg = config(60 * CHUNK, 30.0);
+        let views = [(60.0, 210.0), (45.0, 120.0), (30.0, 30.0)];
+        cfg.views = views
+            .iter()
+            .map(|&(z, a)| ViewAngles {
+                zenith_deg: z,
+                azimuth_deg: a,
+            })
+            .collect();
+        let soil = 0.4;
+        let b = trace_budget(&stand, &accel, &[band(0.0, 0.0, soil)], true, &cfg, &|_| {})
+            .unwrap()
+            .remove(0);
+        let gap = |z: f64| (-0.5 * lai / z.to_radians().cos()).exp();
+        for (v, &(z, _)) in b.brf.iter().zip(&views).take(2) {
+            let want = soil * gap(30.0) * gap(z);
+            assert!(
+                (v.brf.value - want).abs() < 4.0 * v.brf.std_error + 0.003,
+                "view {z}: BRF {} ± {} against {want}",
+                v.brf.value,
+                v.brf.std_error
+            );
+        }
+        let hot = b.brf[2].brf.value;
+        assert!(
+            hot > 1.5 * soil * gap(30.0) * gap(30.0),
+            "hot spot {hot} against {}",
+            soil * gap(30.0) * gap(30.0)
+        );
+        // The views add rays but change no fate.
+        let plain = trace_budget(
+            &stand,
+            &accel,
+            &[band(0.0, 0.0, soil)],
+            true,
+            &config(60 * CHUNK, 30.0),
+            &|_| {},
+        )
+        .unwrap()
+        .remove(0);
+        assert_eq!(plain.reflected, b.reflected);
+        assert!(b.rays > plain.rays);
+    }
+
+    #[test]
     fn lossless_leaves_over_a_white_soil_send_everything_back_to_the_sky() {
         // Nothing absorbs, and in a cyclic plot nothing leaves through the sides: every
         // photon ends in the sky.
@@ -498,7 +726,10 @@ mod tests {
             x.seconds = 0.0;
         }
         assert_eq!(a, b);
-        let other = BudgetConfig { seed: 8, ..cfg };
+        let other = BudgetConfig {
+            seed: 8,
+            ..cfg.clone()
+        };
         let c = trace_budget(&stand, &accel, &spec.bands, true, &other, &|_| {}).unwrap();
         assert_ne!(a[0].reflected, c[0].reflected);
     }

@@ -107,6 +107,22 @@ pub fn budget_text(b: &Budget) -> String {
             r.photons
         );
     }
+    if b.bands.iter().any(|r| !r.brf.is_empty()) {
+        s += "BRF towards each view (zenith°:azimuth°, ± one standard error):\n| band |";
+        for v in &b.bands[0].brf {
+            s += &format!(" {}:{} |", v.view.zenith_deg, v.view.azimuth_deg);
+        }
+        s += "\n| --- |";
+        s += &" ---: |".repeat(b.bands[0].brf.len());
+        s += "\n";
+        for r in &b.bands {
+            s += &format!("| {} |", r.band);
+            for v in &r.brf {
+                s += &format!(" {:.4} ± {:.4} |", v.brf.value, v.brf.std_error);
+            }
+            s += "\n";
+        }
+    }
     if let Some(f) = b.fapar {
         s += &format!("fAPAR {f:.4}\n");
     }

@@ -7,6 +7,7 @@ use anyhow::{bail, Context, Result};
 use std::path::{Path, PathBuf};
 use sylva_budget::{
     budget_json, budget_text, trace_budget, Budget, BudgetConfig, CanopySpec, Stand, SunAngles,
+    ViewAngles,
 };
 
 #[derive(clap::Args)]
@@ -24,6 +25,11 @@ pub struct BudgetArgs {
     /// Photons per band (the standard error of a fraction falls as 1/√photons).
     #[arg(long, default_value_t = 1_000_000)]
     photons: u64,
+    /// Also the BRF (bidirectional reflectance factor) towards these view directions,
+    /// ZENITH:AZIMUTH in degrees, comma-separated, e.g. `--brf 0:0,30:0,30:180` (the sun's own
+    /// direction is the hot spot). Each adds a ray per scattering event.
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    brf: Vec<String>,
     /// Seed of the photons (the stand's own seed is in its file). Results depend on the
     /// seeds only, not on the thread count.
     #[arg(long, default_value_t = 1)]
@@ -58,6 +64,11 @@ pub fn run(a: BudgetArgs) -> Result<()> {
             zenith_deg: a.sun_zenith,
             azimuth_deg: a.sun_azimuth,
         },
+        views: a
+            .brf
+            .iter()
+            .map(|v| ViewAngles::parse(v))
+            .collect::<Result<_, _>>()?,
     };
     cfg.validate()?;
     let t0 = std::time::Instant::now();

@@ -104,3 +104,33 @@ fn bad_canopies_and_suns_get_one_line_errors_naming_the_problem() {
         assert_eq!(err.trim().lines().count(), 1, "{err}");
     }
 }
+
+#[test]
+fn the_brf_is_reported_per_view_with_the_hot_spot_towards_the_sun() {
+    let (ok, out, err) = sylva(&[
+        "budget",
+        "layer",
+        "--sun-zenith",
+        "30",
+        "--photons",
+        "20000",
+        "--brf",
+        "30:0,30:180",
+        "--json",
+    ]);
+    assert!(ok, "{err}");
+    let r: serde_json::Value = serde_json::from_str(&out).unwrap();
+    for b in r["bands"].as_array().unwrap() {
+        let brf = b["brf"].as_array().unwrap();
+        assert_eq!(brf.len(), 2);
+        assert_eq!(brf[1]["view"]["azimuth_deg"], 180.0);
+        let v = |k: usize| brf[k]["brf"]["value"].as_f64().unwrap();
+        // Looking along the sunlight's way back, the viewer sees the sunlit leaves: the hot
+        // spot of every canopy.
+        assert!(v(0) > 1.3 * v(1), "{b}");
+    }
+    for bad in ["95:0", "30", "x:1"] {
+        let (ok, _, err) = sylva(&["budget", "layer", "--brf", bad]);
+        assert!(!ok && err.contains("--brf"), "{err}");
+    }
+}
