@@ -32,7 +32,7 @@ ALLOWED = {
     "sylva-spp": {"sylva-core", "sylva-geom", "sylva-grid", "sylva-lb", "sylva-voxel",
                   "sylva-trace", "sylva-light"},
     # The canopy radiation budget: abstract stands, bands, the Monte Carlo budget.
-    "sylva-budget": {"sylva-core", "sylva-geom", "sylva-trace"},
+    "sylva-budget": {"sylva-core", "sylva-geom", "sylva-grow", "sylva-trace"},
     # Transport and queue only: what runs on the ranks is the pipeline's (jobs of a Runner).
     "sylva-mpi": {"sylva-core"},
     "sylva-pipeline": {"sylva-core", "sylva-geom", "sylva-grid", "sylva-lb", "sylva-voxel",
@@ -42,7 +42,7 @@ ALLOWED = {
     "sylva-view": {"sylva-core", "sylva-geom", "sylva-lb", "sylva-light", "sylva-render",
                    "sylva-pipeline"},
     "sylva-fuzz": {"sylva-core", "sylva-geom", "sylva-grid", "sylva-grow", "sylva-io",
-                   "sylva-lb", "sylva-scene", "sylva-budget"},
+                   "sylva-lb", "sylva-scene"},
     "sylva-testkit": None,  # dev-only: anything
     "sylva-cli": None,  # the front end: anything
 }

@@ -3,26 +3,53 @@
 //! the PAR bands), reflected to the sky (the albedo), transmitted to the ground and absorbed
 //! by it.
 //!
-//! Owns the abstract canopies that radiation-transfer intercomparisons use ([`spec`]: a TOML
-//! description; [`stand`]: its leaves as meshes): spherical or ellipsoidal crowns filled with
-//! flat leaves of uniformly random orientation, placed without overlap, or a homogeneous
-//! layer; the bands with their leaf reflectance and transmittance and soil albedo; and the
-//! Monte Carlo photon budget of such a stand in a cyclic plot ([`photons`]: light leaving a
-//! side re-enters on the opposite one, so the plot stands for an infinite stand), the
+//! The abstract canopies themselves (spherical or ellipsoidal crowns filled with flat leaves
+//! of uniformly random orientation placed without overlap, or a homogeneous layer; the bands
+//! with their leaf reflectance and transmittance and soil albedo) are grown in
+//! `sylva_grow::stand`, where scenes find them too. This crate owns the stand as the photons
+//! see it ([`stand`]: repeated over the sides of a cyclic plot) and the Monte Carlo photon
+//! budget of it ([`photons`]: light leaving a side re-enters on the opposite one, so the plot
+//! stands for an infinite stand), the
 //! reference the other methods are held to, with the BRF towards chosen view directions by
 //! local estimates ([`report`] formats it).
 //!
-//! May import `sylva-core`, `sylva-geom` (meshes, models, instances) and `sylva-trace` (the
-//! kd-trees the photons are traced through).
+//! May import `sylva-core`, `sylva-geom` (meshes, models, instances), `sylva-grow` (the
+//! stands) and `sylva-trace` (the kd-trees the photons are traced through).
 
 pub mod photons;
 pub mod report;
-pub mod spec;
 pub mod stand;
 
 pub use photons::{
     trace_budget, BandBudget, BudgetConfig, Fraction, SunAngles, ViewAngles, ViewBrf, MAX_VIEWS,
 };
 pub use report::{budget_json, budget_text, Budget};
-pub use spec::{Band, BudgetError, CanopySpec, CrownShape, LeafShape};
 pub use stand::Stand;
+pub use sylva_grow::stand::{Band, CanopySpec, CrownShape, LeafShape, StandError};
+
+/// Why a budget was refused: one line naming the file or setting and the problem.
+#[derive(Debug, thiserror::Error)]
+pub enum BudgetError {
+    #[error(transparent)]
+    Stand(#[from] StandError),
+    #[error("{what} = {value}: {why}")]
+    Invalid {
+        what: String,
+        value: String,
+        why: String,
+    },
+    #[error(transparent)]
+    Memory(#[from] sylva_core::MemoryError),
+    #[error("building the stand's kd-trees: {0}")]
+    Trace(#[from] sylva_trace::TraceError),
+}
+
+impl BudgetError {
+    pub fn invalid(what: impl Into<String>, value: impl ToString, why: impl Into<String>) -> Self {
+        BudgetError::Invalid {
+            what: what.into(),
+            value: value.to_string(),
+            why: why.into(),
+        }
+    }
+}

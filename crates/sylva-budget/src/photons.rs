@@ -21,8 +21,8 @@
 //! seeded from the run's seed, the band and the chunk's index, so a result depends on the
 //! seed only, never on the thread count.
 
-use crate::spec::{Band, BudgetError};
 use crate::stand::Stand;
+use crate::{Band, BudgetError};
 use glam::Vec3;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -535,7 +535,7 @@ fn reaches_sky(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::spec::CanopySpec;
+    use crate::CanopySpec;
 
     fn layer(lai: f64, size: f64) -> (CanopySpec, Stand, SceneAccel) {
         let spec = CanopySpec::parse(&format!(

@@ -2,8 +2,8 @@
 //! PAR bands, what the stand was; as a text table or JSON.
 
 use crate::photons::{BandBudget, SunAngles};
-use crate::spec::{Band, CanopySpec};
 use crate::stand::Stand;
+use crate::{Band, CanopySpec};
 use serde::Serialize;
 
 /// The result of `sylva budget`.

@@ -75,7 +75,7 @@ pub fn canopy_toml(data: &[u8]) -> bool {
     let Ok(text) = std::str::from_utf8(data) else {
         return false;
     };
-    sylva_budget::CanopySpec::parse(text).is_ok()
+    sylva_grow::stand::CanopySpec::parse(text).is_ok()
 }
 
 /// An OBJ file and the MTL file it may name (`mtllib m.mtl`), split at [`MTL_SEPARATOR`],

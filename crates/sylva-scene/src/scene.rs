@@ -20,6 +20,7 @@ use sylva_geom::{
 use sylva_grow::arbaro::{self, ArbaroError};
 use sylva_grow::cloud::{cumulus, CloudError, CumulusParams};
 use sylva_grow::species::{normalize_name, Species, BUILTIN_NAMES};
+use sylva_grow::stand::CanopySpec;
 use sylva_grow::teapot::teapot_model;
 use sylva_grow::weber_penn::GenerateError;
 use sylva_io::import::{self, ImportError, ImportOptions, UpAxis};
@@ -101,6 +102,15 @@ struct RawScene {
     sky: Option<Spanned<RawSky>>,
     camera: Option<Spanned<RawCamera>>,
     lb: Option<Spanned<RawLb>>,
+    stand: Option<Spanned<RawStand>>,
+}
+
+/// `[stand]`: an abstract canopy's crowns (or layer) as models and instances.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawStand {
+    /// A built-in stand (`crowns`, `layer`) or a canopy file, relative to the scene file.
+    canopy: String,
 }
 
 #[derive(Debug, Deserialize)]
@@ -218,6 +228,18 @@ pub enum ModelSource {
     },
     /// A shape made in code ([`SHAPES`]) in one solid material of linear colour `color`.
     Shape { shape: Shape, color: [f32; 3] },
+    /// Model `unit` of an abstract canopy (`[stand]`: a crown variant, or the layer).
+    Stand {
+        spec: std::sync::Arc<CanopySpec>,
+        unit: usize,
+    },
+}
+
+impl ModelSource {
+    /// Builds the model (grown, read or made).
+    pub(crate) fn stand_model(spec: &CanopySpec, unit: usize) -> Model {
+        sylva_grow::stand::unit_model(spec, unit)
+    }
 }
 
 /// Shapes a model can be made of (`shape = "teapot"`).
@@ -1006,6 +1028,68 @@ impl SceneDesc {
             }
         };
 
+        // An abstract canopy's models and placed instances after the file's own.
+        if let Some(st) = &raw.stand {
+            let l = line(st.span());
+            let name = &st.get_ref().canopy;
+            let spec = match CanopySpec::builtin(name) {
+                Some(spec) => spec,
+                None => {
+                    let path: PathBuf = match base_dir {
+                        Some(d) => d.join(name),
+                        None => PathBuf::from(name),
+                    };
+                    if !path.is_file() {
+                        return Err(invalid(
+                            Some(l),
+                            format!(
+                                "stand '{name}': no such canopy file ({}), and not a built-in stand ({})",
+                                path.display(),
+                                CanopySpec::BUILTIN.join(", ")
+                            ),
+                        ));
+                    }
+                    CanopySpec::load(&path).map_err(|e| invalid(Some(l), format!("stand: {e}")))?
+                }
+            };
+            let placed = sylva_grow::stand::placements(&spec)
+                .map_err(|e| invalid(Some(l), format!("stand '{name}': {e}")))?;
+            let first = models.len();
+            let units = sylva_grow::stand::unit_count(&spec);
+            let spec = std::sync::Arc::new(spec);
+            for unit in 0..units {
+                let model_name = if spec.crowns.is_some() {
+                    format!("{}-crown-{unit}", spec.name)
+                } else {
+                    format!("{}-layer", spec.name)
+                };
+                if models.iter().any(|o| o.name == model_name) {
+                    return Err(invalid(
+                        Some(l),
+                        format!("stand '{name}': model '{model_name}' is defined twice"),
+                    ));
+                }
+                models.push(ModelDesc {
+                    name: model_name,
+                    source: ModelSource::Stand {
+                        spec: spec.clone(),
+                        unit,
+                    },
+                    preset: None,
+                    line: l,
+                });
+            }
+            instances.extend(placed.into_iter().map(|i| InstanceDesc {
+                model: first + i.model as usize,
+                placement: Placement::Explicit {
+                    position: i.position,
+                    rotation_deg: i.rotation_deg,
+                    scale: i.scale,
+                },
+                line: l,
+            }));
+        }
+
         // An empty (or truncated-to-empty) file would render an empty scene without a word. A
         // scene of media alone (the cloud) has something to draw.
         if (models.is_empty() || instances.is_empty()) && media.is_empty() {
@@ -1061,6 +1145,7 @@ impl SceneDesc {
                             model: d.name.clone(),
                             source: Box::new(source),
                         })?,
+                    ModelSource::Stand { spec, unit } => ModelSource::stand_model(spec, *unit),
                 };
                 model.name = d.name.clone();
                 Ok(model)
@@ -1083,6 +1168,9 @@ impl SceneDesc {
                     ModelSource::Species(s) => ModelOrigin::Species(s.name.clone()),
                     ModelSource::Mesh { path, .. } => ModelOrigin::MeshFile(path.clone()),
                     ModelSource::Shape { shape, .. } => ModelOrigin::Shape(shape.name().into()),
+                    ModelSource::Stand { spec, .. } => {
+                        ModelOrigin::Shape(format!("stand {}", spec.name))
+                    }
                 })
                 .collect(),
             model_presets: self

@@ -2,3 +2,4 @@
 
 mod media;
 mod scene;
+mod stand;

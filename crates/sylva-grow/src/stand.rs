@@ -1,5 +1,14 @@
-//! An abstract canopy as TOML: the plot, crowns of flat leaves or a homogeneous layer, the
-//! leaves, the bands (docs/budget.md has every key).
+//! Abstract canopies, the kind radiation-transfer intercomparisons use (docs/budget.md): a
+//! TOML description (the plot, crowns of flat leaves or a homogeneous layer, the leaves, the
+//! bands) and its leaves as meshes.
+//!
+//! Crowns come as a few distinct crown models ([`unit_model`]) and their placements
+//! ([`placements`]: random sequential addition without overlap in the plot, distances
+//! wrapping in a cyclic one, each crown one of the models turned at random about the
+//! vertical); a layer is one model over the whole plot. Every leaf is a flat disc (a regular
+//! octagon of the disc's area) or square, its centre uniform in the crown or layer and its
+//! normal uniform over the sphere, so the leaf projection function G is 1/2 in every
+//! direction. The plot is `[-x/2, x/2] × [-z/2, z/2]` around the origin, the soil at y = 0.
 //!
 //! ```toml
 //! name = "crowns"
@@ -26,13 +35,16 @@
 //!
 //! A homogeneous layer replaces `[crowns]` with `[layer] lai = 3.0, height = 2.0`.
 
+use glam::{Quat, Vec3};
 use serde::Deserialize;
 use std::path::Path;
+use sylva_core::SplitMix64;
+use sylva_geom::{Instance, Material, MaterialKind, Mesh, Model, Optics};
 use thiserror::Error;
 
-/// Why a canopy or a budget was refused: one line naming the file or setting and the problem.
+/// Why a canopy was refused: one line naming the file or setting and the problem.
 #[derive(Debug, Error)]
-pub enum BudgetError {
+pub enum StandError {
     #[error("{path}: {message}")]
     File { path: String, message: String },
     #[error("{at}{message}")]
@@ -45,13 +57,11 @@ pub enum BudgetError {
     },
     #[error(transparent)]
     Memory(#[from] sylva_core::MemoryError),
-    #[error("building the stand's kd-trees: {0}")]
-    Trace(#[from] sylva_trace::TraceError),
 }
 
-impl BudgetError {
+impl StandError {
     pub fn invalid(what: impl Into<String>, value: impl ToString, why: impl Into<String>) -> Self {
-        BudgetError::Invalid {
+        StandError::Invalid {
             what: what.into(),
             value: value.to_string(),
             why: why.into(),
@@ -278,8 +288,8 @@ pub const JAMMING_COVER: f64 = 0.547;
 
 impl CanopySpec {
     /// Reads and checks a canopy file.
-    pub fn load(path: &Path) -> Result<CanopySpec, BudgetError> {
-        let file = |message: String| BudgetError::File {
+    pub fn load(path: &Path) -> Result<CanopySpec, StandError> {
+        let file = |message: String| StandError::File {
             path: path.display().to_string(),
             message,
         };
@@ -289,12 +299,12 @@ impl CanopySpec {
     }
 
     /// Parses and checks TOML text.
-    pub fn parse(text: &str) -> Result<CanopySpec, BudgetError> {
+    pub fn parse(text: &str) -> Result<CanopySpec, StandError> {
         let mut spec: CanopySpec = toml::from_str(text).map_err(|e| {
             let line = e
                 .span()
                 .map(|r| text[..r.start.min(text.len())].matches('\n').count() + 1);
-            BudgetError::Toml {
+            StandError::Toml {
                 at: line.map_or(String::new(), |l| format!("line {l}: ")),
                 message: e.message().trim().to_string(),
             }
@@ -321,12 +331,12 @@ impl CanopySpec {
     pub const BUILTIN: [&'static str; 2] = ["crowns", "layer"];
 
     /// Every setting within its range: one error naming the first that is not.
-    pub fn validate(&self) -> Result<(), BudgetError> {
+    pub fn validate(&self) -> Result<(), StandError> {
         let positive = |what: &str, v: f64| {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(BudgetError::invalid(what, v, "must be a positive number"))
+                Err(StandError::invalid(what, v, "must be a positive number"))
             }
         };
         positive("plot.size[0]", self.plot.size[0])?;
@@ -334,14 +344,14 @@ impl CanopySpec {
         positive("leaves.size", self.leaves.size)?;
         match (&self.crowns, &self.layer) {
             (Some(_), Some(_)) => {
-                return Err(BudgetError::invalid(
+                return Err(StandError::invalid(
                     "canopy",
                     "[crowns] and [layer]",
                     "give one of them, not both",
                 ))
             }
             (None, None) => {
-                return Err(BudgetError::invalid(
+                return Err(StandError::invalid(
                     "canopy",
                     "no [crowns] or [layer]",
                     "give crowns (radius, centre_height, lai, cover) or a layer (lai, height)",
@@ -352,7 +362,7 @@ impl CanopySpec {
                 positive("crowns.half_height", c.half_height())?;
                 positive("crowns.lai", c.lai)?;
                 if !(c.centre_height.is_finite() && c.centre_height >= c.half_height()) {
-                    return Err(BudgetError::invalid(
+                    return Err(StandError::invalid(
                         "crowns.centre_height",
                         c.centre_height,
                         format!(
@@ -362,21 +372,21 @@ impl CanopySpec {
                     ));
                 }
                 if !(c.cover.is_finite() && c.cover > 0.0 && c.cover <= 1.0) {
-                    return Err(BudgetError::invalid(
+                    return Err(StandError::invalid(
                         "crowns.cover",
                         c.cover,
                         "must be in (0, 1]",
                     ));
                 }
                 if c.cover > JAMMING_COVER {
-                    return Err(BudgetError::invalid(
+                    return Err(StandError::invalid(
                         "crowns.cover",
                         c.cover,
                         format!("non-overlapping crowns placed at random cannot reach it (random placement jams near {JAMMING_COVER})"),
                     ));
                 }
                 if self.leaves.reach() >= c.radius.min(c.half_height()) {
-                    return Err(BudgetError::invalid(
+                    return Err(StandError::invalid(
                         "leaves.size",
                         self.leaves.size,
                         "a leaf must be smaller than its crown",
@@ -384,7 +394,7 @@ impl CanopySpec {
                 }
                 let [x, z] = self.plot.size;
                 if 2.0 * c.radius > x.min(z) {
-                    return Err(BudgetError::invalid(
+                    return Err(StandError::invalid(
                         "crowns.radius",
                         c.radius,
                         format!("a crown must fit the {x} m × {z} m plot"),
@@ -395,7 +405,7 @@ impl CanopySpec {
                 positive("layer.lai", l.lai)?;
                 positive("layer.height", l.height)?;
                 if 2.0 * self.leaves.reach() >= l.height {
-                    return Err(BudgetError::invalid(
+                    return Err(StandError::invalid(
                         "layer.height",
                         l.height,
                         format!(
@@ -410,14 +420,14 @@ impl CanopySpec {
         for b in &self.bands {
             let what = |k: &str| format!("bands.{}.{k}", b.name);
             if b.name.trim().is_empty() {
-                return Err(BudgetError::invalid(
+                return Err(StandError::invalid(
                     "bands.name",
                     "\"\"",
                     "a band needs a name",
                 ));
             }
             if !names.insert(b.name.clone()) {
-                return Err(BudgetError::invalid(
+                return Err(StandError::invalid(
                     "bands.name",
                     &b.name,
                     "names a band twice",
@@ -429,18 +439,18 @@ impl CanopySpec {
                 ("soil_albedo", b.soil_albedo),
             ] {
                 if !(v.is_finite() && (0.0..=1.0).contains(&v)) {
-                    return Err(BudgetError::invalid(what(k), v, "must be in [0, 1]"));
+                    return Err(StandError::invalid(what(k), v, "must be in [0, 1]"));
                 }
             }
             if b.leaf_reflectance + b.leaf_transmittance > 1.0 {
-                return Err(BudgetError::invalid(
+                return Err(StandError::invalid(
                     what("leaf_reflectance + leaf_transmittance"),
                     b.leaf_reflectance + b.leaf_transmittance,
                     "must not exceed 1 (a leaf cannot give out more light than it receives)",
                 ));
             }
             if !(b.weight.is_finite() && b.weight > 0.0) {
-                return Err(BudgetError::invalid(
+                return Err(StandError::invalid(
                     what("weight"),
                     b.weight,
                     "must be a positive number",
@@ -449,7 +459,7 @@ impl CanopySpec {
         }
         let triangles = self.triangles();
         if triangles > MAX_TRIANGLES {
-            return Err(BudgetError::invalid(
+            return Err(StandError::invalid(
                 "canopy",
                 format!("{triangles} leaf triangles"),
                 format!("more than {MAX_TRIANGLES}: use larger leaves, a smaller plot or fewer crown variants"),
@@ -555,6 +565,243 @@ leaf_reflectance = 0.45
 leaf_transmittance = 0.40
 soil_albedo = 0.12
 "#;
+
+/// Crown models (or 1 for a layer) a stand is made of.
+pub fn unit_count(spec: &CanopySpec) -> usize {
+    if spec.crowns.is_some() {
+        spec.crown_variants() as usize
+    } else {
+        1
+    }
+}
+
+/// Model `k` of [`unit_count`]: crown variant `k` around its centre, or the layer.
+pub fn unit_model(spec: &CanopySpec, k: usize) -> Model {
+    let leaves = spec.leaves_per_unit();
+    match (&spec.crowns, &spec.layer) {
+        (Some(c), _) => crown_model(
+            spec,
+            c.radius,
+            c.half_height(),
+            leaves,
+            SplitMix64::for_chunk(spec.seed, k as u64).next_u64(),
+        ),
+        (_, Some(l)) => layer_model(spec, l.height, leaves, spec.seed),
+        _ => unreachable!("a validated canopy has crowns or a layer"),
+    }
+}
+
+/// The instances inside the plot: each crown (a model of [`unit_model`], turned at random)
+/// at its placed centre, or the layer at the origin.
+pub fn placements(spec: &CanopySpec) -> Result<Vec<Instance>, StandError> {
+    let Some(c) = &spec.crowns else {
+        return Ok(vec![Instance {
+            model: 0,
+            position: Vec3::ZERO,
+            rotation_deg: 0.0,
+            scale: 1.0,
+        }]);
+    };
+    let centres = place_crowns(spec, c.radius, spec.crown_count())?;
+    let variants = spec.crown_variants();
+    let mut rng = SplitMix64::new(spec.seed ^ 0x7075_726e);
+    Ok(centres
+        .iter()
+        .enumerate()
+        .map(|(k, p)| Instance {
+            model: (k as u64 % variants) as u32,
+            position: Vec3::new(p[0] as f32, c.centre_height as f32, p[1] as f32),
+            rotation_deg: (rng.next_f64() * 360.0) as f32,
+            scale: 1.0,
+        })
+        .collect())
+}
+
+/// Height above every leaf, m.
+pub fn top(spec: &CanopySpec) -> f64 {
+    match (&spec.crowns, &spec.layer) {
+        (Some(c), _) => c.centre_height + c.half_height() + spec.leaves.reach(),
+        (_, Some(l)) => l.height,
+        _ => 0.0,
+    }
+}
+
+fn leaf_material() -> Material {
+    Material {
+        name: "leaf".into(),
+        kind: MaterialKind::Leaf,
+        base_color: [0.1, 0.3, 0.05],
+        texture: None,
+        two_sided: true,
+        optics: Optics::FOREST_LEAF,
+    }
+}
+
+/// A unit vector uniform over the sphere.
+fn isotropic(u1: f64, u2: f64) -> Vec3 {
+    let z = 2.0 * u1 - 1.0;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * std::f64::consts::PI * u2;
+    Vec3::new((r * phi.cos()) as f32, z as f32, (r * phi.sin()) as f32)
+}
+
+/// Adds one leaf centred on `c` with unit normal `n`, turned by `spin` in its plane.
+fn push_leaf(mesh: &mut Mesh, shape: LeafShape, size: f64, c: Vec3, n: Vec3, spin: f32) {
+    let rot = Quat::from_rotation_arc(Vec3::Y, n) * Quat::from_rotation_y(spin);
+    let corners: Vec<Vec3> = match shape {
+        LeafShape::Square => {
+            let h = 0.5 * size as f32;
+            [(-h, -h), (h, -h), (h, h), (-h, h)]
+                .iter()
+                .map(|&(x, z)| c + rot * Vec3::new(x, 0.0, z))
+                .collect()
+        }
+        LeafShape::Disc => {
+            let r = (0.5 * size * octagon_scale()) as f32;
+            (0..8)
+                .map(|k| {
+                    let a = k as f32 * std::f32::consts::FRAC_PI_4;
+                    c + rot * Vec3::new(r * a.cos(), 0.0, r * a.sin())
+                })
+                .collect()
+        }
+    };
+    let ids: Vec<u32> = corners
+        .iter()
+        .map(|&p| mesh.push_vertex(p, n, [0.0, 0.0]))
+        .collect();
+    for k in 1..ids.len() - 1 {
+        mesh.push_triangle(ids[0], ids[k], ids[k + 1], 0);
+    }
+}
+
+/// One crown's leaves around the origin (its centre): `count` leaves uniform in the
+/// ellipsoid of horizontal radius `radius` and vertical semi-axis `half_height`.
+fn crown_model(spec: &CanopySpec, radius: f64, half_height: f64, count: u64, seed: u64) -> Model {
+    let mut rng = SplitMix64::new(seed);
+    let mut mesh = Mesh::default();
+    let leaves = &spec.leaves;
+    let mut placed = 0;
+    while placed < count {
+        let (x, y, z) = (
+            2.0 * rng.next_f64() - 1.0,
+            2.0 * rng.next_f64() - 1.0,
+            2.0 * rng.next_f64() - 1.0,
+        );
+        if x * x + y * y + z * z > 1.0 {
+            continue;
+        }
+        let c = Vec3::new(
+            (x * radius) as f32,
+            (y * half_height) as f32,
+            (z * radius) as f32,
+        );
+        let n = isotropic(rng.next_f64(), rng.next_f64());
+        let spin = (rng.next_f64() * std::f64::consts::TAU) as f32;
+        push_leaf(&mut mesh, leaves.shape, leaves.size, c, n, spin);
+        placed += 1;
+    }
+    Model::new("crown", mesh, vec![leaf_material()])
+}
+
+/// The layer's leaves over the whole plot: centres uniform in x and z and, in y, within
+/// `[reach, height − reach]` so that no leaf pierces the soil or rises over the layer.
+fn layer_model(spec: &CanopySpec, height: f64, count: u64, seed: u64) -> Model {
+    let mut rng = SplitMix64::new(seed);
+    let mut mesh = Mesh::default();
+    let [hx, hz] = [0.5 * spec.plot.size[0], 0.5 * spec.plot.size[1]];
+    let reach = spec.leaves.reach();
+    for _ in 0..count {
+        let c = Vec3::new(
+            ((2.0 * rng.next_f64() - 1.0) * hx) as f32,
+            (reach + rng.next_f64() * (height - 2.0 * reach)) as f32,
+            ((2.0 * rng.next_f64() - 1.0) * hz) as f32,
+        );
+        let n = isotropic(rng.next_f64(), rng.next_f64());
+        let spin = (rng.next_f64() * std::f64::consts::TAU) as f32;
+        push_leaf(&mut mesh, spec.leaves.shape, spec.leaves.size, c, n, spin);
+    }
+    Model::new("layer", mesh, vec![leaf_material()])
+}
+
+/// The shortest distance between two points of the cyclic plot (or the plain one).
+pub fn plot_distance(a: [f64; 2], b: [f64; 2], size: [f64; 2], cyclic: bool) -> f64 {
+    let d = |k: usize| {
+        let d = (a[k] - b[k]).abs();
+        if cyclic {
+            d.min(size[k] - d)
+        } else {
+            d
+        }
+    };
+    d(0).hypot(d(1))
+}
+
+/// Crown centres (x, z) placed one after another at random, each refused when it would
+/// overlap one placed before.
+pub fn place_crowns(
+    spec: &CanopySpec,
+    radius: f64,
+    count: u64,
+) -> Result<Vec<[f64; 2]>, StandError> {
+    let [sx, sz] = spec.plot.size;
+    let cyclic = spec.plot.cyclic;
+    // An isolated plot keeps whole crowns inside it.
+    let margin = if cyclic { 0.0 } else { radius };
+    let mut rng = SplitMix64::new(spec.seed ^ 0x5eed_c0de);
+    let mut centres: Vec<[f64; 2]> = Vec::with_capacity(count as usize);
+    // A uniform grid of cells no smaller than a crown's diameter: a new crown can only
+    // overlap crowns in its own and the neighbouring cells.
+    let cells = [
+        ((sx / (2.0 * radius)).floor() as usize).max(1),
+        ((sz / (2.0 * radius)).floor() as usize).max(1),
+    ];
+    let mut grid: Vec<Vec<u32>> = vec![Vec::new(); cells[0] * cells[1]];
+    let cell_of = |p: [f64; 2]| {
+        [
+            (((p[0] + 0.5 * sx) / sx * cells[0] as f64) as usize).min(cells[0] - 1),
+            (((p[1] + 0.5 * sz) / sz * cells[1] as f64) as usize).min(cells[1] - 1),
+        ]
+    };
+    let attempts = 20_000 + 2_000 * count;
+    let mut tried = 0u64;
+    while (centres.len() as u64) < count {
+        tried += 1;
+        if tried > attempts {
+            return Err(StandError::invalid(
+                "crowns.cover",
+                spec.crowns.as_ref().map_or(0.0, |c| c.cover),
+                format!(
+                    "only {} of {count} non-overlapping crowns of radius {radius} m found room in the {sx} m × {sz} m plot after {attempts} tries",
+                    centres.len()
+                ),
+            ));
+        }
+        let p = [
+            (rng.next_f64() - 0.5) * (sx - 2.0 * margin),
+            (rng.next_f64() - 0.5) * (sz - 2.0 * margin),
+        ];
+        let [cx, cz] = cell_of(p);
+        let mut free = true;
+        'near: for dx in [cells[0] - 1, 0, 1] {
+            for dz in [cells[1] - 1, 0, 1] {
+                let (ix, iz) = ((cx + dx) % cells[0], (cz + dz) % cells[1]);
+                for &k in &grid[ix * cells[1] + iz] {
+                    if plot_distance(p, centres[k as usize], spec.plot.size, cyclic) < 2.0 * radius
+                    {
+                        free = false;
+                        break 'near;
+                    }
+                }
+            }
+        }
+        if free {
+            grid[cx * cells[1] + cz].push(centres.len() as u32);
+            centres.push(p);
+        }
+    }
+    Ok(centres)
+}
 
 #[cfg(test)]
 mod tests {
