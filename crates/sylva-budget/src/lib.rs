@@ -16,6 +16,7 @@
 //! May import `sylva-core`, `sylva-geom` (meshes, models, instances), `sylva-grow` (the
 //! stands) and `sylva-trace` (the kd-trees the photons are traced through).
 
+pub mod bench;
 pub mod photons;
 pub mod report;
 pub mod stand;

@@ -46,6 +46,10 @@ enum BenchCommand {
     /// from its base solutions (the default; `--against-direct` also against the light solved
     /// per sun), or 004's paper light with `--light paper`.
     Relight(super::bench_relight::BenchRelightArgs),
+    /// The canopy radiation budget (`sylva budget`): building the stand and each band's
+    /// photons, medians of several runs, photons and rays per second (default: the built-in
+    /// `crowns`, 10⁶ photons a band).
+    Budget(super::budget::BenchBudgetArgs),
     /// The viewer (`sylva view`) driven as the page drives it: input-to-frame latency and
     /// frames per second while the sun is dragged, and the refined frame's delay after the
     /// last input (default scene: demo, 512x512).
@@ -116,6 +120,7 @@ pub fn run(args: BenchArgs, runner: &dyn sylva_pipeline::Runner) -> Result<()> {
         BenchCommand::Voxelize(a) => super::bench_voxel::run(a),
         BenchCommand::Trace(a) => super::bench_trace::run(a, runner),
         BenchCommand::Spp(a) => super::bench_spp::run(a),
+        BenchCommand::Budget(a) => super::budget::bench(a),
         BenchCommand::Relight(a) => super::bench_relight::run(a),
         BenchCommand::View(a) => super::view::bench(a),
     }

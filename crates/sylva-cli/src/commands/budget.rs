@@ -42,21 +42,63 @@ pub struct BudgetArgs {
     out: Option<PathBuf>,
 }
 
-pub fn run(a: BudgetArgs) -> Result<()> {
-    let spec = match CanopySpec::builtin(&a.canopy) {
-        Some(spec) => spec,
-        None => {
-            let path = Path::new(&a.canopy);
-            if !path.exists() {
-                bail!(
-                    "{}: no such canopy file, and not a built-in stand ({})",
-                    a.canopy,
-                    CanopySpec::BUILTIN.join(", ")
-                );
-            }
-            CanopySpec::load(path)?
-        }
+#[derive(clap::Args)]
+pub struct BenchBudgetArgs {
+    /// A canopy file or a built-in stand (`crowns`, `layer`).
+    #[arg(default_value = "crowns")]
+    canopy: String,
+    #[arg(long, default_value_t = 30.0, allow_hyphen_values = true)]
+    sun_zenith: f64,
+    /// Photons per band.
+    #[arg(long, default_value_t = 1_000_000)]
+    photons: u64,
+    /// Timed runs (each builds the stand and traces every band); medians reported.
+    #[arg(long, default_value_t = 3)]
+    runs: u32,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    json: bool,
+}
+
+/// A built-in stand, or the canopy file at `name`.
+fn canopy(name: &str) -> Result<CanopySpec> {
+    if let Some(spec) = CanopySpec::builtin(name) {
+        return Ok(spec);
+    }
+    let path = Path::new(name);
+    if !path.exists() {
+        bail!(
+            "{name}: no such canopy file, and not a built-in stand ({})",
+            CanopySpec::BUILTIN.join(", ")
+        );
+    }
+    Ok(CanopySpec::load(path)?)
+}
+
+pub fn bench(a: BenchBudgetArgs) -> Result<()> {
+    let spec = canopy(&a.canopy)?;
+    let cfg = BudgetConfig {
+        photons: a.photons,
+        seed: 1,
+        sun: SunAngles {
+            zenith_deg: a.sun_zenith,
+            azimuth_deg: 0.0,
+        },
+        views: Vec::new(),
     };
+    cfg.validate()?;
+    let bar = bench_bar(
+        a.json,
+        (a.photons * spec.bands.len() as u64 * u64::from(a.runs.clamp(1, 50))) as usize,
+        "photons",
+    );
+    let b = sylva_budget::bench::bench_budget(&spec, &cfg, a.runs, &|n| bar.inc(n))?;
+    bar.finish_and_clear();
+    super::output::print_report(&b, a.json)
+}
+
+pub fn run(a: BudgetArgs) -> Result<()> {
+    let spec = canopy(&a.canopy)?;
     let cfg = BudgetConfig {
         photons: a.photons,
         seed: a.seed,
