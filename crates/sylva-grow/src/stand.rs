@@ -283,6 +283,9 @@ fn seed() -> u64 {
 /// models: about 100 bytes each with their kd-tree.
 pub const MAX_TRIANGLES: u64 = 60_000_000;
 
+/// Crowns a stand may place (each a placement test against its neighbours and an instance).
+pub const MAX_CROWNS: u64 = 1_000_000;
+
 /// Random sequential placement of equal discs jams near this cover (Feder 1980: 0.547).
 pub const JAMMING_COVER: f64 = 0.547;
 
@@ -457,11 +460,27 @@ impl CanopySpec {
                 ));
             }
         }
+        if let Some(c) = &self.crowns {
+            // In floating point: a plot of any size gives a finite count to compare.
+            let crowns = c.cover * self.plot.size[0] * self.plot.size[1]
+                / (std::f64::consts::PI * c.radius * c.radius);
+            if crowns > MAX_CROWNS as f64 {
+                return Err(StandError::invalid(
+                    "crowns",
+                    format!("{crowns:.3e} crowns"),
+                    format!("more than {MAX_CROWNS}: use a smaller plot or larger crowns (a cyclic plot stands for an infinite stand already)"),
+                ));
+            }
+        }
         let triangles = self.triangles();
         if triangles > MAX_TRIANGLES {
             return Err(StandError::invalid(
                 "canopy",
-                format!("{triangles} leaf triangles"),
+                if triangles == u64::MAX {
+                    "more than 1.8e19 leaf triangles".to_string()
+                } else {
+                    format!("{triangles} leaf triangles")
+                },
                 format!("more than {MAX_TRIANGLES}: use larger leaves, a smaller plot or fewer crown variants"),
             ));
         }
@@ -752,9 +771,10 @@ pub fn place_crowns(
     let mut centres: Vec<[f64; 2]> = Vec::with_capacity(count as usize);
     // A uniform grid of cells no smaller than a crown's diameter: a new crown can only
     // overlap crowns in its own and the neighbouring cells.
+    // (At most 2048 a side: larger cells only hold more crowns.)
     let cells = [
-        ((sx / (2.0 * radius)).floor() as usize).max(1),
-        ((sz / (2.0 * radius)).floor() as usize).max(1),
+        ((sx / (2.0 * radius)).floor() as usize).clamp(1, 2048),
+        ((sz / (2.0 * radius)).floor() as usize).clamp(1, 2048),
     ];
     let mut grid: Vec<Vec<u32>> = vec![Vec::new(); cells[0] * cells[1]];
     let cell_of = |p: [f64; 2]| {
@@ -878,6 +898,14 @@ mod tests {
             ),
             ("name = \"x\"\n".to_string(), "no [crowns] or [layer]"),
             (base.replace("size = 0.1", "size = 0.001"), "leaf triangles"),
+            (
+                base.replace("size = [100.0, 100.0]", "size = [1e6, 1e6]"),
+                "more than 1000000",
+            ),
+            (
+                base.replace("size = [100.0, 100.0]", "size = [1e30, 1e30]"),
+                "more than 1000000",
+            ),
         ];
         for (text, needle) in cases {
             let e = CanopySpec::parse(&text).unwrap_err().to_string();
