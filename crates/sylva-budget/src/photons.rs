@@ -35,7 +35,8 @@ pub const CHUNK: u64 = 4096;
 /// counted as unfinished.
 pub const MAX_EVENTS: u32 = 100_000;
 
-/// The sun's zenith and azimuth angles, degrees (azimuth from +z towards +x).
+/// The sun's zenith and azimuth angles, degrees; the azimuth from +x towards +z, as a
+/// scene's `[sun]` (`sylva_core::Sun::from_angles`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct SunAngles {
     pub zenith_deg: f64,
@@ -61,15 +62,11 @@ impl SunAngles {
         Ok(())
     }
 
-    /// The direction sunlight travels (unit, downwards).
+    /// The direction sunlight travels (unit, downwards); NaN for angles
+    /// [`SunAngles::validate`] refuses.
     pub fn travel(&self) -> Vec3 {
-        let (z, a) = (self.zenith_deg.to_radians(), self.azimuth_deg.to_radians());
-        Vec3::new(
-            -(z.sin() * a.sin()) as f32,
-            -z.cos() as f32,
-            -(z.sin() * a.cos()) as f32,
-        )
-        .normalize()
+        sylva_core::Sun::from_angles(90.0 - self.zenith_deg, self.azimuth_deg)
+            .map_or(Vec3::NAN, |sun| -sun.to_sun().as_vec3())
     }
 }
 
@@ -732,6 +729,33 @@ mod tests {
         };
         let c = trace_budget(&stand, &accel, &spec.bands, true, &other, &|_| {}).unwrap();
         assert_ne!(a[0].reflected, c[0].reflected);
+    }
+
+    #[test]
+    fn the_sun_and_the_views_turn_as_a_scenes_sun() {
+        // Azimuth from +x towards +z (sylva_core::Sun::from_angles): at 90° the sun stands
+        // towards +z, so its light travels towards −z.
+        let d = SunAngles {
+            zenith_deg: 60.0,
+            azimuth_deg: 90.0,
+        }
+        .travel();
+        assert!(d.x.abs() < 1e-6 && (d.y + 0.5).abs() < 1e-6 && (d.z + 0.866_025_4).abs() < 1e-6);
+        let v = ViewAngles {
+            zenith_deg: 60.0,
+            azimuth_deg: 90.0,
+        }
+        .towards();
+        assert!(
+            (v + d).length() < 1e-6,
+            "the hot spot's view looks back along the sunlight"
+        );
+        assert!(SunAngles {
+            zenith_deg: f64::NAN,
+            azimuth_deg: 0.0
+        }
+        .travel()
+        .is_nan());
     }
 
     #[test]

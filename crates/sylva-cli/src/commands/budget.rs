@@ -19,7 +19,7 @@ pub struct BudgetArgs {
     /// The sun's zenith angle, degrees from the vertical (0 to below 90).
     #[arg(long, default_value_t = 30.0, allow_hyphen_values = true)]
     sun_zenith: f64,
-    /// The sun's azimuth, degrees from +z towards +x.
+    /// The sun's azimuth, degrees from +x towards +z (as a scene's `[sun]`).
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     sun_azimuth: f64,
     /// Photons per band (the standard error of a fraction falls as 1/√photons).
