@@ -8,6 +8,7 @@ use crate::stand::Stand;
 use crate::{BudgetError, CanopySpec};
 use serde::Serialize;
 use std::time::Instant;
+use sylva_core::measure::median;
 
 /// One band's photons, timed.
 #[derive(Debug, Clone, Serialize)]
@@ -38,16 +39,6 @@ pub struct BudgetBench {
     pub bands: Vec<BandBench>,
     /// Median seconds of a whole budget (build and every band).
     pub total_seconds: f64,
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }
 
 /// Builds and traces `spec`'s budget `runs` times.
@@ -83,13 +74,13 @@ pub fn bench_budget(
     let bands = spec
         .bands
         .iter()
-        .zip(bands.iter_mut())
+        .zip(&bands)
         .zip(&rays)
         .map(|((band, secs), &rays)| {
             let (lo, hi) = secs.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &s| {
                 (lo.min(s), hi.max(s))
             });
-            let seconds = median(secs);
+            let seconds = median(secs.clone());
             BandBench {
                 band: band.name.clone(),
                 seconds,
@@ -108,9 +99,9 @@ pub fn bench_budget(
         threads: rayon::current_num_threads(),
         triangles,
         instances,
-        build_seconds: median(&mut build),
+        build_seconds: median(build),
         bands,
-        total_seconds: median(&mut total),
+        total_seconds: median(total),
     })
 }
 
@@ -173,6 +164,5 @@ mod tests {
         }
         assert!(b.total_seconds >= b.build_seconds);
         assert!(bench_budget(&spec, &cfg, 0, &|_| {}).is_err());
-        assert_eq!(median(&mut [3.0, 1.0, 2.0, 10.0]), 2.5);
     }
 }

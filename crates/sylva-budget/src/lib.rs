@@ -22,23 +22,19 @@ pub mod report;
 pub mod stand;
 
 pub use photons::{
-    trace_budget, BandBudget, BudgetConfig, Fraction, SunAngles, ViewAngles, ViewBrf, MAX_VIEWS,
+    trace_budget, Angles, BandBudget, BudgetConfig, Fraction, SunAngles, ViewAngles, ViewBrf,
+    MAX_VIEWS,
 };
 pub use report::{budget_json, budget_text, Budget};
 pub use stand::Stand;
 pub use sylva_grow::stand::{Band, CanopySpec, CrownShape, LeafShape, StandError};
 
-/// Why a budget was refused: one line naming the file or setting and the problem.
+/// Why a budget was refused: one line naming the file or setting and the problem (a bad
+/// setting is a [`StandError::Invalid`], as a bad stand file's are).
 #[derive(Debug, thiserror::Error)]
 pub enum BudgetError {
     #[error(transparent)]
     Stand(#[from] StandError),
-    #[error("{what} = {value}: {why}")]
-    Invalid {
-        what: String,
-        value: String,
-        why: String,
-    },
     #[error(transparent)]
     Memory(#[from] sylva_core::MemoryError),
     #[error("building the stand's kd-trees: {0}")]
@@ -47,10 +43,6 @@ pub enum BudgetError {
 
 impl BudgetError {
     pub fn invalid(what: impl Into<String>, value: impl ToString, why: impl Into<String>) -> Self {
-        BudgetError::Invalid {
-            what: what.into(),
-            value: value.to_string(),
-            why: why.into(),
-        }
+        BudgetError::Stand(StandError::invalid(what, value, why))
     }
 }

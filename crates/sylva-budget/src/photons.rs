@@ -35,26 +35,43 @@ pub const CHUNK: u64 = 4096;
 /// counted as unfinished.
 pub const MAX_EVENTS: u32 = 100_000;
 
-/// The sun's zenith and azimuth angles, degrees; the azimuth from +x towards +z, as a
-/// scene's `[sun]` (`sylva_core::Sun::from_angles`).
+/// A direction's zenith and azimuth angles, degrees; the azimuth from +x towards +z, as a
+/// scene's `[sun]` (`sylva_core::Sun::from_angles`). The sun's ([`SunAngles`]) and a view's
+/// ([`ViewAngles`]) are the same angles, so the view of the sun's own direction is the hot
+/// spot.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct SunAngles {
+pub struct Angles {
     pub zenith_deg: f64,
     pub azimuth_deg: f64,
 }
 
-impl SunAngles {
-    pub fn validate(&self) -> Result<(), BudgetError> {
+/// The sun's direction.
+pub type SunAngles = Angles;
+/// A view's direction, towards the viewer above the stand.
+pub type ViewAngles = Angles;
+
+impl Angles {
+    /// The sun's angles as `--sun-zenith` and `--sun-azimuth` accept them.
+    pub fn validate_sun(&self) -> Result<(), BudgetError> {
+        self.check("--sun-zenith", "--sun-azimuth", " (the sun must be up)")
+    }
+
+    /// A view's angles as `--brf` accepts them.
+    pub fn validate_view(&self) -> Result<(), BudgetError> {
+        self.check("--brf zenith", "--brf azimuth", "")
+    }
+
+    fn check(&self, zenith: &str, azimuth: &str, why: &str) -> Result<(), BudgetError> {
         if !(self.zenith_deg.is_finite() && (0.0..90.0).contains(&self.zenith_deg)) {
             return Err(BudgetError::invalid(
-                "--sun-zenith",
+                zenith,
                 self.zenith_deg,
-                "degrees from the vertical, 0 to below 90 (the sun must be up)",
+                format!("degrees from the vertical, 0 to below 90{why}"),
             ));
         }
         if !self.azimuth_deg.is_finite() {
             return Err(BudgetError::invalid(
-                "--sun-azimuth",
+                azimuth,
                 self.azimuth_deg,
                 "must be a finite number of degrees",
             ));
@@ -62,25 +79,8 @@ impl SunAngles {
         Ok(())
     }
 
-    /// The direction sunlight travels (unit, downwards); NaN for angles
-    /// [`SunAngles::validate`] refuses.
-    pub fn travel(&self) -> Vec3 {
-        sylva_core::Sun::from_angles(90.0 - self.zenith_deg, self.azimuth_deg)
-            .map_or(Vec3::NAN, |sun| -sun.to_sun().as_vec3())
-    }
-}
-
-/// A direction seen from above the stand, towards the viewer: zenith and azimuth as the
-/// sun's ([`SunAngles`]), so the view of the sun's own direction is the hot spot.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct ViewAngles {
-    pub zenith_deg: f64,
-    pub azimuth_deg: f64,
-}
-
-impl ViewAngles {
-    /// Parses `ZENITH:AZIMUTH` in degrees.
-    pub fn parse(s: &str) -> Result<ViewAngles, BudgetError> {
+    /// Parses a view, `ZENITH:AZIMUTH` in degrees.
+    pub fn parse_view(s: &str) -> Result<ViewAngles, BudgetError> {
         let bad = || {
             BudgetError::invalid(
                 "--brf",
@@ -89,39 +89,24 @@ impl ViewAngles {
             )
         };
         let (z, a) = s.split_once(':').ok_or_else(bad)?;
-        let v = ViewAngles {
+        let v = Angles {
             zenith_deg: z.trim().parse().map_err(|_| bad())?,
             azimuth_deg: a.trim().parse().map_err(|_| bad())?,
         };
-        v.validate()?;
+        v.validate_view()?;
         Ok(v)
     }
 
-    pub fn validate(&self) -> Result<(), BudgetError> {
-        if !(self.zenith_deg.is_finite() && (0.0..90.0).contains(&self.zenith_deg)) {
-            return Err(BudgetError::invalid(
-                "--brf zenith",
-                self.zenith_deg,
-                "degrees from the vertical, 0 to below 90",
-            ));
-        }
-        if !self.azimuth_deg.is_finite() {
-            return Err(BudgetError::invalid(
-                "--brf azimuth",
-                self.azimuth_deg,
-                "must be a finite number of degrees",
-            ));
-        }
-        Ok(())
+    /// The direction sunlight from here travels (unit, downwards); NaN for angles the
+    /// checks refuse.
+    pub fn travel(&self) -> Vec3 {
+        sylva_core::Sun::from_angles(90.0 - self.zenith_deg, self.azimuth_deg)
+            .map_or(Vec3::NAN, |sun| -sun.to_sun().as_vec3())
     }
 
-    /// The unit direction towards the viewer (upwards).
+    /// The unit direction towards here (upwards): a view's.
     pub fn towards(&self) -> Vec3 {
-        -SunAngles {
-            zenith_deg: self.zenith_deg,
-            azimuth_deg: self.azimuth_deg,
-        }
-        .travel()
+        -self.travel()
     }
 }
 
@@ -159,9 +144,9 @@ impl BudgetConfig {
             ));
         }
         for v in &self.views {
-            v.validate()?;
+            v.validate_view()?;
         }
-        self.sun.validate()
+        self.sun.validate_sun()
     }
 }
 
@@ -355,10 +340,12 @@ fn trace_chunk(
     let views: Vec<(Vec3, f32)> = cfg
         .views
         .iter()
-        .map(|v| (v.towards(), v.towards().y))
+        .map(|v| {
+            let v = v.towards();
+            (v, v.y)
+        })
         .collect();
-    let [hx, hz] = [stand.half[0] as f32, stand.half[1] as f32];
-    let top = stand.top as f32;
+    let plot = PlotBox::of(stand);
     let (r, t, rho) = (
         band.leaf_reflectance,
         band.leaf_transmittance,
@@ -371,33 +358,17 @@ fn trace_chunk(
     let mut stats = TraceStats::default();
     'photon: for _ in 0..n {
         let mut o = Vec3::new(
-            (2.0 * rng.next_f64() as f32 - 1.0) * hx,
-            top,
-            (2.0 * rng.next_f64() as f32 - 1.0) * hz,
+            (2.0 * rng.next_f64() as f32 - 1.0) * plot.hx,
+            plot.top,
+            (2.0 * rng.next_f64() as f32 - 1.0) * plot.hz,
         );
         let mut d = travel;
         let mut scattered = false;
         for _ in 0..MAX_EVENTS {
             // Where the photon leaves the plot's box: the soil, the top or a side.
-            let t_soil = if d.y < 0.0 { -o.y / d.y } else { f32::INFINITY };
-            let t_top = if d.y > 0.0 {
-                (top - o.y) / d.y
-            } else {
-                f32::INFINITY
-            };
-            let side = |p: f32, v: f32, h: f32| {
-                if v > 0.0 {
-                    (h - p) / v
-                } else if v < 0.0 {
-                    (-h - p) / v
-                } else {
-                    f32::INFINITY
-                }
-            };
-            let (t_x, t_z) = (side(o.x, d.x, hx).max(0.0), side(o.z, d.z, hz).max(0.0));
-            let t_end = t_soil.min(t_top).min(t_x).min(t_z);
+            let e = plot.exits(o, d);
             k.rays += 1;
-            let ray = Ray::segment(o, d, 0.0, t_end);
+            let ray = Ray::segment(o, d, 0.0, e.end);
             if let Some(hit) = accel.closest_hit(&ray, TraversalConfig::default(), &mut stats) {
                 let p = ray.at(hit.t);
                 let ng = accel.geometric_normal(&hit);
@@ -428,15 +399,16 @@ fn trace_chunk(
                 d = lambert(leave, rng);
                 continue;
             }
-            if t_end == t_soil {
+            if e.end == e.soil {
                 k.arrived += 1;
                 if !scattered {
                     k.direct += 1;
                 }
+                let p = o + d * e.soil;
+                let on_soil = Vec3::new(p.x, 0.0, p.z);
                 if rho > 0.0 && !views.is_empty() {
                     // ρ cos θ_v / π towards v, times π / cos θ_v: ρ, where the view is open.
-                    let p = o + d * t_soil;
-                    let from = Vec3::new(p.x, 0.0, p.z);
+                    let from = on_soil;
                     for (j, &(v, _)) in views.iter().enumerate() {
                         if reaches_sky(stand, accel, cyclic, from, v, &mut k.rays) {
                             k.brf[j] += rho;
@@ -445,15 +417,14 @@ fn trace_chunk(
                 }
                 if rng.next_f64() < rho {
                     scattered = true;
-                    let p = o + d * t_soil;
-                    o = Vec3::new(p.x, 0.0, p.z);
+                    o = on_soil;
                     d = lambert(Vec3::Y, rng);
                     continue;
                 }
                 k.soil += 1;
                 continue 'photon;
             }
-            if t_end == t_top {
+            if e.end == e.top {
                 k.reflected += 1;
                 continue 'photon;
             }
@@ -461,23 +432,85 @@ fn trace_chunk(
                 k.side += 1;
                 continue 'photon;
             }
-            // Through a side: in again on the opposite one, the crossed coordinate set to
-            // that side exactly.
-            let mut p = o + d * t_end;
-            if t_end == t_x {
-                p.x = if d.x > 0.0 { -hx } else { hx };
-            }
-            if t_end == t_z {
-                p.z = if d.z > 0.0 { -hz } else { hz };
-            }
-            p.x = p.x.clamp(-hx, hx);
-            p.z = p.z.clamp(-hz, hz);
-            p.y = p.y.clamp(0.0, top);
-            o = p;
+            // Through a side: in again on the opposite one.
+            o = plot.wrapped(o, d, &e);
         }
         k.unfinished += 1;
     }
     k
+}
+
+/// The plot's box: `[-hx, hx] × [0, top] × [-hz, hz]`.
+struct PlotBox {
+    hx: f32,
+    hz: f32,
+    top: f32,
+}
+
+/// Where a ray leaves a [`PlotBox`]: through the soil, the top or a side (∞ where it does
+/// not), and the first of them.
+struct Exits {
+    soil: f32,
+    top: f32,
+    x: f32,
+    z: f32,
+    end: f32,
+}
+
+impl PlotBox {
+    fn of(stand: &Stand) -> PlotBox {
+        PlotBox {
+            hx: stand.half[0] as f32,
+            hz: stand.half[1] as f32,
+            top: stand.top as f32,
+        }
+    }
+
+    fn exits(&self, o: Vec3, d: Vec3) -> Exits {
+        let soil = if d.y < 0.0 { -o.y / d.y } else { f32::INFINITY };
+        let top = if d.y > 0.0 {
+            (self.top - o.y) / d.y
+        } else {
+            f32::INFINITY
+        };
+        let side = |p: f32, v: f32, h: f32| {
+            if v > 0.0 {
+                (h - p) / v
+            } else if v < 0.0 {
+                (-h - p) / v
+            } else {
+                f32::INFINITY
+            }
+        };
+        let (x, z) = (
+            side(o.x, d.x, self.hx).max(0.0),
+            side(o.z, d.z, self.hz).max(0.0),
+        );
+        Exits {
+            soil,
+            top,
+            x,
+            z,
+            end: soil.min(top).min(x).min(z),
+        }
+    }
+
+    /// Where a ray leaving through a side at `e.end` comes in again: on the opposite side,
+    /// the crossed coordinate set to that side exactly.
+    fn wrapped(&self, o: Vec3, d: Vec3, e: &Exits) -> Vec3 {
+        let mut p = o + d * e.end;
+        if e.end == e.x {
+            p.x = if d.x > 0.0 { -self.hx } else { self.hx };
+        }
+        if e.end == e.z {
+            p.z = if d.z > 0.0 { -self.hz } else { self.hz };
+        }
+        Vec3::new(
+            p.x.clamp(-self.hx, self.hx),
+            p.y.clamp(0.0, self.top),
+            p.z.clamp(-self.hz, self.hz),
+        )
+    }
 }
 
 /// Whether a ray from `o` along `d` (upwards) leaves through the plot's top (or, in an
@@ -490,41 +523,22 @@ fn reaches_sky(
     d: Vec3,
     rays: &mut u64,
 ) -> bool {
-    let [hx, hz] = [stand.half[0] as f32, stand.half[1] as f32];
-    let top = stand.top as f32;
+    let plot = PlotBox::of(stand);
     let mut stats = TraceStats::default();
     for _ in 0..MAX_EVENTS {
-        let t_top = (top - o.y) / d.y;
-        let side = |p: f32, v: f32, h: f32| {
-            if v > 0.0 {
-                (h - p) / v
-            } else if v < 0.0 {
-                (-h - p) / v
-            } else {
-                f32::INFINITY
-            }
-        };
-        let (t_x, t_z) = (side(o.x, d.x, hx).max(0.0), side(o.z, d.z, hz).max(0.0));
-        let t_end = t_top.min(t_x).min(t_z);
+        let e = plot.exits(o, d);
         *rays += 1;
         if accel.any_hit(
-            &Ray::segment(o, d, 0.0, t_end),
+            &Ray::segment(o, d, 0.0, e.end),
             TraversalConfig::default(),
             &mut stats,
         ) {
             return false;
         }
-        if t_end == t_top || !cyclic {
+        if e.end == e.top || !cyclic {
             return true;
         }
-        let mut p = o + d * t_end;
-        if t_end == t_x {
-            p.x = if d.x > 0.0 { -hx } else { hx };
-        }
-        if t_end == t_z {
-            p.z = if d.z > 0.0 { -hz } else { hz };
-        }
-        o = Vec3::new(p.x.clamp(-hx, hx), p.y.clamp(0.0, top), p.z.clamp(-hz, hz));
+        o = plot.wrapped(o, d, &e);
     }
     false
 }

@@ -301,6 +301,24 @@ impl CanopySpec {
         Ok(spec)
     }
 
+    /// A built-in stand, or the canopy file `name` (relative to `base`, when given).
+    pub fn find(name: &str, base: Option<&Path>) -> Result<CanopySpec, StandError> {
+        if let Some(spec) = CanopySpec::builtin(name) {
+            return Ok(spec);
+        }
+        let path = base.map_or_else(|| Path::new(name).to_path_buf(), |d| d.join(name));
+        if !path.is_file() {
+            return Err(StandError::File {
+                path: path.display().to_string(),
+                message: format!(
+                    "no such canopy file, and not a built-in stand ({})",
+                    CanopySpec::BUILTIN.join(", ")
+                ),
+            });
+        }
+        CanopySpec::load(&path)
+    }
+
     /// Parses and checks TOML text.
     pub fn parse(text: &str) -> Result<CanopySpec, StandError> {
         let mut spec: CanopySpec = toml::from_str(text).map_err(|e| {
@@ -320,8 +338,8 @@ impl CanopySpec {
     }
 
     /// The built-in stands: `crowns` (issue 29's validation stand: spheres of crown LAI 5 at
-    /// cover 0.3 over 100 m × 100 m, red and near-infrared) and `layer` (a homogeneous layer of
-    /// LAI 3, 2 m thick, on a 10 m cyclic plot).
+    /// cover 0.3 over 100 m × 100 m) and `layer` (a homogeneous layer of LAI 3, 2 m thick, on a
+    /// 10 m cyclic plot), both in the default bands (red and near-infrared, soil 0.12).
     pub fn builtin(name: &str) -> Option<CanopySpec> {
         let text = match name {
             "crowns" => BUILTIN_CROWNS,
@@ -548,17 +566,6 @@ cover = 0.3
 [leaves]
 shape = "disc"
 size = 0.1
-[[bands]]
-name = "red"
-leaf_reflectance = 0.07
-leaf_transmittance = 0.06
-soil_albedo = 0.12
-par = true
-[[bands]]
-name = "nir"
-leaf_reflectance = 0.45
-leaf_transmittance = 0.40
-soil_albedo = 0.12
 "#;
 
 const BUILTIN_LAYER: &str = r#"
@@ -572,17 +579,6 @@ height = 2.0
 [leaves]
 shape = "disc"
 size = 0.1
-[[bands]]
-name = "red"
-leaf_reflectance = 0.07
-leaf_transmittance = 0.06
-soil_albedo = 0.12
-par = true
-[[bands]]
-name = "nir"
-leaf_reflectance = 0.45
-leaf_transmittance = 0.40
-soil_albedo = 0.12
 "#;
 
 /// Crown models (or 1 for a layer) a stand is made of.
@@ -852,7 +848,14 @@ mod tests {
 
     #[test]
     fn bad_canopies_are_one_line_errors() {
-        let base = BUILTIN_CROWNS;
+        // The built-in crowns with their (default) bands written out.
+        let base = &format!(
+            "{BUILTIN_CROWNS}[[bands]]\nname = \"red\"\nleaf_reflectance = 0.07\nleaf_transmittance = 0.06\nsoil_albedo = 0.12\npar = true\n[[bands]]\nname = \"nir\"\nleaf_reflectance = 0.45\nleaf_transmittance = 0.40\nsoil_albedo = 0.12\n"
+        );
+        assert_eq!(
+            CanopySpec::parse(base).unwrap(),
+            CanopySpec::builtin("crowns").unwrap()
+        );
         let cases = [
             (
                 base.replace("leaf_reflectance = 0.45", "leaf_reflectance = 0.75"),

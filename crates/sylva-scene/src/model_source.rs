@@ -143,7 +143,7 @@ pub fn load_scene_model(scene: &SceneDesc, name: Option<&str>) -> Result<Model, 
         ModelSource::Mesh { path, options } => {
             import::load_mesh_file(path, options).map_err(Box::new)?
         }
-        ModelSource::Stand { spec, unit } => ModelSource::stand_model(spec, *unit),
+        ModelSource::Stand { spec, unit } => sylva_grow::stand::unit_model(spec, *unit),
     };
     model.name = desc.name.clone();
     Ok(model)

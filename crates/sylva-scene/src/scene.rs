@@ -235,13 +235,6 @@ pub enum ModelSource {
     },
 }
 
-impl ModelSource {
-    /// Builds the model (grown, read or made).
-    pub(crate) fn stand_model(spec: &CanopySpec, unit: usize) -> Model {
-        sylva_grow::stand::unit_model(spec, unit)
-    }
-}
-
 /// Shapes a model can be made of (`shape = "teapot"`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Shape {
@@ -1032,26 +1025,8 @@ impl SceneDesc {
         if let Some(st) = &raw.stand {
             let l = line(st.span());
             let name = &st.get_ref().canopy;
-            let spec = match CanopySpec::builtin(name) {
-                Some(spec) => spec,
-                None => {
-                    let path: PathBuf = match base_dir {
-                        Some(d) => d.join(name),
-                        None => PathBuf::from(name),
-                    };
-                    if !path.is_file() {
-                        return Err(invalid(
-                            Some(l),
-                            format!(
-                                "stand '{name}': no such canopy file ({}), and not a built-in stand ({})",
-                                path.display(),
-                                CanopySpec::BUILTIN.join(", ")
-                            ),
-                        ));
-                    }
-                    CanopySpec::load(&path).map_err(|e| invalid(Some(l), format!("stand: {e}")))?
-                }
-            };
+            let spec = CanopySpec::find(name, base_dir)
+                .map_err(|e| invalid(Some(l), format!("stand: {e}")))?;
             let placed = sylva_grow::stand::placements(&spec)
                 .map_err(|e| invalid(Some(l), format!("stand '{name}': {e}")))?;
             let first = models.len();
@@ -1145,7 +1120,7 @@ impl SceneDesc {
                             model: d.name.clone(),
                             source: Box::new(source),
                         })?,
-                    ModelSource::Stand { spec, unit } => ModelSource::stand_model(spec, *unit),
+                    ModelSource::Stand { spec, unit } => sylva_grow::stand::unit_model(spec, *unit),
                 };
                 model.name = d.name.clone();
                 Ok(model)

@@ -3,8 +3,8 @@
 //! the canopy, reflected to the sky, transmitted to the ground and absorbed by it, and fAPAR.
 
 use super::output::{bench_bar, emit_to};
-use anyhow::{bail, Context, Result};
-use std::path::{Path, PathBuf};
+use anyhow::{Context, Result};
+use std::path::PathBuf;
 use sylva_budget::{
     budget_json, budget_text, trace_budget, Budget, BudgetConfig, CanopySpec, Stand, SunAngles,
     ViewAngles,
@@ -60,23 +60,8 @@ pub struct BenchBudgetArgs {
     json: bool,
 }
 
-/// A built-in stand, or the canopy file at `name`.
-fn canopy(name: &str) -> Result<CanopySpec> {
-    if let Some(spec) = CanopySpec::builtin(name) {
-        return Ok(spec);
-    }
-    let path = Path::new(name);
-    if !path.exists() {
-        bail!(
-            "{name}: no such canopy file, and not a built-in stand ({})",
-            CanopySpec::BUILTIN.join(", ")
-        );
-    }
-    Ok(CanopySpec::load(path)?)
-}
-
 pub fn bench(a: BenchBudgetArgs) -> Result<()> {
-    let spec = canopy(&a.canopy)?;
+    let spec = CanopySpec::find(&a.canopy, None)?;
     let cfg = BudgetConfig {
         photons: a.photons,
         seed: 1,
@@ -98,7 +83,7 @@ pub fn bench(a: BenchBudgetArgs) -> Result<()> {
 }
 
 pub fn run(a: BudgetArgs) -> Result<()> {
-    let spec = canopy(&a.canopy)?;
+    let spec = CanopySpec::find(&a.canopy, None)?;
     let cfg = BudgetConfig {
         photons: a.photons,
         seed: a.seed,
@@ -109,7 +94,7 @@ pub fn run(a: BudgetArgs) -> Result<()> {
         views: a
             .brf
             .iter()
-            .map(|v| ViewAngles::parse(v))
+            .map(|v| ViewAngles::parse_view(v))
             .collect::<Result<_, _>>()?,
     };
     cfg.validate()?;
