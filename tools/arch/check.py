@@ -31,8 +31,9 @@ ALLOWED = {
                      "sylva-trace", "sylva-trace-gpu", "sylva-wgpu"},
     "sylva-spp": {"sylva-core", "sylva-geom", "sylva-grid", "sylva-lb", "sylva-voxel",
                   "sylva-trace", "sylva-light"},
-    # The canopy radiation budget: abstract stands, bands, the Monte Carlo budget.
-    "sylva-budget": {"sylva-core", "sylva-geom", "sylva-grow", "sylva-trace"},
+    # The canopy radiation budget: abstract stands, bands, the Monte Carlo budget and the
+    # lattice budget held to it.
+    "sylva-budget": {"sylva-core", "sylva-geom", "sylva-grid", "sylva-grow", "sylva-lb", "sylva-trace"},
     # Transport and queue only: what runs on the ranks is the pipeline's (jobs of a Runner).
     "sylva-mpi": {"sylva-core"},
     "sylva-pipeline": {"sylva-core", "sylva-geom", "sylva-grid", "sylva-lb", "sylva-voxel",

@@ -13,14 +13,21 @@
 //! reference the other methods are held to, with the BRF towards chosen view directions by
 //! local estimates ([`report`] formats it).
 //!
+//! The lattice-Boltzmann budget of the same plot ([`lattice`]: the leaves binned into cells,
+//! the direct beam traced exactly, the scattered light carried by `sylva_lb::plot`) is held
+//! to it.
+//!
 //! May import `sylva-core`, `sylva-geom` (meshes, models, instances), `sylva-grow` (the
-//! stands) and `sylva-trace` (the kd-trees the photons are traced through).
+//! stands), `sylva-trace` (the kd-trees the photons are traced through), `sylva-grid` and
+//! `sylva-lb` (the cells and the lattice).
 
 pub mod bench;
+pub mod lattice;
 pub mod photons;
 pub mod report;
 pub mod stand;
 
+pub use lattice::{lb_budget, LbBand, LbConfig, LbRun};
 pub use photons::{
     trace_budget, Angles, BandBudget, BudgetConfig, Fraction, SunAngles, ViewAngles, ViewBrf,
     MAX_VIEWS,

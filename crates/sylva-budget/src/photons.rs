@@ -441,24 +441,24 @@ fn trace_chunk(
 }
 
 /// The plot's box: `[-hx, hx] × [0, top] × [-hz, hz]`.
-struct PlotBox {
-    hx: f32,
-    hz: f32,
-    top: f32,
+pub(crate) struct PlotBox {
+    pub(crate) hx: f32,
+    pub(crate) hz: f32,
+    pub(crate) top: f32,
 }
 
 /// Where a ray leaves a [`PlotBox`]: through the soil, the top or a side (∞ where it does
 /// not), and the first of them.
-struct Exits {
-    soil: f32,
-    top: f32,
-    x: f32,
-    z: f32,
-    end: f32,
+pub(crate) struct Exits {
+    pub(crate) soil: f32,
+    pub(crate) top: f32,
+    pub(crate) x: f32,
+    pub(crate) z: f32,
+    pub(crate) end: f32,
 }
 
 impl PlotBox {
-    fn of(stand: &Stand) -> PlotBox {
+    pub(crate) fn of(stand: &Stand) -> PlotBox {
         PlotBox {
             hx: stand.half[0] as f32,
             hz: stand.half[1] as f32,
@@ -466,7 +466,7 @@ impl PlotBox {
         }
     }
 
-    fn exits(&self, o: Vec3, d: Vec3) -> Exits {
+    pub(crate) fn exits(&self, o: Vec3, d: Vec3) -> Exits {
         let soil = if d.y < 0.0 { -o.y / d.y } else { f32::INFINITY };
         let top = if d.y > 0.0 {
             (self.top - o.y) / d.y
@@ -497,7 +497,7 @@ impl PlotBox {
 
     /// Where a ray leaving through a side at `e.end` comes in again: on the opposite side,
     /// the crossed coordinate set to that side exactly.
-    fn wrapped(&self, o: Vec3, d: Vec3, e: &Exits) -> Vec3 {
+    pub(crate) fn wrapped(&self, o: Vec3, d: Vec3, e: &Exits) -> Vec3 {
         let mut p = o + d * e.end;
         if e.end == e.x {
             p.x = if d.x > 0.0 { -self.hx } else { self.hx };

@@ -21,6 +21,7 @@ pub mod kernel;
 /// them without the solver); re-exported here under their old paths.
 pub use sylva_grid::{grid, grid_file, lattice};
 pub mod light;
+pub mod plot;
 /// The presets and per-colour parameters live in `sylva-geom` (scenes name presets, and
 /// export reads their optics without the solver); re-exported here where the solver uses them.
 pub use sylva_geom::params;

@@ -437,26 +437,7 @@ pub fn first_collision_source(
     let mut source = zero();
     let mut unit_strengths: Vec<((f64, f64), Vec<f32>)> = Vec::new();
     for c in 0..3 {
-        let profile = |p: &ColourParams| -> [f32; Q] {
-            let pn = crate::collision::normalised_phase(p.g);
-            let albedo = if p.sigma_t() > 0.0 {
-                p.sigma_s / p.sigma_t()
-            } else {
-                0.0
-            };
-            std::array::from_fn(|m| {
-                if m == 0 {
-                    return 0.0;
-                }
-                let share: f64 = hit
-                    .vertices
-                    .iter()
-                    .zip(&hit.weights)
-                    .map(|(&j, &w)| w * weight(m) * pn[m][j])
-                    .sum();
-                (albedo * share) as f32
-            })
-        };
+        let profile = |p: &ColourParams| scatter_profile(p, &hit);
         source.green[c] = profile(&medium.colours[c]);
         source.brown[c] = profile(&medium.brown_colour(c));
         // Colours with the same extinction share the transmittance.
@@ -480,6 +461,31 @@ pub fn first_collision_source(
             .collect();
     }
     Ok(source)
+}
+
+/// What a site's first collision with the sun's beam scatters into each lattice direction,
+/// per unit of intercepted light: `σ_s / σ_t` times `w_m pn(m ← sun)`, the phase function of
+/// the lattice directions around the sun (`hit`: the polyhedron face its direction crosses).
+/// The directions' shares sum to the single-scattering albedo.
+pub fn scatter_profile(p: &ColourParams, hit: &crate::relight::polyhedron::FaceHit) -> [f32; Q] {
+    let pn = crate::collision::normalised_phase(p.g);
+    let albedo = if p.sigma_t() > 0.0 {
+        p.sigma_s / p.sigma_t()
+    } else {
+        0.0
+    };
+    std::array::from_fn(|m| {
+        if m == 0 {
+            return 0.0;
+        }
+        let share: f64 = hit
+            .vertices
+            .iter()
+            .zip(&hit.weights)
+            .map(|(&j, &w)| w * weight(m) * pn[m][j])
+            .sum();
+        (albedo * share) as f32
+    })
 }
 
 /// `T_i (1 - e^{-κ_i})` per site for a unit sun (0 on the shell and where nothing is): the

@@ -445,12 +445,12 @@ impl SharedState {
 
 /// One colour's lattice: site codes, two states, collision constants.
 pub struct Lattice {
-    dims: Dims,
+    pub(crate) dims: Dims,
     /// Per site: density ρ for green (leaf) and plain medium sites, -ρ for brown (wood) sites,
     /// 0 on the shell (boundary sites only emit).
-    codes: Vec<f32>,
-    states: [AlignedBuf; 2],
-    current: usize,
+    pub(crate) codes: Vec<f32>,
+    pub(crate) states: [AlignedBuf; 2],
+    pub(crate) current: usize,
     /// [`RING`] planes of each intermediate state of [`Lattice::step_sweep`], ring after ring.
     ring: AlignedBuf,
     green: CubicOmega,
@@ -460,11 +460,11 @@ pub struct Lattice {
     keep_f0_green: f32,
     keep_f0_brown: f32,
     isa: KernelIsa,
-    boundary: Boundary,
+    pub(crate) boundary: Boundary,
     /// This colour's floor radiance per `(x, z)`, if the bottom face emits one.
     floor: Option<Vec<f32>>,
     /// This colour's volume source, if any.
-    source: Option<ColourSource>,
+    pub(crate) source: Option<ColourSource>,
 }
 
 impl Lattice {
@@ -890,7 +890,13 @@ impl Lattice {
     }
 
     /// Post-collision values of one site in f64, and `f_0` before any zeroing.
-    fn post_collision(&self, state: &[f32], x: usize, y: usize, z: usize) -> ([f64; Q], f64) {
+    pub(crate) fn post_collision(
+        &self,
+        state: &[f32],
+        x: usize,
+        y: usize,
+        z: usize,
+    ) -> ([f64; Q], f64) {
         let code = self.codes[self.dims.index(x, y, z)] as f64;
         let f: [f64; Q] = std::array::from_fn(|m| state[self.state_index(x, y, z, m)] as f64);
         let (omega, rho, keep) = if code < 0.0 {

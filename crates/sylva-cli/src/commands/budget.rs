@@ -6,9 +6,20 @@ use super::output::{bench_bar, emit_to};
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 use sylva_budget::{
-    budget_json, budget_text, trace_budget, Budget, BudgetConfig, CanopySpec, Stand, SunAngles,
-    ViewAngles,
+    budget_json, budget_text, lb_budget, trace_budget, Budget, BudgetConfig, CanopySpec, LbConfig,
+    Stand, SunAngles, ViewAngles,
 };
+
+/// How `sylva budget` finds the fractions.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Method {
+    /// Monte Carlo photons through the explicit leaves (the reference; standard errors).
+    Mc,
+    /// The lattice-Boltzmann light over the leaves binned into cells (`--lb-cell`).
+    Lb,
+    /// Both, and the lattice's differences to the Monte Carlo.
+    Both,
+}
 
 #[derive(clap::Args)]
 pub struct BudgetArgs {
@@ -34,6 +45,20 @@ pub struct BudgetArgs {
     /// seeds only, not on the thread count.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// `mc`: Monte Carlo photons (the reference); `lb`: the lattice-Boltzmann light (cyclic
+    /// plots only); `both`, with the lattice's differences to the photons.
+    #[arg(long, value_enum, default_value_t = Method::Mc)]
+    method: Method,
+    /// The lattice's cell edge, metres (rounded so that whole cells tile the plot).
+    #[arg(long, default_value_t = 0.5, allow_hyphen_values = true)]
+    lb_cell: f64,
+    /// Direct-beam rays per column side for the lattice (rays² per column).
+    #[arg(long, default_value_t = 4)]
+    lb_rays: usize,
+    /// The lattice stops once the light leaving through its top and onto the soil changes
+    /// by at most this share of a step's input from one step to the next.
+    #[arg(long, default_value_t = 1e-6)]
+    lb_tolerance: f64,
     /// Print JSON instead of a text table.
     #[arg(long)]
     json: bool,
@@ -98,21 +123,62 @@ pub fn run(a: BudgetArgs) -> Result<()> {
             .collect::<Result<_, _>>()?,
     };
     cfg.validate()?;
+    let lb_cfg = LbConfig {
+        cell: a.lb_cell,
+        rays: a.lb_rays,
+        tolerance: a.lb_tolerance,
+        ..LbConfig::default()
+    };
+    if a.method != Method::Mc {
+        lb_cfg.validate()?;
+    }
+    let quiet = a.json || a.out.is_some();
     let t0 = std::time::Instant::now();
     let stand = Stand::build(&spec)?;
     let accel = sylva_trace::SceneAccel::from_parts(&stand.models, &stand.instances, None)
         .context("building the stand's kd-trees")?;
     let build_seconds = t0.elapsed().as_secs_f64();
-    let bar = bench_bar(
-        a.json || a.out.is_some(),
-        (a.photons * spec.bands.len() as u64) as usize,
-        "photons",
-    );
-    let bands = trace_budget(&stand, &accel, &spec.bands, spec.plot.cyclic, &cfg, &|n| {
-        bar.inc(n)
-    })?;
-    bar.finish_and_clear();
-    let budget = Budget::new(&spec, &stand, cfg.sun, bands, build_seconds);
+    let lattice = if a.method == Method::Mc {
+        None
+    } else {
+        let spinner = if quiet {
+            indicatif::ProgressBar::hidden()
+        } else {
+            indicatif::ProgressBar::new_spinner()
+        };
+        let run = lb_budget(
+            &spec,
+            &stand,
+            &accel,
+            cfg.sun,
+            &lb_cfg,
+            &|band, step, residual| {
+                if step % 16 == 0 {
+                    spinner.set_message(format!(
+                    "lattice, band {band}: step {step}, change {residual:.1e} of a step's input"
+                ));
+                    spinner.tick();
+                }
+            },
+        )?;
+        spinner.finish_and_clear();
+        Some(run)
+    };
+    let bands = if a.method == Method::Lb {
+        Vec::new()
+    } else {
+        let bar = bench_bar(
+            quiet,
+            (a.photons * spec.bands.len() as u64) as usize,
+            "photons",
+        );
+        let bands = trace_budget(&stand, &accel, &spec.bands, spec.plot.cyclic, &cfg, &|n| {
+            bar.inc(n)
+        })?;
+        bar.finish_and_clear();
+        bands
+    };
+    let budget = Budget::new(&spec, &stand, cfg.sun, bands, lattice, build_seconds);
     let text = if a.json {
         format!("{}\n", budget_json(&budget))
     } else {

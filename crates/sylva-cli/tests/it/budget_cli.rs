@@ -134,3 +134,85 @@ fn the_brf_is_reported_per_view_with_the_hot_spot_towards_the_sun() {
         assert!(!ok && err.contains("--brf"), "{err}");
     }
 }
+
+#[test]
+fn the_lattice_budget_balances_and_stands_beside_the_photons() {
+    // `--method both` on a small cyclic stand: the lattice's fractions balance, agree with the
+    // photons' and the text shows their differences; `--method lb` refuses an isolated plot.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("grove.toml");
+    let stand = "name = \"grove\"\n[plot]\nsize = [12.0, 12.0]\n[crowns]\nshape = \"sphere\"\nradius = 1.5\ncentre_height = 3.0\nlai = 4.0\ncover = 0.3\n[leaves]\nshape = \"disc\"\nsize = 0.1\n";
+    std::fs::write(&path, stand).unwrap();
+    let (ok, stdout, err) = sylva(&[
+        "budget",
+        path.to_str().unwrap(),
+        "--sun-zenith",
+        "35",
+        "--method",
+        "both",
+        "--photons",
+        "100000",
+        "--json",
+    ]);
+    assert!(ok, "{err}");
+    let r: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(r["method"], "both");
+    let lattice = &r["lattice"];
+    assert_eq!(lattice["cell_m"], 0.5);
+    assert_eq!(lattice["grid"][0], 24);
+    for (mc, lb) in r["bands"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(lattice["bands"].as_array().unwrap())
+    {
+        let v = |k: &str| lb[k].as_f64().unwrap();
+        assert_eq!(lb["converged"], true);
+        let sum = v("canopy_absorbed") + v("reflected") + v("soil_absorbed");
+        assert!((sum - 1.0).abs() < 0.005, "{lb}");
+        assert!((v("balance") - (1.0 - sum)).abs() < 1e-12);
+        for k in [
+            "canopy_absorbed",
+            "reflected",
+            "ground_arrived",
+            "soil_absorbed",
+        ] {
+            let m = mc[k]["value"].as_f64().unwrap();
+            assert!((v(k) - m).abs() < 0.03, "{k}: lattice {} against {m}", v(k));
+        }
+    }
+    let (ok, text, err) = sylva(&[
+        "budget",
+        path.to_str().unwrap(),
+        "--method",
+        "both",
+        "--photons",
+        "20000",
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        text.contains("lattice-Boltzmann, cells of 0.500 m"),
+        "{text}"
+    );
+    assert!(text.contains("Lattice − Monte Carlo"), "{text}");
+    // An isolated plot, and a cell that cannot tile the plot: one line each.
+    let isolated = dir.path().join("isolated.toml");
+    std::fs::write(
+        &isolated,
+        stand.replace("[plot]\n", "[plot]\ncyclic = false\n"),
+    )
+    .unwrap();
+    let (ok, _, err) = sylva(&["budget", isolated.to_str().unwrap(), "--method", "lb"]);
+    assert!(!ok);
+    assert!(err.contains("cyclic") && err.lines().count() == 1, "{err}");
+    let (ok, _, err) = sylva(&[
+        "budget",
+        path.to_str().unwrap(),
+        "--method",
+        "lb",
+        "--lb-cell",
+        "-1",
+    ]);
+    assert!(!ok);
+    assert!(err.contains("--lb-cell"), "{err}");
+}
