@@ -1,8 +1,10 @@
-//! `sylva bench budget`: the budget's two stages timed, medians of several runs: building the
-//! stand (its meshes and kd-trees) and tracing each band's photons, with photons and rays per
-//! second. A band's rays per second against the same stand's first band, measured in the same
+//! `sylva bench budget`: the budget's stages timed, medians of several runs: building the
+//! stand (its meshes and kd-trees), tracing each band's photons (photons and rays per
+//! second) and, with a lattice configuration, the lattice budget (its traced flights and
+//! each band's steps). A band's rays per second against the same stand's first band, measured in the same
 //! run, is the figure that survives a noisy host.
 
+use crate::lattice::{lb_budget, LbConfig};
 use crate::photons::{trace_budget, BudgetConfig};
 use crate::stand::Stand;
 use crate::{BudgetError, CanopySpec};
@@ -37,14 +39,32 @@ pub struct BudgetBench {
     /// Median seconds building the stand's meshes and kd-trees.
     pub build_seconds: f64,
     pub bands: Vec<BandBench>,
-    /// Median seconds of a whole budget (build and every band).
+    /// The lattice budget's, when asked for.
+    pub lattice: Option<LatticeBench>,
+    /// Median seconds of a whole budget (build and every band, of each method run).
     pub total_seconds: f64,
 }
 
-/// Builds and traces `spec`'s budget `runs` times.
+/// The lattice budget, timed.
+#[derive(Debug, Clone, Serialize)]
+pub struct LatticeBench {
+    pub cell_m: f64,
+    pub grid: [usize; 3],
+    /// Median seconds binning the leaves and tracing the first flights.
+    pub flights_seconds: f64,
+    /// Per band: median seconds and the steps (the same every run).
+    pub bands: Vec<(String, f64, usize)>,
+    /// Median seconds of the lattice budget (flights and every band).
+    pub seconds: f64,
+}
+
+/// Builds and traces `spec`'s budget `runs` times: the photons' unless `photons` is false,
+/// and the lattice's with `lattice`.
 pub fn bench_budget(
     spec: &CanopySpec,
     cfg: &BudgetConfig,
+    photons: bool,
+    lattice: Option<&LbConfig>,
     runs: u32,
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<BudgetBench, BudgetError> {
@@ -52,30 +72,62 @@ pub fn bench_budget(
         return Err(BudgetError::invalid("--runs", runs, "must be 1 to 50"));
     }
     cfg.validate()?;
+    if let Some(l) = lattice {
+        l.validate()?;
+    }
     let mut build = Vec::new();
     let mut total = Vec::new();
     let mut bands: Vec<Vec<f64>> = vec![Vec::new(); spec.bands.len()];
     let mut rays = vec![0u64; spec.bands.len()];
     let (mut triangles, mut instances) = (0, 0);
+    let (mut lb_flights, mut lb_total) = (Vec::new(), Vec::new());
+    let mut lb_bands: Vec<Vec<f64>> = vec![Vec::new(); spec.bands.len()];
+    let mut lb_last = None;
     for _ in 0..runs {
         let t0 = Instant::now();
         let stand = Stand::build(spec)?;
         let accel = sylva_trace::SceneAccel::from_parts(&stand.models, &stand.instances, None)?;
         build.push(t0.elapsed().as_secs_f64());
         (triangles, instances) = (stand.triangles(), stand.instances.len());
-        let result = trace_budget(&stand, &accel, &spec.bands, spec.plot.cyclic, cfg, progress)?;
-        for (k, b) in result.iter().enumerate() {
-            bands[k].push(b.seconds);
-            rays[k] = b.rays;
+        if photons {
+            let result =
+                trace_budget(&stand, &accel, &spec.bands, spec.plot.cyclic, cfg, progress)?;
+            for (k, b) in result.iter().enumerate() {
+                bands[k].push(b.seconds);
+                rays[k] = b.rays;
+            }
+        }
+        if let Some(l) = lattice {
+            let t1 = Instant::now();
+            let run = lb_budget(spec, &stand, &accel, cfg.sun, l, &|_, _, _| {})?;
+            lb_total.push(t1.elapsed().as_secs_f64());
+            lb_flights.push(run.build_seconds);
+            for (k, b) in run.bands.iter().enumerate() {
+                lb_bands[k].push(b.seconds);
+            }
+            lb_last = Some(run);
         }
         total.push(t0.elapsed().as_secs_f64());
     }
+    let lattice = lb_last.map(|run| LatticeBench {
+        cell_m: run.cell_m,
+        grid: run.grid,
+        flights_seconds: median(lb_flights),
+        bands: run
+            .bands
+            .iter()
+            .zip(&lb_bands)
+            .map(|(b, secs)| (b.band.clone(), median(secs.clone()), b.steps))
+            .collect(),
+        seconds: median(lb_total),
+    });
     let photons = cfg.photons as f64;
     let bands = spec
         .bands
         .iter()
         .zip(&bands)
         .zip(&rays)
+        .filter(|((_, secs), _)| !secs.is_empty())
         .map(|((band, secs), &rays)| {
             let (lo, hi) = secs.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &s| {
                 (lo.min(s), hi.max(s))
@@ -101,6 +153,7 @@ pub fn bench_budget(
         instances,
         build_seconds: median(build),
         bands,
+        lattice,
         total_seconds: median(total),
     })
 }
@@ -126,6 +179,20 @@ impl std::fmt::Display for BudgetBench {
                 b.rays_per_photon
             )?;
         }
+        if let Some(l) = &self.lattice {
+            writeln!(
+                f,
+                "  lattice, cells of {:.3} m ({}×{}×{}): flights {:.3} s",
+                l.cell_m, l.grid[0], l.grid[1], l.grid[2], l.flights_seconds
+            )?;
+            for (band, seconds, steps) in &l.bands {
+                writeln!(
+                    f,
+                    "  lattice band {band:<8} {seconds:>8.3} s, {steps} steps"
+                )?;
+            }
+            writeln!(f, "  lattice budget      {:>8.3} s", l.seconds)?;
+        }
         writeln!(f, "  whole budget        {:>8.3} s", self.total_seconds)
     }
 }
@@ -150,8 +217,9 @@ mod tests {
             },
             views: Vec::new(),
         };
-        let b = bench_budget(&spec, &cfg, 3, &|_| {}).unwrap();
+        let b = bench_budget(&spec, &cfg, true, None, 3, &|_| {}).unwrap();
         assert_eq!(b.bands.len(), 2);
+        assert!(b.lattice.is_none());
         // The rays are the budget's own: the seed fixes them.
         let stand = Stand::build(&spec).unwrap();
         let accel =
@@ -163,6 +231,21 @@ mod tests {
             assert!(bench.rays_per_photon >= 1.0);
         }
         assert!(b.total_seconds >= b.build_seconds);
-        assert!(bench_budget(&spec, &cfg, 0, &|_| {}).is_err());
+        assert!(bench_budget(&spec, &cfg, true, None, 0, &|_| {}).is_err());
+        // The lattice alone: its steps are the budget's own.
+        let lb = LbConfig {
+            cell: 0.5,
+            ..LbConfig::default()
+        };
+        let b = bench_budget(&spec, &cfg, false, Some(&lb), 2, &|_| {}).unwrap();
+        assert!(b.bands.is_empty());
+        let l = b.lattice.unwrap();
+        let run = lb_budget(&spec, &stand, &accel, cfg.sun, &lb, &|_, _, _| {}).unwrap();
+        for ((band, seconds, steps), r) in l.bands.iter().zip(&run.bands) {
+            assert_eq!((band, *steps), (&r.band, r.steps));
+            assert!(*seconds > 0.0 && *seconds <= l.seconds);
+        }
+        // A layer 1 m thick, the stand's top a millimetre over it: 3 rows of 0.5 m.
+        assert_eq!(l.grid, [6, 3, 6]);
     }
 }

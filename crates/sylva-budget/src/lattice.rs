@@ -41,7 +41,10 @@ const SHARE_SCALE: f64 = 4_503_599_627_370_496.0; // 2^52, so a share of 1 fits 
 /// How the lattice budget is made.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct LbConfig {
-    /// Cell edge, m (rounded so that whole cells tile the plot).
+    /// Cell edge, m (rounded so that whole cells tile the plot). The default 1 m agreed best
+    /// with the photons over the 54 cases (docs/budget.md): finer cells made more
+    /// nearly empty rows, along which the lattice's horizontal directions carry light round
+    /// the plot that a real photon would have climbed out of.
     pub cell: f64,
     /// Direct-beam rays per column side (`rays²` per column).
     pub rays: usize,
@@ -54,7 +57,7 @@ pub struct LbConfig {
 impl Default for LbConfig {
     fn default() -> LbConfig {
         LbConfig {
-            cell: 0.5,
+            cell: 1.0,
             rays: 4,
             tolerance: 1e-6,
             max_steps: 50_000,
@@ -516,6 +519,10 @@ impl Flights {
     /// The flight of light `strength` per source, met by leaves that scatter `albedo` of it
     /// with the lattice's normalised phase `pn`.
     pub fn flight(&self, strength: &[f64], albedo: f64, pn: &[[f64; Q]; Q]) -> FirstFlight {
+        if strength.iter().all(|&v| v == 0.0) {
+            // A black soil sends nothing: no work per step.
+            return FirstFlight::default();
+        }
         let groups: Vec<((usize, [f32; Q]), f64)> = (0..self.sites.len())
             .into_par_iter()
             .map(|g| {

@@ -3,8 +3,10 @@
 //! Owns the collision matrix with Henyey-Greenstein anisotropy, the
 //! parameter presets, the solver (boundary shell, green/brown sites, convergence), grid
 //! previews, the built-in test
-//! shapes and relighting of one grid (paper 004: base solutions solved as independent jobs,
-//! the 32-face polyhedron, compression and the compressed file);
+//! shapes, relighting of one grid (paper 004: base solutions solved as independent jobs,
+//! the 32-face polyhedron, compression and the compressed file) and the lattice over a
+//! cyclic plot on a reflecting soil with its face tallies ([`plot`], for the radiation
+//! budget);
 //! [`LbSolver`] is the solver as a backend ([`CpuSolver`] here, the GPU one in
 //! `sylva-lb-gpu`).
 

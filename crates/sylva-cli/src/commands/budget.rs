@@ -50,7 +50,7 @@ pub struct BudgetArgs {
     #[arg(long, value_enum, default_value_t = Method::Mc)]
     method: Method,
     /// The lattice's cell edge, metres (rounded so that whole cells tile the plot).
-    #[arg(long, default_value_t = 0.5, allow_hyphen_values = true)]
+    #[arg(long, default_value_t = 1.0, allow_hyphen_values = true)]
     lb_cell: f64,
     /// Direct-beam rays per column side for the lattice (rays² per column).
     #[arg(long, default_value_t = 4)]
@@ -80,6 +80,12 @@ pub struct BenchBudgetArgs {
     /// Timed runs (each builds the stand and traces every band); medians reported.
     #[arg(long, default_value_t = 3)]
     runs: u32,
+    /// `mc`: time the photons; `lb`: the lattice budget; `both`.
+    #[arg(long, value_enum, default_value_t = Method::Mc)]
+    method: Method,
+    /// The lattice's cell edge, metres.
+    #[arg(long, default_value_t = 1.0, allow_hyphen_values = true)]
+    lb_cell: f64,
     /// Print one JSON object instead of text.
     #[arg(long)]
     json: bool,
@@ -97,12 +103,24 @@ pub fn bench(a: BenchBudgetArgs) -> Result<()> {
         views: Vec::new(),
     };
     cfg.validate()?;
+    // The photons' progress (the lattice's runs are not counted in photons).
     let bar = bench_bar(
-        a.json,
+        a.json || a.method == Method::Lb,
         (a.photons * spec.bands.len() as u64 * u64::from(a.runs.clamp(1, 50))) as usize,
         "photons",
     );
-    let b = sylva_budget::bench::bench_budget(&spec, &cfg, a.runs, &|n| bar.inc(n))?;
+    let lattice = LbConfig {
+        cell: a.lb_cell,
+        ..LbConfig::default()
+    };
+    let b = sylva_budget::bench::bench_budget(
+        &spec,
+        &cfg,
+        a.method != Method::Lb,
+        (a.method != Method::Mc).then_some(&lattice),
+        a.runs,
+        &|n| bar.inc(n),
+    )?;
     bar.finish_and_clear();
     super::output::print_report(&b, a.json)
 }

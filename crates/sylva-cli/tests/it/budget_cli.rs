@@ -158,8 +158,8 @@ fn the_lattice_budget_balances_and_stands_beside_the_photons() {
     let r: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     assert_eq!(r["method"], "both");
     let lattice = &r["lattice"];
-    assert_eq!(lattice["cell_m"], 0.5);
-    assert_eq!(lattice["grid"][0], 24);
+    assert_eq!(lattice["cell_m"], 1.0);
+    assert_eq!(lattice["grid"][0], 12);
     for (mc, lb) in r["bands"]
         .as_array()
         .unwrap()
