@@ -1,24 +1,23 @@
 //! The lattice-Boltzmann budget of a cyclic plot (issue 29 item 5b): the stand's leaf area
-//! binned into cubic cells, the sun's direct beam traced exactly through them, and the light
-//! it scatters carried by the LB solver over a cyclic plot on a reflecting soil
-//! (`sylva_lb::plot`), the same light as a scene's physical light.
+//! binned into cubic cells, the light's first flights traced through the explicit leaves,
+//! and the rest carried by the LB solver over a cyclic plot on a reflecting soil
+//! (`sylva_lb::plot`), the same lattice as a scene's physical light (docs/budget.md).
 //!
 //! * **Cells.** Whole cells tile the plot (its sides must be multiples of the cell), from the
 //!   soil up to above the highest leaf. Each leaf triangle's one-sided area goes to the cell
 //!   of its centroid, wrapped around the plot, as 2⁻³² cell² fixed-point integers (the same
-//!   for any thread count). A cell's extinction per cell edge is `G A / cell²` (G = 1/2,
-//!   leaves of random orientation) and its LB density the matching collision probability
-//!   ([`sylva_grid::density::collision_probability`]).
-//! * **The direct beam.** `rays²` parallel rays per column enter the top along the sun and
-//!   cross the cells exactly (Amanatides & Woo), wrapping around the sides; each cell
-//!   intercepts `T (1 − e^{−κ ℓ})` of a ray, the rest reaches the soil. Every share of the
-//!   sunlight ends in a cell or on the soil, so this part conserves exactly (to the
-//!   2⁻⁵² fixed point the shares are summed in).
-//! * **The LB.** A cell scatters `r + t` of what it intercepts into the lattice directions
-//!   around the sun (the physical light's first-collision source) and absorbs the rest; the
-//!   lattice carries the scattered light through the canopy, around the sides and between
-//!   the canopy and the soil until nothing changes, and tallies what the leaves absorb, what
-//!   leaves through the top and what lands on the soil.
+//!   for any thread count); a cell's LB density is the collision probability of that area
+//!   ([`sylva_grid::density::collision_probability`], G = 1/2).
+//! * **First flights, traced** on the photons' kd-trees across the cyclic sides, because the
+//!   lattice's 18 directions draw them poorly (its upward ones reach 45° from the zenith at
+//!   most, its horizontal ones never leave their row): the sun's beam to the first leaf or
+//!   the soil ([`direct_beam`]); the light those leaves scatter once, to the next leaf, the
+//!   sky or the soil, and the soil's light, to the first leaf or the sky ([`Flights`]).
+//!   Where a flight meets a leaf, the leaf absorbs 1 − (r + t) and scatters the rest into
+//!   the lattice in its cell, along the lattice directions about the ray's.
+//! * **The LB** carries the light scattered twice and more until nothing changes, the soil
+//!   reflecting what lands on it each step, and tallies what the leaves absorb, what leaves
+//!   through the top and what lands on the soil.
 
 use crate::photons::{PlotBox, SunAngles, MAX_EVENTS};
 use crate::stand::Stand;
@@ -35,8 +34,9 @@ use sylva_trace::{Ray, SceneAccel, TraceStats, TraversalConfig};
 
 /// Fixed-point scale of binned leaf area (cell² units).
 const AREA_SCALE: f64 = 4_294_967_296.0;
-/// Fixed-point scale of the direct beam's shares of the sunlight.
-const SHARE_SCALE: f64 = 4_503_599_627_370_496.0; // 2^52, so a share of 1 fits with room
+/// Fixed-point scale of the direct beam's shares of the sunlight: 2⁵², so that the whole
+/// sunlight fits a u64 with room.
+const SHARE_SCALE: f64 = 4_503_599_627_370_496.0;
 
 /// How the lattice budget is made.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]

@@ -191,7 +191,7 @@ fn the_lattice_budget_balances_and_stands_beside_the_photons() {
     ]);
     assert!(ok, "{err}");
     assert!(
-        text.contains("lattice-Boltzmann, cells of 0.500 m"),
+        text.contains("lattice-Boltzmann, cells of 1.000 m"),
         "{text}"
     );
     assert!(text.contains("Lattice − Monte Carlo"), "{text}");
