@@ -424,12 +424,10 @@ pub fn solve_cyclic_plot(
             .map(|(a, d)| soil_albedo * (a + d))
             .collect()
     };
-    // The soil's light of a step: by the floor's sites, or traced and injected. Returns
-    // what it adds to the step's top and floor flows, and what the leaves it meets first
-    // absorb.
     let zero = vec![0.0; columns];
-    // Returns what the step's soil (and steady) light adds to its top and floor flows, what
-    // the leaves it meets first absorb, and how much light it brings in all.
+    // Sends a step's soil light (from the floor's sites, or traced and injected with the
+    // steady light); returns what that adds to the step's top and floor flows, what the
+    // leaves it meets first absorb, and how much light it brings in all.
     let send = |lattice: &mut Lattice, radiance: &[f64]| -> (PlotFlows, f64, f64) {
         match &soil_light {
             SoilLight::Floor => {
