@@ -34,9 +34,6 @@ use sylva_trace::{Ray, SceneAccel, TraceStats, TraversalConfig};
 
 /// Fixed-point scale of binned leaf area (cell² units).
 const AREA_SCALE: f64 = 4_294_967_296.0;
-/// Fixed-point scale of the direct beam's shares of the sunlight: 2⁵², so that the whole
-/// sunlight fits a u64 with room.
-const SHARE_SCALE: f64 = 4_503_599_627_370_496.0;
 
 /// How the lattice budget is made.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -275,9 +272,7 @@ pub fn direct_beam(
 ) -> DirectBeam {
     let dims = plot.grid.dims;
     let (nx, nz) = (dims.nx - 2, dims.nz - 2);
-    let share = ((SHARE_SCALE / (nx * nz * rays * rays) as f64).round()) as u64;
-    let total = (share * (nx * nz * rays * rays) as u64) as f64 / SHARE_SCALE;
-    let ray_share = share as f64 / SHARE_SCALE / total;
+    let ray_share = 1.0 / (nx * nz * rays * rays) as f64;
     let bx = PlotBox::of(stand);
     let cell = plot.cell;
     // Per column: the sites met, the columns landed on, the hits.
@@ -318,23 +313,23 @@ pub fn direct_beam(
             (met, landed, hits)
         })
         .collect();
-    // Shares are whole fixed-point units summed as integers: exact whatever the order.
-    let mut intercepted = vec![0u64; dims.sites()];
-    let mut ground = vec![0u64; nx * nz];
+    // Every ray carries the same share: count them, so the sums are exact whatever the order.
+    let mut intercepted = vec![0u32; dims.sites()];
+    let mut ground = vec![0u32; nx * nz];
     let mut hits = Vec::new();
     for (met, landed, h) in columns {
         for i in met {
-            intercepted[i] += share;
+            intercepted[i] += 1;
         }
         for c in landed {
-            ground[c] += share;
+            ground[c] += 1;
         }
         hits.extend(h);
     }
-    let unfix = |v: u64| v as f64 / SHARE_SCALE / total;
+    let share = |n: u32| n as f64 * ray_share;
     DirectBeam {
-        intercepted: intercepted.into_iter().map(unfix).collect(),
-        ground: ground.into_iter().map(unfix).collect(),
+        intercepted: intercepted.into_iter().map(share).collect(),
+        ground: ground.into_iter().map(share).collect(),
         hits,
     }
 }
@@ -354,13 +349,13 @@ pub struct Flights {
     entries: Vec<(u8, u32, f32)>,
     /// Per source, the share of its light that escapes to the sky.
     escape: Vec<f64>,
-    /// Per source with any, the shares that land on the soil per column.
-    floor: Vec<(u32, Vec<(u32, f64)>)>,
+    /// (source, column, share) of the rays that land on the soil.
+    floor: Vec<(u32, u32, f64)>,
     columns: usize,
 }
 
-/// Traces every ray of a source, telling the callback each one's share and end.
-type SourceRays<'a> = dyn Fn(usize, &mut dyn FnMut(f64, Traced)) + Sync + 'a;
+/// Traces the rays of a unit of work, telling the callback each one's source, share and end.
+type SourceRays<'a> = dyn Fn(usize, &mut dyn FnMut(usize, f64, Traced)) + Sync + 'a;
 
 /// What one ray of a source did.
 enum Traced {
@@ -370,14 +365,19 @@ enum Traced {
 }
 
 impl Flights {
-    /// `rays(source, emit)` traces each ray of a source, calling `emit(share, end)`.
-    fn build(sources: usize, columns: usize, rays: &SourceRays) -> Flights {
-        type PerSource = (Vec<(usize, u8, u32, f32)>, f64, Vec<(u32, f64)>);
-        let per_source: Vec<PerSource> = (0..sources)
+    /// `rays(unit, emit)` traces the rays of each of `units` (in parallel), calling
+    /// `emit(source, share, end)` for each; `sources` strengths scale them later.
+    fn build(units: usize, sources: usize, columns: usize, rays: &SourceRays) -> Flights {
+        type PerUnit = (
+            Vec<(usize, u8, u32, f32)>,
+            Vec<(u32, f64)>,
+            Vec<(u32, u32, f64)>,
+        );
+        let per_unit: Vec<PerUnit> = (0..units)
             .into_par_iter()
-            .map(|source| {
-                let (mut met, mut escape, mut floor) = (Vec::new(), 0.0, Vec::new());
-                rays(source, &mut |share, end| match end {
+            .map(|unit| {
+                let (mut met, mut escape, mut floor) = (Vec::new(), Vec::new(), Vec::new());
+                rays(unit, &mut |source, share, end| match end {
                     Traced::Met(site, d) => {
                         let travel = [d.x as f64, d.y as f64, d.z as f64];
                         if let Ok(h) = sylva_lb::relight::polyhedron::face_hit(travel) {
@@ -388,21 +388,23 @@ impl Flights {
                             }
                         }
                     }
-                    Traced::Sky => escape += share,
-                    Traced::Soil(column) => floor.push((column as u32, share)),
+                    Traced::Sky => escape.push((source as u32, share)),
+                    Traced::Soil(column) => floor.push((source as u32, column as u32, share)),
                 });
                 (met, escape, floor)
             })
             .collect();
-        let escape = per_source.iter().map(|(_, e, _)| *e).collect();
-        let floor = per_source
-            .iter()
-            .enumerate()
-            .filter(|(_, (_, _, f))| !f.is_empty())
-            .map(|(s, (_, _, f))| (s as u32, f.clone()))
-            .collect();
+        // Summed in the units' order: the same for any thread count.
+        let mut escape = vec![0.0; sources];
+        let mut floor = Vec::new();
+        for (_, e, f) in &per_unit {
+            for &(source, share) in e {
+                escape[source as usize] += share;
+            }
+            floor.extend_from_slice(f);
+        }
         let mut all: Vec<(usize, u8, u32, f32)> =
-            per_source.into_iter().flat_map(|(m, _, _)| m).collect();
+            per_unit.into_iter().flat_map(|(m, _, _)| m).collect();
         // Stable: entries of one (site, direction, source) keep the rays' order, so the sums
         // are the same for any thread count.
         all.par_sort_by_key(|&(site, j, source, _)| (site, j, source));
@@ -433,7 +435,7 @@ impl Flights {
         let (nx, nz) = (dims.nx - 2, dims.nz - 2);
         let bx = PlotBox::of(stand);
         let w = 1.0 / (rays * rays) as f64;
-        Flights::build(nx * nz, nx * nz, &|column, emit| {
+        Flights::build(nx * nz, nx * nz, nx * nz, &|column, emit| {
             let (cx, cz) = (column / nz, column % nz);
             let mut rng = sylva_core::SplitMix64::for_chunk(SOIL_SEED, column as u64);
             let mut stats = TraceStats::default();
@@ -451,7 +453,7 @@ impl Flights {
                         RayEnd::Leaf(p, _) => Traced::Met(site_of(plot, stand.half, p), d),
                         _ => Traced::Sky,
                     };
-                    emit(w, end);
+                    emit(column, w, end);
                 }
             }
         })
@@ -471,10 +473,10 @@ impl Flights {
         let dims = plot.grid.dims;
         let nz = dims.nz - 2;
         let bx = PlotBox::of(stand);
-        // Sources 0 and 1 each trace every hit; chunks of hits keep the work parallel.
+        // Units of work: each side (source 0: reflected, 1: transmitted) of a chunk of hits.
         const CHUNK: usize = 1024;
-        let chunks = hits.len().div_ceil(CHUNK);
-        let flights = Flights::build(2 * chunks.max(1), (dims.nx - 2) * nz, &|k, emit| {
+        let units = 2 * hits.len().div_ceil(CHUNK);
+        Flights::build(units, 2, (dims.nx - 2) * nz, &|k, emit| {
             let (side, chunk) = (k % 2, k / 2);
             let mut rng = sylva_core::SplitMix64::for_chunk(SCATTER_SEED, k as u64);
             let mut stats = TraceStats::default();
@@ -492,33 +494,14 @@ impl Flights {
                             Traced::Soil(x * nz + z)
                         }
                     };
-                    emit(h.share / rays as f64, end);
+                    emit(side, h.share / rays as f64, end);
                 }
             }
-        });
-        // Sources 2c and 2c + 1 are chunk c's two sides: fold them into sources 0 and 1.
-        flights.fold_sources(2)
+        })
     }
 
-    /// Renumbers source `s` as `s % n`.
-    fn fold_sources(mut self, n: usize) -> Flights {
-        for e in &mut self.entries {
-            e.1 %= n as u32;
-        }
-        let mut escape = vec![0.0; n];
-        for (s, e) in self.escape.iter().enumerate() {
-            escape[s % n] += e;
-        }
-        self.escape = escape;
-        for f in &mut self.floor {
-            f.0 %= n as u32;
-        }
-        self
-    }
-
-    /// The flight of light `strength` per source, met by leaves that scatter `albedo` of it
-    /// with the lattice's normalised phase `pn`.
-    pub fn flight(&self, strength: &[f64], albedo: f64, pn: &[[f64; Q]; Q]) -> FirstFlight {
+    /// The flight of light `strength` per source, met by leaves that scatter as `leaf`.
+    pub fn flight(&self, strength: &[f64], leaf: &LeafScatter) -> FirstFlight {
         if strength.iter().all(|&v| v == 0.0) {
             // A black soil sends nothing: no work per step.
             return FirstFlight::default();
@@ -530,25 +513,23 @@ impl Flights {
                 for &(j, c, w) in &self.entries[self.starts[g]..self.starts[g + 1]] {
                     incident[j as usize] += strength[c as usize] * w as f64;
                 }
-                let met: f64 = incident.iter().sum();
                 let mut out = [0.0f32; Q];
                 for (j, &v) in incident.iter().enumerate() {
                     if v != 0.0 {
-                        for (m, o) in out.iter_mut().enumerate().skip(1) {
-                            *o += (albedo * v * weight(m) * pn[m][j]) as f32;
+                        for (o, &share) in out.iter_mut().zip(&leaf.into[j]) {
+                            *o += (v * share) as f32;
                         }
                     }
                 }
-                ((self.sites[g], out), (1.0 - albedo) * met)
+                let met: f64 = incident.iter().sum();
+                ((self.sites[g], out), (1.0 - leaf.albedo) * met)
             })
             .collect();
         let mut floor = Vec::new();
         if !self.floor.is_empty() {
             floor = vec![0.0; self.columns];
-            for (s, landed) in &self.floor {
-                for &(column, share) in landed {
-                    floor[column as usize] += strength[*s as usize] * share;
-                }
+            for &(source, column, share) in &self.floor {
+                floor[column as usize] += strength[source as usize] * share;
             }
         }
         FirstFlight {
@@ -556,6 +537,35 @@ impl Flights {
             absorbed: groups.iter().map(|(_, a)| a).sum(),
             escaped: self.escape.iter().zip(strength).map(|(e, l)| e * l).sum(),
             floor,
+        }
+    }
+}
+
+/// How a leaf scatters light arriving along lattice direction `j`: `into[j][m]`, the share
+/// sent along `m`, is the albedo times `w_m pn(m ← j)` (the lattice's leaf phase function),
+/// computed once per band for the flights' every step.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LeafScatter {
+    pub albedo: f64,
+    pub into: [[f64; Q]; Q],
+}
+
+impl LeafScatter {
+    pub fn new(medium: &sylva_lb::MediumParams) -> LeafScatter {
+        let leaf = &medium.colours[0];
+        let albedo = leaf.sigma_s / leaf.sigma_t();
+        let pn = sylva_lb::collision::normalised_phase(leaf.g);
+        LeafScatter {
+            albedo,
+            into: std::array::from_fn(|j| {
+                std::array::from_fn(|m| {
+                    if m == 0 {
+                        0.0
+                    } else {
+                        albedo * weight(m) * pn[m][j]
+                    }
+                })
+            }),
         }
     }
 }
@@ -641,10 +651,9 @@ pub fn lb_budget(
             .map_err(|e| {
                 BudgetError::invalid(format!("band {}", band.name), r + tr, e.to_string())
             })?;
-            let pn = sylva_lb::collision::normalised_phase(medium.colours[0].g);
-            let albedo = r + tr;
-            let steady = scattered_once.flight(&[r, tr], albedo, &pn);
-            let soil_flight = |radiance: &[f64]| soil.flight(radiance, albedo, &pn);
+            let leaf = LeafScatter::new(&medium);
+            let steady = scattered_once.flight(&[r, tr], &leaf);
+            let soil_flight = |radiance: &[f64]| soil.flight(radiance, &leaf);
             let solution = solve_cyclic_plot(
                 &plot.grid,
                 &medium,

@@ -467,7 +467,7 @@ pub fn first_collision_source(
 /// per unit of intercepted light: `σ_s / σ_t` times `w_m pn(m ← sun)`, the phase function of
 /// the lattice directions around the sun (`hit`: the polyhedron face its direction crosses).
 /// The directions' shares sum to the single-scattering albedo.
-pub fn scatter_profile(p: &ColourParams, hit: &crate::relight::polyhedron::FaceHit) -> [f32; Q] {
+fn scatter_profile(p: &ColourParams, hit: &crate::relight::polyhedron::FaceHit) -> [f32; Q] {
     let pn = crate::collision::normalised_phase(p.g);
     let albedo = if p.sigma_t() > 0.0 {
         p.sigma_s / p.sigma_t()

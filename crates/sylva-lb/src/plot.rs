@@ -54,6 +54,14 @@ impl PlotFlows {
     pub fn floor_total(&self) -> f64 {
         self.floor.iter().sum()
     }
+
+    /// Adds `top` and, per column, `floor` (which may be empty: nothing).
+    fn add(&mut self, top: f64, floor: &[f64]) {
+        self.top += top;
+        for (a, f) in self.floor.iter_mut().zip(floor) {
+            *a += f;
+        }
+    }
 }
 
 impl Lattice {
@@ -80,31 +88,25 @@ impl Lattice {
     /// over. Call after every step (and once before the first, where the state is not zero).
     pub fn wrap_sides(&mut self) {
         let (nx, ny, nz) = (self.dims.nx, self.dims.ny, self.dims.nz);
-        // Each plane's side sites: the whole plane on the x sides, the two z ends elsewhere.
-        let sites = |x: usize| -> Vec<(usize, usize)> {
-            let side = x == 0 || x == nx - 1;
-            (1..ny - 1)
-                .flat_map(|y| {
-                    let zs: Vec<usize> = if side {
-                        (0..nz).collect()
-                    } else {
-                        vec![0, nz - 1]
-                    };
-                    zs.into_iter().map(move |z| (y, z))
-                })
-                .collect()
-        };
         let state = &self.states[self.current];
+        // Each plane's side sites: the whole plane on the x sides, the two z ends elsewhere.
         let values: Vec<Vec<(usize, [f32; Q])>> = (0..nx)
             .into_par_iter()
             .map(|x| {
-                sites(x)
-                    .into_iter()
-                    .map(|(y, z)| {
-                        let post = self.post_values(state, wrap(x, nx), y, wrap(z, nz));
-                        (self.state_index(x, y, z, 0), post.map(|v| v as f32))
-                    })
-                    .collect()
+                let ghost = |y: usize, z: usize| {
+                    let post = self.post_values(state, wrap(x, nx), y, wrap(z, nz));
+                    (self.state_index(x, y, z, 0), post.map(|v| v as f32))
+                };
+                let side = x == 0 || x == nx - 1;
+                let mut out = Vec::with_capacity((ny - 2) * if side { nz } else { 2 });
+                for y in 1..ny - 1 {
+                    if side {
+                        out.extend((0..nz).map(|z| ghost(y, z)));
+                    } else {
+                        out.extend([ghost(y, 0), ghost(y, nz - 1)]);
+                    }
+                }
+                out
             })
             .collect();
         let stride = self.state_index(0, 0, 0, 1) - self.state_index(0, 0, 0, 0);
@@ -425,39 +427,36 @@ pub fn solve_cyclic_plot(
             .collect()
     };
     let zero = vec![0.0; columns];
+    let none = || PlotFlows {
+        top: 0.0,
+        floor: zero.clone(),
+    };
+    let steady_total = match &soil_light {
+        SoilLight::Traced { steady, .. } => steady.total(),
+        SoilLight::Floor => 0.0,
+    };
     // Sends a step's soil light (from the floor's sites, or traced and injected with the
     // steady light); returns what that adds to the step's top and floor flows, what the
-    // leaves it meets first absorb, and how much light it brings in all.
+    // leaves it meets first absorb, and how much light it brings in all (a soil flight
+    // accounts for all the soil's light).
     let send = |lattice: &mut Lattice, radiance: &[f64]| -> (PlotFlows, f64, f64) {
+        let emitted: f64 = radiance.iter().sum();
         match &soil_light {
             SoilLight::Floor => {
                 lattice.emit_floor(radiance);
-                let none = PlotFlows {
-                    top: 0.0,
-                    floor: zero.clone(),
-                };
-                (none, 0.0, radiance.iter().sum())
+                (none(), 0.0, emitted)
             }
+            // The floor's sites keep the zero boundary they started with.
             SoilLight::Traced { soil, steady } => {
-                lattice.emit_floor(&zero);
-                let mut all = PlotFlows {
-                    top: 0.0,
-                    floor: zero.clone(),
-                };
-                let (mut absorbed, mut total) = (0.0, 0.0);
+                let mut all = none();
+                let mut absorbed = 0.0;
                 for flight in [&soil(radiance), *steady] {
                     let flows = lattice.inject(&flight.scattered);
-                    all.top += flows.top + flight.escaped;
-                    for (a, f) in all.floor.iter_mut().zip(&flows.floor) {
-                        *a += f;
-                    }
-                    for (a, f) in all.floor.iter_mut().zip(&flight.floor) {
-                        *a += f;
-                    }
+                    all.add(flows.top + flight.escaped, &flows.floor);
+                    all.add(0.0, &flight.floor);
                     absorbed += flight.absorbed;
-                    total += flight.total();
                 }
-                (all, absorbed, total)
+                (all, absorbed, emitted + steady_total)
             }
         }
     };
@@ -481,13 +480,8 @@ pub fn solve_cyclic_plot(
         steps += 1;
         // What the soil sent last step that landed on the floor or left counts with this
         // step's flows.
-        let arrived: Vec<f64> = flows
-            .floor
-            .iter()
-            .zip(&soil_out.floor)
-            .map(|(a, b)| a + b)
-            .collect();
-        radiance = reflect(&arrived);
+        flows.add(0.0, &soil_out.floor);
+        radiance = reflect(&flows.floor);
         (soil_out, soil_absorbed, sent) = send(&mut lattice, &radiance);
         lattice.wrap_sides();
         flows = lattice.plot_flows();
@@ -511,19 +505,14 @@ pub fn solve_cyclic_plot(
     }
     // The steady state's flows of one step: the lattice's from the current state, the soil
     // light's from the send that made it.
-    let floor: Vec<f64> = flows
-        .floor
-        .iter()
-        .zip(&soil_out.floor)
-        .map(|(a, b)| a + b)
-        .collect();
+    flows.add(soil_out.top, &soil_out.floor);
     Ok(PlotSolution {
         sourced,
         emitted: radiance.iter().sum(),
         entered: sent,
         absorbed: lattice.absorbed_per_step() + soil_absorbed,
-        top: flows.top + soil_out.top,
-        floor,
+        top: flows.top,
+        floor: flows.floor,
         steps,
         converged,
         residual,
