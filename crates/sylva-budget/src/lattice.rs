@@ -101,8 +101,14 @@ pub struct PlotGrid {
 }
 
 impl PlotGrid {
-    /// Bins the leaves of `stand` (grown from `spec`) into cells of about `cell` metres.
-    pub fn build(spec: &CanopySpec, stand: &Stand, cell: f64) -> Result<PlotGrid, BudgetError> {
+    /// Bins the leaves of `stand` (grown from `spec`) into cells of about `cell` metres,
+    /// once it is sure the lattice and the flights of `rays²` rays a column will fit.
+    pub fn build(
+        spec: &CanopySpec,
+        stand: &Stand,
+        cell: f64,
+        rays: usize,
+    ) -> Result<PlotGrid, BudgetError> {
         if !spec.plot.cyclic {
             return Err(StandError::invalid(
                 format!("{}: [plot] cyclic", spec.name),
@@ -130,9 +136,16 @@ impl PlotGrid {
         let ny = (stand.top / cell).ceil().max(1.0) as usize;
         let dims = Dims::new(nx + 2, ny + 2, nz + 2)
             .map_err(|e| BudgetError::invalid("--lb-cell", cell, format!("the LB grid: {e}")))?;
+        // Per site: the binned area, the density and wood, the beam's counts and shares. Per
+        // ray of a column: its beam hit and, for the soil and the once-scattered light, up to
+        // three sorted entries a ray that meets a leaf (24 B each, 4 scattered rays a hit).
+        let rays_per_column = (rays * rays) as u64;
+        let flights = (nx * nz) as u64 * rays_per_column * (32 + 3 * 24 * (1 + 4));
         sylva_core::check_memory(
             &format!("the lattice budget on a {dims} grid"),
-            sylva_lb::solver::memory_needed(dims) + dims.sites() as u64 * (8 + 8 + 8 + 4 + 4),
+            sylva_lb::solver::memory_needed(dims)
+                + dims.sites() as u64 * (8 + 8 + 8 + 4 + 4)
+                + flights,
         )?;
         let area: Vec<AtomicU64> = (0..dims.sites()).map(|_| AtomicU64::new(0)).collect();
         let half = stand.half;
@@ -629,7 +642,7 @@ pub fn lb_budget(
     cfg.validate()?;
     sun.validate_sun()?;
     let t0 = std::time::Instant::now();
-    let plot = PlotGrid::build(spec, stand, cfg.cell)?;
+    let plot = PlotGrid::build(spec, stand, cfg.cell, cfg.rays)?;
     let beam = direct_beam(stand, accel, &plot, sun.travel(), cfg.rays);
     let soil = Flights::soil(stand, accel, &plot, cfg.rays);
     let scattered_once =
@@ -732,7 +745,7 @@ mod tests {
         let spec = layer(3.0, 0.0, 0.0, 0.0);
         let stand = Stand::build(&spec).unwrap();
         let accel = accel(&stand);
-        let plot = PlotGrid::build(&spec, &stand, 0.5).unwrap();
+        let plot = PlotGrid::build(&spec, &stand, 0.5, 4).unwrap();
         assert!(
             (plot.leaf_area / 100.0 - 3.0).abs() < 1e-3,
             "LAI {}",
@@ -926,14 +939,33 @@ mod tests {
     }
 
     #[test]
+    fn a_lattice_that_cannot_fit_is_refused_before_it_is_made() {
+        // A 1 km plot in half-metre cells with 64² rays a column: petabytes of flights.
+        let mut spec = layer(1e-4, 0.1, 0.07, 0.06);
+        spec.plot.size = [1000.0, 1000.0];
+        let stand = Stand::build(&spec).unwrap();
+        let err = PlotGrid::build(&spec, &stand, 0.5, 64)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("lattice budget") && err.contains("needs"),
+            "{err}"
+        );
+    }
+
+    #[test]
     fn isolated_plots_and_untileable_cells_are_refused() {
         let mut spec = layer(3.0, 0.1, 0.07, 0.06);
         spec.plot.size = [10.0, 7.3];
         let stand = Stand::build(&spec).unwrap();
-        let err = PlotGrid::build(&spec, &stand, 0.5).unwrap_err().to_string();
+        let err = PlotGrid::build(&spec, &stand, 0.5, 4)
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("--lb-cell"), "{err}");
         spec.plot.cyclic = false;
-        let err = PlotGrid::build(&spec, &stand, 0.5).unwrap_err().to_string();
+        let err = PlotGrid::build(&spec, &stand, 0.5, 4)
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("cyclic"), "{err}");
     }
 }
