@@ -28,7 +28,7 @@ pub use kdtree::{
 };
 pub use model::{AlphaMask, ModelAccel};
 pub use query::{KdTracer, RayQuery, ShadowRay};
-pub use ray::{intersect_triangle, ray_box, Hit, Ray, TriangleData};
+pub use ray::{intersect_triangle, intersect_triangle_vertices, ray_box, Hit, Ray, TriangleData};
 pub use scene::{
     AccelMemory, OccluderCache, SceneAccel, TraceError, TraceInstance, TreeCacheReport, KD_TREE,
 };

@@ -443,6 +443,13 @@ impl ModelAccel {
         self.alpha.iter().map(|a| (a.uv, a.mask))
     }
 
+    /// Triangle `triangle`'s alpha test, when it has one: its corners' texture coordinates
+    /// and its mask in [`ModelAccel::alpha_masks`].
+    pub fn triangle_alpha(&self, triangle: u32) -> Option<([Vec2; 3], u32)> {
+        let a = self.tris.get(triangle as usize)?.alpha;
+        self.alpha.get(a as usize).map(|a| (a.uv, a.mask))
+    }
+
     /// One opacity bitmask per leaf texture.
     pub fn alpha_masks(&self) -> &[AlphaMask] {
         &self.masks

@@ -36,6 +36,10 @@ enum BenchCommand {
     /// Rendering a scene's view: acceleration build, frame time at 1 and 4 rays per pixel,
     /// primary and shadow rays per second, memory (default scene: demo; try beech, catalpa).
     Trace(super::bench_trace::BenchTraceArgs),
+    /// The kd-tree alone on three sets of rays from a scene's view: primary, shadow (to the
+    /// sun) and incoherent (cosine from the primary hits); rays per second, and with
+    /// `--export DIR` the scene and rays for `tools/embree/compare.py` (default scene: demo).
+    Rays(super::bench_rays::BenchRaysArgs),
     /// 003's rendering system step by step (deep opacity maps and instance grids, sky, sun,
     /// a frame with the plane-parallel light) beside the paper's Table 4 (default: red_maple
     /// on a 4 × 4 lattice, 22 directions).
@@ -119,6 +123,7 @@ pub fn run(args: BenchArgs, runner: &dyn sylva_pipeline::Runner) -> Result<()> {
         BenchCommand::Scene(a) => super::bench_scene::run(a),
         BenchCommand::Voxelize(a) => super::bench_voxel::run(a),
         BenchCommand::Trace(a) => super::bench_trace::run(a, runner),
+        BenchCommand::Rays(a) => super::bench_rays::run(a, runner),
         BenchCommand::Spp(a) => super::bench_spp::run(a),
         BenchCommand::Budget(a) => super::budget::bench(a),
         BenchCommand::Relight(a) => super::bench_relight::run(a),

@@ -49,6 +49,7 @@ pub fn error_report(head: &str, e: &anyhow::Error) -> String {
 
 pub mod basis;
 pub mod bench;
+pub mod bench_rays;
 pub mod bench_relight;
 pub mod bench_scene;
 pub mod bench_spp;

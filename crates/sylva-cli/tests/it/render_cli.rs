@@ -178,6 +178,58 @@ fn bench_trace_json_has_the_fields() {
     assert_eq!(v["memory"]["unique_models"], 1);
 }
 
+#[test]
+fn bench_rays_reports_three_sets_and_exports_them_with_its_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = write_scene(dir.path());
+    let out = dir.path().join("rays");
+    let (ok, stdout, stderr) = sylva(&[
+        "bench",
+        "rays",
+        &scene,
+        "--no-cache",
+        "--runs",
+        "1",
+        "--json",
+        "--export",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).expect("one JSON object");
+    let sets = v["sets"].as_array().unwrap();
+    let names: Vec<&str> = sets.iter().map(|s| s["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["primary", "shadow", "incoherent"]);
+    assert_eq!(sets[0]["rays"], 64 * 40);
+    // A shadow and an incoherent ray per primary hit.
+    assert_eq!(sets[1]["rays"], sets[0]["hits"]);
+    assert_eq!(sets[2]["rays"], sets[0]["hits"]);
+    let saved: serde_json::Value =
+        serde_json::from_slice(&fs::read(out.join("sylva.json")).unwrap()).unwrap();
+    assert_eq!(saved["sets"], v["sets"]);
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&fs::read(out.join("manifest.json")).unwrap()).unwrap();
+    assert_eq!(manifest["sets"][0]["rays"], 64 * 40);
+    // Rows of 8 f32 per ray.
+    let rays = fs::metadata(out.join("shadow_rays.f32")).unwrap().len();
+    assert_eq!(rays, 32 * sets[1]["rays"].as_u64().unwrap());
+
+    // An export path that is a file is refused, naming it.
+    let file = dir.path().join("taken");
+    fs::write(&file, "x").unwrap();
+    let (ok, _, stderr) = sylva(&[
+        "bench",
+        "rays",
+        &scene,
+        "--no-cache",
+        "--runs",
+        "1",
+        "--export",
+        file.to_str().unwrap(),
+    ]);
+    assert!(!ok);
+    assert!(stderr.contains("taken"), "{stderr}");
+}
+
 /// Runs `sylva ARGS` as if `mpirun` had started it as one of two processes (the variable Open
 /// MPI sets; the check comes before MPI would start): (success, stderr).
 fn as_one_of_two(args: &[&str]) -> (bool, String) {

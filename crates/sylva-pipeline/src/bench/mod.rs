@@ -1,11 +1,13 @@
 //! The measurements of `sylva bench trace|relight|spp`: each returns a plain report (JSON
 //! through serde, text through `Display`); the command line only parses and prints.
 
+mod rays;
 mod relight;
 pub mod scaling;
 mod spp;
 mod trace;
 
+pub use rays::{export_rays, ray_sets, rays, Answers, RaySetMeasure, RaySets, RaysBench};
 pub use relight::{
     against_direct, relight, relight_physical, AgainstDirect, DirectSolve, PhysicalRelightBench,
     RelightBench, RelightBenchPlan, SunAgainstDirect,

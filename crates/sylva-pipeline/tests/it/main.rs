@@ -8,5 +8,6 @@ mod forest;
 mod gpu;
 mod media;
 mod physical;
+mod rays;
 mod relight;
 mod render;
