@@ -117,6 +117,51 @@ fn render_args<'a>(scene: &'a str, out: &'a str, cache: &'a str) -> Vec<&'a str>
 }
 
 #[test]
+fn mpi_band_render_is_bit_identical_to_one_process() {
+    if !sylva_testkit::require_mpirun() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("bands.toml");
+    let bands = r#"
+[bands]
+names = ["red", "nir"]
+leaf_reflectance = [0.07, 0.45]
+leaf_transmittance = [0.05, 0.40]
+bark = [0.16, 0.35]
+soil = [0.14, 0.25]
+sky = [0.55, 0.25]
+"#;
+    std::fs::write(&scene, format!("{SCENE}{bands}")).unwrap();
+    let scene = scene.to_str().unwrap();
+    let d = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let args = |out: &str, cache: &str| -> Vec<String> {
+        let mut a: Vec<String> = render_args(scene, out, cache)
+            .into_iter()
+            .map(String::from)
+            .collect();
+        a.retain(|x| x != "--hdr"); // a band render always writes its EXR
+        a
+    };
+    let (one, np2) = (d("one.png"), d("np2.png"));
+    let a = args(&one, &d("one-cache"));
+    let (ok, out, err) = sylva(&a.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(ok, "{out}\n{err}");
+    let a = args(&np2, &d("np2-cache"));
+    let (ok, out, err) = mpirun(2, &a.iter().map(String::as_str).collect::<Vec<_>>(), &[]);
+    assert!(ok, "{out}\n{err}");
+    assert_eq!(
+        out.matches("wrote ").count(),
+        1,
+        "rank 0 alone writes: {out}"
+    );
+    assert!(out.contains("LB solves shared across 2 ranks"), "{out}");
+    let exr = |p: &str| std::fs::read(Path::new(p).with_extension("exr")).unwrap();
+    assert!(exr(&np2) == exr(&one), "the band layers differ");
+    assert!(std::fs::read(&np2).unwrap() == std::fs::read(&one).unwrap());
+}
+
+#[test]
 fn mpi_render_and_lb_are_bit_identical_to_one_process() {
     if !sylva_testkit::require_mpirun() {
         return;

@@ -18,6 +18,7 @@
 //! `sylva-scene` and `sylva-grow`, model files in `sylva-io`, the density grid in
 //! `sylva-voxel`, the solver in `sylva-lb`.
 
+pub mod bands;
 pub mod material;
 pub mod medium;
 pub mod mesh;
@@ -25,6 +26,7 @@ pub mod params;
 pub mod scene;
 pub mod texture;
 
+pub use bands::Bands;
 pub use material::{
     LeafOptics, Material, MaterialKind, Measured, Optics, FOREST_LEAF_TRANSMISSION,
     KNAPP_CARTER_LEAF,

@@ -110,8 +110,13 @@ pub struct Scene {
     pub sun: Sun,
     /// Linear RGB radiance of the sky.
     pub sky_color: [f32; 3],
+    /// The sun's colour (irradiance per channel, before `--sun-irradiance` scales it);
+    /// `None`: a 6500 K black body of luminance 1. Bands set it ([`Scene::apply_band_group`]).
+    pub sun_color: Option<[f32; 3]>,
     pub camera: Camera,
     pub lb: LbSettings,
+    /// Spectral bands in place of RGB (`[bands]`), rendered three at a time.
+    pub bands: Option<crate::bands::Bands>,
 }
 
 impl Scene {
@@ -127,6 +132,12 @@ impl Scene {
             }
         }
         Ok(())
+    }
+
+    /// The sun's colour: [`Scene::sun_color`], or a 6500 K black body of luminance 1.
+    pub fn sun_rgb(&self) -> [f32; 3] {
+        self.sun_color
+            .unwrap_or_else(|| sylva_core::blackbody_rgb(sylva_core::SUN_TEMPERATURE_K))
     }
 
     /// World bounds of all instances (the ground excluded).
@@ -174,5 +185,63 @@ impl Scene {
             .enabled
             .then(|| self.ground.size.map(|s| [0.5 * s[0], 0.5 * s[1]]))
             .flatten()
+    }
+}
+
+impl Scene {
+    /// The scene's bands of group `g` ([`Bands::group`]) in its three channels: every leaf
+    /// gets the bands' measured reflectance and transmittance (its factors are formed by the
+    /// next [`Scene::set_leaf_optics`]), bark the bands' albedo as its mean (its texture
+    /// keeps the pattern), the ground, the sun and the sky the bands' values. Solid
+    /// materials (built-in shapes) keep theirs. No bands: unchanged.
+    pub fn apply_band_group(&mut self, g: usize) -> Result<(), String> {
+        let Some(bands) = self.bands.clone() else {
+            return Ok(());
+        };
+        if g >= bands.groups() {
+            return Err(format!(
+                "band group {g}: the scene's {} bands make {} groups",
+                bands.len(),
+                bands.groups()
+            ));
+        }
+        let measured = crate::Measured {
+            reflectance: bands.channels(g, &bands.leaf_reflectance),
+            transmittance: bands.channels(g, &bands.leaf_transmittance),
+        };
+        let bark = bands.channels(g, &bands.bark);
+        for model in &mut self.models {
+            for m in &mut model.materials {
+                match m.kind {
+                    crate::MaterialKind::Leaf => m.optics.measured = Some(measured),
+                    crate::MaterialKind::Wood => {
+                        let mean = m.mean_colour();
+                        for c in 0..3 {
+                            if mean[c] <= 0.0 && bark[c] > 0.0 {
+                                return Err(format!(
+                                    "model '{}', material '{}': its colour is black in a \
+                                     channel, so it cannot carry band '{}''s bark albedo {}",
+                                    model.name,
+                                    m.name,
+                                    bands.names[bands.group(g)[c]],
+                                    bark[c]
+                                ));
+                            }
+                            m.optics.reflect[c] = if mean[c] > 0.0 {
+                                bark[c] / mean[c]
+                            } else {
+                                0.0
+                            };
+                            m.optics.transmit[c] = 0.0;
+                        }
+                    }
+                    crate::MaterialKind::Solid => {}
+                }
+            }
+        }
+        self.ground.color = bands.channels(g, &bands.soil);
+        self.sky_color = bands.channels(g, &bands.sky);
+        self.sun_color = Some(bands.channels(g, &bands.sun));
+        Ok(())
     }
 }

@@ -41,6 +41,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod bands;
 pub mod bases;
 pub mod bench;
 pub mod forest;
@@ -467,10 +468,11 @@ pub fn scene_illumination(scene: &Scene) -> Illumination {
     )
 }
 
-/// The light around `scene`'s plants: its 6500 K sun of irradiance `sun_irradiance` towards
+/// The light around `scene`'s plants: its sun ([`Scene::sun_rgb`], a 6500 K black body
+/// unless bands set it) of irradiance `sun_irradiance` towards
 /// `to_sun`, its sky and its ground.
 pub fn illumination(scene: &Scene, to_sun: Vec3, sun_irradiance: f32) -> Illumination {
-    let sun_colour = Vec3::from_array(sylva_core::blackbody_rgb(sylva_core::SUN_TEMPERATURE_K));
+    let sun_colour = Vec3::from_array(scene.sun_rgb());
     Illumination {
         sun_to: to_sun,
         sun: sun_colour * sun_irradiance,
@@ -1133,7 +1135,7 @@ impl PreparedScene {
         query: &'s dyn RayQuery,
         light: &'s dyn IndirectLight,
     ) -> Renderer<'s> {
-        let sun_colour = Vec3::from_array(sylva_core::blackbody_rgb(sylva_core::SUN_TEMPERATURE_K));
+        let sun_colour = Vec3::from_array(self.scene.sun_rgb());
         Renderer::new(
             &self.scene,
             query,

@@ -159,6 +159,64 @@ pub fn write_exr(
     write_encoded(path, bytes.get_ref())
 }
 
+/// Row-major linear images of one size, one per named layer → a multi-layer 32-bit float
+/// OpenEXR at `path`, each layer one channel `Y` (spectral bands: a layer per band).
+pub fn write_exr_layers(
+    path: &Path,
+    width: u32,
+    height: u32,
+    layers: &[(String, Vec<f32>)],
+) -> Result<(), OutputError> {
+    write_encoded(path, &encode_exr_layers(path, width, height, layers)?)
+}
+
+/// The bytes of [`write_exr_layers`]' file (`path` names it in errors), for an output set.
+pub fn encode_exr_layers(
+    path: &Path,
+    width: u32,
+    height: u32,
+    layers: &[(String, Vec<f32>)],
+) -> Result<Vec<u8>, OutputError> {
+    use exr::prelude::{
+        AnyChannel, AnyChannels, Encoding, FlatSamples, Image, ImageAttributes, IntegerBounds,
+        Layer, LayerAttributes, Layers, Vec2, WritableImage,
+    };
+    for (_, pixels) in layers {
+        check_size(path, width, height, pixels.len())?;
+    }
+    let size = Vec2(width as usize, height as usize);
+    let layers: Layers<AnyChannels<FlatSamples>> = layers
+        .iter()
+        .map(|(name, pixels)| {
+            Layer::new(
+                size,
+                LayerAttributes::named(name.as_str()),
+                Encoding::SMALL_LOSSLESS,
+                AnyChannels::sort(smallvec::smallvec![AnyChannel::new(
+                    "Y",
+                    FlatSamples::F32(pixels.clone())
+                )]),
+            )
+        })
+        .collect();
+    let image = Image::from_layers(
+        ImageAttributes::new(IntegerBounds::from_dimensions(size)),
+        layers,
+    );
+    let mut bytes = Vec::new();
+    image
+        .write()
+        .to_buffered(Cursor::new(&mut bytes))
+        .map_err(|e| OutputError::Encode {
+            path: path.into(),
+            source: image::ImageError::Encoding(image::error::EncodingError::new(
+                image::error::ImageFormatHint::Exact(ImageFormat::OpenExr),
+                e,
+            )),
+        })?;
+    Ok(bytes)
+}
+
 /// Row-major 8-bit sRGB frames of one size → an animated PNG (APNG) at `path`, each frame
 /// shown `delay_ms`, looping forever. Viewers without APNG show the first frame.
 pub fn write_apng(

@@ -23,6 +23,23 @@ pub struct SceneInfo {
     pub ground: GroundInfo,
     /// Linear RGB radiance of the sky.
     pub sky_color: [f32; 3],
+    /// `[bands]`, when the scene has them: what `sylva render` draws in place of RGB.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bands: Option<BandsInfo>,
+}
+
+/// A scene's spectral bands, one entry per band in each list.
+#[derive(Debug, Clone, Serialize)]
+pub struct BandsInfo {
+    pub names: Vec<String>,
+    pub leaf_reflectance: Vec<f32>,
+    pub leaf_transmittance: Vec<f32>,
+    pub bark: Vec<f32>,
+    pub soil: Vec<f32>,
+    pub sun: Vec<f32>,
+    pub sky: Vec<f32>,
+    /// The bands shown as red, green and blue.
+    pub false_colour: [String; 3],
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -84,6 +101,16 @@ impl SceneInfo {
                 color: g.color,
             },
             sky_color: scene.sky_color,
+            bands: scene.bands.as_ref().map(|b| BandsInfo {
+                names: b.names.clone(),
+                leaf_reflectance: b.leaf_reflectance.clone(),
+                leaf_transmittance: b.leaf_transmittance.clone(),
+                bark: b.bark.clone(),
+                soil: b.soil.clone(),
+                sun: b.sun.clone(),
+                sky: b.sky.clone(),
+                false_colour: b.false_colour.map(|k| b.names[k].clone()),
+            }),
         }
     }
 }
@@ -140,6 +167,34 @@ impl fmt::Display for SceneInfo {
             "  lb                   grid {}, preset {}",
             self.lb.grid, self.lb.preset
         )?;
+        if let Some(b) = &self.bands {
+            writeln!(
+                o,
+                "  bands                {} in place of RGB (false colour: R = {}, G = {}, B = {})",
+                b.names.len(),
+                b.false_colour[0],
+                b.false_colour[1],
+                b.false_colour[2]
+            )?;
+            writeln!(
+                o,
+                "    {:<12} {:>7} {:>7} {:>7} {:>7} {:>7} {:>7}",
+                "band", "leaf R", "leaf T", "bark", "soil", "sun", "sky"
+            )?;
+            for (k, n) in b.names.iter().enumerate() {
+                writeln!(
+                    o,
+                    "    {:<12} {:>7.3} {:>7.3} {:>7.3} {:>7.3} {:>7.3} {:>7.3}",
+                    n,
+                    b.leaf_reflectance[k],
+                    b.leaf_transmittance[k],
+                    b.bark[k],
+                    b.soil[k],
+                    b.sun[k],
+                    b.sky[k]
+                )?;
+            }
+        }
         if !stats.models.is_empty() {
             writeln!(o)?;
             writeln!(

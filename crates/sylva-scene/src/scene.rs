@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use sylva_core::limits;
 use sylva_core::Sun;
 use sylva_geom::{
-    Aabb, Camera, Ground, Instance, LbSettings, Measured, Medium, Model, ModelOrigin, Scene,
+    Aabb, Bands, Camera, Ground, Instance, LbSettings, Measured, Medium, Model, ModelOrigin, Scene,
 };
 use sylva_grow::arbaro::{self, ArbaroError};
 use sylva_grow::cloud::{cumulus, CloudError, CumulusParams};
@@ -103,6 +103,24 @@ struct RawScene {
     camera: Option<Spanned<RawCamera>>,
     lb: Option<Spanned<RawLb>>,
     stand: Option<Spanned<RawStand>>,
+    bands: Option<Spanned<RawBands>>,
+}
+
+/// `[bands]`: spectral bands in place of RGB, one value per band in each list.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawBands {
+    names: Vec<String>,
+    leaf_reflectance: Vec<f32>,
+    leaf_transmittance: Vec<f32>,
+    bark: Vec<f32>,
+    soil: Vec<f32>,
+    /// Default: 1 in every band (a flat spectrum).
+    sun: Option<Vec<f32>>,
+    sky: Vec<f32>,
+    /// Three band names shown as red, green and blue (default: the last three bands, the
+    /// longest wavelength in red when names run from short to long).
+    false_colour: Option<[String; 3]>,
 }
 
 /// `[stand]`: an abstract canopy's crowns (or layer) as models and instances.
@@ -376,6 +394,8 @@ pub struct SceneDesc {
     /// `None` position: frame the scene's bounds when it is built.
     pub camera: CameraDesc,
     pub lb: LbSettings,
+    /// `[bands]`: spectral bands in place of RGB.
+    pub bands: Option<Bands>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -1000,6 +1020,42 @@ impl SceneDesc {
             }
         };
 
+        let bands = match &raw.bands {
+            None => None,
+            Some(b) => {
+                let l = line(b.span());
+                let b = b.get_ref();
+                let n = b.names.len();
+                let index = |name: &str| {
+                    b.names.iter().position(|x| x == name).ok_or_else(|| {
+                        invalid(
+                            Some(l),
+                            format!("bands: false_colour names '{name}', which is not in names"),
+                        )
+                    })
+                };
+                let false_colour = match &b.false_colour {
+                    Some([r, g, bl]) => [index(r)?, index(g)?, index(bl)?],
+                    // The last three, longest first; fewer bands repeat.
+                    None => [0, 1, 2].map(|k| n.saturating_sub(1 + k)),
+                };
+                let bands = Bands {
+                    names: b.names.clone(),
+                    leaf_reflectance: b.leaf_reflectance.clone(),
+                    leaf_transmittance: b.leaf_transmittance.clone(),
+                    bark: b.bark.clone(),
+                    soil: b.soil.clone(),
+                    sun: b.sun.clone().unwrap_or_else(|| vec![1.0; n]),
+                    sky: b.sky.clone(),
+                    false_colour,
+                };
+                bands
+                    .validate()
+                    .map_err(|e| invalid(Some(l), format!("bands: {e}")))?;
+                Some(bands)
+            }
+        };
+
         let lb = match &raw.lb {
             None => LbSettings::default(),
             Some(s) => {
@@ -1092,6 +1148,7 @@ impl SceneDesc {
             ground,
             sun,
             sky_color,
+            bands,
             camera,
             lb,
         })
@@ -1158,6 +1215,8 @@ impl SceneDesc {
             ground: self.ground,
             sun: self.sun,
             sky_color: self.sky_color,
+            sun_color: None,
+            bands: self.bands.clone(),
             camera: Camera {
                 position: Vec3::ZERO,
                 look_at: Vec3::Z,

@@ -266,6 +266,8 @@ fn table_3_run_is_deterministic_and_consistent() {
             rays_per_pixel: 1,
         },
         lb: sylva_geom::LbSettings::default(),
+        sun_color: None,
+        bands: None,
         // Every model with the scene's preset, no media.
         model_presets: Vec::new(),
         media: Vec::new(),
@@ -427,6 +429,8 @@ fn bad_input_is_an_error() {
             rays_per_pixel: 1,
         },
         lb: sylva_geom::LbSettings::default(),
+        sun_color: None,
+        bands: None,
         // Every model with the scene's preset, no media.
         model_presets: Vec::new(),
         media: Vec::new(),

@@ -70,6 +70,12 @@ pub fn run(args: ExportArgs) -> Result<()> {
     sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&[args.output.join(main_file)])?;
     let t0 = Instant::now();
     let mut scene = sylva_scene::load(&args.scene)?;
+    if scene.bands.is_some() {
+        eprintln!(
+            "{}: its [bands] are rendered by `sylva render`; the export is in RGB",
+            scene.origin
+        );
+    }
     scene
         .set_leaf_optics(args.leaf_optics.into())
         .map_err(anyhow::Error::msg)?;

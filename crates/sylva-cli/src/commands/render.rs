@@ -9,11 +9,13 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use sylva_core::Sun;
+use sylva_geom::Bands;
 use sylva_lb::relight::Precision;
 use sylva_lb::LbSolver;
 use sylva_light::relight::{BasisReport, GlobalGridOptions, SunWeights};
 use sylva_light::report::LightEvent;
 use sylva_light::{Progress, Silent};
+use sylva_pipeline::bands::BandImages;
 use sylva_pipeline::{
     check_png_name, costly_grid_warning, load_scene, plan_images, resolution, scene_line,
     tone_map_modes, write_images, written_line, BasisChoice, LbPlan, LightSettings, PrepareOptions,
@@ -456,6 +458,9 @@ pub struct PrepareRequest<'a> {
     pub sun: Option<Sun>,
     /// Also hands every line printed to this (`view`: the page shows the preparation).
     pub echo: Option<&'a (dyn Fn(String) + Sync)>,
+    /// The band group to render when the scene has `[bands]` (`render`: each in turn);
+    /// `None`: the scene in RGB, its bands left out (other commands).
+    pub band_group: Option<usize>,
 }
 
 /// Loads the scene, lights every model (from the cache when it can) and builds its
@@ -473,6 +478,7 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
         check_size,
         sun,
         echo,
+        band_group,
     } = req;
     let root = runner.is_root();
     // Machine-readable runs keep stdout for their JSON.
@@ -493,6 +499,33 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
     };
     let traversal = TraversalConfig::checked(a.view.stack).map_err(anyhow::Error::msg)?;
     let mut scene = load_scene(&a.scene, sun)?;
+    if let Some(bands) = &scene.bands {
+        match band_group {
+            Some(g) => {
+                if a.lb.leaf_optics != LeafOpticsArg::Measured {
+                    bail!(
+                        "{}: [bands] give each band's leaf reflectance and transmittance; \
+                         render them with --leaf-optics measured (the default)",
+                        scene.origin
+                    );
+                }
+                let group = bands.group(g).map(|b| bands.names[b].as_str());
+                say(format!(
+                    "band group {} of {}: {} in the red, green and blue channels",
+                    g + 1,
+                    bands.groups(),
+                    group.join(", ")
+                ));
+                scene
+                    .apply_band_group(g)
+                    .map_err(|e| anyhow::anyhow!("{}: bands: {e}", scene.origin))?;
+            }
+            None => say(format!(
+                "{}: its [bands] are rendered by `sylva render`; this command shows it in RGB",
+                scene.origin
+            )),
+        }
+    }
     scene
         .set_leaf_optics(a.lb.leaf_optics.into())
         .map_err(anyhow::Error::msg)?;
@@ -572,6 +605,77 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
     })
 }
 
+/// A scene's band groups: the first prepared, and how to prepare each of the others.
+struct BandGroups<'a> {
+    bands: &'a Bands,
+    first: Prepared,
+    prepare: &'a dyn Fn(usize) -> Result<Prepared>,
+}
+
+/// `render` of a scene with `[bands]`: one frame per band group (three bands each, on every
+/// rank under MPI), then the bands as the layers of one EXR and three of them as a
+/// false-colour PNG.
+fn render_bands(
+    a: &RenderArgs,
+    groups: BandGroups<'_>,
+    tm: &ToneMap,
+    runner: &dyn Runner,
+    t_all: Instant,
+) -> Result<()> {
+    let bands = groups.bands;
+    let name = groups.first.scene.scene.name.clone();
+    let mut images: Option<BandImages> = None;
+    let mut next = Some(groups.first);
+    for g in 0..bands.groups() {
+        let p = match next.take() {
+            Some(p) => p,
+            None => (groups.prepare)(g)?,
+        };
+        let prepared = &p.scene;
+        let rpp = a.rpp.unwrap_or(prepared.scene.camera.rays_per_pixel);
+        let camera = prepared.camera(p.width, p.height);
+        let settings = prepared.settings(camera, rpp, a.frame.view.seed);
+        let bars = Bars::new(|_: LightEvent| {});
+        let progress: &dyn Progress = if runner.is_root() { &bars } else { &Silent };
+        let t = Instant::now();
+        // Ranks other than the root get no frame: they go on to the next group.
+        let Some(d) = prepared.render_split(runner, &settings, progress)? else {
+            continue;
+        };
+        let mut names: Vec<&str> = bands.group(g).map(|b| bands.names[b].as_str()).to_vec();
+        names.dedup(); // a last group repeats its last band in the spare channels
+        println!(
+            "bands {}: {}x{} at {rpp} rays/pixel, frame {:.2} s",
+            names.join(", "),
+            d.frame.width,
+            d.frame.height,
+            t.elapsed().as_secs_f64()
+        );
+        images
+            .get_or_insert_with(|| BandImages::new(bands, d.frame.width, d.frame.height))
+            .add_group(g, &d.frame);
+    }
+    let Some(images) = images else {
+        return Ok(()); // the root writes the images
+    };
+    let base = a.output.clone().unwrap_or_else(|| {
+        PathBuf::from(format!(
+            "sylva-out/{}.png",
+            sylva_core::file_stem(&name, "scene")
+        ))
+    });
+    let written = images.write(&base, tm)?;
+    println!(
+        "wrote {} (a layer per band: {}) and {} (false colour: {}) in {:.1} s",
+        written.exr.display(),
+        bands.names.join(", "),
+        written.png.display(),
+        images.false_colour_legend(),
+        t_all.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
 pub fn run(a: RenderArgs, runner: &dyn Runner) -> Result<()> {
     let modes = Mode::parse_set(&a.mode).with_context(|| {
         format!(
@@ -609,18 +713,32 @@ pub fn run(a: RenderArgs, runner: &dyn Runner) -> Result<()> {
     if spp && runner.processes() > 1 {
         bail!("--light spp renders in one process: run it without mpirun");
     }
-    let p = prepare(
-        &a.frame,
-        PrepareRequest {
-            need_lb: !spp && modes.iter().any(|m| m.needs_lb()),
-            rays_per_pixel: a.rpp,
-            output_images: modes.len(),
-            instance_weights: a.forest_weights,
-            sun,
-            ..PrepareRequest::default()
-        },
-        runner,
-    )?;
+    let request = |band_group| PrepareRequest {
+        need_lb: !spp && modes.iter().any(|m| m.needs_lb()),
+        rays_per_pixel: a.rpp,
+        output_images: modes.len(),
+        instance_weights: a.forest_weights,
+        sun,
+        band_group,
+        ..PrepareRequest::default()
+    };
+    let p = prepare(&a.frame, request(Some(0)), runner)?;
+    if let Some(bands) = p.scene.scene.bands.clone() {
+        if spp || modes != [Mode::Full] {
+            bail!(
+                "{}: a scene with [bands] renders each band's full light with the LB \
+                 (not --mode {} or --light spp)",
+                p.scene.scene.origin,
+                a.mode
+            );
+        }
+        let groups = BandGroups {
+            bands: &bands,
+            first: p,
+            prepare: &|g| prepare(&a.frame, request(Some(g)), runner),
+        };
+        return render_bands(&a, groups, &tm, runner, t_all);
+    }
     let prepared = &p.scene;
     let rpp = a.rpp.unwrap_or(prepared.scene.camera.rays_per_pixel);
     let camera = prepared.camera(p.width, p.height);

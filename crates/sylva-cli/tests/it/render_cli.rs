@@ -178,6 +178,100 @@ fn bench_trace_json_has_the_fields() {
     assert_eq!(v["memory"]["unique_models"], 1);
 }
 
+const BANDS: &str = r#"
+[bands]
+names = ["blue", "green", "red", "nir"]
+leaf_reflectance = [0.04, 0.12, 0.07, 0.45]
+leaf_transmittance = [0.02, 0.15, 0.05, 0.40]
+bark = [0.08, 0.12, 0.16, 0.35]
+soil = [0.06, 0.10, 0.14, 0.25]
+sky = [0.9, 0.7, 0.55, 0.25]
+false_colour = ["nir", "red", "green"]
+"#;
+
+#[test]
+fn a_scene_with_bands_renders_a_layer_per_band_and_a_false_colour_png() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("bands.toml");
+    fs::write(&scene, format!("{SCENE}{BANDS}")).unwrap();
+    let scene = scene.to_str().unwrap();
+    let out = dir.path().join("out/bands.png");
+    let cache = dir.path().join("cache");
+    let (out_s, cache_s) = (out.to_str().unwrap(), cache.to_str().unwrap());
+    let run = |extra: &[&str]| {
+        let mut a = vec![
+            "render",
+            scene,
+            "-o",
+            out_s,
+            "--lb-grid",
+            "12",
+            "--cache-dir",
+            cache_s,
+        ];
+        a.extend_from_slice(extra);
+        sylva(&a)
+    };
+    let (ok, stdout, stderr) = run(&[]);
+    assert!(ok, "{stdout}\n{stderr}");
+    // Two renders: blue, green, red; then nir.
+    assert!(stdout.contains("bands blue, green, red:"), "{stdout}");
+    assert!(stdout.contains("bands nir:"), "{stdout}");
+    assert!(
+        stdout.contains("false colour: R = nir, G = red, B = green"),
+        "{stdout}"
+    );
+    let png = image::open(&out).unwrap().to_rgb8();
+    assert_eq!(png.dimensions(), (64, 40));
+
+    use exr::prelude::{ReadChannels, ReadLayers};
+    let exr = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .all_layers()
+        .all_attributes()
+        .from_file(out.with_extension("exr"))
+        .unwrap();
+    assert_eq!(exr.layer_data.len(), 4);
+    // The top row sees the sky, whose radiance each band gives.
+    let top_row = |name: &str| {
+        let layer = (exr.layer_data.iter())
+            .find(|l| {
+                l.attributes
+                    .layer_name
+                    .as_ref()
+                    .map(|n| n.to_string())
+                    .as_deref()
+                    == Some(name)
+            })
+            .unwrap_or_else(|| panic!("a layer named {name}"));
+        let v: Vec<f32> = layer.channel_data.list[0]
+            .sample_data
+            .values_as_f32()
+            .collect();
+        assert_eq!(v.len(), 64 * 40);
+        v[..64].iter().sum::<f32>() / 64.0
+    };
+    for (band, sky) in [("blue", 0.9), ("green", 0.7), ("red", 0.55), ("nir", 0.25)] {
+        let got = top_row(band);
+        assert!((got - sky).abs() < 1e-4, "{band}: sky {got}, given {sky}");
+    }
+
+    // Refused before any work, in one line naming the scene.
+    for (extra, want) in [
+        (&["--mode", "all"][..], "--mode all"),
+        (&["--leaf-optics", "texture"][..], "--leaf-optics measured"),
+    ] {
+        let (ok, _, stderr) = run(extra);
+        assert!(!ok);
+        assert!(
+            stderr.contains(want) && stderr.contains("bands.toml"),
+            "{stderr}"
+        );
+    }
+}
+
 #[test]
 fn bench_rays_reports_three_sets_and_exports_them_with_its_report() {
     let dir = tempfile::tempdir().unwrap();

@@ -613,13 +613,13 @@ pub fn write(
     let _ = writeln!(x, "    </sensor>\n");
 
     // Lights.
-    let sun =
-        sylva_core::blackbody_rgb(sylva_core::SUN_TEMPERATURE_K).map(|c| c * opts.sun_irradiance);
+    let sun = scene.sun_rgb().map(|c| c * opts.sun_irradiance);
     let _ = writeln!(
         x,
-        "    <!-- The sun: elevation {:.2}°, azimuth {:.2}°; a 6500 K black body. -->",
+        "    <!-- The sun: elevation {:.2}°, azimuth {:.2}°; its colour {:?} (a 6500 K black body unless bands set it). -->",
         scene.sun.elevation_deg(),
-        scene.sun.azimuth_deg()
+        scene.sun.azimuth_deg(),
+        scene.sun_rgb()
     );
     let _ = writeln!(
         x,

@@ -3,6 +3,7 @@
 //! binary of its own: it counts `tracing` spans, and a callsite's interest is process-wide,
 //! so spans of tests on other threads race with its scoped subscriber.
 
+mod bands;
 mod distributed;
 mod forest;
 mod gpu;
