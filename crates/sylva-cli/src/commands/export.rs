@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{bail, Result};
 use clap::Args;
 use sylva_core::thousands;
 use sylva_io::export::{self, mitsuba, obj, Format};
@@ -49,6 +49,11 @@ pub struct ExportArgs {
     /// same choice as the render compared against).
     #[arg(long, value_enum, default_value = "measured")]
     pub leaf_optics: super::render::LeafOpticsArg,
+    /// A scene with `[bands]`: export band group G (bands 3G+1 to 3G+3 in the red, green and
+    /// blue channels, as `sylva render` draws them; docs/render.md, "Spectral bands").
+    /// Without it such a scene is exported in RGB.
+    #[arg(long, value_name = "G")]
+    pub band_group: Option<usize>,
 }
 
 /// False once Ctrl-C arrived (sylva-core's one handler, installed by `main`): the writers
@@ -70,11 +75,34 @@ pub fn run(args: ExportArgs) -> Result<()> {
     sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&[args.output.join(main_file)])?;
     let t0 = Instant::now();
     let mut scene = sylva_scene::load(&args.scene)?;
-    if scene.bands.is_some() {
-        eprintln!(
-            "{}: its [bands] are rendered by `sylva render`; the export is in RGB",
+    match (&scene.bands, args.band_group) {
+        (None, Some(g)) => {
+            bail!("--band-group {g}: {} has no [bands]", scene.origin)
+        }
+        (Some(_), None) => eprintln!(
+            "{}: exported in RGB; --band-group G exports its bands (three a group)",
             scene.origin
-        );
+        ),
+        (Some(bands), Some(g)) => {
+            if args.leaf_optics != super::render::LeafOpticsArg::Measured {
+                bail!(
+                    "{}: [bands] give each band's leaf reflectance and transmittance; \
+                     export them with --leaf-optics measured (the default)",
+                    scene.origin
+                );
+            }
+            if g < bands.groups() {
+                let names = bands.group(g).map(|b| bands.names[b].as_str());
+                eprintln!(
+                    "band group {g}: {} in the red, green and blue channels",
+                    names.join(", ")
+                );
+            }
+            scene
+                .apply_band_group(g)
+                .map_err(|e| anyhow::anyhow!("--band-group: {}: {e}", scene.origin))?;
+        }
+        (None, None) => {}
     }
     scene
         .set_leaf_optics(args.leaf_optics.into())

@@ -5,6 +5,86 @@ use common::sylva;
 use std::fs;
 
 #[test]
+fn a_band_group_exports_its_bands_values_in_the_three_channels() {
+    let dir = tempfile::tempdir().unwrap();
+    let scene = dir.path().join("bands.toml");
+    fs::write(
+        &scene,
+        r#"
+[[models]]
+name = "rose"
+species = "dogrose"
+
+[[instances]]
+model = "rose"
+position = [0.0, 0.0, 0.0]
+
+[ground]
+size = [10.0, 10.0]
+
+[bands]
+names = ["red", "nir", "swir"]
+leaf_reflectance = [0.07, 0.45, 0.3]
+leaf_transmittance = [0.05, 0.40, 0.2]
+bark = [0.16, 0.35, 0.3]
+soil = [0.125, 0.25, 0.375]
+sun = [1.0, 0.75, 0.5]
+sky = [0.5, 0.25, 0.125]
+"#,
+    )
+    .unwrap();
+    let scene = scene.to_str().unwrap();
+    let out = dir.path().join("out");
+    let export = |extra: &[&str]| {
+        let mut a = vec![
+            "export",
+            scene,
+            "--format",
+            "mitsuba",
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        a.extend_from_slice(extra);
+        sylva(&a)
+    };
+    let (ok, _, err) = export(&["--band-group", "0"]);
+    assert!(ok, "{err}");
+    assert!(err.contains("band group 0: red, nir, swir"), "{err}");
+    let xml = fs::read_to_string(out.join("scene.xml")).unwrap();
+    // The sky, the ground and the sun (π times its per-band irradiance) carry the bands.
+    assert!(
+        xml.contains("radiance\" value=\"0.5, 0.25, 0.125\""),
+        "sky:\n{xml}"
+    );
+    assert!(
+        xml.contains("reflectance\" value=\"0.125, 0.25, 0.375\""),
+        "ground:\n{xml}"
+    );
+    assert!(
+        xml.contains("irradiance\" value=\"3.1415927, 2.3561945, 1.5707964\""),
+        "sun:\n{xml}"
+    );
+
+    // Refused: a group past the bands, and a scene without bands.
+    let (ok, _, err) = export(&["--band-group", "1"]);
+    assert!(
+        !ok && err.contains("the scene's 3 bands make 1 groups"),
+        "{err}"
+    );
+    let (ok, _, err) = sylva(&[
+        "export",
+        "catalpa",
+        "--format",
+        "obj",
+        "-o",
+        out.to_str().unwrap(),
+        "--band-group",
+        "0",
+    ]);
+    assert!(!ok && err.contains("has no [bands]"), "{err}");
+}
+
+#[test]
 fn export_demo_to_mitsuba() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo");
