@@ -113,6 +113,16 @@ def texel_opaque(mask, wrap, u, v):
     return mask[y, x]
 
 
+def _segments(rows):
+    """Rays as Embree takes them: origins moved to t_min (its tnear is 0), directions, and
+    the segment's length (Embree's "no limit" for an infinite one)."""
+    o = rows[:, 0:3].astype(np.float32) + rows[:, 4:7] * rows[:, 3:4]
+    d = np.ascontiguousarray(rows[:, 4:7], dtype=np.float32)
+    far = (rows[:, 7] - rows[:, 3]).astype(np.float32)
+    far = np.where(np.isfinite(far), far, np.float32(1e37)).astype(np.float32)
+    return o, d, far
+
+
 class EmbreeScene:
     """The export's instances flattened into Embree meshes: geometry i is instance i, the
     ground (two triangles) the last one."""
@@ -165,10 +175,7 @@ class EmbreeScene:
     def closest(self, rows, alpha=True):
         """Closest opaque hits: (t, geometry, primitive) per ray, with Embree's seconds and the
         emulation's seconds."""
-        o = rows[:, 0:3].astype(np.float32) + rows[:, 4:7] * rows[:, 3:4]
-        d = np.ascontiguousarray(rows[:, 4:7], dtype=np.float32)
-        far = (rows[:, 7] - rows[:, 3]).astype(np.float32)
-        far = np.where(np.isfinite(far), far, np.float32(1e37)).astype(np.float32)
+        o, d, far = _segments(rows)
         n = len(rows)
         t_hit = np.full(n, np.inf, np.float32)
         g_hit = np.full(n, MISS, np.int64)
@@ -206,10 +213,7 @@ class EmbreeScene:
         if alpha:
             (t, _, _), embree_s, emul_s = self.closest(rows, alpha=True)
             return np.isfinite(t), embree_s, emul_s
-        o = rows[:, 0:3].astype(np.float32) + rows[:, 4:7] * rows[:, 3:4]
-        d = np.ascontiguousarray(rows[:, 4:7], dtype=np.float32)
-        far = (rows[:, 7] - rows[:, 3]).astype(np.float32)
-        far = np.where(np.isfinite(far), far, np.float32(1e37)).astype(np.float32)
+        o, d, far = _segments(rows)
         t0 = time.perf_counter()
         r = self.scene.run(o, d, dists=far, query="OCCLUDED")
         return np.asarray(r) != MISS, time.perf_counter() - t0, 0.0

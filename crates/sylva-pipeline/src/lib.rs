@@ -180,8 +180,8 @@ pub enum PipelineError {
     /// A job, the processes running them or the data between them failed.
     #[error(transparent)]
     Jobs(#[from] sylva_core::jobs::JobError),
-    #[error("writing {}", .0.display())]
-    Output(std::path::PathBuf, #[source] std::io::Error),
+    #[error(transparent)]
+    Output(#[from] sylva_core::OutputError),
 }
 
 impl From<sylva_core::wire::WireError> for PipelineError {

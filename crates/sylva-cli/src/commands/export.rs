@@ -4,7 +4,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{bail, Result};
+use anyhow::Result;
 use clap::Args;
 use sylva_core::thousands;
 use sylva_io::export::{self, mitsuba, obj, Format};
@@ -75,34 +75,17 @@ pub fn run(args: ExportArgs) -> Result<()> {
     sylva_core::OutputSet::new::<&std::path::Path>(&[]).plan(&[args.output.join(main_file)])?;
     let t0 = Instant::now();
     let mut scene = sylva_scene::load(&args.scene)?;
-    match (&scene.bands, args.band_group) {
-        (None, Some(g)) => {
-            bail!("--band-group {g}: {} has no [bands]", scene.origin)
-        }
-        (Some(_), None) => eprintln!(
+    match args.band_group {
+        Some(g) => eprintln!(
+            "{}",
+            super::render::apply_band_group(&mut scene, g, args.leaf_optics)
+                .map_err(|e| e.context(format!("--band-group {g}")))?
+        ),
+        None if scene.bands.is_some() => eprintln!(
             "{}: exported in RGB; --band-group G exports its bands (three a group)",
             scene.origin
         ),
-        (Some(bands), Some(g)) => {
-            if args.leaf_optics != super::render::LeafOpticsArg::Measured {
-                bail!(
-                    "{}: [bands] give each band's leaf reflectance and transmittance; \
-                     export them with --leaf-optics measured (the default)",
-                    scene.origin
-                );
-            }
-            if g < bands.groups() {
-                let names = bands.group(g).map(|b| bands.names[b].as_str());
-                eprintln!(
-                    "band group {g}: {} in the red, green and blue channels",
-                    names.join(", ")
-                );
-            }
-            scene
-                .apply_band_group(g)
-                .map_err(|e| anyhow::anyhow!("--band-group: {}: {e}", scene.origin))?;
-        }
-        (None, None) => {}
+        None => {}
     }
     scene
         .set_leaf_optics(args.leaf_optics.into())

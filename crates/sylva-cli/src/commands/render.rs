@@ -9,7 +9,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use sylva_core::Sun;
-use sylva_geom::Bands;
+use sylva_geom::{Bands, Scene};
 use sylva_lb::relight::Precision;
 use sylva_lb::LbSolver;
 use sylva_light::relight::{BasisReport, GlobalGridOptions, SunWeights};
@@ -499,27 +499,9 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
     };
     let traversal = TraversalConfig::checked(a.view.stack).map_err(anyhow::Error::msg)?;
     let mut scene = load_scene(&a.scene, sun)?;
-    if let Some(bands) = &scene.bands {
+    if scene.bands.is_some() {
         match band_group {
-            Some(g) => {
-                if a.lb.leaf_optics != LeafOpticsArg::Measured {
-                    bail!(
-                        "{}: [bands] give each band's leaf reflectance and transmittance; \
-                         render them with --leaf-optics measured (the default)",
-                        scene.origin
-                    );
-                }
-                let group = bands.group(g).map(|b| bands.names[b].as_str());
-                say(format!(
-                    "band group {} of {}: {} in the red, green and blue channels",
-                    g + 1,
-                    bands.groups(),
-                    group.join(", ")
-                ));
-                scene
-                    .apply_band_group(g)
-                    .map_err(|e| anyhow::anyhow!("{}: bands: {e}", scene.origin))?;
-            }
+            Some(g) => say(apply_band_group(&mut scene, g, a.lb.leaf_optics)?),
             None => say(format!(
                 "{}: its [bands] are rendered by `sylva render`; this command shows it in RGB",
                 scene.origin
@@ -605,6 +587,39 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
     })
 }
 
+/// Puts band group `g` of `scene`'s `[bands]` into its three channels
+/// ([`sylva_geom::Scene::apply_band_group`]; the bands' leaves need measured leaf optics) and
+/// says which bands went where (`render` and `export`).
+pub fn apply_band_group(scene: &mut Scene, g: usize, leaf_optics: LeafOpticsArg) -> Result<String> {
+    let Some(bands) = scene.bands.clone() else {
+        bail!("{} has no [bands]", scene.origin);
+    };
+    if leaf_optics != LeafOpticsArg::Measured {
+        bail!(
+            "{}: [bands] give each band's leaf reflectance and transmittance; use \
+             --leaf-optics measured (the default)",
+            scene.origin
+        );
+    }
+    scene
+        .apply_band_group(g)
+        .map_err(|e| anyhow::anyhow!("{}: bands: {e}", scene.origin))?;
+    let names = bands.group(g).map(|b| bands.names[b].as_str());
+    Ok(format!(
+        "band group {g} ({} in all): {} in the red, green and blue channels",
+        bands.groups(),
+        names.join(", ")
+    ))
+}
+
+/// `sylva-out/NAME.png`: where a render goes without `-o`.
+fn default_output(scene_name: &str) -> PathBuf {
+    PathBuf::from(format!(
+        "sylva-out/{}.png",
+        sylva_core::file_stem(scene_name, "scene")
+    ))
+}
+
 /// A scene's band groups: the first prepared, and how to prepare each of the others.
 struct BandGroups<'a> {
     bands: &'a Bands,
@@ -658,12 +673,7 @@ fn render_bands(
     let Some(images) = images else {
         return Ok(()); // the root writes the images
     };
-    let base = a.output.clone().unwrap_or_else(|| {
-        PathBuf::from(format!(
-            "sylva-out/{}.png",
-            sylva_core::file_stem(&name, "scene")
-        ))
-    });
+    let base = a.output.clone().unwrap_or_else(|| default_output(&name));
     let written = images.write(&base, tm)?;
     println!(
         "wrote {} (a layer per band: {}) and {} (false colour: {}) in {:.1} s",
@@ -765,12 +775,10 @@ pub fn run(a: RenderArgs, runner: &dyn Runner) -> Result<()> {
         }
     };
 
-    let base = a.output.clone().unwrap_or_else(|| {
-        PathBuf::from(format!(
-            "sylva-out/{}.png",
-            sylva_core::file_stem(&prepared.scene.name, "scene")
-        ))
-    });
+    let base = a
+        .output
+        .clone()
+        .unwrap_or_else(|| default_output(&prepared.scene.name));
     let images = tone_map_modes(&frame, &modes, &tm);
     let written = write_images(&base, frame.width, frame.height, &images, a.hdr)?;
     for (image, files) in images.iter().zip(&written) {

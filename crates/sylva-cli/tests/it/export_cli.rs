@@ -49,7 +49,10 @@ sky = [0.5, 0.25, 0.125]
     };
     let (ok, _, err) = export(&["--band-group", "0"]);
     assert!(ok, "{err}");
-    assert!(err.contains("band group 0: red, nir, swir"), "{err}");
+    assert!(
+        err.contains("band group 0 (1 in all): red, nir, swir"),
+        "{err}"
+    );
     let xml = fs::read_to_string(out.join("scene.xml")).unwrap();
     // The sky, the ground and the sun (π times its per-band irradiance) carry the bands.
     assert!(

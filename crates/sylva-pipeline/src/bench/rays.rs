@@ -13,7 +13,7 @@ use glam::{Affine3A, Vec3};
 use rayon::prelude::*;
 use serde::Serialize;
 use sylva_core::measure::median;
-use sylva_core::SplitMix64;
+use sylva_core::{OutputError, OutputSet, SplitMix64};
 use sylva_geom::{Camera, Scene};
 use sylva_trace::{Hit, KdTracer, PinholeCamera, Ray, RayQuery, ShadowRay, TraceStats};
 
@@ -240,18 +240,20 @@ impl fmt::Display for RaysBench {
     }
 }
 
-/// Medians of `runs` timed passes of `pass` after one untimed one.
-fn timed(runs: u32, mut pass: impl FnMut()) -> f64 {
-    pass();
-    median(
+/// One untimed pass of `pass` (its result: the answers and counts, and a warm-up), then the
+/// median seconds of `runs` timed ones.
+fn timed<T>(runs: u32, mut pass: impl FnMut() -> T) -> (T, f64) {
+    let first = pass();
+    let seconds = median(
         (0..runs.max(1))
             .map(|_| {
                 let t = Instant::now();
-                pass();
+                drop(pass());
                 t.elapsed().as_secs_f64()
             })
             .collect(),
-    )
+    );
+    (first, seconds)
 }
 
 /// Traces the three sets of `camera`'s view `runs` times each on the kd-tree (the thread
@@ -284,9 +286,11 @@ pub fn rays(
             parts_per_ray: per(st.instance_visits),
         }
     };
-    let (primary_hits, primary_stats) = closest_all(tracer, &sets.primary);
-    let (blocked, shadow_stats) = blocked_all(tracer, &sets.shadow);
-    let (incoherent_hits, incoherent_stats) = closest_all(tracer, &sets.incoherent);
+    let ((primary_hits, primary_stats), primary_s) =
+        timed(runs, || closest_all(tracer, &sets.primary));
+    let ((blocked, shadow_stats), shadow_s) = timed(runs, || blocked_all(tracer, &sets.shadow));
+    let ((incoherent_hits, incoherent_stats), incoherent_s) =
+        timed(runs, || closest_all(tracer, &sets.incoherent));
     let count = |h: &[Option<Hit>]| h.iter().filter(|h| h.is_some()).count();
     let measures = vec![
         measure(
@@ -295,7 +299,7 @@ pub fn rays(
             sets.primary.len(),
             count(&primary_hits),
             primary_stats,
-            timed(runs, || drop(closest_all(tracer, &sets.primary))),
+            primary_s,
         ),
         measure(
             "shadow",
@@ -303,7 +307,7 @@ pub fn rays(
             sets.shadow.len(),
             blocked.iter().filter(|&&b| b).count(),
             shadow_stats,
-            timed(runs, || drop(blocked_all(tracer, &sets.shadow))),
+            shadow_s,
         ),
         measure(
             "incoherent",
@@ -311,17 +315,9 @@ pub fn rays(
             sets.incoherent.len(),
             count(&incoherent_hits),
             incoherent_stats,
-            timed(runs, || drop(closest_all(tracer, &sets.incoherent))),
+            incoherent_s,
         ),
     ];
-    if let Some(dir) = export {
-        let answers = Answers {
-            primary: &primary_hits,
-            shadow: &blocked,
-            incoherent: &incoherent_hits,
-        };
-        export_rays(dir, &p.scene, tracer, &sets, &answers, to_sun)?;
-    }
     let report = RaysBench {
         scene: p.scene.name.clone(),
         width: camera.width,
@@ -335,9 +331,20 @@ pub fn rays(
         exported_to: export.map(Path::to_path_buf),
     };
     if let Some(dir) = export {
-        // Beside the rays, for tools/embree/compare.py to set Embree's figures against.
-        let json = serde_json::to_vec_pretty(&report).expect("the report serialises");
-        write(dir, "sylva.json", &json)?;
+        let answers = Answers {
+            primary: &primary_hits,
+            shadow: &blocked,
+            incoherent: &incoherent_hits,
+        };
+        export_rays(
+            dir,
+            &p.scene,
+            tracer,
+            &sets,
+            &answers,
+            to_sun,
+            Some(&report),
+        )?;
     }
     Ok(report)
 }
@@ -434,13 +441,9 @@ fn matrix_rows(a: &Affine3A) -> [f32; 12] {
     ]
 }
 
-fn write(dir: &Path, name: &str, bytes: &[u8]) -> Result<(), PipelineError> {
-    let path = dir.join(name);
-    sylva_core::atomic_write(&path, bytes).map_err(|e| PipelineError::Output(path, e))
-}
-
 /// Writes the scene (model-space meshes, alpha masks, instance transforms), the three ray
-/// sets and `answers` under `dir` (created), the manifest last.
+/// sets, `answers` and the `report` they were measured in under `dir` (created), as one
+/// output set: every file is replaced, or (on an error or Ctrl-C) none.
 pub fn export_rays(
     dir: &Path,
     scene: &Scene,
@@ -448,8 +451,16 @@ pub fn export_rays(
     sets: &RaySets,
     answers: &Answers<'_>,
     to_sun: Vec3,
+    report: Option<&RaysBench>,
 ) -> Result<(), PipelineError> {
-    std::fs::create_dir_all(dir).map_err(|e| PipelineError::Output(dir.to_path_buf(), e))?;
+    let mut set = OutputSet::new::<&Path>(&[]);
+    // A file in the directory's place is refused here, before anything is made.
+    set.plan(&[dir.join("manifest.json")])?;
+    std::fs::create_dir_all(dir).map_err(|source| OutputError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut write = |name: &str, bytes: &[u8]| set.write_bytes(&dir.join(name), bytes);
     let accel = &tracer.accel;
     let mut models = Vec::new();
     let mut masks = Vec::new();
@@ -474,16 +485,16 @@ pub fn export_rays(
                 }
             }
         }
-        write(dir, &format!("model{k}_positions.f32"), &f32s(&positions))?;
-        write(dir, &format!("model{k}_indices.u32"), &u32s(&indices))?;
-        write(dir, &format!("model{k}_mask.i32"), &i32s(&mask_ids))?;
-        write(dir, &format!("model{k}_uv.f32"), &f32s(&uvs))?;
+        write(&format!("model{k}_positions.f32"), &f32s(&positions))?;
+        write(&format!("model{k}_indices.u32"), &u32s(&indices))?;
+        write(&format!("model{k}_mask.i32"), &i32s(&mask_ids))?;
+        write(&format!("model{k}_uv.f32"), &f32s(&uvs))?;
         for m in ma.alpha_masks() {
             let texels = (m.width() * m.height()) as usize;
             let opaque: Vec<u8> = (0..texels)
                 .map(|i| (m.bits()[i / 64] >> (i % 64) & 1) as u8)
                 .collect();
-            write(dir, &format!("mask{}.u8", masks.len()), &opaque)?;
+            write(&format!("mask{}.u8", masks.len()), &opaque)?;
             masks.push(MaskEntry {
                 width: m.width(),
                 height: m.height(),
@@ -506,27 +517,21 @@ pub fn export_rays(
         inst_models.push(i.model);
         inst_matrices.extend(matrix_rows(&i.to_world));
     }
-    write(dir, "instance_model.u32", &u32s(&inst_models))?;
-    write(dir, "instance_to_world.f32", &f32s(&inst_matrices))?;
+    write("instance_model.u32", &u32s(&inst_models))?;
+    write("instance_to_world.f32", &f32s(&inst_matrices))?;
+    write("primary_rays.f32", &ray_rows(sets.primary.iter().copied()))?;
+    write("primary_hits.u32", &hit_rows(answers.primary))?;
     write(
-        dir,
-        "primary_rays.f32",
-        &ray_rows(sets.primary.iter().copied()),
-    )?;
-    write(dir, "primary_hits.u32", &hit_rows(answers.primary))?;
-    write(
-        dir,
         "shadow_rays.f32",
         &ray_rows(sets.shadow.iter().map(|s| s.ray)),
     )?;
     let blocked: Vec<u8> = answers.shadow.iter().map(|&b| b as u8).collect();
-    write(dir, "shadow_blocked.u8", &blocked)?;
+    write("shadow_blocked.u8", &blocked)?;
     write(
-        dir,
         "incoherent_rays.f32",
         &ray_rows(sets.incoherent.iter().copied()),
     )?;
-    write(dir, "incoherent_hits.u32", &hit_rows(answers.incoherent))?;
+    write("incoherent_hits.u32", &hit_rows(answers.incoherent))?;
     let manifest = Manifest {
         format: "sylva-rays-1",
         scene: scene.name.clone(),
@@ -553,6 +558,13 @@ pub fn export_rays(
             },
         ],
     };
+    if let Some(report) = report {
+        // Beside the rays, for tools/embree/compare.py to set Embree's figures against.
+        let json = serde_json::to_vec_pretty(report).expect("the report serialises");
+        write("sylva.json", &json)?;
+    }
     let json = serde_json::to_vec_pretty(&manifest).expect("the manifest serialises");
-    write(dir, "manifest.json", &json)
+    write("manifest.json", &json)?;
+    set.commit()?;
+    Ok(())
 }

@@ -104,7 +104,7 @@ fn exported_triangles_and_matrices_reproduce_the_kd_tree_hits() {
         shadow: &blocked,
         incoherent: &inc,
     };
-    export_rays(&out, &scene, &tracer, &sets, &answers, to_sun).unwrap();
+    export_rays(&out, &scene, &tracer, &sets, &answers, to_sun, None).unwrap();
     let manifest: serde_json::Value =
         serde_json::from_slice(&fs::read(out.join("manifest.json")).unwrap()).unwrap();
     assert_eq!(manifest["format"], "sylva-rays-1");
