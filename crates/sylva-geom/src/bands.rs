@@ -5,6 +5,9 @@
 //! `3g, 3g + 1, 3g + 2` into the red, green and blue channels of an otherwise unchanged
 //! scene ([`crate::Scene::apply_band_group`]), and a band render is one render per group.
 
+/// The most bands a scene may name: a hyperspectral sensor's few hundred, with room.
+pub const MAX_BANDS: usize = 1024;
+
 /// The scene's bands, validated ([`Bands::validate`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Bands {
@@ -50,6 +53,12 @@ impl Bands {
     pub fn validate(&self) -> Result<(), String> {
         if self.names.is_empty() {
             return Err("names: at least one band".into());
+        }
+        if self.names.len() > MAX_BANDS {
+            return Err(format!(
+                "names: {} bands, at most {MAX_BANDS} (each group of three is a render)",
+                self.names.len()
+            ));
         }
         for (i, n) in self.names.iter().enumerate() {
             if n.trim().is_empty() {

@@ -639,6 +639,12 @@ fn render_bands(
 ) -> Result<()> {
     let bands = groups.bands;
     let name = groups.first.scene.scene.name.clone();
+    // Every band's image is kept until the last group is rendered.
+    let (w, h) = (groups.first.width, groups.first.height);
+    sylva_core::check_memory(
+        &format!("{} band images of {w}x{h}", bands.len()),
+        bands.len() as u64 * u64::from(w) * u64::from(h) * 4,
+    )?;
     let mut images: Option<BandImages> = None;
     let mut next = Some(groups.first);
     for g in 0..bands.groups() {

@@ -22,6 +22,11 @@ use crate::{PipelineError, PreparedScene};
 /// Rays per work unit: one 8×8 tile, as the renderer hands the tracer.
 const BATCH: usize = 64;
 
+/// Bytes a pixel of the view takes at most: its primary, shadow and incoherent rays (32,
+/// 40, 32), their answers (24, 1, 24), a timed pass's copies of those and its place in the
+/// order (8), rounded up.
+const BYTES_PER_PIXEL: u64 = 256;
+
 /// The three ray sets of one view.
 #[derive(Debug, Clone)]
 pub struct RaySets {
@@ -108,6 +113,14 @@ pub fn ray_sets(
     seed: u64,
 ) -> Result<RaySets, PipelineError> {
     let pinhole = PinholeCamera::new(camera)?;
+    let pixels = u64::from(camera.width) * u64::from(camera.height);
+    sylva_core::check_memory(
+        &format!(
+            "the ray sets of a {}x{} view (rays, answers, a timed pass's copies)",
+            camera.width, camera.height
+        ),
+        pixels * BYTES_PER_PIXEL,
+    )?;
     let pixels = pixel_order(camera.width, camera.height);
     let primary: Vec<Ray> = pixels
         .iter()

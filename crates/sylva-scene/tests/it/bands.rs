@@ -122,6 +122,18 @@ fn bad_band_lists_are_refused_in_one_line() {
             ),
             "at least one band",
         ),
+        (
+            {
+                let names: Vec<String> = (0..1025).map(|k| format!("\"b{k}\"")).collect();
+                let zeros = vec!["0.0"; 1025].join(", ");
+                format!(
+                    "names = [{}]\nleaf_reflectance = [{zeros}]\nleaf_transmittance = [{zeros}]\n\
+                     bark = [{zeros}]\nsoil = [{zeros}]\nsky = [{zeros}]",
+                    names.join(", ")
+                )
+            },
+            "names: 1025 bands, at most 1024",
+        ),
     ];
     for (bands, want) in cases {
         let e = parse(&with_bands(&bands))
