@@ -216,6 +216,7 @@ mod tests {
                 azimuth_deg: 0.0,
             },
             views: Vec::new(),
+            image: None,
         };
         let b = bench_budget(&spec, &cfg, true, None, 3, &|_| {}).unwrap();
         assert_eq!(b.bands.len(), 2);

@@ -839,6 +839,7 @@ mod tests {
             seed: 3,
             sun,
             views: Vec::new(),
+            image: None,
         };
         let mc = crate::trace_budget(&stand, &accel, &spec.bands, true, &cfg, &|_| {}).unwrap();
         let lb = lb_budget(

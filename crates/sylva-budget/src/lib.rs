@@ -11,7 +11,8 @@
 //! budget of it ([`photons`]: light leaving a side re-enters on the opposite one, so the plot
 //! stands for an infinite stand), the
 //! reference the other methods are held to, with the BRF towards chosen view directions by
-//! local estimates ([`report`] formats it).
+//! local estimates ([`report`] formats it) and as an image of the plot from one of them
+//! ([`brf_image`]).
 //!
 //! The lattice-Boltzmann budget of the same plot ([`lattice`]: the leaves binned into cells,
 //! the direct beam traced exactly, the scattered light carried by `sylva_lb::plot`) is held
@@ -19,14 +20,17 @@
 //!
 //! May import `sylva-core`, `sylva-geom` (meshes, models, instances), `sylva-grow` (the
 //! stands), `sylva-trace` (the kd-trees the photons are traced through), `sylva-grid` and
-//! `sylva-lb` (the cells and the lattice).
+//! `sylva-lb` (the cells and the lattice), and `sylva-render`'s output encoders (the BRF
+//! image's EXR and PNGs).
 
 pub mod bench;
+pub mod brf_image;
 pub mod lattice;
 pub mod photons;
 pub mod report;
 pub mod stand;
 
+pub use brf_image::{BrfImage, BrfImageFiles, BrfImageSpec, WrittenBrfImages};
 pub use lattice::{lb_budget, LbBand, LbConfig, LbRun};
 pub use photons::{
     trace_budget, Angles, BandBudget, BudgetConfig, Fraction, SunAngles, ViewAngles, ViewBrf,

@@ -21,6 +21,7 @@
 //! seeded from the run's seed, the band and the chunk's index, so a result depends on the
 //! seed only, never on the thread count.
 
+use crate::brf_image::{BrfImage, BrfImageSpec, ImageTally};
 use crate::stand::Stand;
 use crate::{Band, BudgetError};
 use glam::Vec3;
@@ -119,6 +120,8 @@ pub struct BudgetConfig {
     pub sun: SunAngles,
     /// Directions to estimate the BRF towards (none: no BRF).
     pub views: Vec<ViewAngles>,
+    /// Also the BRF as an image towards one view ([`crate::brf_image`]).
+    pub image: Option<BrfImageSpec>,
 }
 
 /// Views a run may estimate the BRF towards (each adds a ray per scattering event).
@@ -145,6 +148,9 @@ impl BudgetConfig {
         }
         for v in &self.views {
             v.validate_view()?;
+        }
+        if let Some(image) = &self.image {
+            image.validate()?;
         }
         self.sun.validate_sun()
     }
@@ -188,6 +194,9 @@ pub struct BandBudget {
     pub balance: f64,
     /// The BRF towards each of the run's views.
     pub brf: Vec<ViewBrf>,
+    /// The BRF image, where the run asked for one (not in the JSON: `--brf-image` writes it).
+    #[serde(skip)]
+    pub image: Option<BrfImage>,
     pub photons: u64,
     pub rays: u64,
     pub seconds: f64,
@@ -246,29 +255,55 @@ pub fn trace_budget(
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<Vec<BandBudget>, BudgetError> {
     cfg.validate()?;
+    if let Some(image) = &cfg.image {
+        sylva_core::check_memory(
+            "the BRF images",
+            image.memory_bytes(stand.half, bands.len()),
+        )?;
+    }
     bands
         .iter()
         .enumerate()
         .map(|(b, band)| {
             let t0 = std::time::Instant::now();
             let chunks = cfg.photons.div_ceil(CHUNK);
+            let tally = cfg
+                .image
+                .map(|spec| ImageTally::new(&spec, stand.half, stand.top));
             let counts: Vec<Counts> = (0..chunks)
                 .into_par_iter()
                 .map(|c| {
                     let n = CHUNK.min(cfg.photons - c * CHUNK);
                     let seed = cfg.seed ^ (b as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
                     let mut rng = SplitMix64::for_chunk(seed, c);
-                    let k = trace_chunk(stand, accel, band, cyclic, cfg, n, &mut rng);
+                    let k =
+                        trace_chunk(stand, accel, band, cyclic, cfg, tally.as_ref(), n, &mut rng);
                     progress(n);
                     k
                 })
                 .collect();
-            Ok(summarise(band, &counts, cfg, t0.elapsed().as_secs_f64()))
+            let image = cfg
+                .image
+                .zip(tally)
+                .map(|(spec, t)| t.finish(spec.view, cfg.photons));
+            Ok(summarise(
+                band,
+                &counts,
+                cfg,
+                image,
+                t0.elapsed().as_secs_f64(),
+            ))
         })
         .collect()
 }
 
-fn summarise(band: &Band, counts: &[Counts], cfg: &BudgetConfig, seconds: f64) -> BandBudget {
+fn summarise(
+    band: &Band,
+    counts: &[Counts],
+    cfg: &BudgetConfig,
+    image: Option<BrfImage>,
+    seconds: f64,
+) -> BandBudget {
     let photons = cfg.photons;
     let n = photons as f64;
     let mean = |get: &dyn Fn(&Counts) -> f64| {
@@ -320,31 +355,51 @@ fn summarise(band: &Band, counts: &[Counts], cfg: &BudgetConfig, seconds: f64) -
         leaf_events: counts.iter().map(|c| c.leaf_events).sum::<u64>() as f64 / n,
         balance: 1.0 - fates,
         brf,
+        image,
         photons,
         rays: counts.iter().map(|c| c.rays).sum(),
         seconds,
     }
 }
 
-/// `n` photons of one band.
+/// `n` photons of one band; the estimates towards the image's view also go to `image`.
+#[allow(clippy::too_many_arguments)]
 fn trace_chunk(
     stand: &Stand,
     accel: &SceneAccel,
     band: &Band,
     cyclic: bool,
     cfg: &BudgetConfig,
+    image: Option<&ImageTally>,
     n: u64,
     rng: &mut SplitMix64,
 ) -> Counts {
     let travel = cfg.sun.travel();
-    let views: Vec<(Vec3, f32)> = cfg
-        .views
+    let mut view_angles = cfg.views.clone();
+    // The image's view: one of the run's views, or one more estimated for the image only.
+    let image_view = cfg.image.map(|spec| {
+        view_angles
+            .iter()
+            .position(|&v| v == spec.view)
+            .unwrap_or_else(|| {
+                view_angles.push(spec.view);
+                view_angles.len() - 1
+            })
+    });
+    let views: Vec<(Vec3, f32)> = view_angles
         .iter()
         .map(|v| {
             let v = v.towards();
             (v, v.y)
         })
         .collect();
+    let tally = |j: usize, exit: Vec3, v: Vec3, estimate: f64| {
+        if let (Some(img), Some(i)) = (image, image_view) {
+            if i == j {
+                img.add(exit, v, estimate);
+            }
+        }
+    };
     let plot = PlotBox::of(stand);
     let (r, t, rho) = (
         band.leaf_reflectance,
@@ -380,8 +435,11 @@ fn trace_chunk(
                     let (share, side) = if c > 0.0 { (r, facing) } else { (t, -facing) };
                     if share > 0.0 && c != 0.0 {
                         let from = p + side * eps;
-                        if reaches_sky(stand, accel, cyclic, from, v, &mut k.rays) {
-                            k.brf[j] += share * c.abs() as f64 / mu as f64;
+                        if let Some(exit) = reaches_sky(stand, accel, cyclic, from, v, &mut k.rays)
+                        {
+                            let estimate = share * c.abs() as f64 / mu as f64;
+                            k.brf[j] += estimate;
+                            tally(j, exit, v, estimate);
                         }
                     }
                 }
@@ -410,8 +468,10 @@ fn trace_chunk(
                     // ρ cos θ_v / π towards v, times π / cos θ_v: ρ, where the view is open.
                     let from = on_soil;
                     for (j, &(v, _)) in views.iter().enumerate() {
-                        if reaches_sky(stand, accel, cyclic, from, v, &mut k.rays) {
+                        if let Some(exit) = reaches_sky(stand, accel, cyclic, from, v, &mut k.rays)
+                        {
                             k.brf[j] += rho;
+                            tally(j, exit, v, rho);
                         }
                     }
                 }
@@ -513,8 +573,9 @@ impl PlotBox {
     }
 }
 
-/// Whether a ray from `o` along `d` (upwards) leaves through the plot's top (or, in an
-/// isolated plot, through a side) without meeting a leaf, crossing the cyclic sides.
+/// Where a ray from `o` along `d` (upwards) leaves the plot's box through its top (or, in
+/// an isolated plot, through a side) without meeting a leaf, crossing the cyclic sides;
+/// `None` where a leaf stops it.
 fn reaches_sky(
     stand: &Stand,
     accel: &SceneAccel,
@@ -522,7 +583,7 @@ fn reaches_sky(
     mut o: Vec3,
     d: Vec3,
     rays: &mut u64,
-) -> bool {
+) -> Option<Vec3> {
     let plot = PlotBox::of(stand);
     let mut stats = TraceStats::default();
     for _ in 0..MAX_EVENTS {
@@ -533,14 +594,14 @@ fn reaches_sky(
             TraversalConfig::default(),
             &mut stats,
         ) {
-            return false;
+            return None;
         }
         if e.end == e.top || !cyclic {
-            return true;
+            return Some(o + d * e.end);
         }
         o = plot.wrapped(o, d, &e);
     }
-    false
+    None
 }
 
 #[cfg(test)]
@@ -578,6 +639,7 @@ mod tests {
                 azimuth_deg: 30.0,
             },
             views: Vec::new(),
+            image: None,
         }
     }
 
@@ -724,7 +786,17 @@ mod tests {
     #[test]
     fn results_depend_on_the_seed_only() {
         let (spec, stand, accel) = layer(1.0, 2.0);
-        let cfg = config(3 * CHUNK + 11, 20.0);
+        // With a BRF image: its tallies, too, must not depend on the order chunks finish.
+        let cfg = BudgetConfig {
+            image: Some(crate::BrfImageSpec {
+                view: ViewAngles {
+                    zenith_deg: 40.0,
+                    azimuth_deg: 10.0,
+                },
+                side: 8,
+            }),
+            ..config(3 * CHUNK + 11, 20.0)
+        };
         let run = |threads: usize| {
             rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
@@ -736,6 +808,7 @@ mod tests {
         for x in a.iter_mut().chain(b.iter_mut()) {
             x.seconds = 0.0;
         }
+        assert!(a[0].image.as_ref().is_some_and(|i| i.mean() > 0.0));
         assert_eq!(a, b);
         let other = BudgetConfig {
             seed: 8,

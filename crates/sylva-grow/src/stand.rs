@@ -260,7 +260,9 @@ pub struct CanopySpec {
     /// Seed of the crowns' placement and of every leaf's position and orientation.
     #[serde(default = "seed")]
     pub seed: u64,
-    #[serde(default)]
+    /// `[plot]`, also read as `[domain]` (the name radiation-transfer intercomparisons and
+    /// issue 29 give it).
+    #[serde(default, alias = "domain")]
     pub plot: Plot,
     pub crowns: Option<Crowns>,
     pub layer: Option<Layer>,
@@ -837,6 +839,19 @@ mod tests {
         );
         assert_eq!(l.bands.len(), 2);
         assert!(CanopySpec::builtin("nothing").is_none());
+    }
+
+    #[test]
+    fn domain_is_another_name_for_the_plot() {
+        let plot = "[plot]\nsize = [20.0, 10.0]\ncyclic = false\n";
+        let layer = "[layer]\nlai = 2.0\nheight = 1.0\n";
+        let a = CanopySpec::parse(&format!("{plot}{layer}")).unwrap();
+        let b = CanopySpec::parse(&format!("{}{layer}", plot.replace("plot", "domain"))).unwrap();
+        assert_eq!(a, b);
+        assert!(!b.plot.cyclic && b.plot.size == [20.0, 10.0]);
+        let both = format!("{plot}{}{layer}", plot.replace("plot", "domain"));
+        let e = CanopySpec::parse(&both).unwrap_err().to_string();
+        assert!(e.contains("duplicate") && !e.contains('\n'), "{e}");
     }
 
     #[test]

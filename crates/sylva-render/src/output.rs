@@ -28,6 +28,8 @@ pub enum OutputError {
         path: PathBuf,
         source: image::ImageError,
     },
+    #[error("{path}: cannot read the OpenEXR layers: {message}")]
+    Read { path: PathBuf, message: String },
     #[error("cannot write {path}: {source}")]
     Io {
         path: PathBuf,
@@ -168,6 +170,74 @@ pub fn write_exr_layers(
     layers: &[(String, Vec<f32>)],
 ) -> Result<(), OutputError> {
     write_encoded(path, &encode_exr_layers(path, width, height, layers)?)
+}
+
+/// A multi-layer OpenEXR read back: each layer's name and its one channel, row-major.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExrLayers {
+    pub width: u32,
+    pub height: u32,
+    pub layers: Vec<(String, Vec<f32>)>,
+}
+
+impl ExrLayers {
+    /// The names of the layers, in the file's order.
+    pub fn names(&self) -> Vec<&str> {
+        self.layers.iter().map(|(n, _)| n.as_str()).collect()
+    }
+
+    /// Layer `name`'s pixels.
+    pub fn layer(&self, name: &str) -> Option<&[f32]> {
+        let (_, l) = self.layers.iter().find(|(n, _)| n == name)?;
+        Some(l)
+    }
+}
+
+/// Reads a file [`write_exr_layers`] wrote (or any OpenEXR whose layers have one channel
+/// each, all one size): the inverse of the writer, for tools and tests.
+pub fn read_exr_layers(path: &Path) -> Result<ExrLayers, OutputError> {
+    use exr::prelude::{ReadChannels, ReadLayers};
+    let bad = |message: String| OutputError::Read {
+        path: path.into(),
+        message,
+    };
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .all_layers()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|e| bad(e.to_string()))?;
+    let mut size = None;
+    let mut layers = Vec::new();
+    for (k, layer) in image.layer_data.iter().enumerate() {
+        let name = layer
+            .attributes
+            .layer_name
+            .as_ref()
+            .map_or_else(|| format!("layer {k}"), |n| n.to_string());
+        let [channel] = layer.channel_data.list.as_slice() else {
+            return Err(bad(format!(
+                "layer {name} has {} channels, not one",
+                layer.channel_data.list.len()
+            )));
+        };
+        let s = (layer.size.0 as u32, layer.size.1 as u32);
+        if *size.get_or_insert(s) != s {
+            return Err(bad(format!(
+                "layer {name} is {}x{}, not the first's size",
+                s.0, s.1
+            )));
+        }
+        layers.push((name, channel.sample_data.values_as_f32().collect()));
+    }
+    let (width, height) = size.ok_or_else(|| bad("no layers".into()))?;
+    Ok(ExrLayers {
+        width,
+        height,
+        layers,
+    })
 }
 
 /// The bytes of [`write_exr_layers`]' file (`path` names it in errors), for an output set.
@@ -323,6 +393,31 @@ mod tests {
         write_exr(&path, 3, 2, &px).unwrap();
         let back = image::open(&path).unwrap().to_rgb32f();
         assert_eq!(back.as_raw(), px.as_flattened());
+    }
+
+    #[test]
+    fn exr_layers_round_trip_with_their_names() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bands.exr");
+        let layers = vec![
+            ("red".to_string(), vec![0.0, 0.25, 1e-6, 3.5, -1.0, 7.0]),
+            ("nir".to_string(), vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]),
+        ];
+        write_exr_layers(&path, 3, 2, &layers).unwrap();
+        let back = read_exr_layers(&path).unwrap();
+        assert_eq!((back.width, back.height), (3, 2));
+        assert_eq!(back.names(), ["red", "nir"]);
+        assert_eq!(back.layers, layers);
+        assert_eq!(back.layer("nir"), Some(&layers[1].1[..]));
+        // An RGB file has three channels in its one layer; a truncated file is no OpenEXR.
+        let rgb = dir.path().join("rgb.exr");
+        write_exr(&rgb, 1, 1, &[[0.5; 3]]).unwrap();
+        let e = read_exr_layers(&rgb).unwrap_err().to_string();
+        assert!(e.contains("rgb.exr") && e.contains("3 channels"), "{e}");
+        let bytes = std::fs::read(&path).unwrap();
+        std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+        let e = read_exr_layers(&path).unwrap_err().to_string();
+        assert!(e.contains("bands.exr") && !e.contains('\n'), "{e}");
     }
 
     #[test]

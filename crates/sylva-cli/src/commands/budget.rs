@@ -6,8 +6,8 @@ use super::output::{bench_bar, emit_to};
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 use sylva_budget::{
-    budget_json, budget_text, lb_budget, trace_budget, Budget, BudgetConfig, CanopySpec, LbConfig,
-    Stand, SunAngles, ViewAngles,
+    budget_json, budget_text, lb_budget, trace_budget, BrfImage, BrfImageFiles, BrfImageSpec,
+    Budget, BudgetConfig, CanopySpec, LbConfig, Stand, SunAngles, ViewAngles,
 };
 
 /// How `sylva budget` finds the fractions.
@@ -41,6 +41,19 @@ pub struct BudgetArgs {
     /// direction is the hot spot). Each adds a ray per scattering event.
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     brf: Vec<String>,
+    /// Also the BRF as an image: the plot's top seen from this view, ZENITH:AZIMUTH in
+    /// degrees, each pixel the BRF of the stretch of the plot it covers (their mean is the
+    /// view's BRF). Written to `--brf-image-out` (an EXR of one layer per band) and a grey
+    /// PNG per band beside it.
+    #[arg(long, allow_hyphen_values = true)]
+    brf_image: Option<String>,
+    /// Pixels along the plot's longer side of the BRF image (square pixels on the ground).
+    /// A pixel's noise falls as 1/√(photons per pixel): raise `--photons` with the size.
+    #[arg(long, default_value_t = 128)]
+    brf_image_size: u32,
+    /// Where the BRF image goes: this EXR, and `STEM_BAND.png` per band beside it.
+    #[arg(long, default_value = "brf.exr")]
+    brf_image_out: PathBuf,
     /// Seed of the photons (the stand's own seed is in its file). Results depend on the
     /// seeds only, not on the thread count.
     #[arg(long, default_value_t = 1)]
@@ -101,6 +114,7 @@ pub fn bench(a: BenchBudgetArgs) -> Result<()> {
             azimuth_deg: 0.0,
         },
         views: Vec::new(),
+        image: None,
     };
     cfg.validate()?;
     // The photons' progress (the lattice's runs are not counted in photons).
@@ -139,8 +153,23 @@ pub fn run(a: BudgetArgs) -> Result<()> {
             .iter()
             .map(|v| ViewAngles::parse_view(v))
             .collect::<Result<_, _>>()?,
+        image: a
+            .brf_image
+            .as_deref()
+            .map(|v| {
+                ViewAngles::parse_view(v).map(|view| BrfImageSpec {
+                    view,
+                    side: a.brf_image_size,
+                })
+            })
+            .transpose()?,
     };
     cfg.validate()?;
+    if a.method == Method::Lb && (!cfg.views.is_empty() || cfg.image.is_some()) {
+        anyhow::bail!(
+            "--brf and --brf-image come from the photons: use --method mc or --method both"
+        );
+    }
     let lb_cfg = LbConfig {
         cell: a.lb_cell,
         rays: a.lb_rays,
@@ -150,6 +179,14 @@ pub fn run(a: BudgetArgs) -> Result<()> {
     if a.method != Method::Mc {
         lb_cfg.validate()?;
     }
+    // The image's files are checked before the long work.
+    let image_files = match cfg.image {
+        Some(_) => {
+            let names: Vec<&str> = spec.bands.iter().map(|b| b.name.as_str()).collect();
+            Some(BrfImageFiles::plan(&a.brf_image_out, &names)?)
+        }
+        None => None,
+    };
     let quiet = a.json || a.out.is_some();
     let t0 = std::time::Instant::now();
     let stand = Stand::build(&spec)?;
@@ -196,11 +233,41 @@ pub fn run(a: BudgetArgs) -> Result<()> {
         bar.finish_and_clear();
         bands
     };
+    let mut bands = bands;
+    let images: Vec<(String, BrfImage)> = bands
+        .iter_mut()
+        .filter_map(|b| Some((b.band.clone(), b.image.take()?)))
+        .collect();
+    let written = match image_files {
+        Some(files) => Some(files.write(&images.iter().map(|(_, i)| i).collect::<Vec<_>>())?),
+        None => None,
+    };
     let budget = Budget::new(&spec, &stand, cfg.sun, bands, lattice, build_seconds);
     let text = if a.json {
         format!("{}\n", budget_json(&budget))
     } else {
         budget_text(&budget)
     };
-    emit_to(&text, a.out)
+    emit_to(&text, a.out)?;
+    if let Some(w) = written {
+        let (_, first) = &images[0];
+        // Standard output carries the JSON or the table; where the images went is a note.
+        eprintln!(
+            "BRF image towards {}:{} ({}x{} pixels, {:.1} photons a pixel per band): {} (a layer per band)",
+            first.view.zenith_deg,
+            first.view.azimuth_deg,
+            first.width,
+            first.height,
+            a.photons as f64 / (first.width as f64 * first.height as f64),
+            w.exr.display()
+        );
+        for ((name, img), (png, white)) in images.iter().zip(&w.pngs) {
+            eprintln!(
+                "  {name}: mean BRF {:.4}, {} (white = BRF {white:.4})",
+                img.mean(),
+                png.display()
+            );
+        }
+    }
+    Ok(())
 }

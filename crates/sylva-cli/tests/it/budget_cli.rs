@@ -136,6 +136,61 @@ fn the_brf_is_reported_per_view_with_the_hot_spot_towards_the_sun() {
 }
 
 #[test]
+fn the_brf_image_is_written_as_an_exr_of_the_bands_and_a_png_each() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("view.exr");
+    let (ok, stdout, err) = sylva(&[
+        "budget",
+        "layer",
+        "--photons",
+        "20000",
+        "--brf-image",
+        "30:180",
+        "--brf-image-size",
+        "12",
+        "--brf-image-out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(ok, "{err}");
+    // Standard output stays JSON; the image view's BRF is in it although `--brf` was not
+    // given, and the note on standard error gives the same value as the image's mean.
+    let r: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert!(r["bands"][0]["brf"].as_array().unwrap().is_empty());
+    assert!(
+        err.contains("12x12 pixels") && err.contains("view_red.png"),
+        "{err}"
+    );
+    let exr = sylva_render::output::read_exr_layers(&out).unwrap();
+    assert_eq!((exr.width, exr.height), (12, 12));
+    assert_eq!(exr.names(), ["red", "nir"]);
+    for band in ["red", "nir"] {
+        let png = image::open(dir.path().join(format!("view_{band}.png"))).unwrap();
+        assert_eq!((png.width(), png.height()), (12, 12));
+    }
+    for (args, says) in [
+        (vec!["--brf-image", "90:0"], "--brf zenith"),
+        (vec!["--brf-image", "30"], "ZENITH:AZIMUTH"),
+        (
+            vec!["--brf-image", "0:0", "--brf-image-size", "0"],
+            "--brf-image-size",
+        ),
+        (
+            vec!["--brf-image", "0:0", "--method", "lb"],
+            "--method mc or --method both",
+        ),
+    ] {
+        let mut all = vec!["budget", "layer", "--photons", "20000"];
+        all.extend(args);
+        let (ok, _, err) = sylva(&all);
+        assert!(
+            !ok && err.contains(says) && err.trim().lines().count() == 1,
+            "{err}"
+        );
+    }
+}
+
+#[test]
 fn the_lattice_budget_balances_and_stands_beside_the_photons() {
     // `--method both` on a small cyclic stand: the lattice's fractions balance, agree with the
     // photons' and the text shows their differences; `--method lb` refuses an isolated plot.

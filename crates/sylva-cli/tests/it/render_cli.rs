@@ -224,32 +224,13 @@ fn a_scene_with_bands_renders_a_layer_per_band_and_a_false_colour_png() {
     let png = image::open(&out).unwrap().to_rgb8();
     assert_eq!(png.dimensions(), (64, 40));
 
-    use exr::prelude::{ReadChannels, ReadLayers};
-    let exr = exr::prelude::read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .all_layers()
-        .all_attributes()
-        .from_file(out.with_extension("exr"))
-        .unwrap();
-    assert_eq!(exr.layer_data.len(), 4);
+    let exr = sylva_render::output::read_exr_layers(&out.with_extension("exr")).unwrap();
+    assert_eq!(exr.layers.len(), 4);
     // The top row sees the sky, whose radiance each band gives.
     let top_row = |name: &str| {
-        let layer = (exr.layer_data.iter())
-            .find(|l| {
-                l.attributes
-                    .layer_name
-                    .as_ref()
-                    .map(|n| n.to_string())
-                    .as_deref()
-                    == Some(name)
-            })
+        let v = exr
+            .layer(name)
             .unwrap_or_else(|| panic!("a layer named {name}"));
-        let v: Vec<f32> = layer.channel_data.list[0]
-            .sample_data
-            .values_as_f32()
-            .collect();
         assert_eq!(v.len(), 64 * 40);
         v[..64].iter().sum::<f32>() / 64.0
     };

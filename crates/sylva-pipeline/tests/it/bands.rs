@@ -137,27 +137,9 @@ fn bands_carrying_the_rgb_values_render_the_rgb_image_into_exr_layers() {
     let written = images.write(&base, &tm).unwrap();
     let png = image::open(&written.png).unwrap().to_rgb8();
     assert_eq!(png.dimensions(), (frame.width, frame.height));
-    use exr::prelude::ReadChannels;
-    use exr::prelude::ReadLayers;
-    let exr = exr::prelude::read()
-        .no_deep_data()
-        .largest_resolution_level()
-        .all_channels()
-        .all_layers()
-        .all_attributes()
-        .from_file(&written.exr)
-        .unwrap();
-    let names: Vec<String> = exr
-        .layer_data
-        .iter()
-        .map(|l| l.attributes.layer_name.as_ref().unwrap().to_string())
-        .collect();
-    assert_eq!(names, ["r", "g", "b"]);
-    for (c, layer) in exr.layer_data.iter().enumerate() {
-        let values: Vec<f32> = layer.channel_data.list[0]
-            .sample_data
-            .values_as_f32()
-            .collect();
+    let exr = sylva_render::output::read_exr_layers(&written.exr).unwrap();
+    assert_eq!(exr.names(), ["r", "g", "b"]);
+    for (c, (_, values)) in exr.layers.iter().enumerate() {
         assert_eq!(values.len(), rgb.len());
         assert!(
             values.iter().zip(&rgb).all(|(v, p)| *v == p[c]),
