@@ -37,7 +37,7 @@ pub use photons::{
     MAX_VIEWS,
 };
 pub use report::{budget_json, budget_text, Budget};
-pub use stand::Stand;
+pub use stand::{Stand, Surfaces};
 pub use sylva_grow::stand::{Band, CanopySpec, CrownShape, LeafShape, StandError};
 
 /// Why a budget was refused: one line naming the file or setting and the problem (a bad
@@ -48,6 +48,8 @@ pub enum BudgetError {
     Stand(#[from] StandError),
     #[error(transparent)]
     Memory(#[from] sylva_core::MemoryError),
+    #[error("{scene}: {message}")]
+    Scene { scene: String, message: String },
     #[error("building the stand's kd-trees: {0}")]
     Trace(#[from] sylva_trace::TraceError),
 }

@@ -255,6 +255,13 @@ pub fn trace_budget(
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<Vec<BandBudget>, BudgetError> {
     cfg.validate()?;
+    if let Some(s) = &stand.surfaces {
+        assert_eq!(
+            s.len(),
+            bands.len(),
+            "a scene's surfaces for each of its bands"
+        );
+    }
     if let Some(image) = &cfg.image {
         sylva_core::check_memory(
             "the BRF images",
@@ -276,8 +283,17 @@ pub fn trace_budget(
                     let n = CHUNK.min(cfg.photons - c * CHUNK);
                     let seed = cfg.seed ^ (b as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
                     let mut rng = SplitMix64::for_chunk(seed, c);
-                    let k =
-                        trace_chunk(stand, accel, band, cyclic, cfg, tally.as_ref(), n, &mut rng);
+                    let k = trace_chunk(
+                        stand,
+                        accel,
+                        band,
+                        cyclic,
+                        b,
+                        cfg,
+                        tally.as_ref(),
+                        n,
+                        &mut rng,
+                    );
                     progress(n);
                     k
                 })
@@ -369,6 +385,7 @@ fn trace_chunk(
     accel: &SceneAccel,
     band: &Band,
     cyclic: bool,
+    b: usize,
     cfg: &BudgetConfig,
     image: Option<&ImageTally>,
     n: u64,
@@ -401,11 +418,7 @@ fn trace_chunk(
         }
     };
     let plot = PlotBox::of(stand);
-    let (r, t, rho) = (
-        band.leaf_reflectance,
-        band.leaf_transmittance,
-        band.soil_albedo,
-    );
+    let rho = band.soil_albedo;
     let mut k = Counts {
         brf: vec![0.0; views.len()],
         ..Counts::default()
@@ -426,6 +439,9 @@ fn trace_chunk(
             let ray = Ray::segment(o, d, 0.0, e.end);
             if let Some(hit) = accel.closest_hit(&ray, TraversalConfig::default(), &mut stats) {
                 let p = ray.at(hit.t);
+                let model = stand.instances[hit.instance as usize].model as usize;
+                let material = stand.models[model].mesh.material_ids[hit.triangle as usize];
+                let (r, t) = stand.optics(b, band, model, material as usize);
                 let ng = accel.geometric_normal(&hit);
                 let facing = if ng.dot(d) < 0.0 { ng } else { -ng };
                 k.leaf_events += 1;

@@ -4,7 +4,7 @@
 use crate::lattice::LbRun;
 use crate::photons::{BandBudget, SunAngles};
 use crate::stand::Stand;
-use crate::{Band, CanopySpec};
+use crate::Band;
 use serde::Serialize;
 
 /// The result of `sylva budget`.
@@ -32,10 +32,9 @@ pub struct Budget {
 }
 
 impl Budget {
-    /// The budget of `spec` from the Monte Carlo's `bands` (may be empty) and the lattice's
+    /// The budget of `stand` from the Monte Carlo's `bands` (may be empty) and the lattice's
     /// run (if any).
     pub fn new(
-        spec: &CanopySpec,
         stand: &Stand,
         sun: SunAngles,
         bands: Vec<BandBudget>,
@@ -50,25 +49,21 @@ impl Budget {
         } else {
             bands.iter().map(|b| b.canopy_absorbed.value).collect()
         };
-        let fapar = fapar(&spec.bands, &absorbed);
+        let fapar = fapar(&stand.bands, &absorbed);
         let method = match (bands.is_empty(), lattice.is_some()) {
             (false, false) => "monte-carlo",
             (true, _) => "lattice-boltzmann",
             (false, true) => "both",
         };
         Budget {
-            stand: spec.name.clone(),
+            stand: stand.name.clone(),
             method,
             sun,
-            cyclic: spec.plot.cyclic,
-            plot_m: spec.plot.size,
+            cyclic: stand.cyclic,
+            plot_m: stand.half.map(|h| 2.0 * h),
             lai: stand.lai,
             cover: stand.cover,
-            crowns: if spec.crowns.is_some() {
-                stand.placed
-            } else {
-                0
-            },
+            crowns: stand.crowns,
             triangles: stand.triangles(),
             seconds: bands.iter().map(|b| b.seconds).sum::<f64>()
                 + lattice
@@ -101,7 +96,7 @@ pub fn budget_json(b: &Budget) -> String {
 
 pub fn budget_text(b: &Budget) -> String {
     let mut s = format!(
-        "{}: {} plot {} m × {} m, LAI {:.3}{}, {} leaf triangles; sun zenith {}°, azimuth {}°\n",
+        "{}: {} plot {} m × {} m, LAI {:.3}{}, {} triangles; sun zenith {}°, azimuth {}°\n",
         b.stand,
         if b.cyclic { "cyclic" } else { "isolated" },
         b.plot_m[0],

@@ -2,14 +2,33 @@
 //! and their placements, or the layer) and, in a cyclic plot, the instances reaching over a
 //! side repeated one plot over on the opposite side, so that a ray inside the plot meets every
 //! leaf of the periodic stand there.
+//!
+//! A rendered scene is a stand too ([`Stand::from_scene`]): its trees over its ground's
+//! rectangle, each material with its own mean reflectance and transmittance per band (the
+//! scene's `[bands]`, else its red, green and blue channels).
 
-use crate::BudgetError;
+use crate::{Band, BudgetError};
 use glam::Vec3;
-use sylva_geom::{Instance, Model};
+use sylva_geom::{Instance, LeafOptics, MaterialKind, Model, Scene};
 use sylva_grow::stand::{placements, top, unit_count, unit_model, CanopySpec};
+
+/// One band's surfaces: per model, per material, the mean reflectance and transmittance.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Surfaces(pub Vec<Vec<[f64; 2]>>);
 
 /// The leaves of a canopy, ready to trace.
 pub struct Stand {
+    /// The stand's or the scene's name.
+    pub name: String,
+    /// Light leaving a side re-enters on the opposite one.
+    pub cyclic: bool,
+    /// The bands the budget is made in.
+    pub bands: Vec<Band>,
+    /// Per band, each material's own optics (a scene's); `None`: every leaf has its band's
+    /// `leaf_reflectance` and `leaf_transmittance` (an abstract stand's).
+    pub surfaces: Option<Vec<Surfaces>>,
+    /// Crowns placed (crown stands; 0 otherwise).
+    pub crowns: usize,
     pub models: Vec<Model>,
     /// The crowns (or the layer) inside the plot, then their repeats over the sides.
     pub instances: Vec<Instance>,
@@ -70,6 +89,11 @@ impl Stand {
             }
         }
         Ok(Stand {
+            name: spec.name.clone(),
+            cyclic: spec.plot.cyclic,
+            bands: spec.bands.clone(),
+            surfaces: None,
+            crowns: if spec.crowns.is_some() { placed } else { 0 },
             models,
             instances,
             placed,
@@ -80,10 +104,226 @@ impl Stand {
         })
     }
 
+    /// A rendered scene as a stand: its instances over its ground's rectangle (or, without
+    /// a ground, the rectangle about the origin that holds every instance, over a black
+    /// soil), each material's mean reflectance and transmittance per band from its optics
+    /// formed for `leaf_optics`. The bands are the scene's `[bands]` (the blue, green, red
+    /// and par bands count towards fAPAR), else its linear red, green and blue channels (all
+    /// three in the PAR range). In a `cyclic` plot the instances reaching over a side are
+    /// repeated one plot over.
+    pub fn from_scene(
+        scene: &Scene,
+        leaf_optics: LeafOptics,
+        cyclic: bool,
+    ) -> Result<Stand, BudgetError> {
+        let bad = |message: String| BudgetError::Scene {
+            scene: scene.origin.clone(),
+            message,
+        };
+        if !scene.media.is_empty() {
+            return Err(bad(
+                "participating media (clouds) are not part of a canopy's budget".into(),
+            ));
+        }
+        if scene.instances.is_empty() {
+            return Err(bad("no instances: nothing to intercept the light".into()));
+        }
+        let bounds: Vec<_> = scene
+            .instances
+            .iter()
+            .map(|i| i.world_bounds(&scene.models[i.model as usize]))
+            .collect();
+        let top = bounds.iter().map(|b| b.max.y).fold(f32::MIN, f32::max) as f64;
+        if !(top > 0.0 && top.is_finite()) {
+            return Err(bad(format!(
+                "its plants reach {top} m: nothing stands above the soil (y = 0)"
+            )));
+        }
+        let half = match scene.ground_half_extents() {
+            Some([hx, hz]) => [hx as f64, hz as f64],
+            None => {
+                let reach = |f: &dyn Fn(&sylva_geom::Aabb) -> f32| {
+                    bounds.iter().map(f).fold(0.0f32, f32::max) as f64
+                };
+                [
+                    reach(&|b| b.min.x.abs().max(b.max.x.abs())),
+                    reach(&|b| b.min.z.abs().max(b.max.z.abs())),
+                ]
+            }
+        };
+        if !(half[0] > 0.0 && half[1] > 0.0) {
+            return Err(bad(format!(
+                "its plot is {} m × {} m: it needs an area",
+                2.0 * half[0],
+                2.0 * half[1]
+            )));
+        }
+        let (bands, surfaces) = scene_bands(scene, leaf_optics).map_err(bad)?;
+        let placed = scene.instances.len();
+        let mut instances = scene.instances.clone();
+        if cyclic {
+            let [sx, sz] = [2.0 * half[0], 2.0 * half[1]];
+            for (k, b) in bounds.iter().enumerate() {
+                for ox in [-1.0, 0.0, 1.0] {
+                    for oz in [-1.0, 0.0, 1.0] {
+                        let (dx, dz) = (ox * sx, oz * sz);
+                        let reaches = (b.min.x as f64 + dx) < half[0]
+                            && (b.max.x as f64 + dx) > -half[0]
+                            && (b.min.z as f64 + dz) < half[1]
+                            && (b.max.z as f64 + dz) > -half[1];
+                        if (ox != 0.0 || oz != 0.0) && reaches {
+                            let inst = scene.instances[k];
+                            instances.push(Instance {
+                                position: inst.position + Vec3::new(dx as f32, 0.0, dz as f32),
+                                ..inst
+                            });
+                        }
+                    }
+                }
+            }
+        }
+        // One-sided leaf area: each leaf triangle's area, scaled, times the share of its
+        // texture that is leaf (the rest is cut away by the alpha test).
+        let leaf_area: Vec<f64> = scene
+            .models
+            .iter()
+            .map(|m| {
+                let opaque: Vec<f64> = m
+                    .materials
+                    .iter()
+                    .map(|mat| match (&mat.kind, &mat.texture) {
+                        (MaterialKind::Leaf, Some(t)) => t.opaque_fraction(),
+                        (MaterialKind::Leaf, None) => 1.0,
+                        _ => 0.0,
+                    })
+                    .collect();
+                m.mesh
+                    .indices
+                    .iter()
+                    .zip(&m.mesh.material_ids)
+                    .map(|(t, &mat)| {
+                        let p = |k: usize| Vec3::from_array(m.mesh.positions[t[k] as usize]);
+                        let area = 0.5 * (p(1) - p(0)).cross(p(2) - p(0)).length() as f64;
+                        area * opaque.get(mat as usize).copied().unwrap_or(0.0)
+                    })
+                    .sum()
+            })
+            .collect();
+        let area: f64 = scene
+            .instances
+            .iter()
+            .map(|i| leaf_area[i.model as usize] * f64::from(i.scale).powi(2))
+            .sum();
+        Ok(Stand {
+            name: scene.name.clone(),
+            cyclic,
+            bands,
+            surfaces: Some(surfaces),
+            crowns: 0,
+            models: scene.models.clone(),
+            instances,
+            placed,
+            half,
+            top: top + 1e-3 * top.max(1.0),
+            lai: area / (4.0 * half[0] * half[1]),
+            cover: None,
+        })
+    }
+
+    /// Reflectance and transmittance of material `material` of model `model` in band `b`
+    /// (`band`, whose leaf optics an abstract stand's leaves all have).
+    #[inline]
+    pub fn optics(&self, b: usize, band: &Band, model: usize, material: usize) -> (f64, f64) {
+        match &self.surfaces {
+            None => (band.leaf_reflectance, band.leaf_transmittance),
+            Some(s) => {
+                let [r, t] = s[b].0[model][material];
+                (r, t)
+            }
+        }
+    }
+
     /// Leaf triangles of the distinct models.
     pub fn triangles(&self) -> usize {
         self.models.iter().map(Model::triangle_count).sum()
     }
+}
+
+/// A scene's bands and each band's surfaces: channel `c` of a scene whose optics are formed
+/// holds, per material, the mean colour times the reflectance and transmittance factors.
+fn scene_bands(
+    scene: &Scene,
+    leaf_optics: LeafOptics,
+) -> Result<(Vec<Band>, Vec<Surfaces>), String> {
+    let channels = |s: &Scene| -> [Surfaces; 3] {
+        std::array::from_fn(|c| {
+            Surfaces(
+                s.models
+                    .iter()
+                    .map(|m| {
+                        m.materials
+                            .iter()
+                            .map(|mat| {
+                                let mean = f64::from(mat.mean_colour()[c]);
+                                [
+                                    (mean * f64::from(mat.optics.reflect[c])).clamp(0.0, 1.0),
+                                    (mean * f64::from(mat.optics.transmit[c])).clamp(0.0, 1.0),
+                                ]
+                            })
+                            .collect()
+                    })
+                    .collect(),
+            )
+        })
+    };
+    let soil = |s: &Scene, c: usize| {
+        if s.ground.enabled {
+            f64::from(s.ground.color[c]).clamp(0.0, 1.0)
+        } else {
+            0.0
+        }
+    };
+    let band = |name: &str, soil: f64, par: bool| Band {
+        name: name.to_string(),
+        // Unused: a scene's leaves differ by material, and `Stand::surfaces` holds each.
+        leaf_reflectance: 0.0,
+        leaf_transmittance: 0.0,
+        soil_albedo: soil,
+        par,
+        weight: 1.0,
+    };
+    let Some(bands) = &scene.bands else {
+        let mut s = scene.clone();
+        s.set_leaf_optics(leaf_optics)?;
+        let surfaces = channels(&s);
+        let names = ["red", "green", "blue"];
+        let bands = (0..3).map(|c| band(names[c], soil(&s, c), true)).collect();
+        return Ok((bands, surfaces.into()));
+    };
+    if leaf_optics != LeafOptics::Measured {
+        return Err(
+            "[bands] give each band's leaf reflectance and transmittance: the leaf optics must be measured (the default)"
+                .into(),
+        );
+    }
+    let mut out: Vec<Option<(Band, Surfaces)>> = vec![None; bands.len()];
+    for g in 0..bands.groups() {
+        let mut s = scene.clone();
+        s.apply_band_group(g)?;
+        s.set_leaf_optics(LeafOptics::Measured)?;
+        let surfaces = channels(&s);
+        for (c, b) in bands.group(g).into_iter().enumerate() {
+            if out[b].is_none() {
+                let name = &bands.names[b];
+                let par = ["blue", "green", "red", "par"].contains(&name.to_lowercase().as_str());
+                out[b] = Some((band(name, soil(&s, c), par), surfaces[c].clone()));
+            }
+        }
+    }
+    Ok(out
+        .into_iter()
+        .map(|b| b.expect("every band in a group"))
+        .unzip())
 }
 
 #[cfg(test)]

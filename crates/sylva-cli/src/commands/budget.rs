@@ -24,15 +24,27 @@ pub enum Method {
 #[derive(clap::Args)]
 pub struct BudgetArgs {
     /// A canopy file (TOML: `[plot]`, `[crowns]` or `[layer]`, `[leaves]`, `[[bands]]`;
-    /// docs/budget.md) or a built-in stand: `crowns` (spheres of crown LAI 5 at cover 0.3 over
-    /// 100 m × 100 m) or `layer` (a homogeneous layer of LAI 3).
+    /// docs/budget.md), a built-in stand: `crowns` (spheres of crown LAI 5 at cover 0.3 over
+    /// 100 m × 100 m) or `layer` (a homogeneous layer of LAI 3), or a scene (a file, or a
+    /// built-in one such as `demo`): its trees over its ground, each material with its own
+    /// leaf optics, in its bands or its red, green and blue channels.
     canopy: String,
-    /// The sun's zenith angle, degrees from the vertical (0 to below 90).
-    #[arg(long, default_value_t = 30.0, allow_hyphen_values = true)]
-    sun_zenith: f64,
-    /// The sun's azimuth, degrees from +x towards +z (as a scene's `[sun]`).
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-    sun_azimuth: f64,
+    /// The sun's zenith angle, degrees from the vertical (0 to below 90). Default: 30 for a
+    /// stand, a scene's own sun for a scene.
+    #[arg(long, allow_hyphen_values = true)]
+    sun_zenith: Option<f64>,
+    /// The sun's azimuth, degrees from +x towards +z (as a scene's `[sun]`). Default: 0 for
+    /// a stand, a scene's own sun for a scene.
+    #[arg(long, allow_hyphen_values = true)]
+    sun_azimuth: Option<f64>,
+    /// A scene's plot made cyclic: light leaving a side re-enters on the opposite one, so
+    /// the scene stands for an endless forest (a canopy file says it in `[plot] cyclic`).
+    #[arg(long)]
+    cyclic: bool,
+    /// A scene's leaf optics (docs/light.md, "Leaf optics"): `measured` (the default) or
+    /// `texture`.
+    #[arg(long, value_enum)]
+    leaf_optics: Option<super::render::LeafOpticsArg>,
     /// Photons per band (the standard error of a fraction falls as 1/√photons).
     #[arg(long, default_value_t = 1_000_000)]
     photons: u64,
@@ -139,30 +151,111 @@ pub fn bench(a: BenchBudgetArgs) -> Result<()> {
     super::output::print_report(&b, a.json)
 }
 
+/// What `sylva budget` was given.
+enum Subject {
+    /// An abstract stand: a built-in one or a canopy file.
+    Stand(CanopySpec),
+    /// A rendered scene: a built-in one or a scene file.
+    Scene(Box<sylva_geom::Scene>),
+}
+
+/// A built-in stand, a canopy file (one with `[crowns]` or `[layer]`), or else a scene.
+fn subject(name: &str) -> Result<Subject> {
+    if CanopySpec::builtin(name).is_some() {
+        return Ok(Subject::Stand(CanopySpec::find(name, None)?));
+    }
+    let path = std::path::Path::new(name);
+    if path.is_file() {
+        let text = sylva_core::read_text_file(path, 16 << 20, "canopy or scene file")?;
+        let canopy = text
+            .parse::<toml::Table>()
+            .is_ok_and(|t| t.contains_key("crowns") || t.contains_key("layer"));
+        if canopy {
+            return Ok(Subject::Stand(CanopySpec::load(path)?));
+        }
+    }
+    match sylva_pipeline::load_scene(name, None) {
+        Ok(scene) => Ok(Subject::Scene(Box::new(scene))),
+        Err(sylva_pipeline::PipelineError::Scene(sylva_scene::SceneError::NotFound(_))) => {
+            anyhow::bail!(
+                "{name}: no such canopy or scene file, and not a built-in stand ({}) or scene ({})",
+                CanopySpec::BUILTIN.join(", "),
+                sylva_scene::builtin_scenes::NAMES.join(", ")
+            )
+        }
+        Err(e) => Err(e.into()),
+    }
+}
+
 pub fn run(a: BudgetArgs) -> Result<()> {
-    let spec = CanopySpec::find(&a.canopy, None)?;
+    // The views first: a bad one is refused before a scene is built.
+    let views = a
+        .brf
+        .iter()
+        .map(|v| ViewAngles::parse_view(v))
+        .collect::<Result<Vec<_>, _>>()?;
+    let image = a
+        .brf_image
+        .as_deref()
+        .map(|v| {
+            ViewAngles::parse_view(v).map(|view| BrfImageSpec {
+                view,
+                side: a.brf_image_size,
+            })
+        })
+        .transpose()?;
+    if let Some(image) = &image {
+        image.validate()?;
+    }
+    let subject = subject(&a.canopy)?;
+    let (spec, scene) = match subject {
+        Subject::Stand(spec) => {
+            if a.cyclic {
+                anyhow::bail!(
+                    "--cyclic is for scenes: {} says it in its [plot] (cyclic = true, the default)",
+                    spec.name
+                );
+            }
+            if a.leaf_optics.is_some() {
+                anyhow::bail!(
+                    "--leaf-optics is for scenes: {}'s leaves take their bands' leaf_reflectance and leaf_transmittance",
+                    spec.name
+                );
+            }
+            (Some(spec), None)
+        }
+        Subject::Scene(scene) => {
+            if a.method != Method::Mc {
+                anyhow::bail!(
+                    "{}: the lattice budget is for abstract stands (crowns, layers, canopy files); a scene's budget comes from the photons (--method mc, the default)",
+                    scene.origin
+                );
+            }
+            (None, Some(scene))
+        }
+    };
+    // A scene's sun to a nanodegree: its angles come back from a direction vector.
+    let nano = |deg: f64| (deg * 1e9).round() / 1e9;
+    let sun = match &scene {
+        Some(scene) => SunAngles {
+            zenith_deg: a
+                .sun_zenith
+                .unwrap_or(nano(90.0 - scene.sun.elevation_deg())),
+            azimuth_deg: a
+                .sun_azimuth
+                .unwrap_or(nano(scene.sun.azimuth_deg().rem_euclid(360.0))),
+        },
+        None => SunAngles {
+            zenith_deg: a.sun_zenith.unwrap_or(30.0),
+            azimuth_deg: a.sun_azimuth.unwrap_or(0.0),
+        },
+    };
     let cfg = BudgetConfig {
         photons: a.photons,
         seed: a.seed,
-        sun: SunAngles {
-            zenith_deg: a.sun_zenith,
-            azimuth_deg: a.sun_azimuth,
-        },
-        views: a
-            .brf
-            .iter()
-            .map(|v| ViewAngles::parse_view(v))
-            .collect::<Result<_, _>>()?,
-        image: a
-            .brf_image
-            .as_deref()
-            .map(|v| {
-                ViewAngles::parse_view(v).map(|view| BrfImageSpec {
-                    view,
-                    side: a.brf_image_size,
-                })
-            })
-            .transpose()?,
+        sun,
+        views,
+        image,
     };
     cfg.validate()?;
     if a.method == Method::Lb && (!cfg.views.is_empty() || cfg.image.is_some()) {
@@ -179,30 +272,35 @@ pub fn run(a: BudgetArgs) -> Result<()> {
     if a.method != Method::Mc {
         lb_cfg.validate()?;
     }
+    let quiet = a.json || a.out.is_some();
+    let t0 = std::time::Instant::now();
+    let stand = match (&spec, &scene) {
+        (Some(spec), _) => Stand::build(spec)?,
+        (None, Some(scene)) => {
+            Stand::from_scene(scene, a.leaf_optics.unwrap_or_default().into(), a.cyclic)?
+        }
+        (None, None) => unreachable!("a stand or a scene"),
+    };
+    drop(scene);
     // The image's files are checked before the long work.
     let image_files = match cfg.image {
         Some(_) => {
-            let names: Vec<&str> = spec.bands.iter().map(|b| b.name.as_str()).collect();
+            let names: Vec<&str> = stand.bands.iter().map(|b| b.name.as_str()).collect();
             Some(BrfImageFiles::plan(&a.brf_image_out, &names)?)
         }
         None => None,
     };
-    let quiet = a.json || a.out.is_some();
-    let t0 = std::time::Instant::now();
-    let stand = Stand::build(&spec)?;
     let accel = sylva_trace::SceneAccel::from_parts(&stand.models, &stand.instances, None)
         .context("building the stand's kd-trees")?;
     let build_seconds = t0.elapsed().as_secs_f64();
-    let lattice = if a.method == Method::Mc {
-        None
-    } else {
+    let lattice = if let (Some(spec), true) = (&spec, a.method != Method::Mc) {
         let spinner = if quiet {
             indicatif::ProgressBar::hidden()
         } else {
             indicatif::ProgressBar::new_spinner()
         };
         let run = lb_budget(
-            &spec,
+            spec,
             &stand,
             &accel,
             cfg.sun,
@@ -218,16 +316,18 @@ pub fn run(a: BudgetArgs) -> Result<()> {
         )?;
         spinner.finish_and_clear();
         Some(run)
+    } else {
+        None
     };
     let bands = if a.method == Method::Lb {
         Vec::new()
     } else {
         let bar = bench_bar(
             quiet,
-            (a.photons * spec.bands.len() as u64) as usize,
+            (a.photons * stand.bands.len() as u64) as usize,
             "photons",
         );
-        let bands = trace_budget(&stand, &accel, &spec.bands, spec.plot.cyclic, &cfg, &|n| {
+        let bands = trace_budget(&stand, &accel, &stand.bands, stand.cyclic, &cfg, &|n| {
             bar.inc(n)
         })?;
         bar.finish_and_clear();
@@ -242,7 +342,7 @@ pub fn run(a: BudgetArgs) -> Result<()> {
         Some(files) => Some(files.write(&images.iter().map(|(_, i)| i).collect::<Vec<_>>())?),
         None => None,
     };
-    let budget = Budget::new(&spec, &stand, cfg.sun, bands, lattice, build_seconds);
+    let budget = Budget::new(&stand, cfg.sun, bands, lattice, build_seconds);
     let text = if a.json {
         format!("{}\n", budget_json(&budget))
     } else {

@@ -191,6 +191,103 @@ fn the_brf_image_is_written_as_an_exr_of_the_bands_and_a_png_each() {
 }
 
 #[test]
+fn a_scene_holding_a_stand_gets_the_stand_s_budget() {
+    // The same crowns twice: as a canopy file, and as a scene whose [stand] places them over
+    // a ground of the plot's size, its [bands] giving the leaves' and the soil's optics. The
+    // scene's budget (each material's optics, the ground as the soil, --cyclic) must be the
+    // stand's, which reads its bands directly.
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("grove.toml"),
+        "name = \"grove\"\n[plot]\nsize = [12.0, 12.0]\n[crowns]\nradius = 1.5\ncentre_height = 3.0\nlai = 3.0\ncover = 0.3\n[leaves]\nsize = 0.15\n\n[[bands]]\nname = \"red\"\nleaf_reflectance = 0.07\nleaf_transmittance = 0.06\nsoil_albedo = 0.12\npar = true\n\n[[bands]]\nname = \"nir\"\nleaf_reflectance = 0.45\nleaf_transmittance = 0.4\nsoil_albedo = 0.3\n",
+    )
+    .unwrap();
+    let scene = dir.path().join("grove-scene.toml");
+    std::fs::write(
+        &scene,
+        "[stand]\ncanopy = \"grove.toml\"\n[ground]\nsize = [12.0, 12.0]\n[sun]\nelevation = 55.0\nazimuth = 20.0\n\
+         [bands]\nnames = [\"red\", \"nir\"]\nleaf_reflectance = [0.07, 0.45]\nleaf_transmittance = [0.06, 0.4]\n\
+         bark = [0.1, 0.3]\nsoil = [0.12, 0.3]\nsky = [0.5, 0.2]\n",
+    )
+    .unwrap();
+    let budget = |args: &[&str]| -> serde_json::Value {
+        let mut all = vec!["budget", "--photons", "100000", "--json"];
+        all.extend(args);
+        let (ok, out, err) = sylva(&all);
+        assert!(ok, "{err}");
+        serde_json::from_str(&out).unwrap()
+    };
+    let stand = budget(&[
+        dir.path().join("grove.toml").to_str().unwrap(),
+        "--sun-zenith",
+        "35",
+        "--sun-azimuth",
+        "20",
+    ]);
+    // The scene's own sun (elevation 55°) is the stand's zenith 35°.
+    let from_scene = budget(&[scene.to_str().unwrap(), "--cyclic"]);
+    assert_eq!(from_scene["sun"]["azimuth_deg"], 20.0);
+    assert!((from_scene["sun"]["zenith_deg"].as_f64().unwrap() - 35.0).abs() < 1e-9);
+    assert_eq!(from_scene["cyclic"], true);
+    let lai = |b: &serde_json::Value| b["lai"].as_f64().unwrap();
+    assert!(
+        (lai(&stand) - lai(&from_scene)).abs() < 1e-3 * lai(&stand),
+        "LAI {} against {}",
+        lai(&from_scene),
+        lai(&stand)
+    );
+    for k in 0..2 {
+        let (a, b) = (&stand["bands"][k], &from_scene["bands"][k]);
+        assert_eq!(a["band"], b["band"]);
+        for fate in [
+            "canopy_absorbed",
+            "reflected",
+            "soil_absorbed",
+            "ground_direct",
+        ] {
+            let (x, y) = (&a[fate], &b[fate]);
+            let v = |f: &serde_json::Value, k: &str| f[k].as_f64().unwrap();
+            let se = v(x, "std_error").hypot(v(y, "std_error"));
+            assert!(
+                (v(x, "value") - v(y, "value")).abs() < 4.0 * se + 1e-4,
+                "{} {fate}: scene {} against the stand's {} (± {se})",
+                a["band"],
+                v(y, "value"),
+                v(x, "value")
+            );
+        }
+    }
+    // An isolated scene (the default) loses light through its sides; the lattice and a
+    // stand's --cyclic are refused.
+    let isolated = budget(&[scene.to_str().unwrap()]);
+    assert!(isolated["bands"][0]["side_lost"]["value"].as_f64().unwrap() > 0.05);
+    for (args, says) in [
+        (
+            vec![scene.to_str().unwrap(), "--method", "both"],
+            "abstract stands",
+        ),
+        (vec!["layer", "--cyclic"], "--cyclic is for scenes"),
+        (
+            vec!["layer", "--leaf-optics", "texture"],
+            "--leaf-optics is for scenes",
+        ),
+        (vec!["cloud"], "participating media"),
+        (
+            vec!["no-such-scene"],
+            "not a built-in stand (crowns, layer) or scene (demo",
+        ),
+    ] {
+        let mut all = vec!["budget", "--photons", "20000"];
+        all.extend(args);
+        let (ok, _, err) = sylva(&all);
+        assert!(
+            !ok && err.contains(says) && err.trim().lines().count() == 1,
+            "{err}"
+        );
+    }
+}
+
+#[test]
 fn the_lattice_budget_balances_and_stands_beside_the_photons() {
     // `--method both` on a small cyclic stand: the lattice's fractions balance, agree with the
     // photons' and the text shows their differences; `--method lb` refuses an isolated plot.
