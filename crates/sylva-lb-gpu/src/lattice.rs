@@ -140,6 +140,9 @@ fn validate_options(o: &SolveOptions) -> Result<(), SolveError> {
     if o.max_steps == 0 {
         return Err(SolveError::Steps);
     }
+    if o.extrapolate {
+        return Err(SolveError::ExtrapolateOnGpu);
+    }
     if let Some(t) = o.tolerance {
         if !(t.is_finite() && t > 0.0) {
             return Err(SolveError::Tolerance(t));

@@ -81,6 +81,7 @@ impl LbSolver for GpuSolver {
         let opts = SolveOptions {
             max_steps: steps,
             tolerance: None,
+            extrapolate: false,
         };
         let mut runs = Vec::with_capacity(repeats);
         {

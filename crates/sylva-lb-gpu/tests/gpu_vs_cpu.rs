@@ -90,6 +90,7 @@ fn three_colours_agree_with_the_cpu_on_green_brown_and_empty_sites() {
     let opts = SolveOptions {
         max_steps: 24,
         tolerance: None,
+        extrapolate: false,
     };
     for brown_rule in [true, false] {
         let medium = anisotropic_medium(brown_rule);
@@ -140,6 +141,7 @@ fn per_colour_boundaries_and_bark_parameters_agree_with_the_cpu() {
     let opts = SolveOptions {
         max_steps: 20,
         tolerance: None,
+        extrapolate: false,
     };
     let medium = MediumParams {
         brown: Some([0.2, 0.15, 0.1].map(|s| ColourParams {
@@ -259,11 +261,13 @@ fn a_volume_source_agrees_with_the_cpu() {
         .map(|n| SolveOptions {
             max_steps: n,
             tolerance: None,
+            extrapolate: false,
         })
         .into_iter()
         .chain([SolveOptions {
             max_steps: 400,
             tolerance: Some(1e-4),
+            extrapolate: false,
         }])
     {
         let (cpu, cpu_reports) = sylva_lb::solve_lighting_rgb(
@@ -287,6 +291,7 @@ fn a_volume_source_agrees_with_the_cpu() {
     let opts = SolveOptions {
         max_steps: 17,
         tolerance: None,
+        extrapolate: false,
     };
     let (with, _) = on_gpu(Some(&source), &opts);
     let (without, _) = on_gpu(None, &opts);
@@ -319,6 +324,7 @@ fn every_step_count_maps_onto_the_cpu_state() {
             let opts = SolveOptions {
                 max_steps: steps,
                 tolerance: None,
+                extrapolate: false,
             };
             let mut cpu_residuals = Vec::new();
             let mut gpu_residuals = Vec::new();
@@ -355,6 +361,7 @@ fn tolerance_stops_after_the_same_step_as_the_cpu() {
     let opts = SolveOptions {
         max_steps: 400,
         tolerance: Some(1e-3),
+        extrapolate: false,
     };
     let mut cpu = Lattice::new(&grid, &medium, 0, sun()).unwrap();
     let mut gpu = GpuLattice::new(&ctx, &grid, &medium, 0, sun(), Precision::F32).unwrap();
@@ -388,6 +395,7 @@ fn a_state_split_over_many_bindings_gives_the_same_result() {
             &SolveOptions {
                 max_steps: 9,
                 tolerance: None,
+                extrapolate: false,
             },
             &mut |_, _| {},
         )
@@ -405,6 +413,7 @@ fn a_state_split_over_many_bindings_gives_the_same_result() {
         &SolveOptions {
             max_steps: 9,
             tolerance: None,
+            extrapolate: false,
         },
         &mut |_, _| {},
     )
@@ -446,6 +455,7 @@ fn a_grid_larger_than_one_binding_agrees_with_the_cpu() {
     let opts = SolveOptions {
         max_steps: 4,
         tolerance: None,
+        extrapolate: false,
     };
     let mut gpu = GpuLattice::new(&ctx, &grid, &medium, 0, sun(), Precision::F32).unwrap();
     let binding = ctx.limits().max_storage_buffer_binding_size as f64;
@@ -553,10 +563,12 @@ fn bad_input_is_refused() {
         SolveOptions {
             max_steps: 0,
             tolerance: None,
+            extrapolate: false,
         },
         SolveOptions {
             max_steps: 5,
             tolerance: Some(f64::NAN),
+            extrapolate: false,
         },
     ] {
         let e = lat.run(&opts, &mut |_, _| {}).unwrap_err();
@@ -586,6 +598,7 @@ fn backends_behind_the_trait_agree_and_name_themselves() {
     let opts = SolveOptions {
         max_steps: 16,
         tolerance: None,
+        extrapolate: false,
     };
     let solvers: [&dyn LbSolver; 2] = [&*cpu.solver, &gpu];
     let [(a, _), (b, _)] = solvers.map(|s| {
@@ -600,11 +613,23 @@ fn backends_behind_the_trait_agree_and_name_themselves() {
     let bad = SolveOptions {
         max_steps: 0,
         tolerance: None,
+        extrapolate: false,
     };
     let e = gpu
         .solve_lighting(&grid, &medium, sun(), &bad, &mut |_, _, _| {})
         .unwrap_err();
     assert!(matches!(e, LbSolverError::Solve(_)), "{e}");
+    // Extrapolated solves are the CPU solver's alone: refused, not run plain.
+    let e = gpu
+        .solve_lighting(
+            &grid,
+            &medium,
+            sun(),
+            &SolveOptions::extrapolated(dims),
+            &mut |_, _, _| {},
+        )
+        .unwrap_err();
+    assert!(e.to_string().contains("CPU solver only"), "{e}");
     let mut last = 0;
     let bench = gpu
         .benchmark(&grid, &medium, sun(), 4, 2, &mut |s| last = s)

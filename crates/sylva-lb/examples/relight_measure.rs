@@ -7,7 +7,8 @@
 //! ```
 //!
 //! The basis set is solved and written to the second path, or read from it when it exists
-//! (`--solve` solves again; `--tolerance T` adds a convergence stop, and B_0 is then solved).
+//! (`--solve` solves again; `--tolerance T` adds a convergence stop, and B_0 is then solved;
+//! `--extrapolate` solves with `SolveOptions::extrapolated`).
 //! `--steps-study` prints how far fewer steps are from the full schedule. Options: `--preset NAME` (default leaf), `--threads N`,
 //! `--points N` (lookups per sun for the error, default 200000), `--suns N` (default 24),
 //! `--precision f16|f32|packed` (stored values; PCA alone stays f16 with packed),
@@ -36,6 +37,7 @@ struct Args {
     precision: Precision,
     steps_study: bool,
     tolerance: Option<f64>,
+    extrapolate: bool,
 }
 
 fn parse() -> Result<Args, String> {
@@ -54,6 +56,7 @@ fn parse() -> Result<Args, String> {
         precision: Precision::F16,
         steps_study: false,
         tolerance: None,
+        extrapolate: false,
     };
     while let Some(a) = it.next() {
         let mut value = |name: &str| it.next().ok_or(format!("{name} needs a value"));
@@ -71,6 +74,7 @@ fn parse() -> Result<Args, String> {
             "--only" => args.only = Some(value("--only")?),
             "--solve" => args.solve = true,
             "--steps-study" => args.steps_study = true,
+            "--extrapolate" => args.extrapolate = true,
             "--tolerance" => {
                 let v = value("--tolerance")?;
                 args.tolerance = Some(
@@ -184,6 +188,7 @@ fn steps_study(
             let opts = sylva_lb::SolveOptions {
                 max_steps: chunk,
                 tolerance: None,
+                extrapolate: false,
             };
             let r = lat.run(&opts, &mut |_, _| {})?;
             let totals = lat.site_totals();
@@ -219,6 +224,9 @@ fn solve(
     medium: &sylva_lb::MediumParams,
 ) -> Result<BasisSet, Box<dyn std::error::Error + Send + Sync>> {
     let mut options = BasisOptions::papers(grid.dims);
+    if args.extrapolate {
+        options.solve = sylva_lb::SolveOptions::extrapolated(grid.dims);
+    }
     options.solve.tolerance = args.tolerance;
     if args.tolerance.is_some() {
         // Each solve stops on its own: B_0 is then solved, not summed (linearity is only

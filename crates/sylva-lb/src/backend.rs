@@ -250,6 +250,7 @@ impl LbSolver for CpuKernelSolver {
         let opts = SolveOptions {
             max_steps: steps,
             tolerance: None,
+            extrapolate: false,
         };
         let mut lattice = Lattice::new(grid, medium, 0, boundary)?;
         lattice.set_kernel(self.kernel);
@@ -375,6 +376,7 @@ mod tests {
         let bad = SolveOptions {
             max_steps: 0,
             tolerance: None,
+            extrapolate: false,
         };
         let e = solver
             .solve_lighting(&grid, &medium, boundary, &bad, &mut |_, _, _| {})

@@ -267,6 +267,7 @@ mod tests {
         let opts = SolveOptions {
             max_steps: 5,
             tolerance: None,
+            extrapolate: false,
         };
         let b = solve(
             &CpuSolver,

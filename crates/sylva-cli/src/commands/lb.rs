@@ -124,6 +124,11 @@ pub struct SolveArgs {
     /// Stop once the relative change of total density per step is below this.
     #[arg(long)]
     tolerance: Option<f64>,
+    /// Extrapolate along the solve's slowest mode (CPU only): 1.5 × the longest edge steps
+    /// by default, three quarters of the papers' work, ending 4-8× closer to the steady state
+    /// than as many plain steps (docs/lb.md, "Extrapolated solves").
+    #[arg(long)]
+    extrapolate: bool,
     /// Boundary intensity of the sun.
     #[arg(long, default_value_t = 1.0)]
     intensity: f64,
@@ -229,7 +234,17 @@ fn solve(a: SolveArgs) -> Result<()> {
     let (grid, name) = load_source(&a, scene.as_ref())?;
     let dims = grid.dims;
     let load_s = t0.elapsed().as_secs_f64();
-    let opts = SolveOptions::for_run(a.steps, a.tolerance, dims);
+    let opts = if a.extrapolate {
+        SolveOptions {
+            max_steps: a
+                .steps
+                .unwrap_or(SolveOptions::extrapolated(dims).max_steps),
+            tolerance: a.tolerance,
+            extrapolate: true,
+        }
+    } else {
+        SolveOptions::for_run(a.steps, a.tolerance, dims)
+    };
     let output = a
         .output
         .clone()

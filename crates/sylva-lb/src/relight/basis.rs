@@ -736,6 +736,7 @@ pub fn parse_basis_metadata<'a>(
         solve: SolveOptions {
             max_steps,
             tolerance,
+            extrapolate: false,
         },
         ambient,
     };

@@ -58,6 +58,7 @@ fn opts(dims: Dims) -> SolveOptions {
     SolveOptions {
         max_steps: 8 * dims.longest_edge(),
         tolerance: None,
+        extrapolate: false,
     }
 }
 

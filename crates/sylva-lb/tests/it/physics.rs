@@ -439,6 +439,7 @@ fn steady_state_balances_inflow_against_absorption_and_outflow() {
                     &SolveOptions {
                         max_steps: 5000,
                         tolerance: Some(1e-9),
+                        extrapolate: false,
                     },
                     &mut |_, _| {},
                 )
@@ -465,6 +466,7 @@ fn same_result_on_one_and_two_threads() {
     let opts = SolveOptions {
         max_steps: 40,
         tolerance: None,
+        extrapolate: false,
     };
     let run = |threads| {
         rayon::ThreadPoolBuilder::new()
@@ -483,6 +485,56 @@ fn same_result_on_one_and_two_threads() {
 }
 
 #[test]
+fn extrapolated_solves_approach_the_same_steady_state_faster() {
+    // A crown of leaves lit by the sun: the steady state from a long plain run, then the
+    // extrapolated schedule (1.5 × the longest edge) against as many plain steps and the
+    // papers' 2 ×. Extrapolation must land several times closer than the plain steps it
+    // took, near the papers' end point, with the same bits on any thread count.
+    let dims = Dims::cube(32).unwrap();
+    let grid = Shape::Crown.grid(dims);
+    let m = Preset::Leaf.params();
+    let sun = Boundary::sun([0.3, -0.9, 0.3], 1.0);
+    let solve = |opts: SolveOptions, threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| {
+                let mut lat = Lattice::new(&grid, &m, 1, sun).unwrap();
+                let report = lat.run(&opts, &mut |_, _| {}).unwrap();
+                (lat.site_totals(), report.steps)
+            })
+    };
+    let plain = |steps| SolveOptions {
+        max_steps: steps,
+        tolerance: None,
+        extrapolate: false,
+    };
+    let (steady, _) = solve(plain(32 * 32), 2);
+    let medium: Vec<usize> = (0..dims.sites())
+        .filter(|&i| grid.density[i] > 0.0)
+        .collect();
+    let error = |f: &[f32]| {
+        let d: f64 = medium
+            .iter()
+            .map(|&i| ((f[i] - steady[i]) as f64).powi(2))
+            .sum();
+        let n: f64 = medium.iter().map(|&i| (steady[i] as f64).powi(2)).sum();
+        (d / n).sqrt()
+    };
+    let (x, steps) = solve(SolveOptions::extrapolated(dims), 2);
+    assert_eq!(steps, 48);
+    let (same_steps, _) = solve(plain(48), 2);
+    let (papers, _) = solve(SolveOptions::papers(dims), 2);
+    let (ex, ep, epapers) = (error(&x), error(&same_steps), error(&papers));
+    assert!(
+        ex < 0.25 * ep && ex < 4.0 * epapers,
+        "extrapolated {ex:.2e}, as many plain steps {ep:.2e}, the papers' {epapers:.2e}"
+    );
+    assert_eq!(solve(SolveOptions::extrapolated(dims), 1).0, x);
+}
+
+#[test]
 fn sun_solution_is_the_weighted_sum_of_base_solutions() {
     // LB is linear (SPEC §3): a sun boundary equals Σ_i max(0, n_i·d) B_i.
     let dims = Dims::cube(16).unwrap();
@@ -491,6 +543,7 @@ fn sun_solution_is_the_weighted_sum_of_base_solutions() {
     let opts = SolveOptions {
         max_steps: 48,
         tolerance: None,
+        extrapolate: false,
     };
     let sun = Boundary::sun([0.3, -0.9, 0.3], 1.0);
     let solve = |b: Boundary| {
@@ -532,7 +585,8 @@ fn bad_parameters_are_refused() {
         .run(
             &SolveOptions {
                 max_steps: 0,
-                tolerance: None
+                tolerance: None,
+                extrapolate: false,
             },
             &mut |_, _| {}
         )
@@ -541,7 +595,8 @@ fn bad_parameters_are_refused() {
         .run(
             &SolveOptions {
                 max_steps: 5,
-                tolerance: Some(-1.0)
+                tolerance: Some(-1.0),
+                extrapolate: false,
             },
             &mut |_, _| {}
         )

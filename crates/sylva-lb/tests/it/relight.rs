@@ -28,6 +28,7 @@ fn options(ambient: Ambient) -> BasisOptions {
         solve: SolveOptions {
             max_steps: STEPS,
             tolerance: None,
+            extrapolate: false,
         },
         ambient,
     }
@@ -52,6 +53,7 @@ fn direct(grid: &DensityGrid, travel: [f64; 3]) -> LightingGrid {
     let opts = SolveOptions {
         max_steps: STEPS,
         tolerance: None,
+        extrapolate: false,
     };
     let b = Boundary::sun(travel, 1.0);
     solve_lighting(grid, &medium(), b, &opts, &mut |_, _, _| {})
@@ -311,6 +313,7 @@ fn progress_counts_every_solve() {
         solve: SolveOptions {
             max_steps: 4,
             tolerance: None,
+            extrapolate: false,
         },
         ambient: Ambient::Solve,
     };
