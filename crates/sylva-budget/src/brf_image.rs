@@ -14,7 +14,7 @@
 //! whatever the thread count and the order the chunks finish in.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use crate::photons::ViewAngles;
 use crate::BudgetError;
@@ -93,6 +93,8 @@ pub(crate) struct ImageTally {
     hz: f32,
     top: f32,
     sums: Vec<AtomicU64>,
+    /// A pixel's sum passed 2^64 (some 4 × 10^9 estimates of 1 in one pixel).
+    overflowed: AtomicBool,
 }
 
 impl ImageTally {
@@ -107,6 +109,7 @@ impl ImageTally {
             sums: (0..u64::from(width) * u64::from(height))
                 .map(|_| AtomicU64::new(0))
                 .collect(),
+            overflowed: AtomicBool::new(false),
         }
     }
 
@@ -123,13 +126,27 @@ impl ImageTally {
         let col = ((u * self.width as f32) as u32).min(self.width - 1);
         let row = ((w * self.height as f32) as u32).min(self.height - 1);
         let i = (row * self.width + col) as usize;
-        self.sums[i].fetch_add((estimate * SCALE).round() as u64, Ordering::Relaxed);
+        let add = (estimate * SCALE).round() as u64;
+        let before = self.sums[i].fetch_add(add, Ordering::Relaxed);
+        if before.checked_add(add).is_none() {
+            self.overflowed.store(true, Ordering::Relaxed);
+        }
     }
 
-    /// The image of `photons` photons: each pixel P · Σ / N.
-    pub(crate) fn finish(self, view: ViewAngles, photons: u64) -> BrfImage {
+    /// The image of `photons` photons: each pixel P · Σ / N; refused where a pixel's sum
+    /// wrapped.
+    pub(crate) fn finish(self, view: ViewAngles, photons: u64) -> Result<BrfImage, BudgetError> {
+        if self.overflowed.into_inner() {
+            return Err(BudgetError::invalid(
+                "--brf-image-size",
+                self.width.max(self.height),
+                format!(
+                    "with {photons} photons a pixel's tally overflowed: use more pixels or fewer photons"
+                ),
+            ));
+        }
         let p = self.sums.len() as f64;
-        BrfImage {
+        Ok(BrfImage {
             view,
             width: self.width,
             height: self.height,
@@ -138,7 +155,7 @@ impl ImageTally {
                 .into_iter()
                 .map(|s| (s.into_inner() as f64 / SCALE * p / photons as f64) as f32)
                 .collect(),
-        }
+        })
     }
 }
 
@@ -351,6 +368,25 @@ mod tests {
         .remove(0);
         let (mean, brf) = (b.image.as_ref().unwrap().mean(), b.brf[0].brf.value);
         assert!(mean > 0.0 && mean < 0.95 * brf, "image {mean}, BRF {brf}");
+    }
+
+    #[test]
+    fn a_tally_that_overflows_is_an_error_not_a_wrapped_image() {
+        let spec = BrfImageSpec {
+            view: NADIR,
+            side: 1,
+        };
+        let tally = ImageTally::new(&spec, [1.0, 1.0], 2.0);
+        let up = Vec3::Y;
+        tally.add(Vec3::new(0.0, 2.0, 0.0), up, 0.5);
+        let img = ImageTally::new(&spec, [1.0, 1.0], 2.0);
+        img.add(Vec3::new(0.0, 2.0, 0.0), up, 0.5);
+        let one = img.finish(NADIR, 1).unwrap();
+        assert_eq!(one.pixels, [0.5]);
+        // 2^64 / 2^32 = 2^32 in one pixel wraps the sum.
+        tally.add(Vec3::new(0.0, 2.0, 0.0), up, 4_294_967_296.0);
+        let e = tally.finish(NADIR, 1).unwrap_err().to_string();
+        assert!(e.contains("overflowed") && !e.contains('\n'), "{e}");
     }
 
     #[test]

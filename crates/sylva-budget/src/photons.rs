@@ -301,7 +301,8 @@ pub fn trace_budget(
             let image = cfg
                 .image
                 .zip(tally)
-                .map(|(spec, t)| t.finish(spec.view, cfg.photons));
+                .map(|(spec, t)| t.finish(spec.view, cfg.photons))
+                .transpose()?;
             Ok(summarise(
                 band,
                 &counts,
