@@ -38,7 +38,7 @@ ALLOWED = {
     "sylva-mpi": {"sylva-core"},
     "sylva-pipeline": {"sylva-core", "sylva-geom", "sylva-grid", "sylva-lb", "sylva-voxel",
                        "sylva-scene", "sylva-trace", "sylva-trace-gpu", "sylva-wgpu",
-                       "sylva-light", "sylva-render", "sylva-spp"},
+                       "sylva-light", "sylva-render", "sylva-spp", "sylva-budget"},
     # The viewer serves frames of a prepared scene: the pipeline's, nothing the pipeline hides.
     "sylva-view": {"sylva-core", "sylva-geom", "sylva-lb", "sylva-light", "sylva-render",
                    "sylva-pipeline"},

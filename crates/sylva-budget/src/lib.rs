@@ -20,9 +20,10 @@
 //!
 //! May import `sylva-core`, `sylva-geom` (meshes, models, instances), `sylva-grow` (the
 //! stands), `sylva-trace` (the kd-trees the photons are traced through), `sylva-grid` and
-//! `sylva-lb` (the cells and the lattice), and `sylva-render`'s output encoders (the BRF
-//! image's EXR and PNGs).
+//! `sylva-lb` (the cells and the lattice). The BRF image's files are the pipeline's
+//! (`sylva_pipeline::brf_images`).
 
+pub mod angles;
 pub mod bench;
 pub mod brf_image;
 pub mod lattice;
@@ -30,7 +31,7 @@ pub mod photons;
 pub mod report;
 pub mod stand;
 
-pub use brf_image::{BrfImage, BrfImageFiles, BrfImageSpec, WrittenBrfImages};
+pub use brf_image::{BrfImage, BrfImageSpec};
 pub use lattice::{lb_budget, LbBand, LbConfig, LbRun};
 pub use photons::{
     trace_budget, Angles, BandBudget, BudgetConfig, Fraction, SunAngles, ViewAngles, ViewBrf,

@@ -44,6 +44,7 @@
 pub mod bands;
 pub mod bases;
 pub mod bench;
+pub mod brf_images;
 pub mod forest;
 pub mod frame;
 mod jobs;

@@ -6,9 +6,10 @@ use super::output::{bench_bar, emit_to};
 use anyhow::{Context, Result};
 use std::path::PathBuf;
 use sylva_budget::{
-    budget_json, budget_text, lb_budget, trace_budget, BrfImage, BrfImageFiles, BrfImageSpec,
-    Budget, BudgetConfig, CanopySpec, LbConfig, Stand, SunAngles, ViewAngles,
+    budget_json, budget_text, lb_budget, trace_budget, BrfImage, BrfImageSpec, Budget,
+    BudgetConfig, CanopySpec, LbConfig, Stand, SunAngles, ViewAngles,
 };
+use sylva_pipeline::brf_images::BrfImageFiles;
 
 /// How `sylva budget` finds the fractions.
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
