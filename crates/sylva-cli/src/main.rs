@@ -41,9 +41,10 @@ enum Command {
     /// on a scene's trees (`spp trees`).
     Spp(commands::spp::SppArgs),
     /// The canopy radiation budget of an abstract stand (crowns of flat leaves or a
-    /// homogeneous layer, in a cyclic plot): per band the sunlight absorbed by the canopy,
-    /// reflected, transmitted to the ground and absorbed by it, and fAPAR, e.g. `sylva budget
-    /// crowns --sun-zenith 30` (docs/budget.md).
+    /// homogeneous layer, in a cyclic plot) or of a scene: per band the sunlight absorbed by
+    /// the canopy, reflected, transmitted to the ground and absorbed by it, fAPAR and the BRF
+    /// (per view, or as an image), e.g. `sylva budget crowns --sun-zenith 30` or `sylva
+    /// budget demo --cyclic` (docs/budget.md).
     Budget(commands::budget::BudgetArgs),
     /// Write a scene for other renderers: OBJ (flattened) or Mitsuba 3 (instanced), e.g.
     /// `sylva export demo --format mitsuba -o out/`.
