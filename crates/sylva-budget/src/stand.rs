@@ -9,7 +9,7 @@
 
 use crate::{Band, BudgetError};
 use glam::Vec3;
-use sylva_geom::{Instance, LeafOptics, MaterialKind, Model, Scene};
+use sylva_geom::{Instance, LeafOptics, MaterialKind, Mesh, Model, Scene};
 use sylva_grow::stand::{placements, top, unit_count, unit_model, CanopySpec};
 
 /// One band's surfaces: per model, per material, the mean reflectance and transmittance.
@@ -110,9 +110,9 @@ impl Stand {
     /// formed for `leaf_optics`. The bands are the scene's `[bands]` (the blue, green, red
     /// and par bands count towards fAPAR), else its linear red, green and blue channels (all
     /// three in the PAR range). In a `cyclic` plot the instances reaching over a side are
-    /// repeated one plot over.
+    /// repeated one plot over. The scene's models become the stand's.
     pub fn from_scene(
-        scene: &Scene,
+        mut scene: Scene,
         leaf_optics: LeafOptics,
         cyclic: bool,
     ) -> Result<Stand, BudgetError> {
@@ -158,7 +158,17 @@ impl Stand {
                 2.0 * half[1]
             )));
         }
-        let (bands, surfaces) = scene_bands(scene, leaf_optics).map_err(bad)?;
+        // The bands' optics are formed on copies of the scene without its meshes (only the
+        // materials change), so a forest's triangles are never copied.
+        let meshes: Vec<Mesh> = scene
+            .models
+            .iter_mut()
+            .map(|m| std::mem::take(&mut m.mesh))
+            .collect();
+        let (bands, surfaces) = scene_bands(&scene, leaf_optics).map_err(bad)?;
+        for (m, mesh) in scene.models.iter_mut().zip(meshes) {
+            m.mesh = mesh;
+        }
         let placed = scene.instances.len();
         let mut instances = scene.instances.clone();
         if cyclic {
@@ -215,12 +225,12 @@ impl Stand {
             .map(|i| leaf_area[i.model as usize] * f64::from(i.scale).powi(2))
             .sum();
         Ok(Stand {
-            name: scene.name.clone(),
+            name: scene.name,
             cyclic,
             bands,
             surfaces: Some(surfaces),
             crowns: 0,
-            models: scene.models.clone(),
+            models: scene.models,
             instances,
             placed,
             half,
@@ -256,22 +266,30 @@ fn scene_bands(
     leaf_optics: LeafOptics,
 ) -> Result<(Vec<Band>, Vec<Surfaces>), String> {
     let channels = |s: &Scene| -> [Surfaces; 3] {
+        // Per model, per material, per channel: [R, T] (a texture's mean read once).
+        let optics: Vec<Vec<[[f64; 2]; 3]>> = s
+            .models
+            .iter()
+            .map(|m| {
+                m.materials
+                    .iter()
+                    .map(|mat| {
+                        let mean = mat.mean_colour();
+                        std::array::from_fn(|c| {
+                            let of = |factor: f32| {
+                                (f64::from(mean[c]) * f64::from(factor)).clamp(0.0, 1.0)
+                            };
+                            [of(mat.optics.reflect[c]), of(mat.optics.transmit[c])]
+                        })
+                    })
+                    .collect()
+            })
+            .collect();
         std::array::from_fn(|c| {
             Surfaces(
-                s.models
+                optics
                     .iter()
-                    .map(|m| {
-                        m.materials
-                            .iter()
-                            .map(|mat| {
-                                let mean = f64::from(mat.mean_colour()[c]);
-                                [
-                                    (mean * f64::from(mat.optics.reflect[c])).clamp(0.0, 1.0),
-                                    (mean * f64::from(mat.optics.transmit[c])).clamp(0.0, 1.0),
-                                ]
-                            })
-                            .collect()
-                    })
+                    .map(|m| m.iter().map(|mat| mat[c]).collect())
                     .collect(),
             )
         })

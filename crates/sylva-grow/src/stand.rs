@@ -299,8 +299,22 @@ impl CanopySpec {
             message,
         };
         let text = std::fs::read_to_string(path).map_err(|e| file(e.to_string()))?;
-        let spec = CanopySpec::parse(&text).map_err(|e| file(e.to_string()))?;
-        Ok(spec)
+        CanopySpec::from_text(path, &text)
+    }
+
+    /// Parses the text of canopy file `path` (read already), its errors naming the file.
+    pub fn from_text(path: &Path, text: &str) -> Result<CanopySpec, StandError> {
+        CanopySpec::parse(text).map_err(|e| StandError::File {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })
+    }
+
+    /// Whether TOML `text` reads as a canopy file (it has `[crowns]` or `[layer]`) rather
+    /// than a scene.
+    pub fn is_canopy_text(text: &str) -> bool {
+        text.parse::<toml::Table>()
+            .is_ok_and(|t| t.contains_key("crowns") || t.contains_key("layer"))
     }
 
     /// A built-in stand, or the canopy file `name` (relative to `base`, when given).

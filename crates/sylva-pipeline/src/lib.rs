@@ -45,6 +45,7 @@ pub mod bands;
 pub mod bases;
 pub mod bench;
 pub mod brf_images;
+pub mod budget;
 pub mod forest;
 pub mod frame;
 mod jobs;
@@ -183,6 +184,8 @@ pub enum PipelineError {
     Jobs(#[from] sylva_core::jobs::JobError),
     #[error(transparent)]
     Output(#[from] sylva_core::OutputError),
+    #[error(transparent)]
+    Budget(#[from] sylva_budget::BudgetError),
 }
 
 impl From<sylva_core::wire::WireError> for PipelineError {

@@ -10,6 +10,7 @@ use sylva_budget::{
     BudgetConfig, CanopySpec, LbConfig, Stand, SunAngles, ViewAngles,
 };
 use sylva_pipeline::brf_images::BrfImageFiles;
+use sylva_pipeline::budget::BudgetSubject;
 
 /// How `sylva budget` finds the fractions.
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -152,42 +153,6 @@ pub fn bench(a: BenchBudgetArgs) -> Result<()> {
     super::output::print_report(&b, a.json)
 }
 
-/// What `sylva budget` was given.
-enum Subject {
-    /// An abstract stand: a built-in one or a canopy file.
-    Stand(CanopySpec),
-    /// A rendered scene: a built-in one or a scene file.
-    Scene(Box<sylva_geom::Scene>),
-}
-
-/// A built-in stand, a canopy file (one with `[crowns]` or `[layer]`), or else a scene.
-fn subject(name: &str) -> Result<Subject> {
-    if CanopySpec::builtin(name).is_some() {
-        return Ok(Subject::Stand(CanopySpec::find(name, None)?));
-    }
-    let path = std::path::Path::new(name);
-    if path.is_file() {
-        let text = sylva_core::read_text_file(path, 16 << 20, "canopy or scene file")?;
-        let canopy = text
-            .parse::<toml::Table>()
-            .is_ok_and(|t| t.contains_key("crowns") || t.contains_key("layer"));
-        if canopy {
-            return Ok(Subject::Stand(CanopySpec::load(path)?));
-        }
-    }
-    match sylva_pipeline::load_scene(name, None) {
-        Ok(scene) => Ok(Subject::Scene(Box::new(scene))),
-        Err(sylva_pipeline::PipelineError::Scene(sylva_scene::SceneError::NotFound(_))) => {
-            anyhow::bail!(
-                "{name}: no such canopy or scene file, and not a built-in stand ({}) or scene ({})",
-                CanopySpec::BUILTIN.join(", "),
-                sylva_scene::builtin_scenes::NAMES.join(", ")
-            )
-        }
-        Err(e) => Err(e.into()),
-    }
-}
-
 pub fn run(a: BudgetArgs) -> Result<()> {
     // The views first: a bad one is refused before a scene is built.
     let views = a
@@ -208,9 +173,10 @@ pub fn run(a: BudgetArgs) -> Result<()> {
     if let Some(image) = &image {
         image.validate()?;
     }
-    let subject = subject(&a.canopy)?;
+    let subject = BudgetSubject::find(&a.canopy)?;
+    let default_sun = subject.default_sun();
     let (spec, scene) = match subject {
-        Subject::Stand(spec) => {
+        BudgetSubject::Stand(spec) => {
             if a.cyclic {
                 anyhow::bail!(
                     "--cyclic is for scenes: {} says it in its [plot] (cyclic = true, the default)",
@@ -225,7 +191,7 @@ pub fn run(a: BudgetArgs) -> Result<()> {
             }
             (Some(spec), None)
         }
-        Subject::Scene(scene) => {
+        BudgetSubject::Scene(scene) => {
             if a.method != Method::Mc {
                 anyhow::bail!(
                     "{}: the lattice budget is for abstract stands (crowns, layers, canopy files); a scene's budget comes from the photons (--method mc, the default)",
@@ -235,21 +201,9 @@ pub fn run(a: BudgetArgs) -> Result<()> {
             (None, Some(scene))
         }
     };
-    // A scene's sun to a nanodegree: its angles come back from a direction vector.
-    let nano = |deg: f64| (deg * 1e9).round() / 1e9;
-    let sun = match &scene {
-        Some(scene) => SunAngles {
-            zenith_deg: a
-                .sun_zenith
-                .unwrap_or(nano(90.0 - scene.sun.elevation_deg())),
-            azimuth_deg: a
-                .sun_azimuth
-                .unwrap_or(nano(scene.sun.azimuth_deg().rem_euclid(360.0))),
-        },
-        None => SunAngles {
-            zenith_deg: a.sun_zenith.unwrap_or(30.0),
-            azimuth_deg: a.sun_azimuth.unwrap_or(0.0),
-        },
+    let sun = SunAngles {
+        zenith_deg: a.sun_zenith.unwrap_or(default_sun.zenith_deg),
+        azimuth_deg: a.sun_azimuth.unwrap_or(default_sun.azimuth_deg),
     };
     let cfg = BudgetConfig {
         photons: a.photons,
@@ -275,14 +229,13 @@ pub fn run(a: BudgetArgs) -> Result<()> {
     }
     let quiet = a.json || a.out.is_some();
     let t0 = std::time::Instant::now();
-    let stand = match (&spec, &scene) {
+    let stand = match (&spec, scene) {
         (Some(spec), _) => Stand::build(spec)?,
         (None, Some(scene)) => {
-            Stand::from_scene(scene, a.leaf_optics.unwrap_or_default().into(), a.cyclic)?
+            Stand::from_scene(*scene, a.leaf_optics.unwrap_or_default().into(), a.cyclic)?
         }
         (None, None) => unreachable!("a stand or a scene"),
     };
-    drop(scene);
     // The image's files are checked before the long work.
     let image_files = match cfg.image {
         Some(_) => {
@@ -320,7 +273,7 @@ pub fn run(a: BudgetArgs) -> Result<()> {
     } else {
         None
     };
-    let bands = if a.method == Method::Lb {
+    let mut bands = if a.method == Method::Lb {
         Vec::new()
     } else {
         let bar = bench_bar(
@@ -334,7 +287,6 @@ pub fn run(a: BudgetArgs) -> Result<()> {
         bar.finish_and_clear();
         bands
     };
-    let mut bands = bands;
     let images: Vec<(String, BrfImage)> = bands
         .iter_mut()
         .filter_map(|b| Some((b.band.clone(), b.image.take()?)))

@@ -4,6 +4,17 @@
 use crate::common;
 use common::sylva;
 
+/// `sylva budget ARGS --photons 20000` fails with one line of standard error holding `says`.
+fn refused_in_one_line(args: &[&str], says: &str) {
+    let mut all = vec!["budget", "--photons", "20000"];
+    all.extend(args);
+    let (ok, _, err) = sylva(&all);
+    assert!(
+        !ok && err.contains(says) && err.trim().lines().count() == 1,
+        "{err}"
+    );
+}
+
 #[test]
 fn a_canopy_file_gets_a_budget_whose_fates_add_up() {
     let dir = tempfile::tempdir().unwrap();
@@ -180,13 +191,9 @@ fn the_brf_image_is_written_as_an_exr_of_the_bands_and_a_png_each() {
             "--method mc or --method both",
         ),
     ] {
-        let mut all = vec!["budget", "layer", "--photons", "20000"];
+        let mut all = vec!["layer"];
         all.extend(args);
-        let (ok, _, err) = sylva(&all);
-        assert!(
-            !ok && err.contains(says) && err.trim().lines().count() == 1,
-            "{err}"
-        );
+        refused_in_one_line(&all, says);
     }
 }
 
@@ -277,13 +284,7 @@ fn a_scene_holding_a_stand_gets_the_stand_s_budget() {
             "not a built-in stand (crowns, layer) or scene (demo",
         ),
     ] {
-        let mut all = vec!["budget", "--photons", "20000"];
-        all.extend(args);
-        let (ok, _, err) = sylva(&all);
-        assert!(
-            !ok && err.contains(says) && err.trim().lines().count() == 1,
-            "{err}"
-        );
+        refused_in_one_line(&args, says);
     }
 }
 
