@@ -48,7 +48,12 @@ impl Viewer {
         let rc = unsafe { libc::kill(self.child.id() as i32, libc::SIGINT) };
         assert_eq!(rc, 0);
         let status = self.child.wait().unwrap();
-        let lines = self.lines.try_iter().collect();
+        // The reader thread may still hold the last lines: take them until it has read the
+        // pipe's end (the process is gone, so that comes), not only what arrived so far.
+        let mut lines = Vec::new();
+        while let Ok(line) = self.lines.recv_timeout(std::time::Duration::from_secs(10)) {
+            lines.push(line);
+        }
         (status.success(), lines)
     }
 
