@@ -3,7 +3,7 @@
 
 use sylva_lb::backend::{CpuSolver, LbBenchmark, LbSolver, LbSolverError};
 use sylva_lb::{
-    Boundary, DensityGrid, Floor, LightingGrid, MediumParams, SolveOptions, SolveReport,
+    Boundary, DensityGrid, Floor, LightingGrid, MediumParams, Schedule, SolveOptions, SolveReport,
     VolumeSource,
 };
 use sylva_wgpu::{open_device, Device, GpuContext};
@@ -125,6 +125,11 @@ impl LbSolver for GpuSolver {
 
     fn cache_tag(&self) -> String {
         format!("gpu-{}", self.precision.name())
+    }
+
+    /// The GPU kernels have no extrapolation (`SolveError::ExtrapolateOnGpu`).
+    fn schedule(&self) -> Schedule {
+        Schedule::Papers
     }
 }
 

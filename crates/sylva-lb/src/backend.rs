@@ -8,8 +8,8 @@ use crate::bandwidth::copy_bandwidth_gbs;
 use crate::kernel::KernelIsa;
 use crate::lattice::Q;
 use crate::solver::{
-    solve_lighting_rgb_on, Boundary, Floor, Lattice, SolveError, SolveOptions, SolveReport,
-    VolumeSource,
+    solve_lighting_rgb_on, Boundary, Floor, Lattice, Schedule, SolveError, SolveOptions,
+    SolveReport, VolumeSource,
 };
 use crate::{DensityGrid, LightingGrid, MediumParams};
 
@@ -141,6 +141,147 @@ pub trait LbSolver: Send + Sync {
     /// What a result depends on besides its inputs, for cache keys: results of different
     /// tags may differ in the last bits (`"cpu"`, `"gpu-f32"`, `"gpu-f16"`).
     fn cache_tag(&self) -> String;
+
+    /// How long a renderer's solves run on this backend (lighting, bases, media): the CPU
+    /// extrapolates (three quarters of the papers' steps, ending about as close to the
+    /// steady state); a backend that cannot runs the papers' schedule. Cache keys name it.
+    fn schedule(&self) -> Schedule;
+}
+
+/// A backend run on another [`Schedule`] than its own (`--lb-schedule`): each solve is the
+/// backend's, for whatever options it is given; only [`LbSolver::schedule`] differs (and with
+/// it the cache keys, which name the schedule).
+pub struct OnSchedule<S> {
+    solver: S,
+    schedule: Schedule,
+}
+
+impl<S: LbSolver> OnSchedule<S> {
+    pub fn new(solver: S, schedule: Schedule) -> OnSchedule<S> {
+        OnSchedule { solver, schedule }
+    }
+}
+
+impl<S: LbSolver> LbSolver for OnSchedule<S> {
+    fn solve_lighting_rgb(
+        &self,
+        grid: &DensityGrid,
+        medium: &MediumParams,
+        boundaries: &[Boundary; 3],
+        floor: Option<&Floor>,
+        source: Option<&VolumeSource>,
+        opts: &SolveOptions,
+        progress: &mut dyn FnMut(usize, usize, f64),
+    ) -> Result<(LightingGrid, Vec<SolveReport>), LbSolverError> {
+        self.solver
+            .solve_lighting_rgb(grid, medium, boundaries, floor, source, opts, progress)
+    }
+
+    fn solve_colour(
+        &self,
+        grid: &DensityGrid,
+        medium: &MediumParams,
+        colour: usize,
+        boundary: Boundary,
+        opts: &SolveOptions,
+        progress: &mut dyn FnMut(usize, f64),
+    ) -> Result<(Vec<f32>, SolveReport), LbSolverError> {
+        self.solver
+            .solve_colour(grid, medium, colour, boundary, opts, progress)
+    }
+
+    fn benchmark(
+        &self,
+        grid: &DensityGrid,
+        medium: &MediumParams,
+        boundary: Boundary,
+        steps: usize,
+        repeats: usize,
+        progress: &mut dyn FnMut(usize),
+    ) -> Result<LbBenchmark, LbSolverError> {
+        self.solver
+            .benchmark(grid, medium, boundary, steps, repeats, progress)
+    }
+
+    fn device(&self) -> &'static str {
+        self.solver.device()
+    }
+
+    fn adapter(&self) -> Option<String> {
+        self.solver.adapter()
+    }
+
+    fn describe(&self) -> String {
+        self.solver.describe()
+    }
+
+    fn cache_tag(&self) -> String {
+        self.solver.cache_tag()
+    }
+
+    fn schedule(&self) -> Schedule {
+        self.schedule
+    }
+}
+
+/// A boxed backend is a backend (for [`OnSchedule`] over a backend chosen at run time).
+impl LbSolver for Box<dyn LbSolver> {
+    fn solve_lighting_rgb(
+        &self,
+        grid: &DensityGrid,
+        medium: &MediumParams,
+        boundaries: &[Boundary; 3],
+        floor: Option<&Floor>,
+        source: Option<&VolumeSource>,
+        opts: &SolveOptions,
+        progress: &mut dyn FnMut(usize, usize, f64),
+    ) -> Result<(LightingGrid, Vec<SolveReport>), LbSolverError> {
+        (**self).solve_lighting_rgb(grid, medium, boundaries, floor, source, opts, progress)
+    }
+
+    fn solve_colour(
+        &self,
+        grid: &DensityGrid,
+        medium: &MediumParams,
+        colour: usize,
+        boundary: Boundary,
+        opts: &SolveOptions,
+        progress: &mut dyn FnMut(usize, f64),
+    ) -> Result<(Vec<f32>, SolveReport), LbSolverError> {
+        (**self).solve_colour(grid, medium, colour, boundary, opts, progress)
+    }
+
+    fn benchmark(
+        &self,
+        grid: &DensityGrid,
+        medium: &MediumParams,
+        boundary: Boundary,
+        steps: usize,
+        repeats: usize,
+        progress: &mut dyn FnMut(usize),
+    ) -> Result<LbBenchmark, LbSolverError> {
+        (**self).benchmark(grid, medium, boundary, steps, repeats, progress)
+    }
+
+    fn device(&self) -> &'static str {
+        (**self).device()
+    }
+
+    fn adapter(&self) -> Option<String> {
+        (**self).adapter()
+    }
+
+    fn describe(&self) -> String {
+        (**self).describe()
+    }
+
+    fn cache_tag(&self) -> String {
+        (**self).cache_tag()
+    }
+
+    fn schedule(&self) -> Schedule {
+        (**self).schedule()
+    }
 }
 
 /// The CPU solver of this crate (the widest vector kernel this CPU runs, all rayon threads).
@@ -199,6 +340,10 @@ impl LbSolver for CpuSolver {
 
     fn cache_tag(&self) -> String {
         CpuKernelSolver::detected().cache_tag()
+    }
+
+    fn schedule(&self) -> Schedule {
+        Schedule::Extrapolated
     }
 }
 
@@ -284,6 +429,10 @@ impl LbSolver for CpuKernelSolver {
 
     fn cache_tag(&self) -> String {
         "cpu".into()
+    }
+
+    fn schedule(&self) -> Schedule {
+        Schedule::Extrapolated
     }
 }
 

@@ -35,11 +35,12 @@ pub mod solver;
 
 pub use backend::{
     count_solve, solves_started, CpuKernelSolver, CpuSolver, LbBenchmark, LbSolver, LbSolverError,
+    OnSchedule,
 };
 pub use grid::{Bounds, DensityGrid, Dims, GridError, LightingGrid, RawElement};
 pub use grid_file::{Element, GridFile, GridFileError, GridKind};
 pub use params::{ColourParams, MediumParams, ParamError, Preset};
 pub use solver::{
     solve_lighting, solve_lighting_rgb, solve_lighting_rgb_on, Boundary, Floor, Flows, Lattice,
-    RunMonitor, SolveError, SolveOptions, SolveReport, StopReason, VolumeSource,
+    RunMonitor, Schedule, SolveError, SolveOptions, SolveReport, StopReason, VolumeSource,
 };

@@ -271,6 +271,35 @@ impl SolveOptions {
     }
 }
 
+/// How long a renderer's solves run: the schedule a backend uses for lighting, bases and
+/// media ([`crate::LbSolver::schedule`]), named in cache keys.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Schedule {
+    /// [`SolveOptions::papers`]: 2 × the longest edge.
+    Papers,
+    /// [`SolveOptions::extrapolated`]: 1.5 × the longest edge, extrapolated along the
+    /// slowest mode (the CPU solver only).
+    Extrapolated,
+}
+
+impl Schedule {
+    /// The stop rule over a `dims` grid.
+    pub fn options(self, dims: Dims) -> SolveOptions {
+        match self {
+            Schedule::Papers => SolveOptions::papers(dims),
+            Schedule::Extrapolated => SolveOptions::extrapolated(dims),
+        }
+    }
+
+    /// The schedule's name in cache keys and reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Schedule::Papers => "papers:2N",
+            Schedule::Extrapolated => "extrapolated:1.5N",
+        }
+    }
+}
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum StopReason {
     /// Ran `max_steps`.

@@ -713,9 +713,9 @@ fn solve_plan(
     })
 }
 
-/// How long the solver runs over `dims` (the papers' schedule).
-pub(crate) fn solve_options(dims: Dims) -> SolveOptions {
-    SolveOptions::papers(dims)
+/// How long `solver` runs over `dims`: its backend's [`LbSolver::schedule`].
+pub(crate) fn solve_options(dims: Dims, solver: &dyn LbSolver) -> SolveOptions {
+    solver.schedule().options(dims)
 }
 
 /// The stable 64-bit key of a model's lighting: [`CACHE_VERSION`] and the grid file version,
@@ -742,7 +742,7 @@ pub fn cache_key(
             sun_q,
             opts,
             &plan,
-            &solver.cache_tag(),
+            solver,
         ),
     ))
 }
@@ -760,7 +760,7 @@ pub(crate) struct ModelLightingKey {
     boundaries: Vec<[f32; sylva_lb::lattice::Q]>,
     /// The physical light's first-collision sun source and floor.
     physical: Option<PhysicalKey>,
-    /// The solve schedule: the papers' 2 × longest edge, no tolerance.
+    /// The solve schedule ([`sylva_lb::Schedule::name`]).
     schedule: &'static str,
 }
 
@@ -775,20 +775,17 @@ pub(crate) struct PhysicalKey {
     step_optical_depth_factor: f64,
 }
 
-/// The papers' schedule, as keys name it.
-const PAPERS_SCHEDULE: &str = "papers:2N";
-
 impl ModelLightingKey {
     fn new(
         model: ModelMediumKey,
         sun: [i64; 3],
         opts: &LightingOptions,
         plan: &SolvePlan,
-        solver: &str,
+        solver: &dyn LbSolver,
     ) -> ModelLightingKey {
         ModelLightingKey {
             light: opts.light.name(),
-            solver: solver.to_string(),
+            solver: solver.cache_tag(),
             model,
             sun,
             boundaries: plan.boundaries.iter().map(|b| b.values).collect(),
@@ -799,7 +796,7 @@ impl ModelLightingKey {
                 ground_albedo: env.ground_albedo,
                 step_optical_depth_factor: light::step_optical_depth_factor(),
             }),
-            schedule: PAPERS_SCHEDULE,
+            schedule: solver.schedule().name(),
         }
     }
 }
@@ -925,7 +922,7 @@ fn solve_density(
     solver: &dyn LbSolver,
     progress: &mut dyn FnMut(usize, usize, usize),
 ) -> Result<LightingGrid, LbSolverError> {
-    let opts = solve_options(grid.dims);
+    let opts = solve_options(grid.dims, solver);
     let max = opts.max_steps;
     // Physical light: the ground under the plant, shadowed by it, and the sunlight
     // scattered at its first collision.
@@ -948,7 +945,7 @@ fn solve_density(
     Ok(lighting)
 }
 
-/// Lights a medium's `grid` with one `boundary` on `solver` (the papers' schedule), forwarding
+/// Lights a medium's `grid` with one `boundary` on `solver` (its schedule), forwarding
 /// progress: the total light, as the media's volume tracer reads it (docs/media.md).
 pub(crate) fn solve_medium(
     grid: &DensityGrid,
@@ -957,7 +954,7 @@ pub(crate) fn solve_medium(
     solver: &dyn LbSolver,
     progress: &mut dyn FnMut(usize, usize, usize),
 ) -> Result<LightingGrid, LbSolverError> {
-    let opts = solve_options(grid.dims);
+    let opts = solve_options(grid.dims, solver);
     let max = opts.max_steps;
     let (lighting, _) = solver.solve_lighting(grid, medium, boundary, &opts, &mut |c, s, _| {
         progress(c, s, max)
@@ -1159,8 +1156,7 @@ impl<'a> LightingPlan<'a> {
                 key
             }
         };
-        let lighting_key =
-            ModelLightingKey::new(model_key, sun_q, opts, &solve, &solver.cache_tag());
+        let lighting_key = ModelLightingKey::new(model_key, sun_q, opts, &solve, solver);
         let key = CacheKey::new(MODEL_LIGHTING, &lighting_key);
         let medium_key = lighting_key.model;
         let placement = placement_for(model, opts.grid)?;
@@ -1320,7 +1316,7 @@ impl<'a> LightingPlan<'a> {
         solver: &dyn LbSolver,
         progress: &mut dyn FnMut(usize, usize),
     ) -> Result<Vec<f32>, LightingError> {
-        let opts = solve_options(density.dims);
+        let opts = solve_options(density.dims, solver);
         let max = opts.max_steps;
         if self.solve.environment.is_none() {
             let (totals, _) = solver
@@ -1385,7 +1381,7 @@ impl<'a> LightingPlan<'a> {
             ),
             (
                 "steps".to_string(),
-                solve_options(self.dims()).max_steps.to_string(),
+                solve_options(self.dims(), solver).max_steps.to_string(),
             ),
             ("solver".to_string(), solver.describe()),
         ];
@@ -1826,7 +1822,7 @@ impl<'a> PartsPlan<'a> {
             }
             _ => density,
         };
-        let sopts = solve_options(dims);
+        let sopts = solve_options(dims, solver);
         let max = sopts.max_steps;
         let (grid, _) = solver
             .solve_lighting_rgb(
@@ -2219,7 +2215,11 @@ mod tests {
         assert_eq!(ra.dims, a.dims());
         assert!(calls > 0);
         assert_eq!(last.1, last.2, "progress reaches max steps");
-        assert_eq!(last.2, 2 * a.dims().longest_edge());
+        assert_eq!(
+            last.2,
+            SolveOptions::extrapolated(a.dims()).max_steps,
+            "the CPU's extrapolated schedule"
+        );
 
         let mut calls2 = 0usize;
         let (b, rb) = model_lighting(&m, &illum(sun()), &o, &CpuSolver, &mut |_, _, _| {
@@ -2507,7 +2507,7 @@ mod tests {
             sun: [0, 100_000, 0],
             boundaries: vec![[0.5; sylva_lb::lattice::Q]; 3],
             physical: Some(physical.clone()),
-            schedule: PAPERS_SCHEDULE,
+            schedule: sylva_lb::Schedule::Papers.name(),
         };
         let with_physical = |f: &dyn Fn(&mut PhysicalKey)| {
             let mut p = physical.clone();
@@ -2558,7 +2558,7 @@ mod tests {
             (
                 "schedule".into(),
                 ModelLightingKey {
-                    schedule: "papers:3N",
+                    schedule: sylva_lb::Schedule::Extrapolated.name(),
                     ..base.clone()
                 },
             ),

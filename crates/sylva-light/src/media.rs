@@ -30,7 +30,7 @@
 use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
 use sylva_geom::Medium;
-use sylva_lb::{LightingGrid, MediumParams};
+use sylva_lb::{LbSolver, LightingGrid, MediumParams};
 
 use crate::device::NoDevice;
 
@@ -536,16 +536,16 @@ impl MediumLightingKey {
         medium: &Medium,
         params: &MediumParams,
         boundary: MediumBoundary,
-        solver_tag: &str,
+        solver: &dyn LbSolver,
     ) -> MediumLightingKey {
         MediumLightingKey {
-            solver: solver_tag.to_string(),
+            solver: solver.cache_tag(),
             grid_file_version: sylva_lb::grid_file::VERSION,
             density: medium.density_hash(),
             colours: params.colours.map(|c| [c.sigma_a, c.sigma_s, c.g]),
             zero_f0_on_green: params.zero_f0_on_green,
             boundary,
-            schedule: "papers:2N",
+            schedule: solver.schedule().name(),
         }
     }
 }
@@ -556,17 +556,17 @@ pub fn medium_cache_key(
     medium: &Medium,
     params: &MediumParams,
     boundary: MediumBoundary,
-    solver_tag: &str,
+    solver: &dyn LbSolver,
 ) -> sylva_core::cache::CacheKey {
     sylva_core::cache::CacheKey::new(
         MEDIUM_LIGHTING,
-        &MediumLightingKey::new(medium, params, boundary, solver_tag),
+        &MediumLightingKey::new(medium, params, boundary, solver),
     )
 }
 
 /// Where a medium's LB solves run and are cached.
 pub struct MediumSolve<'a> {
-    pub solver: &'a dyn sylva_lb::LbSolver,
+    pub solver: &'a dyn LbSolver,
     pub cache_dir: Option<&'a std::path::Path>,
 }
 
@@ -611,7 +611,7 @@ pub fn prepare_medium(
                 .enumerate()
             {
                 let t0 = std::time::Instant::now();
-                let key = medium_cache_key(medium, &params, boundary, &lb.solver.cache_tag());
+                let key = medium_cache_key(medium, &params, boundary, lb.solver);
                 let (which, values) = match boundary {
                     MediumBoundary::Sun(_) => {
                         ("sun", sylva_lb::Boundary::sun((-sun_dir).to_array(), 1.0))
@@ -628,7 +628,7 @@ pub fn prepare_medium(
                     ),
                     (
                         "steps".to_string(),
-                        solve_options(dims).max_steps.to_string(),
+                        solve_options(dims, lb.solver).max_steps.to_string(),
                     ),
                     ("solver".to_string(), lb.solver.describe()),
                 ];
@@ -745,7 +745,7 @@ mod tests {
             (
                 "schedule".into(),
                 MediumLightingKey {
-                    schedule: "papers:3N",
+                    schedule: sylva_lb::Schedule::Extrapolated.name(),
                     ..base.clone()
                 },
             ),

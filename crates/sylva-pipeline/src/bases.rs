@@ -119,7 +119,8 @@ pub fn precompute_relighting(
         let (model, opts) = (&scene.models[m], &bopts[m]);
         let fail = |e: LightingError| model_error(model, e);
         let solver = solver.expect("models are missing only with a solver");
-        let (dims, solves) = BasisPlan::jobs_of(model, opts.grid, &opts.preset).map_err(fail)?;
+        let (dims, solves) =
+            BasisPlan::jobs_of(model, opts.grid, &opts.preset, solver.schedule()).map_err(fail)?;
         // Per job, the solves it runs: all of them in one process.
         let jobs: Vec<std::ops::Range<usize>> = match several {
             true => (0..solves.len()).map(|s| s..s + 1).collect(),
@@ -140,7 +141,10 @@ pub fn precompute_relighting(
                 let _span = (!several)
                     .then(|| tracing::info_span!(stage::LB_MODEL, model = %model.name).entered());
                 if held.is_none() {
-                    held = Some(BasisPlan::new(model, opts.grid, &opts.preset).map_err(fail)?);
+                    held = Some(
+                        BasisPlan::new(model, opts.grid, &opts.preset, solver.schedule())
+                            .map_err(fail)?,
+                    );
                 }
                 let plan = held.as_ref().expect("a basis plan");
                 let run = &solves[jobs[j].clone()];
@@ -176,7 +180,9 @@ pub fn precompute_relighting(
         // The root: the set assembled, compressed and stored as one process does it.
         let plan = match held.take() {
             Some(p) => p,
-            None => BasisPlan::new(model, opts.grid, &opts.preset).map_err(fail)?,
+            None => {
+                BasisPlan::new(model, opts.grid, &opts.preset, solver.schedule()).map_err(fail)?
+            }
         };
         let mut assembly = plan.assembly().map_err(fail)?;
         let mut solve_seconds = 0.0;

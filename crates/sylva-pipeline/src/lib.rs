@@ -89,12 +89,12 @@ use sylva_light::lighting::{
 };
 use sylva_light::media::{prepare_medium, Media, MediumSolve};
 pub use sylva_light::progress::{Progress, Silent};
-pub use sylva_light::relight::{BakeSummary, DEFAULT_BAKE_BUDGET};
 use sylva_light::relight::{
-    BasisCacheOptions, BasisPlan, GlobalGridOptions, GlobalInstance, GlobalLight, GlobalReport,
+    basis_density, BasisCacheOptions, GlobalGridOptions, GlobalInstance, GlobalLight, GlobalReport,
     ModelBasis, PhysicalRelitLight, PhysicalTarget, RelitIllumination, RelitLight, StoredBasis,
     StoredPhysicalBasis, SunWeights, GLOBAL_EXTENSION,
 };
+pub use sylva_light::relight::{BakeSummary, DEFAULT_BAKE_BUDGET};
 use sylva_render::gpu_frame::{FrameError, GpuFrame};
 use sylva_render::output::{encode_exr, encode_png, OutputError};
 use sylva_render::render::{
@@ -1480,13 +1480,9 @@ fn solve_global_grid(
         scene: scene.name.clone(),
         source,
     };
-    for (k, (b, model)) in bases.iter_mut().zip(&scene.models).enumerate() {
+    for (b, model) in bases.iter_mut().zip(&scene.models) {
         if b.density.is_none() {
-            b.density = Some(
-                BasisPlan::new(model, lopts.grid, scene.model_preset(k))
-                    .map_err(err)?
-                    .density,
-            );
+            b.density = Some(basis_density(model, lopts.grid).map_err(err)?);
         }
     }
     let medium = preset_medium(&lopts.preset).map_err(err)?;

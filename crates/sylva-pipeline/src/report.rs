@@ -10,6 +10,7 @@ use sylva_geom::Scene;
 use sylva_render::render::{mean_luminance, Frame, Mode};
 use sylva_render::stages::{stage, StageClock};
 
+use sylva_lb::Schedule;
 use sylva_light::lighting::LightingError;
 use sylva_light::relight::physical::PARTS;
 use sylva_light::relight::BasisPlan;
@@ -133,8 +134,9 @@ pub fn basis_jobs(
     }
     line("model\tbasis\tcolour".into());
     for (m, model) in scene.models.iter().enumerate() {
-        let plan = BasisPlan::new(model, grid, scene.model_preset(m))?;
-        for job in plan.jobs() {
+        // The jobs are the same on any schedule.
+        let (_, jobs) = BasisPlan::jobs_of(model, grid, scene.model_preset(m), Schedule::Papers)?;
+        for job in jobs {
             line(format!("{m}\t{}\t{}", job.basis, job.colour));
         }
     }

@@ -91,7 +91,8 @@ pub fn run(a: BasisArgs, runner: &dyn Runner) -> Result<()> {
         eprintln!("{w}");
     }
     let solver = super::device::open_solver(a.lb.device, a.lb.precision)?;
-    say(format!("LB solver: {}", solver.describe()));
+    let solver = super::device::on_schedule(solver, a.lb.lb_schedule)?;
+    say(super::device::solver_line(&*solver));
     let lb = LbPlan {
         solver: &*solver,
         grid: a.lb.lb_grid,

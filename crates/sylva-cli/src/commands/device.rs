@@ -4,7 +4,7 @@
 
 use anyhow::Result;
 use clap::ValueEnum;
-use sylva_lb::LbSolver;
+use sylva_lb::{LbSolver, OnSchedule, Schedule};
 use sylva_lb_gpu::{select_solver, solver_on, Device, LbGpuError, Precision};
 use sylva_wgpu::{open_device, GpuContext};
 
@@ -26,6 +26,45 @@ pub enum PrecisionArg {
     F32,
     /// Half the memory traffic, about 3e-4 relative error (docs/gpu.md); needs SHADER_F16.
     F16,
+}
+
+/// How long each LB solve runs (`--lb-schedule`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ScheduleArg {
+    /// 1.5 × the grid's longest edge in steps, extrapolated along the slowest mode (the CPU
+    /// solver only).
+    Extrapolated,
+    /// The papers' 2 × the longest edge, plain steps.
+    Papers,
+}
+
+/// `solver` on the schedule a user asked for (`None`: its own). The GPU kernels do not
+/// extrapolate, so asking for it there is an error, not a silent change.
+pub fn on_schedule(
+    solver: Box<dyn LbSolver>,
+    schedule: Option<ScheduleArg>,
+) -> Result<Box<dyn LbSolver>> {
+    let schedule = match schedule {
+        None => return Ok(solver),
+        Some(ScheduleArg::Papers) => Schedule::Papers,
+        Some(ScheduleArg::Extrapolated) => Schedule::Extrapolated,
+    };
+    if schedule == Schedule::Extrapolated && solver.device() != "cpu" {
+        anyhow::bail!(
+            "--lb-schedule extrapolated runs on the CPU solver only (the GPU kernels do not \
+             extrapolate): use --device cpu, or --lb-schedule papers"
+        );
+    }
+    Ok(Box::new(OnSchedule::new(solver, schedule)))
+}
+
+/// The summary line naming the LB solver and its schedule.
+pub fn solver_line(solver: &dyn LbSolver) -> String {
+    let schedule = match solver.schedule() {
+        Schedule::Extrapolated => "1.5 × the grid's edge in steps, extrapolated",
+        Schedule::Papers => "the papers' 2 × the grid's edge in steps",
+    };
+    format!("LB solver: {}; {schedule}", solver.describe())
 }
 
 fn device(d: DeviceArg) -> Device {

@@ -217,6 +217,11 @@ pub struct LbArgs {
     /// GPU state storage of the LB solve: f32, or f16 (half the memory traffic).
     #[arg(long, value_enum, default_value = "f32")]
     pub precision: super::device::PrecisionArg,
+    /// How long each LB solve runs: extrapolated (1.5 × the grid's longest edge in steps,
+    /// extrapolated along the slowest mode; the CPU's default) or papers (2 ×, plain steps;
+    /// the GPU's, whose kernels do not extrapolate). Cache entries are kept per schedule.
+    #[arg(long, value_enum)]
+    pub lb_schedule: Option<super::device::ScheduleArg>,
     /// Physical light: leaves as measured (each species' mean reflectance and transmittance,
     /// the texture shaping only the pattern) or as their texture (its colour the reflectance:
     /// the look before issue 29, to compare). Imported meshes keep their own materials; the
@@ -520,7 +525,8 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
     let gpu = super::device::open_gpu(a.lb.device)?;
     let solver: Option<Box<dyn LbSolver>> = if need_lb {
         let solver = super::device::solver_for(gpu.as_ref(), a.lb.device, a.lb.precision)?;
-        say(format!("LB solver: {}", solver.describe()));
+        let solver = super::device::on_schedule(solver, a.lb.lb_schedule)?;
+        say(super::device::solver_line(&*solver));
         Some(solver)
     } else {
         None

@@ -143,10 +143,10 @@ fn render_solves_lb_on_the_device_asked_for() {
         "[[models]]\nname = \"rose\"\nspecies = \"dogrose\"\n\n[[instances]]\nmodel = \"rose\"\nposition = [0.0, 0.0, 0.0]\n\n[lb]\ngrid = 16\n",
     )
     .unwrap();
-    let render = |device: &str| {
+    let render_on = |device: &str, schedule: Option<&str>| {
         let out = dir.path().join(format!("{device}.png"));
         let cache = dir.path().join(format!("cache-{device}"));
-        let (ok, stdout, err) = sylva(&[
+        let mut args = vec![
             "render",
             scene.to_str().unwrap(),
             "--width",
@@ -157,21 +157,41 @@ fn render_solves_lb_on_the_device_asked_for() {
             cache.to_str().unwrap(),
             "-o",
             out.to_str().unwrap(),
-        ]);
+        ];
+        if let Some(s) = schedule {
+            args.extend(["--lb-schedule", s]);
+        }
+        let (ok, stdout, err) = sylva(&args);
         (ok, stdout, err, out, cache)
     };
+    // The CPU extrapolates by default; on the GPU's schedule the two backends compare.
+    let (ok, stdout, err, _, _) = render_on("cpu", None);
+    assert!(ok, "{err}");
+    assert!(
+        stdout.contains("LB solver: CPU, kernel") && stdout.contains("extrapolated"),
+        "{stdout}"
+    );
+    let render = |device: &str| render_on(device, Some("papers"));
     let (ok, stdout, err, cpu_png, _) = render("cpu");
     assert!(ok, "{err}");
-    assert!(stdout.contains("LB solver: CPU, kernel"), "{stdout}");
+    assert!(stdout.contains("the papers' 2 ×"), "{stdout}");
     assert!(stdout.contains("ray tracer: CPU"), "{stdout}");
     let Some(_) = adapter() else {
         let (ok, _, err, _, _) = render("gpu");
         assert!(!ok && err.contains("no GPU adapter"), "{err}");
         return;
     };
-    let (ok, stdout, err, gpu_png, cache) = render("gpu");
+    let (ok, _, err, _, _) = render_on("gpu", Some("extrapolated"));
+    assert!(
+        !ok && err.contains("--lb-schedule extrapolated runs on the CPU solver only"),
+        "{err}"
+    );
+    let (ok, stdout, err, gpu_png, cache) = render_on("gpu", None);
     assert!(ok, "{err}");
-    assert!(stdout.contains("LB solver: GPU"), "{stdout}");
+    assert!(
+        stdout.contains("LB solver: GPU") && stdout.contains("the papers' 2 ×"),
+        "{stdout}"
+    );
     assert!(stdout.contains("ray tracer: GPU"), "{stdout}");
     // The GPU's entry records its solver; CPU and GPU light the model alike.
     let entry = std::fs::read_dir(&cache)

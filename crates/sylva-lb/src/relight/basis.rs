@@ -627,6 +627,15 @@ pub fn basis_metadata(medium: &MediumParams, options: &BasisOptions) -> Vec<(Str
                 .tolerance
                 .map_or("none".into(), |t| t.to_string()),
         ),
+        (
+            "extrapolate".into(),
+            if options.solve.extrapolate {
+                "yes"
+            } else {
+                "no"
+            }
+            .to_string(),
+        ),
     ];
     for (p, name) in medium.colours.iter().zip(COLOUR_NAMES) {
         metadata.push((
@@ -732,11 +741,17 @@ pub fn parse_basis_metadata<'a>(
         "none" => None,
         t => Some(float("tolerance", t)?),
     };
+    // Files written before extrapolated solves have no entry: they ran plain steps.
+    let extrapolate = match value("extrapolate") {
+        None | Some("no") => false,
+        Some("yes") => true,
+        Some(v) => return Err(format!("metadata 'extrapolate' = '{v}' is not yes or no")),
+    };
     let options = BasisOptions {
         solve: SolveOptions {
             max_steps,
             tolerance,
-            extrapolate: false,
+            extrapolate,
         },
         ambient,
     };
@@ -824,6 +839,49 @@ impl BasisWeights {
 mod tests {
     use super::*;
     use crate::lattice::unit;
+
+    #[test]
+    fn metadata_round_trips_every_schedule() {
+        let medium = crate::Preset::Leaf.params();
+        let dims = Dims::new(24, 20, 18).unwrap();
+        for solve in [
+            SolveOptions::papers(dims),
+            SolveOptions::extrapolated(dims),
+            SolveOptions {
+                max_steps: 90,
+                tolerance: Some(1e-6),
+                extrapolate: false,
+            },
+        ] {
+            let options = BasisOptions {
+                solve,
+                ambient: Ambient::Solve,
+            };
+            let meta = basis_metadata(&medium, &options);
+            let value = |k: &str| {
+                meta.iter()
+                    .find(|(key, _)| key == k)
+                    .map(|(_, v)| v.as_str())
+            };
+            let (m, o) = parse_basis_metadata(&value).unwrap();
+            assert_eq!((m, o), (medium.clone(), options));
+            // Files from before extrapolated solves have no entry: plain steps.
+            if !solve.extrapolate {
+                let older = |k: &str| if k == "extrapolate" { None } else { value(k) };
+                assert_eq!(parse_basis_metadata(&older).unwrap().1, options);
+            }
+        }
+        let meta = basis_metadata(&medium, &BasisOptions::papers(dims));
+        let bad = |k: &str| match k {
+            "extrapolate" => Some("maybe"),
+            k => meta
+                .iter()
+                .find(|(key, _)| key == k)
+                .map(|(_, v)| v.as_str()),
+        };
+        let e = parse_basis_metadata(&bad).unwrap_err();
+        assert!(e.contains("'extrapolate' = 'maybe'"), "{e}");
+    }
 
     #[test]
     fn weights_and_their_free_space_values() {

@@ -31,7 +31,7 @@ use sylva_lb::relight::{
     BasisSet, CompressTarget, CompressedBasis, Region, COMPRESSED_EXTENSION,
 };
 use sylva_lb::solver::SolveOptions;
-use sylva_lb::{DensityGrid, Dims, Element, GridFile, LbSolver, MediumParams};
+use sylva_lb::{DensityGrid, Dims, Element, GridFile, LbSolver, MediumParams, Schedule};
 use sylva_voxel::{placement_for, voxelize, VoxelizeOptions};
 
 use crate::lighting::{
@@ -54,8 +54,13 @@ pub const BASIS_COMPRESSED: CacheKind = CacheKind {
 pub const RAW_EXTENSION: &str = "sbasis";
 /// Metadata key of the seconds the solves of an entry took.
 pub const SOLVE_SECONDS_METADATA: &str = "solve_seconds";
-/// Solver cache tags a lookup-only read tries, after the current solver's.
-const KNOWN_TAGS: [&str; 3] = ["cpu", "gpu-f32", "gpu-f16"];
+/// The solver cache tags a lookup-only read tries, each with its backend's schedule
+/// ([`LbSolver::schedule`]).
+const KNOWN_BACKENDS: [(&str, Schedule); 3] = [
+    ("cpu", Schedule::Extrapolated),
+    ("gpu-f32", Schedule::Papers),
+    ("gpu-f16", Schedule::Papers),
+];
 
 /// How models' base solutions are made and kept.
 #[derive(Debug, Clone, PartialEq)]
@@ -123,6 +128,7 @@ pub(crate) struct BasisKey {
     model: ModelMediumKey,
     max_steps: usize,
     tolerance: Option<f64>,
+    extrapolate: bool,
     ambient: &'static str,
 }
 
@@ -139,6 +145,7 @@ impl BasisKey {
             model: ModelMediumKey::new(model, grid, medium, PAPER_OCCUPANCY),
             max_steps: options.solve.max_steps,
             tolerance: options.solve.tolerance,
+            extrapolate: options.solve.extrapolate,
             ambient: match options.ambient {
                 Ambient::Sum => "sum",
                 Ambient::Solve => "solve",
@@ -212,24 +219,15 @@ pub struct BasisPlan {
 
 impl BasisPlan {
     /// Voxelizes `model` at `grid` sites along its longest edge; the medium from `preset`,
-    /// the papers' schedule, `B_0` summed.
-    pub fn new(model: &Model, grid: usize, preset: &str) -> Result<BasisPlan, LightingError> {
-        let (medium, placement, options) = basis_setup(model, grid, preset)?;
-        sylva_core::check_memory(
-            &format!(
-                "voxelizing model '{}' on a {} grid",
-                model.name, placement.dims
-            ),
-            sylva_voxel::memory_needed(placement.dims),
-        )?;
-        let density = voxelize(
-            model,
-            &VoxelizeOptions {
-                grid,
-                alpha_test: true,
-                occupancy: PAPER_OCCUPANCY,
-            },
-        )?;
+    /// `schedule`'s solves (the solver's [`LbSolver::schedule`]), `B_0` summed.
+    pub fn new(
+        model: &Model,
+        grid: usize,
+        preset: &str,
+        schedule: Schedule,
+    ) -> Result<BasisPlan, LightingError> {
+        let (medium, placement, options) = basis_setup(model, grid, preset, schedule)?;
+        let density = basis_density(model, grid)?;
         debug_assert_eq!(density.dims, placement.dims);
         Ok(BasisPlan {
             model: model.name.clone(),
@@ -244,15 +242,16 @@ impl BasisPlan {
         BasisJob::all(&self.medium, &self.options)
     }
 
-    /// The dimensions of `model`'s grid at `grid` and its [`BasisPlan::jobs`] with `preset`,
-    /// without voxelizing it: the list a work queue hands out before any rank has the
-    /// density grid.
+    /// The dimensions of `model`'s grid at `grid` and its [`BasisPlan::jobs`] with `preset`
+    /// and `schedule`, without voxelizing it: the list a work queue hands out before any
+    /// rank has the density grid.
     pub fn jobs_of(
         model: &Model,
         grid: usize,
         preset: &str,
+        schedule: Schedule,
     ) -> Result<(Dims, Vec<BasisJob>), LightingError> {
-        let (medium, placement, options) = basis_setup(model, grid, preset)?;
+        let (medium, placement, options) = basis_setup(model, grid, preset, schedule)?;
         Ok((placement.dims, BasisJob::all(&medium, &options)))
     }
 
@@ -310,21 +309,41 @@ impl BasisPlan {
     }
 }
 
-/// The solve schedule of basis sets: the papers' 2 × the longest edge, `B_0` summed.
-fn basis_options(dims: Dims) -> BasisOptions {
-    BasisOptions::papers(dims)
+/// `model` voxelized at `grid` sites along its longest edge as its basis is solved on (and
+/// the paper light's global grid places it).
+pub fn basis_density(model: &Model, grid: usize) -> Result<DensityGrid, LightingError> {
+    let placement = placement_for(model, grid)?;
+    sylva_core::check_memory(
+        &format!(
+            "voxelizing model '{}' on a {} grid",
+            model.name, placement.dims
+        ),
+        sylva_voxel::memory_needed(placement.dims),
+    )?;
+    Ok(voxelize(
+        model,
+        &VoxelizeOptions {
+            grid,
+            alpha_test: true,
+            occupancy: PAPER_OCCUPANCY,
+        },
+    )?)
 }
 
 /// What a model's basis depends on besides its density grid: the medium of `preset`, the
-/// grid's placement and the solve schedule.
+/// grid's placement and the solves' options (`schedule`'s, `B_0` summed).
 fn basis_setup(
     model: &Model,
     grid: usize,
     preset: &str,
+    schedule: Schedule,
 ) -> Result<(MediumParams, sylva_voxel::GridPlacement, BasisOptions), LightingError> {
     let medium = preset_medium(preset)?;
     let placement = placement_for(model, grid)?;
-    let options = basis_options(placement.dims);
+    let options = BasisOptions {
+        solve: schedule.options(placement.dims),
+        ambient: Ambient::Sum,
+    };
     Ok((medium, placement, options))
 }
 
@@ -393,23 +412,23 @@ pub fn lookup_basis(
     solver: Option<&dyn LbSolver>,
 ) -> Result<BasisLookup, LightingError> {
     let t0 = Instant::now();
-    let (medium, placement, options) = basis_setup(model, opts.grid, &opts.preset)?;
     opts.target.validate()?;
-    let (dims, bounds) = (placement.dims, placement.bounds());
-    let raw_bytes_of = |d: Dims| BasisSet::memory_needed(d);
-
-    let mut tags: Vec<String> = Vec::new();
-    if let Some(s) = solver {
-        tags.push(s.cache_tag());
-    } else {
-        tags.extend(KNOWN_TAGS.iter().map(|t| t.to_string()));
-    }
+    let backends: Vec<(String, Schedule)> = match solver {
+        Some(s) => vec![(s.cache_tag(), s.schedule())],
+        None => KNOWN_BACKENDS
+            .iter()
+            .map(|&(t, s)| (t.to_string(), s))
+            .collect(),
+    };
     let mut source = LightingSource::Computed;
     let Some(dir) = &opts.cache_dir else {
         return Ok(BasisLookup::Miss(source));
     };
     let cache = Cache::new(dir);
-    for tag in &tags {
+    for (tag, schedule) in &backends {
+        let (medium, placement, options) = basis_setup(model, opts.grid, &opts.preset, *schedule)?;
+        let (dims, bounds) = (placement.dims, placement.bounds());
+        let raw_bytes_of = |d: Dims| BasisSet::memory_needed(d);
         let rkey = basis_key(model, opts.grid, &medium, &options, tag);
         let ckey = compressed_key(rkey, &opts.target);
         let cpath = basis_path(&cache, model, ckey, COMPRESSED_EXTENSION);
@@ -471,7 +490,7 @@ pub fn lookup_basis(
             }
             (None, Some((raw, seconds))) => {
                 // The uncompressed set is there: compress it again (no solve).
-                let density = BasisPlan::new(model, opts.grid, &opts.preset)?.density;
+                let density = basis_density(model, opts.grid)?;
                 let c = compress(&raw, &region_of(&density), &opts.target)?;
                 let cache_warning = cache.store(&cpath, |p| {
                     write_compressed(&c, p, ckey, model, opts, seconds, solver)
@@ -599,7 +618,7 @@ pub fn model_basis(
     let Some(solver) = solver else {
         return Ok(None);
     };
-    let plan = BasisPlan::new(model, opts.grid, &opts.preset)?;
+    let plan = BasisPlan::new(model, opts.grid, &opts.preset, solver.schedule())?;
     let jobs = plan.jobs();
     let max_steps = plan.options.solve.max_steps;
     let solve_start = Instant::now();
@@ -673,6 +692,7 @@ mod tests {
             model: sample_model_medium_key(),
             max_steps: 64,
             tolerance: None,
+            extrapolate: true,
             ambient: "sum",
         };
         let mut variants: Vec<(String, BasisKey)> = vec![
@@ -694,6 +714,13 @@ mod tests {
                 "tolerance".into(),
                 BasisKey {
                     tolerance: Some(0.0),
+                    ..base.clone()
+                },
+            ),
+            (
+                "extrapolate".into(),
+                BasisKey {
+                    extrapolate: false,
                     ..base.clone()
                 },
             ),

@@ -26,8 +26,8 @@ pub mod sun_parts;
 pub mod weights;
 
 pub use basis_cache::{
-    basis_key, basis_path, compressed_key, lookup_basis, model_basis, region_of, store_basis,
-    BasisCacheOptions, BasisLookup, BasisPlan, BasisReport, ModelBasis, RAW_EXTENSION,
+    basis_density, basis_key, basis_path, compressed_key, lookup_basis, model_basis, region_of,
+    store_basis, BasisCacheOptions, BasisLookup, BasisPlan, BasisReport, ModelBasis, RAW_EXTENSION,
 };
 pub use global::{
     luminance_medium, GlobalGridOptions, GlobalInstance, GlobalLight, GlobalReport, InstanceScale,
