@@ -93,7 +93,8 @@ struct ShadeParams {
     ground: [u32; 4],
     ground_box: [f32; 4],
     ground_cell: [f32; 4],
-    /// The final gather: rays per plant sample (0: none), the seed's low and high 32 bits.
+    /// The final gather: rays per plant sample (0: none), the seed's low and high 32 bits,
+    /// and one in how many of its rays traces the sun at its hit.
     gather: [u32; 4],
 }
 
@@ -774,12 +775,13 @@ impl GpuFrame {
             to_sun: v4(to_sun, 0.0),
             ground_colour: v4(ground, 0.0),
             sky: v4(sky, 0.0),
-            // The final gather's rays per plant sample and the seed its directions come from.
+            // The final gather's rays per plant sample, the seed its directions come from and
+            // one in how many of its rays traces the sun at its hit.
             gather: [
                 cpu.gather_count(s),
                 settings.seed as u32,
                 (settings.seed >> 32) as u32,
-                0,
+                crate::gather::SUN_SHADOW_EVERY,
             ],
             leaf_transmission: v4(Vec3::from_array(s.leaf_transmission), 0.0),
             k: [

@@ -394,7 +394,9 @@ struct Scratch {
     /// Gather rays, whose they are, `(tile, sample, side)`, their hits and the geometry
     /// of those.
     gather_rays: Vec<Ray>,
-    gather_owner: Vec<(usize, usize, usize)>,
+    /// Per gather ray: its sample's tile and index, its side, and whether it traces the
+    /// sun's shadow ray from its hit ([`crate::gather::traces_sun`]).
+    gather_owner: Vec<(usize, usize, usize, bool)>,
     gather_hits: Vec<Option<Hit>>,
     gather_geoms: Vec<SampleGeom>,
 }
@@ -660,9 +662,9 @@ impl<'a> Renderer<'a> {
                     let (x, y) = (tile.x0 + (k % tw) as u32, tile.y0 + (k / tw) as u32);
                     let pixel = crate::gather::pixel_key(x, y, camera.width);
                     let s = (i % n as usize) as u32;
-                    self.gather_rays(g, pixel, s, settings, &mut |ray, side| {
+                    self.gather_rays(g, pixel, s, settings, &mut |ray, side, sun| {
                         scratch.gather_rays.push(ray);
-                        scratch.gather_owner.push((t, i, side));
+                        scratch.gather_owner.push((t, i, side, sun));
                     });
                 }
             }
@@ -680,7 +682,7 @@ impl<'a> Renderer<'a> {
                 .enumerate()
             {
                 let (geom, shadow_ray) = self.sample_geometry(ray, hit.as_ref());
-                if let Some(s) = shadow_ray {
+                if let (Some(s), true) = (shadow_ray, scratch.gather_owner[j].3) {
                     scratch.shadow_rays.push(s);
                     scratch.waiting.push((j, 0));
                 }
@@ -693,7 +695,7 @@ impl<'a> Renderer<'a> {
             for (&(j, _), &blocked) in scratch.waiting.iter().zip(&scratch.blocked) {
                 scratch.gather_geoms[j].set_lit(!blocked);
             }
-            for (j, &(t, i, side)) in scratch.gather_owner.iter().enumerate() {
+            for (j, &(t, i, side, _)) in scratch.gather_owner.iter().enumerate() {
                 let l = self.gathered(
                     &scratch.gather_rays[j],
                     scratch.gather_hits[j].as_ref(),
@@ -728,16 +730,16 @@ impl<'a> Renderer<'a> {
         let mut shadow_rays = 0;
         for s in 0..n {
             let ray = sample_ray(camera, x, y, s, n, settings.seed);
-            let (hit, mut geom) = self.trace_one(&ray, stats, &mut shadow_rays);
+            let (hit, mut geom) = self.trace_one(&ray, true, stats, &mut shadow_rays);
             if self.gathers(&settings.shading) {
                 let pixel = crate::gather::pixel_key(x, y, camera.width);
                 let mut rays = Vec::new();
-                self.gather_rays(&mut geom, pixel, s, settings, &mut |r, side| {
-                    rays.push((r, side))
+                self.gather_rays(&mut geom, pixel, s, settings, &mut |r, side, sun| {
+                    rays.push((r, side, sun))
                 });
-                for (r, side) in rays {
+                for (r, side, sun) in rays {
                     shadow_rays += 1;
-                    let (h, g) = self.trace_one(&r, stats, &mut shadow_rays);
+                    let (h, g) = self.trace_one(&r, sun, stats, &mut shadow_rays);
                     geom.add_gathered(side, self.gathered(&r, h.as_ref(), &g, &settings.shading));
                 }
             }
@@ -747,10 +749,11 @@ impl<'a> Renderer<'a> {
     }
 
     /// One ray's closest hit and its shading inputs, lit by its shadow ray when it needs one
-    /// (counted in `shadow_rays`), each traced alone.
+    /// and `sun` allows it (counted in `shadow_rays`), each traced alone.
     fn trace_one(
         &self,
         ray: &Ray,
+        sun: bool,
         stats: &mut TraceStats,
         shadow_rays: &mut u64,
     ) -> (Option<Hit>, SampleGeom) {
@@ -758,7 +761,7 @@ impl<'a> Renderer<'a> {
         self.query
             .closest_hits(std::slice::from_ref(ray), &mut hit, stats);
         let (mut geom, shadow) = self.sample_geometry(ray, hit[0].as_ref());
-        if let Some(shadow) = shadow {
+        if let (Some(shadow), true) = (shadow, sun) {
             let mut blocked = [false];
             self.query.any_hits(&[shadow], &mut blocked, stats);
             geom.set_lit(!blocked[0]);
@@ -859,15 +862,16 @@ impl<'a> Renderer<'a> {
 
     /// A plant sample's gather rays ([`crate::gather`]): `settings.shading.gather_rays` split
     /// between its front and (leaves that transmit) back, cosine-distributed about the
-    /// shading normal and its opposite, each handed to `cast` with its side. Sets the
-    /// sample's ray counts.
+    /// shading normal and its opposite, each handed to `cast` with its side and whether it
+    /// traces its hit's shadow ray ([`crate::gather::traces_sun`]). Sets the sample's ray
+    /// counts.
     fn gather_rays(
         &self,
         g: &mut SampleGeom,
         pixel: u32,
         sample: u32,
         settings: &RenderSettings,
-        cast: &mut dyn FnMut(Ray, usize),
+        cast: &mut dyn FnMut(Ray, usize, bool),
     ) {
         let SampleGeom::Plant {
             point,
@@ -884,16 +888,13 @@ impl<'a> Renderer<'a> {
         let eps = 1e-4 * point.abs().max_element().max(1.0);
         for (side, count, n) in [(0, gather_rays.0, *normal), (1, gather_rays.1, -*normal)] {
             for j in 0..count {
-                let u = crate::gather::sample_point(
-                    settings.seed,
-                    pixel,
-                    side as u32,
-                    sample.wrapping_mul(count).wrapping_add(j),
-                );
+                let index = sample.wrapping_mul(count).wrapping_add(j);
+                let u = crate::gather::sample_point(settings.seed, pixel, side as u32, index);
                 let dir = crate::gather::cosine_direction(n, u);
                 // Off the surface on the ray's side of the triangle (as Renderer::shadow_ray).
                 let off = if dir.dot(*ng) >= 0.0 { eps } else { -eps };
-                cast(Ray::new(*point + *ng * off, dir), side);
+                let sun = crate::gather::traces_sun(settings.seed, pixel, side as u32, index);
+                cast(Ray::new(*point + *ng * off, dir), side, sun);
             }
         }
     }
@@ -901,10 +902,12 @@ impl<'a> Renderer<'a> {
     /// The radiance a gather ray brings back: what the surface it hits sends back along it,
     /// its direct sunlight and its LB light ([`Renderer::shade`] of that point, `g` lit by
     /// its own shadow ray), or the sky where it hits nothing (in any direction, as a camera
-    /// ray past the ground's edge sees it).
+    /// ray past the ground's edge sees it). One gather ray in
+    /// [`crate::gather::SUN_SHADOW_EVERY`] traces the sun at its hit, so its direct sunlight
+    /// counts that many times (the others' `g` is unlit).
     fn gathered(&self, ray: &Ray, hit: Option<&Hit>, g: &SampleGeom, p: &ShadingParams) -> Vec3 {
         let r = self.shade(ray, hit, g, p);
-        r.local + r.indirect + r.sky
+        r.local * crate::gather::SUN_SHADOW_EVERY as f32 + r.indirect + r.sky
     }
 
     /// The ray towards the sun from `point` (on instance `from`, if any), starting a little

@@ -41,7 +41,8 @@ struct ShadeParams {
     ground_box: vec4<f32>,
     // Ground index: 1 / cell size.
     ground_cell: vec4<f32>,
-    // The final gather: rays per plant sample (0: none), the seed's low and high 32 bits.
+    // The final gather: rays per plant sample (0: none), the seed's low and high 32 bits, and
+    // one in how many of its rays traces the sun at its hit (gather::SUN_SHADOW_EVERY, ≥ 1).
     gather: vec4<u32>,
 }
 
@@ -653,6 +654,14 @@ fn gather_point(pixel: u32, side: u32, index: u32) -> vec2<f32> {
     return vec2<f32>(f32((sx + index * 3242174889u) >> 8u) * unit, f32((sy + index * 2447445413u) >> 8u) * unit);
 }
 
+// gather::traces_sun with the frame's seed; shading.gather.w is gather::SUN_SHADOW_EVERY.
+fn gather_traces_sun(pixel: u32, side: u32, index: u32) -> bool {
+    let seed_lo = shading.gather.y;
+    let seed_hi = shading.gather.z;
+    let key = hash32(hash32(pixel ^ hash32(seed_lo ^ hash32(seed_hi))) ^ (side * 0x9e3779b9u));
+    return (hash32(key ^ 0x27d4eb2fu) + index) % shading.gather.w == 0u;
+}
+
 fn cos_sin_turn(t: f32) -> vec2<f32> {
     let q = floor(4.0 * t);
     let a = (4.0 * t - q) * 1.5707964;
@@ -886,7 +895,8 @@ fn gather(d: vec3<f32>, h: Best, g: Geom, pixel: u32, s: u32) -> Gathered {
             j = i - front_count;
             n = -g.normal;
         }
-        let dir = cosine_direction(n, gather_point(pixel, side, s * count + j));
+        let index = s * count + j;
+        let dir = cosine_direction(n, gather_point(pixel, side, index));
         var off = -eps;
         if (dot_(dir, g.ng) >= 0.0) {
             off = eps;
@@ -898,14 +908,15 @@ fn gather(d: vec3<f32>, h: Best, g: Geom, pixel: u32, s: u32) -> Gathered {
         rays += 1u;
         let g2 = sample_geometry(o, dir, c.best);
         var lit = false;
-        if (g2.shadow) {
+        if (g2.shadow && gather_traces_sun(pixel, side, index)) {
             let blocked = any_hit(g2.shadow_origin, shading.to_sun.xyz, 0.0, shading.sun.w, g2.from_instance);
             to_cpu = to_cpu || blocked.y != 0u;
             lit = blocked.x == 0u;
             rays += 1u;
         }
         let r = shade(dir, c.best, g2, lit);
-        let l = (r.local + r.indirect + r.sky) / f32(count);
+        // One ray in shading.gather.w traced the sun: its sunlight counts for them all.
+        let l = (r.local * f32(shading.gather.w) + r.indirect + r.sky) / f32(count);
         if (side == 0u) {
             front += l;
         } else {
