@@ -7,7 +7,7 @@
 use sylva_lb::lattice::Q;
 use sylva_lb::{
     solve_lighting, Boundary, ColourParams, DensityGrid, Dims, Floor, Lattice, LbSolver,
-    LbSolverError, MediumParams, Preset, SolveOptions, StopReason, VolumeSource,
+    LbSolverError, MediumParams, Preset, Schedule, SolveOptions, StopReason, VolumeSource,
 };
 use sylva_lb_gpu::{
     select_solver, solve_lighting_gpu, AdapterChoice, ContextOptions, Device, GpuContext, GpuError,
@@ -582,6 +582,7 @@ fn backends_behind_the_trait_agree_and_name_themselves() {
     let cpu = select_solver(Device::Cpu, Precision::F32).unwrap();
     assert_eq!(cpu.solver.device(), "cpu");
     assert_eq!(cpu.solver.cache_tag(), "cpu");
+    assert_eq!(cpu.solver.schedule(), Schedule::Extrapolated);
     assert!(matches!(
         select_solver(Device::Cpu, Precision::F16),
         Err(LbGpuError::F16OnCpu)
@@ -590,6 +591,21 @@ fn backends_behind_the_trait_agree_and_name_themselves() {
     let gpu = GpuSolver::new(ctx, Precision::F32).unwrap();
     assert_eq!(gpu.device(), "gpu");
     assert_eq!(gpu.cache_tag(), "gpu-f32");
+    assert_eq!(gpu.schedule(), Schedule::Papers);
+    // Each backend runs the schedule it names (the renderer asks for nothing else).
+    {
+        let dims = Dims::new(12, 10, 9).unwrap();
+        let grid = mixed_grid(dims);
+        let medium = anisotropic_medium(true);
+        let sun = Boundary::sun([0.3, -0.9, 0.2], 1.0);
+        for solver in [&*cpu.solver, &gpu as &dyn LbSolver] {
+            let opts = solver.schedule().options(dims);
+            let (_, reports) = solver
+                .solve_lighting(&grid, &medium, sun, &opts, &mut |_, _, _| {})
+                .unwrap_or_else(|e| panic!("{}: {e}", solver.describe()));
+            assert_eq!(reports[0].steps, opts.max_steps, "{}", solver.describe());
+        }
+    }
     assert_eq!(gpu.adapter().as_deref(), Some(gpu.context().adapter_name()));
     assert!(gpu.describe().contains("f32 state"), "{}", gpu.describe());
     let dims = Dims::new(12, 10, 9).unwrap();

@@ -686,6 +686,12 @@ mod tests {
     use sylva_lb::relight::{Codec, Precision};
 
     #[test]
+    fn lookups_without_a_solver_try_the_cpu_on_its_own_schedule() {
+        let cpu = sylva_lb::CpuSolver;
+        assert!(KNOWN_BACKENDS.contains(&(cpu.cache_tag().as_str(), cpu.schedule())));
+    }
+
+    #[test]
     fn basis_key_changes_with_every_field() {
         let base = BasisKey {
             solver: "cpu".into(),
