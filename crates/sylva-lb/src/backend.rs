@@ -151,18 +151,18 @@ pub trait LbSolver: Send + Sync {
 /// A backend run on another [`Schedule`] than its own (`--lb-schedule`): each solve is the
 /// backend's, for whatever options it is given; only [`LbSolver::schedule`] differs (and with
 /// it the cache keys, which name the schedule).
-pub struct OnSchedule<S> {
-    solver: S,
+pub struct OnSchedule {
+    solver: Box<dyn LbSolver>,
     schedule: Schedule,
 }
 
-impl<S: LbSolver> OnSchedule<S> {
-    pub fn new(solver: S, schedule: Schedule) -> OnSchedule<S> {
+impl OnSchedule {
+    pub fn new(solver: Box<dyn LbSolver>, schedule: Schedule) -> OnSchedule {
         OnSchedule { solver, schedule }
     }
 }
 
-impl<S: LbSolver> LbSolver for OnSchedule<S> {
+impl LbSolver for OnSchedule {
     fn solve_lighting_rgb(
         &self,
         grid: &DensityGrid,
@@ -221,66 +221,6 @@ impl<S: LbSolver> LbSolver for OnSchedule<S> {
 
     fn schedule(&self) -> Schedule {
         self.schedule
-    }
-}
-
-/// A boxed backend is a backend (for [`OnSchedule`] over a backend chosen at run time).
-impl LbSolver for Box<dyn LbSolver> {
-    fn solve_lighting_rgb(
-        &self,
-        grid: &DensityGrid,
-        medium: &MediumParams,
-        boundaries: &[Boundary; 3],
-        floor: Option<&Floor>,
-        source: Option<&VolumeSource>,
-        opts: &SolveOptions,
-        progress: &mut dyn FnMut(usize, usize, f64),
-    ) -> Result<(LightingGrid, Vec<SolveReport>), LbSolverError> {
-        (**self).solve_lighting_rgb(grid, medium, boundaries, floor, source, opts, progress)
-    }
-
-    fn solve_colour(
-        &self,
-        grid: &DensityGrid,
-        medium: &MediumParams,
-        colour: usize,
-        boundary: Boundary,
-        opts: &SolveOptions,
-        progress: &mut dyn FnMut(usize, f64),
-    ) -> Result<(Vec<f32>, SolveReport), LbSolverError> {
-        (**self).solve_colour(grid, medium, colour, boundary, opts, progress)
-    }
-
-    fn benchmark(
-        &self,
-        grid: &DensityGrid,
-        medium: &MediumParams,
-        boundary: Boundary,
-        steps: usize,
-        repeats: usize,
-        progress: &mut dyn FnMut(usize),
-    ) -> Result<LbBenchmark, LbSolverError> {
-        (**self).benchmark(grid, medium, boundary, steps, repeats, progress)
-    }
-
-    fn device(&self) -> &'static str {
-        (**self).device()
-    }
-
-    fn adapter(&self) -> Option<String> {
-        (**self).adapter()
-    }
-
-    fn describe(&self) -> String {
-        (**self).describe()
-    }
-
-    fn cache_tag(&self) -> String {
-        (**self).cache_tag()
-    }
-
-    fn schedule(&self) -> Schedule {
-        (**self).schedule()
     }
 }
 

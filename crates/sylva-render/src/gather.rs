@@ -52,14 +52,20 @@ pub fn pixel_key(x: u32, y: u32, width: u32) -> u32 {
     y.wrapping_mul(width).wrapping_add(x)
 }
 
+/// The hash of the seed, the pixel and the side that rotates a pixel's gather rays on that
+/// side ([`sample_point`], [`traces_sun`]).
+fn side_key(seed: u64, pixel: u32, side: u32) -> u32 {
+    hash32(
+        hash32(pixel ^ hash32(seed as u32 ^ hash32((seed >> 32) as u32)))
+            ^ side.wrapping_mul(0x9e37_79b9),
+    )
+}
+
 /// Point `index` of hemisphere `side` (0 front, 1 back) of pixel `pixel` on the unit square:
 /// R2 rotated by a hash of the seed, the pixel and the side. The pixel's `n` samples with
 /// `k` rays each on a side use indices `s · k + j`, so they stratify together.
 pub fn sample_point(seed: u64, pixel: u32, side: u32, index: u32) -> [f32; 2] {
-    let key = hash32(
-        hash32(pixel ^ hash32(seed as u32 ^ hash32((seed >> 32) as u32)))
-            ^ side.wrapping_mul(0x9e37_79b9),
-    );
+    let key = side_key(seed, pixel, side);
     let shift = [hash32(key), hash32(key ^ 0x85eb_ca6b)];
     let to_unit = |v: u32| (v >> 8) as f32 * (1.0 / 16_777_216.0);
     [
@@ -80,11 +86,7 @@ pub const SUN_SHADOW_EVERY: u32 = 4;
 /// pixel's rays on that side, from an offset hashed from the seed, the pixel and the side, so
 /// the sun's samples stratify over the pixel as its directions do.
 pub fn traces_sun(seed: u64, pixel: u32, side: u32, index: u32) -> bool {
-    let key = hash32(
-        hash32(pixel ^ hash32(seed as u32 ^ hash32((seed >> 32) as u32)))
-            ^ side.wrapping_mul(0x9e37_79b9),
-    );
-    hash32(key ^ 0x27d4_eb2f)
+    hash32(side_key(seed, pixel, side) ^ 0x27d4_eb2f)
         .wrapping_add(index)
         .is_multiple_of(SUN_SHADOW_EVERY)
 }

@@ -643,11 +643,16 @@ fn hash32(v: u32) -> u32 {
     return x;
 }
 
-// gather::sample_point with the frame's seed.
-fn gather_point(pixel: u32, side: u32, index: u32) -> vec2<f32> {
+// gather::side_key with the frame's seed.
+fn gather_key(pixel: u32, side: u32) -> u32 {
     let seed_lo = shading.gather.y;
     let seed_hi = shading.gather.z;
-    let key = hash32(hash32(pixel ^ hash32(seed_lo ^ hash32(seed_hi))) ^ (side * 0x9e3779b9u));
+    return hash32(hash32(pixel ^ hash32(seed_lo ^ hash32(seed_hi))) ^ (side * 0x9e3779b9u));
+}
+
+// gather::sample_point with the frame's seed.
+fn gather_point(pixel: u32, side: u32, index: u32) -> vec2<f32> {
+    let key = gather_key(pixel, side);
     let sx = hash32(key);
     let sy = hash32(key ^ 0x85ebca6bu);
     let unit = 1.0 / 16777216.0;
@@ -656,10 +661,7 @@ fn gather_point(pixel: u32, side: u32, index: u32) -> vec2<f32> {
 
 // gather::traces_sun with the frame's seed; shading.gather.w is gather::SUN_SHADOW_EVERY.
 fn gather_traces_sun(pixel: u32, side: u32, index: u32) -> bool {
-    let seed_lo = shading.gather.y;
-    let seed_hi = shading.gather.z;
-    let key = hash32(hash32(pixel ^ hash32(seed_lo ^ hash32(seed_hi))) ^ (side * 0x9e3779b9u));
-    return (hash32(key ^ 0x27d4eb2fu) + index) % shading.gather.w == 0u;
+    return (hash32(gather_key(pixel, side) ^ 0x27d4eb2fu) + index) % shading.gather.w == 0u;
 }
 
 fn cos_sin_turn(t: f32) -> vec2<f32> {

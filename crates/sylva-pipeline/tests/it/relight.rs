@@ -193,7 +193,7 @@ fn exact_relit_light_equals_a_direct_solve_for_every_instance() {
     // exactly; an extrapolated solve is not linear (its step factor is measured).
     let mut p = prepare(
         scene,
-        &OnSchedule::new(CpuSolver, Schedule::Papers),
+        &OnSchedule::new(Box::new(CpuSolver), Schedule::Papers),
         None,
         Some(plan(BasisUse::Always, SunWeights::Exact, false, true)),
         &Silent,
