@@ -11,7 +11,7 @@ use sylva_render::render::{mean_luminance, Frame, Mode};
 use sylva_render::stages::{stage, StageClock};
 
 use sylva_lb::Schedule;
-use sylva_light::lighting::LightingError;
+use sylva_light::lighting::{Light, LightingError};
 use sylva_light::relight::physical::PARTS;
 use sylva_light::relight::BasisPlan;
 
@@ -238,9 +238,18 @@ impl fmt::Display for RenderSummary<'_> {
         if let Some(split) = &self.split {
             writeln!(o, "{split}")?;
         }
+        // The final gather's rays per sample follow the rays per pixel unless given: say how
+        // many the frame took.
+        let shading = &self.prepared.shading;
+        let gather = if shading.light == Light::Physical && shading.gather_rays > 0 {
+            let k = shading.gather_rays;
+            format!(" ({k} gather ray{}/sample)", if k == 1 { "" } else { "s" })
+        } else {
+            String::new()
+        };
         writeln!(
             o,
-            "{}x{} at {} rays/pixel: {} primary + {} shadow rays, {:.2} Mrays/s; frame {:.3} s; {} kd-restarts; kd-trees {}, LB grids {}",
+            "{}x{} at {} rays/pixel{gather}: {} primary + {} shadow rays, {:.2} Mrays/s; frame {:.3} s; {} kd-restarts; kd-trees {}, LB grids {}",
             frame.width,
             frame.height,
             self.rays_per_pixel,

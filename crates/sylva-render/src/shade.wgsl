@@ -867,7 +867,7 @@ struct Gathered {
     to_cpu: bool,
 }
 
-// Renderer::gather_rays, Renderer::gathered and the gathered indirect light of
+// gather::split, Renderer::gather_rays, Renderer::gathered and the gathered indirect light of
 // Renderer::shade: what sample s's gather rays bring back to the plant point g (the front's
 // rays, then the back's).
 fn gather(d: vec3<f32>, h: Best, g: Geom, pixel: u32, s: u32) -> Gathered {
@@ -875,9 +875,19 @@ fn gather(d: vec3<f32>, h: Best, g: Geom, pixel: u32, s: u32) -> Gathered {
     let k = shading.gather.x;
     var front_count = k;
     var back_count = 0u;
+    // gather::side_weight: a single ray on a leaf that transmits stands for both sides.
+    var weight = 1.0;
     if (transmits(h)) {
-        front_count = k - k / 2u;
-        back_count = k / 2u;
+        if (k == 1u) {
+            weight = 2.0;
+            if ((hash32(gather_key(pixel, 0u) ^ 0x165667b1u) + s) % 2u == 0u) {
+                front_count = 0u;
+                back_count = 1u;
+            }
+        } else {
+            front_count = k - k / 2u;
+            back_count = k / 2u;
+        }
     }
     var front = zero;
     var back_sum = zero;
@@ -918,7 +928,7 @@ fn gather(d: vec3<f32>, h: Best, g: Geom, pixel: u32, s: u32) -> Gathered {
         }
         let r = shade(dir, c.best, g2, lit);
         // One ray in shading.gather.w traced the sun: its sunlight counts for them all.
-        let l = (r.local * f32(shading.gather.w) + r.indirect + r.sky) / f32(count);
+        let l = (r.local * f32(shading.gather.w) + r.indirect + r.sky) * weight / f32(count);
         if (side == 0u) {
             front += l;
         } else {

@@ -74,13 +74,14 @@ pub struct RelightArgs {
     pub white: Option<f32>,
     /// Physical light: final-gather rays per camera sample on a plant, 0 to 256 (0: the LB
     /// light at the leaf itself, several times faster; docs/light.md, "The final gather").
+    /// [default: 128 per pixel shared by its samples: 8 up to 16 rays/pixel, 4 at 32, 2 from
+    /// 64 on]
     #[arg(
         long,
-        default_value_t = sylva_render::ShadingParams::default().gather_rays,
         allow_negative_numbers = true,
         value_parser = clap::value_parser!(u32).range(0..=i64::from(sylva_render::gather::MAX_GATHER_RAYS))
     )]
-    pub gather_rays: u32,
+    pub gather_rays: Option<u32>,
 }
 
 pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {

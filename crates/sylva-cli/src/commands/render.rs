@@ -162,14 +162,14 @@ pub struct RenderLightArgs {
     /// Physical light: final-gather rays per camera sample on a plant, 0 to 256: the light
     /// arriving at a leaf is traced one bounce (sky, ground, other leaves lit by the sun and
     /// their LB light); 0 takes the LB light at the leaf itself, several times faster and less
-    /// exact (docs/light.md, "The final gather").
+    /// exact (docs/light.md, "The final gather"). [default: 128 per pixel shared by its
+    /// samples: 8 up to 16 rays/pixel, 4 at 32, 2 from 64 on]
     #[arg(
         long,
-        default_value_t = ShadingParams::default().gather_rays,
         allow_negative_numbers = true,
         value_parser = clap::value_parser!(u32).range(0..=i64::from(sylva_render::gather::MAX_GATHER_RAYS))
     )]
-    pub gather_rays: u32,
+    pub gather_rays: Option<u32>,
     /// LB light from base solutions (always: the physical light's 28 parts per model or,
     /// with --light paper, 004's bases), solved for the sun (never), or (auto) the bases
     /// when all are cached, else solved for the sun.
@@ -182,7 +182,7 @@ impl Default for RenderLightArgs {
     fn default() -> Self {
         RenderLightArgs {
             light: None,
-            gather_rays: ShadingParams::default().gather_rays,
+            gather_rays: None,
             basis: BasisArg::Auto,
         }
     }
@@ -314,7 +314,7 @@ impl FrameArgs {
         scene: &str,
         view: &ViewArgs,
         light: &Option<String>,
-        gather_rays: u32,
+        gather_rays: Option<u32>,
         (lb, relit, grid): (&LbArgs, &RelitArgs, &GridArgs),
     ) -> FrameArgs {
         FrameArgs {
@@ -547,7 +547,10 @@ pub fn prepare(a: &FrameArgs, req: PrepareRequest, runner: &dyn Runner) -> Resul
         light,
         indirect: a.view.indirect,
         sky_ambient: a.view.sky_ambient,
-        gather_rays: a.light.gather_rays,
+        gather_rays: a
+            .light
+            .gather_rays
+            .unwrap_or_else(|| sylva_render::gather::rays_per_sample(rays_per_pixel)),
         largest_frame: Some((width, height, rays_per_pixel)),
         output_images,
         relight: choice.relight,

@@ -70,7 +70,7 @@ impl ViewSceneArgs {
                 &self.scene,
                 &self.view,
                 &self.light.light,
-                self.gather_rays,
+                Some(self.gather_rays),
                 (&self.lb, &self.relit, &self.grid),
             ),
             PrepareRequest {

@@ -238,10 +238,20 @@ fn frames_agree(
     what: &str,
 ) {
     let kernel = gpu.gpu_frame.as_ref().expect("frames on the GPU");
-    for rpp in [1, 4, 3] {
+    // Last, where the scene gathers: one gather ray per sample, which on a leaf takes one
+    // side per sample (gather::split).
+    let one_ray = (cpu.shading.gather_rays > 0).then_some(1);
+    for (rpp, gather_rays) in [(1, None), (4, None), (3, None), (2, one_ray)] {
         let cam = cpu.camera(64, 48);
-        let a = cpu.render(&cpu.settings(cam, rpp, 5), &Silent).unwrap();
-        let b = gpu.render(&gpu.settings(cam, rpp, 5), &Silent).unwrap();
+        let settings = |p: &PreparedScene| {
+            let mut s = p.settings(cam, rpp, 5);
+            if let Some(k) = gather_rays {
+                s.shading.gather_rays = k;
+            }
+            s
+        };
+        let a = cpu.render(&settings(cpu), &Silent).unwrap();
+        let b = gpu.render(&settings(gpu), &Silent).unwrap();
         assert!(b.timings.fused_seconds > 0.0 && b.timings.primary_seconds == 0.0);
         assert_eq!(a.timings.primary_rays, b.timings.primary_rays);
         // The kernel makes its camera rays with the CPU's arithmetic: on lavapipe the same

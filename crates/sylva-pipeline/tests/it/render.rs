@@ -21,6 +21,12 @@ const GROUND: Vec3 = Vec3::new(0.2, 0.3, 0.4);
 const SKY: Vec3 = Vec3::new(0.5, 0.6, 0.9);
 
 fn board_scene(dir: &Path, extra_instances: &str) -> Scene {
+    board_scene_of(dir, extra_instances, "wood_materials")
+}
+
+/// The board scene with the board's material listed under `materials` (`wood_materials`,
+/// or `leaf_materials` for a board that transmits).
+fn board_scene_of(dir: &Path, extra_instances: &str, materials: &str) -> Scene {
     sylva_testkit::write_board(dir);
     let toml = format!(
         r#"
@@ -29,7 +35,7 @@ name = "board"
 [[models]]
 name = "board"
 mesh = "board.obj"
-wood_materials = ["board"]
+{materials} = ["board"]
 
 [[instances]]
 model = "board"
@@ -343,6 +349,57 @@ fn the_gathered_light_on_an_open_board_is_its_reflectance_times_the_sky() {
             );
         }
     }
+}
+
+#[test]
+fn one_gather_ray_on_a_leaf_gathers_both_sides() {
+    // A leaf board transmits: its gathered light is R of the sky above plus T of what lies
+    // below (the ground, its shadow). With one ray per sample the pixel's samples take the
+    // sides in turn, each counting twice, so the board's mean gathered light agrees with
+    // eight rays per sample (which split four and four) within the rays' noise; a side left
+    // without rays would lose T's whole share.
+    let dir = tempfile::tempdir().unwrap();
+    let mut scene = board_scene_of(dir.path(), "", "leaf_materials");
+    (scene.camera.width, scene.camera.height) = (256, 192);
+    let leaf = &shade_materials(&scene.models)[0][0];
+    assert!(leaf.leaf && leaf.optics.transmit.iter().all(|&t| t > 0.0));
+    let lighting = with_lb(&scene);
+    let cam = PinholeCamera::new(&scene.camera).unwrap();
+    let board: Vec<usize> = (0..scene.camera.height)
+        .flat_map(|y| (0..scene.camera.width).map(move |x| (x, y)))
+        .filter(|&(x, y)| {
+            let ray = cam.pixel_ray(x, y);
+            let hit = ray.at((2.0 - ray.origin.y) / ray.dir.y);
+            hit.x.abs() < 0.9 && hit.z.abs() < 0.9
+        })
+        .map(|(x, y)| (y * scene.camera.width + x) as usize)
+        .collect();
+    assert!(board.len() > 500, "{} board pixels", board.len());
+    let mean = |rays: u32| {
+        let p = ShadingParams {
+            gather_rays: rays,
+            ..ShadingParams::default()
+        };
+        let frame = render_with(
+            &scene,
+            &lighting,
+            &RenderSettings::full(scene.camera, 8, 7, p),
+        );
+        board
+            .iter()
+            .map(|&i| frame.pixels[i].indirect)
+            .sum::<Vec3>()
+            / board.len() as f32
+    };
+    let (one, eight) = (mean(1), mean(8));
+    // The front sees only sky: R ⊙ L_sky. T's share below is what one ray could lose.
+    let front = leaf.base * Vec3::from_array(leaf.optics.reflect) * SKY;
+    assert!(
+        (eight - front).min_element() > 0.05 * eight.max_element(),
+        "T's share: {eight} vs front {front}"
+    );
+    let rel = ((one - eight).abs() / eight).max_element();
+    assert!(rel < 0.03, "one ray {one} vs eight {eight}: {rel}");
 }
 
 #[test]
