@@ -8,6 +8,7 @@ use std::fmt;
 
 use sylva_geom::Scene;
 use sylva_render::render::{mean_luminance, Frame, Mode};
+use sylva_render::shade::ShadingParams;
 use sylva_render::stages::{stage, StageClock};
 
 use sylva_lb::Schedule;
@@ -19,6 +20,18 @@ use crate::{ModeImage, PhysicalRelighting, PreparedScene, Relighting, SplitFrame
 
 /// The scene as it will be rendered at `width`×`height`: models, instances, triangles,
 /// media and the sun.
+/// ` (K gather rays/sample)` where the physical light gathers, else nothing: the final
+/// gather's rays per sample follow the rays per pixel unless given, so a summary says how
+/// many a frame took.
+pub fn gather_note(shading: &ShadingParams) -> String {
+    match shading.gather_rays {
+        k if shading.light == Light::Physical && k > 0 => {
+            format!(" ({k} gather ray{}/sample)", if k == 1 { "" } else { "s" })
+        }
+        _ => String::new(),
+    }
+}
+
 pub fn scene_line(scene: &Scene, width: u32, height: u32) -> String {
     format!(
         "scene {}: {} models, {} instances, {} instanced triangles, {} media; {width}x{height}; sun elevation {:.1}° azimuth {:.1}°",
@@ -238,15 +251,7 @@ impl fmt::Display for RenderSummary<'_> {
         if let Some(split) = &self.split {
             writeln!(o, "{split}")?;
         }
-        // The final gather's rays per sample follow the rays per pixel unless given: say how
-        // many the frame took.
-        let shading = &self.prepared.shading;
-        let gather = if shading.light == Light::Physical && shading.gather_rays > 0 {
-            let k = shading.gather_rays;
-            format!(" ({k} gather ray{}/sample)", if k == 1 { "" } else { "s" })
-        } else {
-            String::new()
-        };
+        let gather = gather_note(&self.prepared.shading);
         writeln!(
             o,
             "{}x{} at {} rays/pixel{gather}: {} primary + {} shadow rays, {:.2} Mrays/s; frame {:.3} s; {} kd-restarts; kd-trees {}, LB grids {}",
@@ -273,5 +278,26 @@ impl fmt::Display for RenderSummary<'_> {
             )?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_gather_note_names_the_rays_a_sample_took() {
+        let with = |light, gather_rays| {
+            gather_note(&ShadingParams {
+                light,
+                gather_rays,
+                ..ShadingParams::default()
+            })
+        };
+        assert_eq!(with(Light::Physical, 2), " (2 gather rays/sample)");
+        assert_eq!(with(Light::Physical, 1), " (1 gather ray/sample)");
+        // No gather: the LB light at the leaf, or a light that does not gather.
+        assert_eq!(with(Light::Physical, 0), "");
+        assert_eq!(with(Light::Paper, 8), "");
     }
 }

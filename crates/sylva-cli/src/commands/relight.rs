@@ -182,7 +182,8 @@ pub fn run(a: RelightArgs, runner: &dyn Runner) -> Result<()> {
             n => format!(", {n} MPI ranks"),
         };
         let path = suns.describe();
-        println!("{n} suns {path}; {w}x{h} at {rpp} rays/pixel{ranks}");
+        let gather = sylva_pipeline::report::gather_note(&settings.shading);
+        println!("{n} suns {path}; {w}x{h} at {rpp} rays/pixel{gather}{ranks}");
     }
     if let (Some(note), true) = (suns.night_note(), root) {
         println!("note: {note}");
