@@ -7,7 +7,7 @@
 //! 2 MiB pages when `transparent_hugepage` is `madvise` (the common default), which spares the
 //! TLB; the buffers are marked before their first touch.
 
-use std::alloc::{alloc_zeroed, dealloc, handle_alloc_error, Layout};
+use std::alloc::{alloc, alloc_zeroed, dealloc, handle_alloc_error, Layout};
 use std::ops::{Deref, DerefMut};
 use std::ptr::NonNull;
 
@@ -29,12 +29,26 @@ impl AlignedBuf {
         let bytes = (len * 4).max(4);
         let align = if bytes >= HUGE { HUGE } else { 64 };
         let layout = Layout::from_size_align(bytes, align).expect("buffer size fits a Layout");
+        if align < HUGE {
+            // SAFETY: the layout has non-zero size.
+            let raw = unsafe { alloc_zeroed(layout) };
+            let Some(ptr) = NonNull::new(raw as *mut f32) else {
+                handle_alloc_error(layout)
+            };
+            return AlignedBuf { ptr, len, layout };
+        }
+        // The allocator zeroes an over-aligned block by writing it, which faults it in as
+        // 4 KiB pages before any advice: 89,600 faults and about 1 s of system time per
+        // 128³ solve (docs/PERFORMANCE.md, "Huge pages for the LB state"). So the block is
+        // marked first and zeroed after, and its first touch faults 2 MiB pages.
         // SAFETY: the layout has non-zero size.
-        let raw = unsafe { alloc_zeroed(layout) };
+        let raw = unsafe { alloc(layout) };
         let Some(ptr) = NonNull::new(raw as *mut f32) else {
             handle_alloc_error(layout)
         };
         advise_huge(raw, bytes);
+        // SAFETY: `raw` is valid for `bytes` bytes; zero bytes are 0.0 as f32.
+        unsafe { std::ptr::write_bytes(raw, 0, bytes) };
         AlignedBuf { ptr, len, layout }
     }
 }
