@@ -29,26 +29,27 @@ impl AlignedBuf {
         let bytes = (len * 4).max(4);
         let align = if bytes >= HUGE { HUGE } else { 64 };
         let layout = Layout::from_size_align(bytes, align).expect("buffer size fits a Layout");
-        if align < HUGE {
-            // SAFETY: the layout has non-zero size.
-            let raw = unsafe { alloc_zeroed(layout) };
-            let Some(ptr) = NonNull::new(raw as *mut f32) else {
-                handle_alloc_error(layout)
-            };
-            return AlignedBuf { ptr, len, layout };
-        }
-        // The allocator zeroes an over-aligned block by writing it, which faults it in as
-        // 4 KiB pages before any advice: 89,600 faults and about 1 s of system time per
-        // 128³ solve (docs/PERFORMANCE.md, "Huge pages for the LB state"). So the block is
-        // marked first and zeroed after, and its first touch faults 2 MiB pages.
+        // The allocator zeroes an over-aligned block by writing it, which would fault it in
+        // as 4 KiB pages before any advice (89,600 faults per 128³ solve; docs/PERFORMANCE.md,
+        // "Huge pages for the LB state"). So a huge block is marked first and zeroed after,
+        // and its first touch faults 2 MiB pages.
+        let huge = align == HUGE;
         // SAFETY: the layout has non-zero size.
-        let raw = unsafe { alloc(layout) };
+        let raw = unsafe {
+            if huge {
+                alloc(layout)
+            } else {
+                alloc_zeroed(layout)
+            }
+        };
         let Some(ptr) = NonNull::new(raw as *mut f32) else {
             handle_alloc_error(layout)
         };
-        advise_huge(raw, bytes);
-        // SAFETY: `raw` is valid for `bytes` bytes; zero bytes are 0.0 as f32.
-        unsafe { std::ptr::write_bytes(raw, 0, bytes) };
+        if huge {
+            advise_huge(raw, bytes);
+            // SAFETY: `raw` is valid for `bytes` bytes; zero bytes are 0.0 as f32.
+            unsafe { std::ptr::write_bytes(raw, 0, bytes) };
+        }
         AlignedBuf { ptr, len, layout }
     }
 }

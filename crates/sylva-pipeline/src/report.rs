@@ -18,8 +18,6 @@ use sylva_light::relight::BasisPlan;
 
 use crate::{ModeImage, PhysicalRelighting, PreparedScene, Relighting, SplitFrame, WrittenImage};
 
-/// The scene as it will be rendered at `width`×`height`: models, instances, triangles,
-/// media and the sun.
 /// ` (K gather rays/sample)` where the physical light gathers, else nothing: the final
 /// gather's rays per sample follow the rays per pixel unless given, so a summary says how
 /// many a frame took.
@@ -32,6 +30,8 @@ pub fn gather_note(shading: &ShadingParams) -> String {
     }
 }
 
+/// The scene as it will be rendered at `width`×`height`: models, instances, triangles,
+/// media and the sun.
 pub fn scene_line(scene: &Scene, width: u32, height: u32) -> String {
     format!(
         "scene {}: {} models, {} instances, {} instanced triangles, {} media; {width}x{height}; sun elevation {:.1}° azimuth {:.1}°",

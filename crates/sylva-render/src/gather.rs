@@ -26,6 +26,9 @@ pub const GATHER_RAYS_PER_PIXEL: u32 = 128;
 /// leaf per sample ([`split`]), which measured worse than two.
 pub const MIN_DEFAULT_GATHER_RAYS: u32 = 2;
 
+/// The most gather rays per camera sample.
+pub const MAX_GATHER_RAYS: u32 = 256;
+
 /// The default gather rays per camera sample at `rays_per_pixel` samples per pixel: the
 /// pixel's [`GATHER_RAYS_PER_PIXEL`] shared by its samples, [`DEFAULT_GATHER_RAYS`] at most
 /// and [`MIN_DEFAULT_GATHER_RAYS`] at least (8 up to 16 samples, 4 at 32, 2 from 64 on).
@@ -37,8 +40,6 @@ pub fn rays_per_sample(rays_per_pixel: u32) -> u32 {
     (GATHER_RAYS_PER_PIXEL / rays_per_pixel.max(1))
         .clamp(MIN_DEFAULT_GATHER_RAYS, DEFAULT_GATHER_RAYS)
 }
-/// The most gather rays per camera sample.
-pub const MAX_GATHER_RAYS: u32 = 256;
 
 /// R2's two irrational steps (1/φ₂ and 1/φ₂², φ₂ the plastic number) in 32-bit fixed point.
 const R2: [u32; 2] = [3_242_174_889, 2_447_445_413];

@@ -112,6 +112,24 @@ fn render(scene: &Scene, lighting: &[Option<ModelLighting>], rpp: u32) -> Frame 
     render_with(scene, lighting, &settings(scene, rpp))
 }
 
+/// A frame of the physical light at `rpp` rays per pixel and `gather_rays` per sample (seed 7).
+fn render_gathering(
+    scene: &Scene,
+    lighting: &[Option<ModelLighting>],
+    rpp: u32,
+    gather_rays: u32,
+) -> Frame {
+    let p = ShadingParams {
+        gather_rays,
+        ..ShadingParams::default()
+    };
+    render_with(
+        scene,
+        lighting,
+        &RenderSettings::full(scene.camera, rpp, 7, p),
+    )
+}
+
 /// The pixel whose centre ray sees world point `p`.
 fn pixel_of(cam: &PinholeCamera, p: Vec3) -> (u32, u32) {
     let c = cam.project(p).unwrap();
@@ -323,15 +341,7 @@ fn the_gathered_light_on_an_open_board_is_its_reflectance_times_the_sky() {
     let l = lighting[0].as_ref().unwrap();
     let cam = PinholeCamera::new(&scene.camera).unwrap();
     for rays in [0, 1, 8] {
-        let p = ShadingParams {
-            gather_rays: rays,
-            ..ShadingParams::default()
-        };
-        let frame = render_with(
-            &scene,
-            &lighting,
-            &RenderSettings::full(scene.camera, 1, 7, p),
-        );
+        let frame = render_gathering(&scene, &lighting, 1, rays);
         for (x, z) in [(0.3, 0.6), (-0.5, -0.2), (0.7, -0.7)] {
             let (px, py) = pixel_of(&cam, Vec3::new(x, 2.0, z));
             let ray = cam.pixel_ray(px, py);
@@ -376,15 +386,7 @@ fn one_gather_ray_on_a_leaf_gathers_both_sides() {
         .collect();
     assert!(board.len() > 500, "{} board pixels", board.len());
     let mean = |rays: u32| {
-        let p = ShadingParams {
-            gather_rays: rays,
-            ..ShadingParams::default()
-        };
-        let frame = render_with(
-            &scene,
-            &lighting,
-            &RenderSettings::full(scene.camera, 8, 7, p),
-        );
+        let frame = render_gathering(&scene, &lighting, 8, rays);
         board
             .iter()
             .map(|&i| frame.pixels[i].indirect)
