@@ -82,6 +82,7 @@ impl LbSolver for GpuSolver {
             max_steps: steps,
             tolerance: None,
             extrapolate: false,
+            coarse_start: false,
         };
         let mut runs = Vec::with_capacity(repeats);
         {

@@ -91,6 +91,7 @@ fn three_colours_agree_with_the_cpu_on_green_brown_and_empty_sites() {
         max_steps: 24,
         tolerance: None,
         extrapolate: false,
+        coarse_start: false,
     };
     for brown_rule in [true, false] {
         let medium = anisotropic_medium(brown_rule);
@@ -142,6 +143,7 @@ fn per_colour_boundaries_and_bark_parameters_agree_with_the_cpu() {
         max_steps: 20,
         tolerance: None,
         extrapolate: false,
+        coarse_start: false,
     };
     let medium = MediumParams {
         brown: Some([0.2, 0.15, 0.1].map(|s| ColourParams {
@@ -262,12 +264,14 @@ fn a_volume_source_agrees_with_the_cpu() {
             max_steps: n,
             tolerance: None,
             extrapolate: false,
+            coarse_start: false,
         })
         .into_iter()
         .chain([SolveOptions {
             max_steps: 400,
             tolerance: Some(1e-4),
             extrapolate: false,
+            coarse_start: false,
         }])
     {
         let (cpu, cpu_reports) = sylva_lb::solve_lighting_rgb(
@@ -292,6 +296,7 @@ fn a_volume_source_agrees_with_the_cpu() {
         max_steps: 17,
         tolerance: None,
         extrapolate: false,
+        coarse_start: false,
     };
     let (with, _) = on_gpu(Some(&source), &opts);
     let (without, _) = on_gpu(None, &opts);
@@ -325,6 +330,7 @@ fn every_step_count_maps_onto_the_cpu_state() {
                 max_steps: steps,
                 tolerance: None,
                 extrapolate: false,
+                coarse_start: false,
             };
             let mut cpu_residuals = Vec::new();
             let mut gpu_residuals = Vec::new();
@@ -362,6 +368,7 @@ fn tolerance_stops_after_the_same_step_as_the_cpu() {
         max_steps: 400,
         tolerance: Some(1e-3),
         extrapolate: false,
+        coarse_start: false,
     };
     let mut cpu = Lattice::new(&grid, &medium, 0, sun()).unwrap();
     let mut gpu = GpuLattice::new(&ctx, &grid, &medium, 0, sun(), Precision::F32).unwrap();
@@ -396,6 +403,7 @@ fn a_state_split_over_many_bindings_gives_the_same_result() {
                 max_steps: 9,
                 tolerance: None,
                 extrapolate: false,
+                coarse_start: false,
             },
             &mut |_, _| {},
         )
@@ -414,6 +422,7 @@ fn a_state_split_over_many_bindings_gives_the_same_result() {
             max_steps: 9,
             tolerance: None,
             extrapolate: false,
+            coarse_start: false,
         },
         &mut |_, _| {},
     )
@@ -456,6 +465,7 @@ fn a_grid_larger_than_one_binding_agrees_with_the_cpu() {
         max_steps: 4,
         tolerance: None,
         extrapolate: false,
+        coarse_start: false,
     };
     let mut gpu = GpuLattice::new(&ctx, &grid, &medium, 0, sun(), Precision::F32).unwrap();
     let binding = ctx.limits().max_storage_buffer_binding_size as f64;
@@ -564,11 +574,13 @@ fn bad_input_is_refused() {
             max_steps: 0,
             tolerance: None,
             extrapolate: false,
+            coarse_start: false,
         },
         SolveOptions {
             max_steps: 5,
             tolerance: Some(f64::NAN),
             extrapolate: false,
+            coarse_start: false,
         },
     ] {
         let e = lat.run(&opts, &mut |_, _| {}).unwrap_err();
@@ -582,7 +594,7 @@ fn backends_behind_the_trait_agree_and_name_themselves() {
     let cpu = select_solver(Device::Cpu, Precision::F32).unwrap();
     assert_eq!(cpu.solver.device(), "cpu");
     assert_eq!(cpu.solver.cache_tag(), "cpu");
-    assert_eq!(cpu.solver.schedule(), Schedule::Extrapolated);
+    assert_eq!(cpu.solver.schedule(), Schedule::CoarseStarted);
     assert!(matches!(
         select_solver(Device::Cpu, Precision::F16),
         Err(LbGpuError::F16OnCpu)
@@ -615,6 +627,7 @@ fn backends_behind_the_trait_agree_and_name_themselves() {
         max_steps: 16,
         tolerance: None,
         extrapolate: false,
+        coarse_start: false,
     };
     let solvers: [&dyn LbSolver; 2] = [&*cpu.solver, &gpu];
     let [(a, _), (b, _)] = solvers.map(|s| {
@@ -630,6 +643,7 @@ fn backends_behind_the_trait_agree_and_name_themselves() {
         max_steps: 0,
         tolerance: None,
         extrapolate: false,
+        coarse_start: false,
     };
     let e = gpu
         .solve_lighting(&grid, &medium, sun(), &bad, &mut |_, _, _| {})

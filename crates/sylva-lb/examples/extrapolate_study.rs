@@ -1,10 +1,13 @@
-//! How fast a sun solve approaches its steady state, plain and with extrapolation along the
-//! slowest mode (a study for issue 28 item 4).
+//! How fast a sun solve approaches its steady state: plain, with extrapolation along the
+//! slowest mode, and started from a half-resolution solve (studies for issue 28 item 4).
 //!
 //! ```sh
 //! sylva voxelize southern_catalpa -o catalpa.sgrid
-//! cargo run --release -p sylva-lb --example extrapolate_study -- catalpa.sgrid [REFERENCE_STEPS] [COLOUR] [BASIS]
+//! cargo run --release -p sylva-lb --example extrapolate_study -- catalpa.sgrid [REFERENCE_STEPS] [COLOUR] [BASIS | source]
 //! ```
+//!
+//! `source` lights the grid as the physical light's sun part does: the sun's first-collision
+//! source inside a dark boundary.
 
 use std::time::Instant;
 
@@ -18,13 +21,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let medium = Preset::parse("leaf")?.params();
     // The catalpa scene's sun: elevation 50°, azimuth 30°.
     let sun = sylva_core::Sun::from_angles(50.0, 30.0)?;
-    // Optional: the colour (default 1, green) and a basis boundary instead of the sun.
+    // Optional: the colour (default 1, green) and a basis boundary or the first-collision
+    // source instead of the sun.
     let colour: usize = args.get(2).map_or(Ok(1), |s| s.parse())?;
+    let source = args.get(3).map(String::as_str) == Some("source");
     let boundary = match args.get(3) {
+        Some(_) if source => Boundary { values: [0.0; 19] },
         Some(j) => Boundary::basis(j.parse()?),
         None => Boundary::sun(sun.travel().to_array(), 1.0),
     };
     let mut lat = Lattice::new(&grid, &medium, colour, boundary)?;
+    if source {
+        let travel = sun.travel().to_array();
+        let s = sylva_lb::light::first_collision_source(&grid, &medium, travel, [1.0; 3])?;
+        lat.set_source(Some(s.colour(colour)));
+    }
     let medium_sites: Vec<usize> = (0..grid.dims.sites())
         .filter(|&i| grid.density[i] > 0.0)
         .collect();
@@ -73,10 +84,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "plain, as many steps as extrapolated",
             SolveOptions {
                 extrapolate: false,
+                coarse_start: false,
                 ..SolveOptions::extrapolated(dims)
             },
         ),
         ("extrapolated", SolveOptions::extrapolated(dims)),
+        ("coarse-started", SolveOptions::coarse_started(dims)),
+        (
+            "coarse-started, 0.875 × the edge",
+            SolveOptions {
+                max_steps: 7 * dims.longest_edge() / 8,
+                ..SolveOptions::coarse_started(dims)
+            },
+        ),
     ] {
         lat.reset(boundary);
         let t = Instant::now();

@@ -8,7 +8,8 @@
 //!
 //! The basis set is solved and written to the second path, or read from it when it exists
 //! (`--solve` solves again; `--tolerance T` adds a convergence stop, and B_0 is then solved;
-//! `--extrapolate` solves with `SolveOptions::extrapolated`).
+//! `--extrapolate` solves with `SolveOptions::extrapolated`, `--coarse-start` with
+//! `SolveOptions::coarse_started`).
 //! `--steps-study` prints how far fewer steps are from the full schedule. Options: `--preset NAME` (default leaf), `--threads N`,
 //! `--points N` (lookups per sun for the error, default 200000), `--suns N` (default 24),
 //! `--precision f16|f32|packed` (stored values; PCA alone stays f16 with packed),
@@ -38,6 +39,7 @@ struct Args {
     steps_study: bool,
     tolerance: Option<f64>,
     extrapolate: bool,
+    coarse_start: bool,
 }
 
 fn parse() -> Result<Args, String> {
@@ -57,6 +59,7 @@ fn parse() -> Result<Args, String> {
         steps_study: false,
         tolerance: None,
         extrapolate: false,
+        coarse_start: false,
     };
     while let Some(a) = it.next() {
         let mut value = |name: &str| it.next().ok_or(format!("{name} needs a value"));
@@ -75,6 +78,7 @@ fn parse() -> Result<Args, String> {
             "--solve" => args.solve = true,
             "--steps-study" => args.steps_study = true,
             "--extrapolate" => args.extrapolate = true,
+            "--coarse-start" => args.coarse_start = true,
             "--tolerance" => {
                 let v = value("--tolerance")?;
                 args.tolerance = Some(
@@ -189,6 +193,7 @@ fn steps_study(
                 max_steps: chunk,
                 tolerance: None,
                 extrapolate: false,
+                coarse_start: false,
             };
             let r = lat.run(&opts, &mut |_, _| {})?;
             let totals = lat.site_totals();
@@ -226,6 +231,9 @@ fn solve(
     let mut options = BasisOptions::papers(grid.dims);
     if args.extrapolate {
         options.solve = sylva_lb::SolveOptions::extrapolated(grid.dims);
+    }
+    if args.coarse_start {
+        options.solve = sylva_lb::SolveOptions::coarse_started(grid.dims);
     }
     options.solve.tolerance = args.tolerance;
     if args.tolerance.is_some() {

@@ -283,7 +283,7 @@ impl LbSolver for CpuSolver {
     }
 
     fn schedule(&self) -> Schedule {
-        Schedule::Extrapolated
+        Schedule::CoarseStarted
     }
 }
 
@@ -336,6 +336,7 @@ impl LbSolver for CpuKernelSolver {
             max_steps: steps,
             tolerance: None,
             extrapolate: false,
+            coarse_start: false,
         };
         let mut lattice = Lattice::new(grid, medium, 0, boundary)?;
         lattice.set_kernel(self.kernel);
@@ -372,7 +373,7 @@ impl LbSolver for CpuKernelSolver {
     }
 
     fn schedule(&self) -> Schedule {
-        Schedule::Extrapolated
+        Schedule::CoarseStarted
     }
 }
 
@@ -466,6 +467,7 @@ mod tests {
             max_steps: 0,
             tolerance: None,
             extrapolate: false,
+            coarse_start: false,
         };
         let e = solver
             .solve_lighting(&grid, &medium, boundary, &bad, &mut |_, _, _| {})

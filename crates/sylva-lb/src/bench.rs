@@ -268,6 +268,7 @@ mod tests {
             max_steps: 5,
             tolerance: None,
             extrapolate: false,
+            coarse_start: false,
         };
         let b = solve(
             &CpuSolver,

@@ -2217,8 +2217,8 @@ mod tests {
         assert_eq!(last.1, last.2, "progress reaches max steps");
         assert_eq!(
             last.2,
-            SolveOptions::extrapolated(a.dims()).max_steps,
-            "the CPU's extrapolated schedule"
+            SolveOptions::coarse_started(a.dims()).max_steps,
+            "the CPU's coarse-started schedule"
         );
 
         let mut calls2 = 0usize;

@@ -31,8 +31,11 @@ pub enum PrecisionArg {
 /// How long each LB solve runs (`--lb-schedule`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum ScheduleArg {
-    /// 1.5 × the grid's longest edge in steps, extrapolated along the slowest mode (the CPU
-    /// solver only).
+    /// A half-resolution solve first, interpolated, then 1 × the grid's longest edge in
+    /// steps, extrapolated along the slowest mode (the CPU solver only; its default).
+    Coarse,
+    /// 1.5 × the grid's longest edge in steps from an empty grid, extrapolated along the
+    /// slowest mode (the CPU solver only).
     Extrapolated,
     /// The papers' 2 × the longest edge, plain steps.
     Papers,
@@ -48,10 +51,16 @@ pub fn on_schedule(
         None => return Ok(solver),
         Some(ScheduleArg::Papers) => Schedule::Papers,
         Some(ScheduleArg::Extrapolated) => Schedule::Extrapolated,
+        Some(ScheduleArg::Coarse) => Schedule::CoarseStarted,
     };
-    if schedule == Schedule::Extrapolated && solver.device() != "cpu" {
+    if schedule != Schedule::Papers && solver.device() != "cpu" {
+        let name = if schedule == Schedule::Extrapolated {
+            "extrapolated"
+        } else {
+            "coarse"
+        };
         anyhow::bail!(
-            "--lb-schedule extrapolated runs on the CPU solver only (the GPU kernels do not \
+            "--lb-schedule {name} runs on the CPU solver only (the GPU kernels do not \
              extrapolate): use --device cpu, or --lb-schedule papers"
         );
     }
@@ -62,6 +71,10 @@ pub fn on_schedule(
 pub fn solver_line(solver: &dyn LbSolver) -> String {
     let schedule = match solver.schedule() {
         Schedule::Extrapolated => "1.5 × the grid's edge in steps, extrapolated",
+        Schedule::CoarseStarted => {
+            "1 × the grid's edge in steps from a half-resolution solve (1.5 × from empty below \
+             64 sites), extrapolated"
+        }
         Schedule::Papers => "the papers' 2 × the grid's edge in steps",
     };
     format!("LB solver: {}; {schedule}", solver.describe())

@@ -129,6 +129,12 @@ pub struct SolveArgs {
     /// than as many plain steps (docs/lb.md, "Extrapolated solves").
     #[arg(long)]
     extrapolate: bool,
+    /// Start from the same solve on a grid of half the resolution, interpolated (CPU only;
+    /// the renderer's default): 1 × the longest edge steps by default, extrapolated, ending
+    /// closer to the steady state than --extrapolate's 1.5 × (docs/lb.md, "Coarse-started
+    /// solves").
+    #[arg(long, conflicts_with = "extrapolate")]
+    coarse_start: bool,
     /// Boundary intensity of the sun.
     #[arg(long, default_value_t = 1.0)]
     intensity: f64,
@@ -234,13 +240,21 @@ fn solve(a: SolveArgs) -> Result<()> {
     let (grid, name) = load_source(&a, scene.as_ref())?;
     let dims = grid.dims;
     let load_s = t0.elapsed().as_secs_f64();
-    let opts = if a.extrapolate {
+    let opts = if a.coarse_start {
+        let schedule = SolveOptions::coarse_started(dims);
+        SolveOptions {
+            max_steps: a.steps.unwrap_or(schedule.max_steps),
+            tolerance: a.tolerance,
+            ..schedule
+        }
+    } else if a.extrapolate {
         SolveOptions {
             max_steps: a
                 .steps
                 .unwrap_or(SolveOptions::extrapolated(dims).max_steps),
             tolerance: a.tolerance,
             extrapolate: true,
+            coarse_start: false,
         }
     } else {
         SolveOptions::for_run(a.steps, a.tolerance, dims)

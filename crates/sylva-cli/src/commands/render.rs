@@ -217,9 +217,10 @@ pub struct LbArgs {
     /// GPU state storage of the LB solve: f32, or f16 (half the memory traffic).
     #[arg(long, value_enum, default_value = "f32")]
     pub precision: super::device::PrecisionArg,
-    /// How long each LB solve runs: extrapolated (1.5 × the grid's longest edge in steps,
-    /// extrapolated along the slowest mode; the CPU's default) or papers (2 ×, plain steps;
-    /// the GPU's, whose kernels do not extrapolate). Cache entries are kept per schedule.
+    /// How long each LB solve runs: coarse (a half-resolution solve first, then 1 × the
+    /// grid's longest edge in steps, extrapolated along the slowest mode; the CPU's default),
+    /// extrapolated (1.5 × from an empty grid, extrapolated) or papers (2 ×, plain steps; the
+    /// GPU's, whose kernels do not extrapolate). Cache entries are kept per schedule.
     #[arg(long, value_enum)]
     pub lb_schedule: Option<super::device::ScheduleArg>,
     /// Physical light: leaves as measured (each species' mean reflectance and transmittance,

@@ -164,11 +164,14 @@ fn render_solves_lb_on_the_device_asked_for() {
         let (ok, stdout, err) = sylva(&args);
         (ok, stdout, err, out, cache)
     };
-    // The CPU extrapolates by default; on the GPU's schedule the two backends compare.
+    // The CPU starts from a coarse solve and extrapolates by default; on the GPU's schedule
+    // the two backends compare.
     let (ok, stdout, err, _, _) = render_on("cpu", None);
     assert!(ok, "{err}");
     assert!(
-        stdout.contains("LB solver: CPU, kernel") && stdout.contains("extrapolated"),
+        stdout.contains("LB solver: CPU, kernel")
+            && stdout.contains("from a half-resolution solve")
+            && stdout.contains("extrapolated"),
         "{stdout}"
     );
     let render = |device: &str| render_on(device, Some("papers"));
@@ -181,11 +184,15 @@ fn render_solves_lb_on_the_device_asked_for() {
         assert!(!ok && err.contains("no GPU adapter"), "{err}");
         return;
     };
-    let (ok, _, err, _, _) = render_on("gpu", Some("extrapolated"));
-    assert!(
-        !ok && err.contains("--lb-schedule extrapolated runs on the CPU solver only"),
-        "{err}"
-    );
+    for schedule in ["extrapolated", "coarse"] {
+        let (ok, _, err, _, _) = render_on("gpu", Some(schedule));
+        assert!(
+            !ok && err.contains(&format!(
+                "--lb-schedule {schedule} runs on the CPU solver only"
+            )),
+            "{err}"
+        );
+    }
     let (ok, stdout, err, gpu_png, cache) = render_on("gpu", None);
     assert!(ok, "{err}");
     assert!(

@@ -636,6 +636,15 @@ pub fn basis_metadata(medium: &MediumParams, options: &BasisOptions) -> Vec<(Str
             }
             .to_string(),
         ),
+        (
+            "coarse_start".into(),
+            if options.solve.coarse_start {
+                "yes"
+            } else {
+                "no"
+            }
+            .to_string(),
+        ),
     ];
     for (p, name) in medium.colours.iter().zip(COLOUR_NAMES) {
         metadata.push((
@@ -747,11 +756,18 @@ pub fn parse_basis_metadata<'a>(
         Some("yes") => true,
         Some(v) => return Err(format!("metadata 'extrapolate' = '{v}' is not yes or no")),
     };
+    // Files written before coarse-started solves have no entry: they started empty.
+    let coarse_start = match value("coarse_start") {
+        None | Some("no") => false,
+        Some("yes") => true,
+        Some(v) => return Err(format!("metadata 'coarse_start' = '{v}' is not yes or no")),
+    };
     let options = BasisOptions {
         solve: SolveOptions {
             max_steps,
             tolerance,
             extrapolate,
+            coarse_start,
         },
         ambient,
     };
@@ -847,10 +863,12 @@ mod tests {
         for solve in [
             SolveOptions::papers(dims),
             SolveOptions::extrapolated(dims),
+            SolveOptions::coarse_started(Dims::new(40, 20, 18).unwrap()),
             SolveOptions {
                 max_steps: 90,
                 tolerance: Some(1e-6),
                 extrapolate: false,
+                coarse_start: false,
             },
         ] {
             let options = BasisOptions {
@@ -867,7 +885,15 @@ mod tests {
             assert_eq!((m, o), (medium.clone(), options));
             // Files from before extrapolated solves have no entry: plain steps.
             if !solve.extrapolate {
-                let older = |k: &str| if k == "extrapolate" { None } else { value(k) };
+                let older = |k: &str| match k {
+                    "extrapolate" | "coarse_start" => None,
+                    k => value(k),
+                };
+                assert_eq!(parse_basis_metadata(&older).unwrap().1, options);
+            }
+            // Nor from before coarse-started ones: they started empty.
+            if !solve.coarse_start {
+                let older = |k: &str| if k == "coarse_start" { None } else { value(k) };
                 assert_eq!(parse_basis_metadata(&older).unwrap().1, options);
             }
         }

@@ -59,6 +59,7 @@ fn opts(dims: Dims) -> SolveOptions {
         max_steps: 8 * dims.longest_edge(),
         tolerance: None,
         extrapolate: false,
+        coarse_start: false,
     }
 }
 

@@ -440,6 +440,7 @@ fn steady_state_balances_inflow_against_absorption_and_outflow() {
                         max_steps: 5000,
                         tolerance: Some(1e-9),
                         extrapolate: false,
+                        coarse_start: false,
                     },
                     &mut |_, _| {},
                 )
@@ -467,6 +468,7 @@ fn same_result_on_one_and_two_threads() {
         max_steps: 40,
         tolerance: None,
         extrapolate: false,
+        coarse_start: false,
     };
     let run = |threads| {
         rayon::ThreadPoolBuilder::new()
@@ -484,6 +486,44 @@ fn same_result_on_one_and_two_threads() {
     );
 }
 
+/// The site totals after `opts` on a lattice from `lattice`, on `threads` threads, and the
+/// steps run.
+fn solve_on(
+    threads: usize,
+    lattice: impl Fn() -> Lattice + Send + Sync,
+    opts: SolveOptions,
+) -> (Vec<f32>, usize) {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(|| {
+            let mut lat = lattice();
+            let report = lat.run(&opts, &mut |_, _| {}).unwrap();
+            (lat.site_totals(), report.steps)
+        })
+}
+
+/// `steps` plain steps, from empty or from the coarse start.
+fn plain_steps(steps: usize, coarse_start: bool) -> SolveOptions {
+    SolveOptions {
+        max_steps: steps,
+        tolerance: None,
+        extrapolate: false,
+        coarse_start,
+    }
+}
+
+/// The relative RMS distance of site totals `f` from `steady` over `grid`'s medium.
+fn distance_over_medium(grid: &DensityGrid, steady: &[f32], f: &[f32]) -> f64 {
+    let medium = (0..grid.dims.sites()).filter(|&i| grid.density[i] > 0.0);
+    let (d, n) = medium.fold((0.0, 0.0), |(d, n), i| {
+        let (a, b) = (f64::from(f[i]), f64::from(steady[i]));
+        (d + (a - b) * (a - b), n + b * b)
+    });
+    (d / n).sqrt()
+}
+
 #[test]
 fn extrapolated_solves_approach_the_same_steady_state_faster() {
     // A crown of leaves lit by the sun: the steady state from a long plain run, then the
@@ -494,37 +534,13 @@ fn extrapolated_solves_approach_the_same_steady_state_faster() {
     let grid = Shape::Crown.grid(dims);
     let m = Preset::Leaf.params();
     let sun = Boundary::sun([0.3, -0.9, 0.3], 1.0);
-    let solve = |opts: SolveOptions, threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| {
-                let mut lat = Lattice::new(&grid, &m, 1, sun).unwrap();
-                let report = lat.run(&opts, &mut |_, _| {}).unwrap();
-                (lat.site_totals(), report.steps)
-            })
-    };
-    let plain = |steps| SolveOptions {
-        max_steps: steps,
-        tolerance: None,
-        extrapolate: false,
-    };
-    let (steady, _) = solve(plain(32 * 32), 2);
-    let medium: Vec<usize> = (0..dims.sites())
-        .filter(|&i| grid.density[i] > 0.0)
-        .collect();
-    let error = |f: &[f32]| {
-        let d: f64 = medium
-            .iter()
-            .map(|&i| ((f[i] - steady[i]) as f64).powi(2))
-            .sum();
-        let n: f64 = medium.iter().map(|&i| (steady[i] as f64).powi(2)).sum();
-        (d / n).sqrt()
-    };
+    let lattice = || Lattice::new(&grid, &m, 1, sun).unwrap();
+    let solve = |opts: SolveOptions, threads: usize| solve_on(threads, lattice, opts);
+    let (steady, _) = solve(plain_steps(32 * 32, false), 2);
+    let error = |f: &[f32]| distance_over_medium(&grid, &steady, f);
     let (x, steps) = solve(SolveOptions::extrapolated(dims), 2);
     assert_eq!(steps, 48);
-    let (same_steps, _) = solve(plain(48), 2);
+    let (same_steps, _) = solve(plain_steps(48, false), 2);
     let (papers, _) = solve(SolveOptions::papers(dims), 2);
     let (ex, ep, epapers) = (error(&x), error(&same_steps), error(&papers));
     assert!(
@@ -532,6 +548,171 @@ fn extrapolated_solves_approach_the_same_steady_state_faster() {
         "extrapolated {ex:.2e}, as many plain steps {ep:.2e}, the papers' {epapers:.2e}"
     );
     assert_eq!(solve(SolveOptions::extrapolated(dims), 1).0, x);
+}
+
+#[test]
+fn coarse_started_solves_end_nearer_the_steady_state() {
+    // The crown lit by the sun, and the same crown lit by a volume source and a floor (as
+    // the physical light's parts are), each started from its half-resolution solve. Its
+    // 1 × the longest edge must end far nearer the steady state than as many plain steps
+    // from an empty grid, and the coarse start alone must help those plain steps; the bits
+    // do not depend on the thread count.
+    let dims = Dims::new(64, 40, 44).unwrap();
+    let grid = Shape::Crown.grid(dims);
+    let m = Preset::Leaf.params();
+    let sun = Boundary::sun([0.3, -0.9, 0.3], 1.0);
+    let strength: Vec<f32> = (0..dims.sites())
+        .map(|i| {
+            let (x, y, z) = dims.coords(i);
+            if dims.on_shell(x, y, z) {
+                0.0
+            } else {
+                0.05 * grid.density[i] * (1.0 + (x % 3) as f32)
+            }
+        })
+        .collect();
+    let source = sylva_lb::solver::ColourSource {
+        strength,
+        green: std::array::from_fn(|m| weight(m) as f32),
+        brown: std::array::from_fn(|m| if m == 0 { 0.0 } else { 1.0 / 18.0 }),
+    };
+    let floor: Vec<f32> = (0..dims.nx * dims.nz)
+        .map(|i| 0.1 + (i % 7) as f32 * 0.02)
+        .collect();
+    let dark = Boundary { values: [0.0; Q] };
+    for (case, boundary, lit_inside) in [("sun", sun, false), ("source and floor", dark, true)] {
+        let lattice = || {
+            let mut lat = Lattice::new(&grid, &m, 1, boundary).unwrap();
+            if lit_inside {
+                lat.set_source(Some(source.clone()));
+                lat.set_floor(Some(floor.clone()));
+                lat.reset(boundary);
+            }
+            lat
+        };
+        let solve = |opts: SolveOptions, threads: usize| solve_on(threads, lattice, opts);
+        let plain = plain_steps;
+        let (steady, _) = solve(plain(64 * 16, false), 2);
+        let error = |f: &[f32]| distance_over_medium(&grid, &steady, f);
+        let (coarse, steps) = solve(SolveOptions::coarse_started(dims), 2);
+        assert_eq!(steps, 64, "{case}");
+        let (extrapolated, _) = solve(SolveOptions::extrapolated(dims), 2);
+        let (from_empty, _) = solve(plain(64, false), 2);
+        let (from_coarse, _) = solve(plain(64, true), 2);
+        let (ec, ex) = (error(&coarse), error(&extrapolated));
+        let (ee, epc) = (error(&from_empty), error(&from_coarse));
+        eprintln!(
+            "{case}: coarse-started {ec:.2e}, extrapolated {ex:.2e}; 64 plain steps from \
+             empty {ee:.2e}, from the coarse start {epc:.2e}"
+        );
+        assert!(
+            ec < 0.1 * ee && epc < 0.25 * ee,
+            "{case}: coarse-started {ec:.2e}; 64 plain steps from empty {ee:.2e}, from the \
+             coarse start {epc:.2e}"
+        );
+        assert_eq!(
+            solve(SolveOptions::coarse_started(dims), 1).0,
+            coarse,
+            "{case}"
+        );
+    }
+}
+
+#[test]
+fn a_coarse_start_interpolates_linear_light_exactly() {
+    // Prolongation is trilinear: a state linear in the coarse coordinates comes out as the
+    // same linear function at the fine sites' coarse coordinates, (i + 1/2) / 2.
+    let dims = Dims::new(20, 17, 14).unwrap();
+    let grid = Shape::Crown.grid(dims);
+    let m = Preset::Leaf.params();
+    let mut fine = Lattice::new(&grid, &m, 1, Boundary::sun([0.0, -1.0, 0.0], 1.0)).unwrap();
+    let mut coarse = fine.restricted();
+    let cd = coarse.dims();
+    assert_eq!(cd, sylva_lb::solver::coarse_dims(dims));
+    assert_eq!((cd.nx, cd.ny, cd.nz), (11, 10, 8));
+    let light = |x: f32, y: f32, z: f32, m: usize| 1.0 + 0.5 * x - 0.25 * y + 0.125 * z + m as f32;
+    for x in 1..cd.nx - 1 {
+        for y in 1..cd.ny - 1 {
+            for z in 1..cd.nz - 1 {
+                for q in 0..Q {
+                    coarse.set_f(x, y, z, q, light(x as f32, y as f32, z as f32, q));
+                }
+            }
+        }
+    }
+    fine.prolong_from(&coarse);
+    // Fine sites whose coarse neighbours are all interior (the shell holds the boundary).
+    let inside = |i: usize, n: usize| {
+        let c = (i as f32 + 0.5) / 2.0;
+        c >= 1.0 && c <= (n - 2) as f32
+    };
+    let mut checked = 0;
+    for x in (1..dims.nx - 1).filter(|&x| inside(x, cd.nx)) {
+        for y in (1..dims.ny - 1).filter(|&y| inside(y, cd.ny)) {
+            for z in (1..dims.nz - 1).filter(|&z| inside(z, cd.nz)) {
+                for q in 0..Q {
+                    let at = |i: usize| (i as f32 + 0.5) / 2.0;
+                    let want = light(at(x), at(y), at(z), q);
+                    let got = fine.f(x, y, z, q);
+                    assert!(
+                        (got - want).abs() < 1e-5,
+                        "({x}, {y}, {z}) {q}: {got} vs {want}"
+                    );
+                    checked += 1;
+                }
+            }
+        }
+    }
+    assert!(checked > 1000, "{checked}");
+}
+
+#[test]
+fn a_coarse_site_crosses_twice_the_optical_depth() {
+    // Restriction keeps the medium's extinction per length: a coarse step crosses two fine
+    // cells, so uniform density ρ becomes 1 - (1 - ρ)²; a uniform source doubles per step.
+    let dims = Dims::new(14, 10, 12).unwrap();
+    let rho = 0.3f32;
+    let interior = |i: usize| {
+        let (x, y, z) = dims.coords(i);
+        !dims.on_shell(x, y, z)
+    };
+    let grid = DensityGrid::new(
+        dims,
+        sylva_lb::Bounds::UNIT,
+        (0..dims.sites())
+            .map(|i| if interior(i) { rho } else { 0.0 })
+            .collect(),
+        vec![0.0; dims.sites()],
+    )
+    .unwrap();
+    let m = Preset::Leaf.params();
+    let mut fine = Lattice::new(&grid, &m, 1, Boundary::sun([0.0, -1.0, 0.0], 1.0)).unwrap();
+    fine.set_source(Some(sylva_lb::solver::ColourSource {
+        strength: (0..dims.sites())
+            .map(|i| if interior(i) { 0.01 } else { 0.0 })
+            .collect(),
+        green: std::array::from_fn(|m| weight(m) as f32),
+        brown: [0.0; Q],
+    }));
+    let coarse = fine.restricted();
+    let cd = coarse.dims();
+    let want = 1.0 - (1.0 - rho) * (1.0 - rho);
+    for i in 0..cd.sites() {
+        let (x, y, z) = cd.coords(i);
+        let (code, strength) = (coarse.code(i), coarse.source_strength(i));
+        if cd.on_shell(x, y, z) {
+            assert_eq!((code, strength), (0.0, 0.0));
+        } else {
+            assert!(
+                (code - want).abs() < 1e-6,
+                "({x}, {y}, {z}): {code} vs {want}"
+            );
+            assert!(
+                (strength - 0.02).abs() < 1e-7,
+                "({x}, {y}, {z}): {strength}"
+            );
+        }
+    }
 }
 
 #[test]
@@ -544,6 +725,7 @@ fn sun_solution_is_the_weighted_sum_of_base_solutions() {
         max_steps: 48,
         tolerance: None,
         extrapolate: false,
+        coarse_start: false,
     };
     let sun = Boundary::sun([0.3, -0.9, 0.3], 1.0);
     let solve = |b: Boundary| {
@@ -587,6 +769,7 @@ fn bad_parameters_are_refused() {
                 max_steps: 0,
                 tolerance: None,
                 extrapolate: false,
+                coarse_start: false,
             },
             &mut |_, _| {}
         )
@@ -597,6 +780,7 @@ fn bad_parameters_are_refused() {
                 max_steps: 5,
                 tolerance: Some(-1.0),
                 extrapolate: false,
+                coarse_start: false,
             },
             &mut |_, _| {}
         )

@@ -29,6 +29,7 @@ fn options(ambient: Ambient) -> BasisOptions {
             max_steps: STEPS,
             tolerance: None,
             extrapolate: false,
+            coarse_start: false,
         },
         ambient,
     }
@@ -54,6 +55,7 @@ fn direct(grid: &DensityGrid, travel: [f64; 3]) -> LightingGrid {
         max_steps: STEPS,
         tolerance: None,
         extrapolate: false,
+        coarse_start: false,
     };
     let b = Boundary::sun(travel, 1.0);
     solve_lighting(grid, &medium(), b, &opts, &mut |_, _, _| {})
@@ -314,6 +316,7 @@ fn progress_counts_every_solve() {
             max_steps: 4,
             tolerance: None,
             extrapolate: false,
+            coarse_start: false,
         },
         ambient: Ambient::Solve,
     };

@@ -57,7 +57,7 @@ pub const SOLVE_SECONDS_METADATA: &str = "solve_seconds";
 /// The solver cache tags a lookup-only read tries, each with its backend's schedule
 /// ([`LbSolver::schedule`]).
 const KNOWN_BACKENDS: [(&str, Schedule); 3] = [
-    ("cpu", Schedule::Extrapolated),
+    ("cpu", Schedule::CoarseStarted),
     ("gpu-f32", Schedule::Papers),
     ("gpu-f16", Schedule::Papers),
 ];
@@ -129,6 +129,9 @@ pub(crate) struct BasisKey {
     max_steps: usize,
     tolerance: Option<f64>,
     extrapolate: bool,
+    /// Left out of the key when false, so entries from before coarse starts keep theirs.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    coarse_start: bool,
     ambient: &'static str,
 }
 
@@ -146,6 +149,7 @@ impl BasisKey {
             max_steps: options.solve.max_steps,
             tolerance: options.solve.tolerance,
             extrapolate: options.solve.extrapolate,
+            coarse_start: options.solve.coarse_start,
             ambient: match options.ambient {
                 Ambient::Sum => "sum",
                 Ambient::Solve => "solve",
@@ -699,6 +703,7 @@ mod tests {
             max_steps: 64,
             tolerance: None,
             extrapolate: true,
+            coarse_start: false,
             ambient: "sum",
         };
         let mut variants: Vec<(String, BasisKey)> = vec![
@@ -727,6 +732,13 @@ mod tests {
                 "extrapolate".into(),
                 BasisKey {
                     extrapolate: false,
+                    ..base.clone()
+                },
+            ),
+            (
+                "coarse_start".into(),
+                BasisKey {
+                    coarse_start: true,
                     ..base.clone()
                 },
             ),
