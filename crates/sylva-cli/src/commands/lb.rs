@@ -130,9 +130,9 @@ pub struct SolveArgs {
     #[arg(long)]
     extrapolate: bool,
     /// Start from the same solve on a grid of half the resolution, interpolated (CPU only;
-    /// the renderer's default): 1 × the longest edge steps by default, extrapolated, ending
-    /// closer to the steady state than --extrapolate's 1.5 × (docs/lb.md, "Coarse-started
-    /// solves").
+    /// the renderer's default): 1 × the longest edge steps by default, extrapolated, in about
+    /// 0.8 of --extrapolate's time (docs/lb.md, "Coarse-started solves"). Grids shorter than
+    /// 64 sites run --extrapolate's schedule instead.
     #[arg(long, conflicts_with = "extrapolate")]
     coarse_start: bool,
     /// Boundary intensity of the sun.
