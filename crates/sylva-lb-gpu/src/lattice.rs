@@ -140,7 +140,7 @@ fn validate_options(o: &SolveOptions) -> Result<(), SolveError> {
     if o.max_steps == 0 {
         return Err(SolveError::Steps);
     }
-    if o.extrapolate {
+    if o.extrapolate || o.coarse_start {
         return Err(SolveError::ExtrapolateOnGpu);
     }
     if let Some(t) = o.tolerance {

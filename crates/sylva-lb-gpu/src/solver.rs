@@ -128,7 +128,8 @@ impl LbSolver for GpuSolver {
         format!("gpu-{}", self.precision.name())
     }
 
-    /// The GPU kernels have no extrapolation (`SolveError::ExtrapolateOnGpu`).
+    /// The GPU kernels have no extrapolation and no coarse start
+    /// (`SolveError::ExtrapolateOnGpu`).
     fn schedule(&self) -> Schedule {
         Schedule::Papers
     }

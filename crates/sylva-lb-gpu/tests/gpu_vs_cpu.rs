@@ -649,17 +649,19 @@ fn backends_behind_the_trait_agree_and_name_themselves() {
         .solve_lighting(&grid, &medium, sun(), &bad, &mut |_, _, _| {})
         .unwrap_err();
     assert!(matches!(e, LbSolverError::Solve(_)), "{e}");
-    // Extrapolated solves are the CPU solver's alone: refused, not run plain.
-    let e = gpu
-        .solve_lighting(
-            &grid,
-            &medium,
-            sun(),
-            &SolveOptions::extrapolated(dims),
-            &mut |_, _, _| {},
-        )
-        .unwrap_err();
-    assert!(e.to_string().contains("CPU solver only"), "{e}");
+    // Extrapolated and coarse-started solves are the CPU solver's alone: refused, not run
+    // plain (a coarse start without extrapolation too).
+    let coarse_plain = SolveOptions {
+        extrapolate: false,
+        coarse_start: true,
+        ..SolveOptions::papers(dims)
+    };
+    for opts in [SolveOptions::extrapolated(dims), coarse_plain] {
+        let e = gpu
+            .solve_lighting(&grid, &medium, sun(), &opts, &mut |_, _, _| {})
+            .unwrap_err();
+        assert!(e.to_string().contains("CPU solver only"), "{e}");
+    }
     let mut last = 0;
     let bench = gpu
         .benchmark(&grid, &medium, sun(), 4, 2, &mut |s| last = s)

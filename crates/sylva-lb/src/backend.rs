@@ -143,8 +143,9 @@ pub trait LbSolver: Send + Sync {
     fn cache_tag(&self) -> String;
 
     /// How long a renderer's solves run on this backend (lighting, bases, media): the CPU
-    /// extrapolates (three quarters of the papers' steps, ending about as close to the
-    /// steady state); a backend that cannot runs the papers' schedule. Cache keys name it.
+    /// starts from a half-resolution solve and extrapolates (half the papers' steps, ending
+    /// about as close to the steady state); a backend that cannot runs the papers' schedule.
+    /// Cache keys name it.
     fn schedule(&self) -> Schedule;
 }
 

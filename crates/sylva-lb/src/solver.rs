@@ -25,7 +25,7 @@ pub enum SolveError {
     Boundary { index: usize, value: f32 },
     #[error("convergence tolerance {0} must be a positive finite number")]
     Tolerance(f64),
-    #[error("extrapolated solves run on the CPU solver only: use --device cpu")]
+    #[error("extrapolated and coarse-started solves run on the CPU solver only: use --device cpu")]
     ExtrapolateOnGpu,
     #[error("step count must be at least 1")]
     Steps,
