@@ -1253,8 +1253,8 @@ impl Lattice {
     }
 
     /// Sets the interior of the current state to this problem's light solved on a grid of
-    /// half the resolution ([`Lattice::restricted`], [`SolveOptions::coarse_started`] there
-    /// too), interpolated ([`Lattice::prolong_from`]).
+    /// half the resolution ([`Lattice::restricted`], run as [`SolveOptions::coarse_level`]),
+    /// interpolated ([`Lattice::prolong_from`]).
     fn start_from_coarse(&mut self) -> Result<(), SolveError> {
         let coarse_dims = coarse_dims(self.dims);
         sylva_core::check_memory(
@@ -1280,51 +1280,37 @@ impl Lattice {
         let dims = coarse_dims(fine);
         // The fine interior sites a coarse interior coordinate covers on an axis of `n`.
         let children = |j: usize, n: usize| (2 * j - 1)..(2 * j + 1).min(n - 1);
-        let mut codes = vec![0.0f32; dims.sites()];
-        let mut strength = self.source.as_ref().map(|_| vec![0.0f32; dims.sites()]);
         let source = self.source.as_ref();
-        codes
-            .par_chunks_mut(dims.nz)
-            .zip(
-                strength
-                    .as_mut()
-                    .map(|s| s.par_chunks_mut(dims.nz).map(Some).collect::<Vec<_>>())
-                    .unwrap_or_else(|| (0..dims.nx * dims.ny).map(|_| None).collect())
-                    .into_par_iter(),
-            )
-            .enumerate()
-            .for_each(|(row, (codes, mut strength))| {
-                let (x, y) = (row / dims.ny, row % dims.ny);
-                if x == 0 || y == 0 || x == dims.nx - 1 || y == dims.ny - 1 {
-                    return;
+        // Per coarse site: its code and, with a source, its strength.
+        let (codes, strength): (Vec<f32>, Vec<f32>) = (0..dims.sites())
+            .into_par_iter()
+            .map(|i| {
+                let (x, y, z) = dims.coords(i);
+                if dims.on_shell(x, y, z) {
+                    return (0.0, 0.0);
                 }
-                for z in 1..dims.nz - 1 {
-                    let (mut tau, mut n, mut green, mut brown, mut s) = (0.0f64, 0, 0.0, 0.0, 0.0);
-                    for fx in children(x, fine.nx) {
-                        for fy in children(y, fine.ny) {
-                            for fz in children(z, fine.nz) {
-                                let i = fine.index(fx, fy, fz);
-                                let c = f64::from(self.codes[i]);
-                                tau -= (1.0 - c.abs().min(MAX_RESTRICTED_DENSITY)).ln();
-                                if c < 0.0 {
-                                    brown -= c;
-                                } else {
-                                    green += c;
-                                }
-                                if let Some(src) = source {
-                                    s += f64::from(src.strength[i]);
-                                }
-                                n += 1;
+                let (mut tau, mut n, mut green, mut brown, mut s) = (0.0f64, 0, 0.0, 0.0, 0.0);
+                for fx in children(x, fine.nx) {
+                    for fy in children(y, fine.ny) {
+                        for fz in children(z, fine.nz) {
+                            let i = fine.index(fx, fy, fz);
+                            let c = f64::from(self.codes[i]);
+                            tau -= (1.0 - c.abs().min(MAX_RESTRICTED_DENSITY)).ln();
+                            if c < 0.0 {
+                                brown -= c;
+                            } else {
+                                green += c;
                             }
+                            s += source.map_or(0.0, |src| f64::from(src.strength[i]));
+                            n += 1;
                         }
                     }
-                    let rho = 1.0 - (-2.0 * tau / f64::from(n)).exp();
-                    codes[z] = if brown > green { -rho } else { rho } as f32;
-                    if let Some(out) = strength.as_deref_mut() {
-                        out[z] = (2.0 * s / f64::from(n)) as f32;
-                    }
                 }
-            });
+                let rho = 1.0 - (-2.0 * tau / f64::from(n)).exp();
+                let code = if brown > green { -rho } else { rho };
+                (code as f32, (2.0 * s / f64::from(n)) as f32)
+            })
+            .unzip();
         let floor = self.floor.as_ref().map(|f| {
             // Shell columns keep their own value; interior ones average their sites'.
             let cover = |j: usize, n: usize, nc: usize| {
@@ -1367,8 +1353,8 @@ impl Lattice {
             isa: self.isa,
             boundary: self.boundary,
             floor,
-            source: self.source.as_ref().map(|s| ColourSource {
-                strength: strength.expect("made with the source"),
+            source: source.map(|s| ColourSource {
+                strength,
                 green: s.green,
                 brown: s.brown,
             }),
@@ -1385,9 +1371,6 @@ impl Lattice {
         assert_eq!(cd, coarse_dims(dims), "a lattice restricted from this one");
         let stride = run_stride(dims.nz);
         let cstate = &coarse.states[coarse.current];
-        let cindex = |x: usize, y: usize, z: usize, m: usize| {
-            ((x * cd.ny + y) * Q + m) * run_stride(cd.nz) + 1 + z
-        };
         // The lower coarse neighbour and the weight of the upper one.
         let axis = |i: usize, n: usize| {
             let c = ((i as f32 + 0.5) * 0.5).min((n - 1) as f32);
@@ -1416,7 +1399,7 @@ impl Lattice {
                 for m in 0..Q {
                     column.fill(0.0);
                     for &(cx, cy, w) in &corners {
-                        let start = cindex(cx, cy, 0, m);
+                        let start = coarse.state_index(cx, cy, 0, m);
                         let coarse_run = &cstate[start..start + cd.nz];
                         for (c, &v) in column.iter_mut().zip(coarse_run) {
                             *c += w * v;

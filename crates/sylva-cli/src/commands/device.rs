@@ -47,18 +47,17 @@ pub fn on_schedule(
     solver: Box<dyn LbSolver>,
     schedule: Option<ScheduleArg>,
 ) -> Result<Box<dyn LbSolver>> {
-    let schedule = match schedule {
-        None => return Ok(solver),
-        Some(ScheduleArg::Papers) => Schedule::Papers,
-        Some(ScheduleArg::Extrapolated) => Schedule::Extrapolated,
-        Some(ScheduleArg::Coarse) => Schedule::CoarseStarted,
+    let Some(arg) = schedule else {
+        return Ok(solver);
+    };
+    let schedule = match arg {
+        ScheduleArg::Papers => Schedule::Papers,
+        ScheduleArg::Extrapolated => Schedule::Extrapolated,
+        ScheduleArg::Coarse => Schedule::CoarseStarted,
     };
     if schedule != Schedule::Papers && solver.device() != "cpu" {
-        let name = if schedule == Schedule::Extrapolated {
-            "extrapolated"
-        } else {
-            "coarse"
-        };
+        let name = arg.to_possible_value().expect("every schedule has a name");
+        let name = name.get_name();
         anyhow::bail!(
             "--lb-schedule {name} runs on the CPU solver only (the GPU kernels do not \
              extrapolate): use --device cpu, or --lb-schedule papers"

@@ -609,6 +609,11 @@ impl BasisSet {
 
 /// The medium and solve schedule of a basis set as `key=value` metadata (basis grid files and
 /// compressed basis files share it).
+/// A flag's metadata value.
+fn yes_no(flag: bool) -> String {
+    if flag { "yes" } else { "no" }.to_string()
+}
+
 pub fn basis_metadata(medium: &MediumParams, options: &BasisOptions) -> Vec<(String, String)> {
     let mut metadata = vec![
         (
@@ -627,24 +632,8 @@ pub fn basis_metadata(medium: &MediumParams, options: &BasisOptions) -> Vec<(Str
                 .tolerance
                 .map_or("none".into(), |t| t.to_string()),
         ),
-        (
-            "extrapolate".into(),
-            if options.solve.extrapolate {
-                "yes"
-            } else {
-                "no"
-            }
-            .to_string(),
-        ),
-        (
-            "coarse_start".into(),
-            if options.solve.coarse_start {
-                "yes"
-            } else {
-                "no"
-            }
-            .to_string(),
-        ),
+        ("extrapolate".into(), yes_no(options.solve.extrapolate)),
+        ("coarse_start".into(), yes_no(options.solve.coarse_start)),
     ];
     for (p, name) in medium.colours.iter().zip(COLOUR_NAMES) {
         metadata.push((
@@ -751,17 +740,14 @@ pub fn parse_basis_metadata<'a>(
         t => Some(float("tolerance", t)?),
     };
     // Files written before extrapolated solves have no entry: they ran plain steps.
-    let extrapolate = match value("extrapolate") {
-        None | Some("no") => false,
-        Some("yes") => true,
-        Some(v) => return Err(format!("metadata 'extrapolate' = '{v}' is not yes or no")),
+    let flag = |key: &str| match value(key) {
+        None | Some("no") => Ok(false),
+        Some("yes") => Ok(true),
+        Some(v) => Err(format!("metadata '{key}' = '{v}' is not yes or no")),
     };
-    // Files written before coarse-started solves have no entry: they started empty.
-    let coarse_start = match value("coarse_start") {
-        None | Some("no") => false,
-        Some("yes") => true,
-        Some(v) => return Err(format!("metadata 'coarse_start' = '{v}' is not yes or no")),
-    };
+    let extrapolate = flag("extrapolate")?;
+    // Nor files written before coarse-started solves: they started empty.
+    let coarse_start = flag("coarse_start")?;
     let options = BasisOptions {
         solve: SolveOptions {
             max_steps,
@@ -863,7 +849,7 @@ mod tests {
         for solve in [
             SolveOptions::papers(dims),
             SolveOptions::extrapolated(dims),
-            SolveOptions::coarse_started(Dims::new(40, 20, 18).unwrap()),
+            SolveOptions::coarse_started(Dims::new(80, 20, 18).unwrap()),
             SolveOptions {
                 max_steps: 90,
                 tolerance: Some(1e-6),
@@ -907,6 +893,15 @@ mod tests {
         };
         let e = parse_basis_metadata(&bad).unwrap_err();
         assert!(e.contains("'extrapolate' = 'maybe'"), "{e}");
+        let bad = |k: &str| match k {
+            "coarse_start" => Some("1"),
+            k => meta
+                .iter()
+                .find(|(key, _)| key == k)
+                .map(|(_, v)| v.as_str()),
+        };
+        let e = parse_basis_metadata(&bad).unwrap_err();
+        assert!(e.contains("'coarse_start' = '1' is not yes or no"), "{e}");
     }
 
     #[test]

@@ -92,6 +92,16 @@ fn vector_kernel_matches_dense_reference() {
     }
 }
 
+/// A volume source of `strength` per site, spread over the directions by lattice weight on
+/// green sites and evenly over the moving ones on brown sites.
+fn lattice_weighted_source(strength: Vec<f32>) -> sylva_lb::solver::ColourSource {
+    sylva_lb::solver::ColourSource {
+        strength,
+        green: std::array::from_fn(|m| weight(m) as f32),
+        brown: std::array::from_fn(|m| if m == 0 { 0.0 } else { 1.0 / 18.0 }),
+    }
+}
+
 /// Sweeps of every depth (temporal blocking) against single steps, bit for bit, with a floor
 /// (the rings' floor rows are refilled per plane) and grids as thin as the sweep's stages.
 #[test]
@@ -171,11 +181,7 @@ fn every_kernel_agrees_with_the_portable_one() {
                 }
             })
             .collect();
-        let source = sylva_lb::solver::ColourSource {
-            strength,
-            green: std::array::from_fn(|m| weight(m) as f32),
-            brown: std::array::from_fn(|m| if m == 0 { 0.0 } else { 1.0 / 18.0 }),
-        };
+        let source = lattice_weighted_source(strength);
         for preset in [Preset::Leaf, Preset::Dogrose] {
             let m = preset.params();
             let b = Boundary::sun([0.3, -0.8, 0.52], 1.0);
@@ -571,11 +577,7 @@ fn coarse_started_solves_end_nearer_the_steady_state() {
             }
         })
         .collect();
-    let source = sylva_lb::solver::ColourSource {
-        strength,
-        green: std::array::from_fn(|m| weight(m) as f32),
-        brown: std::array::from_fn(|m| if m == 0 { 0.0 } else { 1.0 / 18.0 }),
-    };
+    let source = lattice_weighted_source(strength);
     let floor: Vec<f32> = (0..dims.nx * dims.nz)
         .map(|i| 0.1 + (i % 7) as f32 * 0.02)
         .collect();
