@@ -7,6 +7,11 @@
 //! outline: at least 32). Areas are summed as 2⁻³² cell² fixed-point integers, so the result
 //! is the same for any thread count and triangle order.
 //!
+//! The pieces are counted without visiting each (a catalpa at 128 has 120 M of them): the
+//! opaque ones of a leaf come from a mask per uv layout (a plant's leaves share a few), and
+//! runs of pieces along a row that lie in one cell are added at once. Both give exactly the
+//! sums of the piece-by-piece rule, which the tests keep as the reference.
+//!
 //! [`AreaGrid::to_density_grid`] turns leaf and bark area into the LB site density: the
 //! probability that light crossing a cell meets a leaf or bark
 //! ([`sylva_grid::density::collision_probability`]), and the bark share of it as the wood fraction.
@@ -110,6 +115,113 @@ enum Kind {
     Invisible,
 }
 
+/// Relative margin (in cells, per cell of distance from the grid's origin) by which pieces
+/// must clear a cell's faces to be counted together in [`plant_area`]: far above the
+/// rounding of a piece's centroid (about 1e-16 relative).
+const CELL_MARGIN: f64 = 1e-9;
+
+/// `v.floor() as i64` without a library call (x86-64's baseline has no rounding
+/// instruction), saturating as the cast does and 0 for NaN.
+#[inline(always)]
+fn floor_to_i64(v: f64) -> i64 {
+    let t = v as i64;
+    t.saturating_sub(((t as f64) > v) as i64)
+}
+
+/// The two families of a triangle's `k²` sub-triangles, as `(offset, rows)`: row `i` of a
+/// family holds `rows - i` pieces with centroids `(i + offset, j + offset) / k`; upright
+/// pieces (offset 1/3, `k` rows) come first, inverted ones (2/3, `k - 1` rows) after.
+fn piece_rows(k: usize) -> [(f64, usize); 2] {
+    [(1.0 / 3.0, k), (2.0 / 3.0, k - 1)]
+}
+
+/// The barycentric coordinates `(s, r)` of the centroids of a triangle's `k²` sub-triangles,
+/// in [`piece_rows`]' order.
+fn pieces(k: usize) -> impl Iterator<Item = (f64, f64)> {
+    let inv_k = 1.0 / k as f64;
+    piece_rows(k).into_iter().flat_map(move |(offset, rows)| {
+        (0..rows).flat_map(move |i| {
+            (0..rows - i).map(move |j| ((i as f64 + offset) * inv_k, (j as f64 + offset) * inv_k))
+        })
+    })
+}
+
+/// Which of a leaf triangle's [`pieces`] lie on opaque texels.
+struct PieceMask {
+    bits: Vec<u64>,
+    count: usize,
+}
+
+impl PieceMask {
+    fn new(o: &Opacity, uv: [[f32; 2]; 3], k: usize) -> PieceMask {
+        let uv = uv.map(|t| t.map(f64::from));
+        let mut bits = vec![0u64; (k * k).div_ceil(64)];
+        let mut count = 0;
+        for (n, (s, r)) in pieces(k).enumerate() {
+            let u = uv[0][0] + (uv[1][0] - uv[0][0]) * s + (uv[2][0] - uv[0][0]) * r;
+            let v = uv[0][1] + (uv[1][1] - uv[0][1]) * s + (uv[2][1] - uv[0][1]) * r;
+            if o.at(u, v) {
+                bits[n / 64] |= 1 << (n % 64);
+                count += 1;
+            }
+        }
+        PieceMask { bits, count }
+    }
+
+    /// Opaque pieces among `from..to`.
+    fn count_in(&self, from: usize, to: usize) -> usize {
+        let (mut n, mut sum) = (from, 0);
+        while n < to {
+            let (word, bit) = (n / 64, n % 64);
+            let take = (64 - bit).min(to - n);
+            let bits = self.bits[word] >> bit;
+            let bits = if take == 64 {
+                bits
+            } else {
+                bits & ((1 << take) - 1)
+            };
+            sum += bits.count_ones() as usize;
+            n += take;
+        }
+        sum
+    }
+}
+
+/// A mask's key: material, the bits of the triangle's uvs, and `k`.
+type MaskKey = (u8, [[u32; 2]; 3], usize);
+
+/// The piece masks a worker met last, keyed by material, uvs and `k`. A plant's leaves
+/// share a few uv layouts (every leaf quad maps the whole texture), so this saves nearly
+/// every texel lookup; a mask is a function of its key alone, so the result does not
+/// depend on which worker built it.
+#[derive(Default)]
+struct MaskCache {
+    entries: Vec<(MaskKey, PieceMask)>,
+    next: usize,
+}
+
+impl MaskCache {
+    const CAPACITY: usize = 8;
+
+    fn get(&mut self, o: &Opacity, material: u8, uv: [[f32; 2]; 3], k: usize) -> &PieceMask {
+        let key = (material, uv.map(|t| t.map(f32::to_bits)), k);
+        if let Some(at) = self.entries.iter().position(|(e, _)| *e == key) {
+            return &self.entries[at].1;
+        }
+        let mask = PieceMask::new(o, uv, k);
+        let at = if self.entries.len() < Self::CAPACITY {
+            self.entries.push((key, mask));
+            self.entries.len() - 1
+        } else {
+            let at = self.next;
+            self.entries[at] = (key, mask);
+            self.next = (at + 1) % Self::CAPACITY;
+            at
+        };
+        &self.entries[at].1
+    }
+}
+
 /// Leaf and bark area per cell of `placement` (`alpha_test`: leaves count only where their
 /// texture is opaque).
 pub fn plant_area(
@@ -151,79 +263,138 @@ pub fn plant_area(
     let origin = DVec3::from_array(placement.origin);
     let inv_cell = 1.0 / placement.cell;
     let hi = [dims.nx - 2, dims.ny - 2, dims.nz - 2].map(|n| n as i64);
-    let cell_of = |p: DVec3| -> usize {
-        let q = (p - origin) * inv_cell;
-        let i = |v: f64, h: i64| (v.floor() as i64).clamp(1, h) as usize;
-        dims.index(i(q.x, hi[0]), i(q.y, hi[1]), i(q.z, hi[2]))
-    };
+    // The cell of a point `q` (in cells from the origin) along axis `a`.
+    let axis_cell = |v: f64, a: usize| floor_to_i64(v).clamp(1, hi[a]) as usize;
     mesh.indices
         .par_iter()
         .zip(mesh.material_ids.par_iter())
         .with_min_len(256)
-        .for_each_init(Vec::<(usize, u64)>::new, |sums, (t, &m)| {
-            let kind = &kinds[m as usize];
-            if matches!(kind, Kind::Invisible) {
-                return;
-            }
-            let p = t.map(|i| DVec3::from_array(mesh.positions[i as usize].map(f64::from)));
-            let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
-            let area_cells = 0.5 * e1.cross(e2).length() * inv_cell * inv_cell;
-            // Degenerate (zero or NaN area) triangles hold no area.
-            if area_cells.is_nan() || area_cells <= 0.0 {
-                return;
-            }
-            let longest = e1.length().max(e2.length()).max((p[2] - p[1]).length()) * inv_cell;
-            let mut k = ((longest * PIECES_PER_CELL).ceil() as usize).clamp(1, MAX_SPLITS);
-            let alpha = match kind {
-                Kind::Leaf(Some(o)) => {
-                    k = k.max(ALPHA_SPLITS);
-                    let uv = t.map(|i| mesh.uvs[i as usize].map(f64::from));
-                    Some((o, uv))
+        .for_each_init(
+            || (Vec::<(usize, u64)>::new(), MaskCache::default()),
+            |(sums, masks), (t, &m)| {
+                let kind = &kinds[m as usize];
+                if matches!(kind, Kind::Invisible) {
+                    return;
                 }
-                _ => None,
-            };
-            let piece = ((area_cells / (k * k) as f64) * FIXED).round() as u64;
-            sums.clear();
-            // Consecutive pieces mostly share a cell: look there first.
-            let mut last = 0usize;
-            let inv_k = 1.0 / k as f64;
-            // Centroids of the k² sub-triangles: (i + 1/3, j + 1/3) / k for i + j ≤ k - 1
-            // (upright) and (i + 2/3, j + 2/3) / k for i + j ≤ k - 2 (inverted).
-            for (offset, rows) in [(1.0 / 3.0, k), (2.0 / 3.0, k - 1)] {
-                for i in 0..rows {
-                    for j in 0..rows - i {
-                        let (s, r) = ((i as f64 + offset) * inv_k, (j as f64 + offset) * inv_k);
-                        if let Some((o, uv)) = &alpha {
-                            let u =
-                                uv[0][0] + (uv[1][0] - uv[0][0]) * s + (uv[2][0] - uv[0][0]) * r;
-                            let v =
-                                uv[0][1] + (uv[1][1] - uv[0][1]) * s + (uv[2][1] - uv[0][1]) * r;
-                            if !o.at(u, v) {
-                                continue;
+                let p = t.map(|i| DVec3::from_array(mesh.positions[i as usize].map(f64::from)));
+                let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+                let area_cells = 0.5 * e1.cross(e2).length() * inv_cell * inv_cell;
+                // Degenerate (zero or NaN area) triangles hold no area.
+                if area_cells.is_nan() || area_cells <= 0.0 {
+                    return;
+                }
+                let longest = e1.length().max(e2.length()).max((p[2] - p[1]).length()) * inv_cell;
+                let mut k = ((longest * PIECES_PER_CELL).ceil() as usize).clamp(1, MAX_SPLITS);
+                let mask = match kind {
+                    Kind::Leaf(Some(o)) => {
+                        k = k.max(ALPHA_SPLITS);
+                        let uv = t.map(|i| mesh.uvs[i as usize]);
+                        Some(masks.get(o, m, uv, k))
+                    }
+                    _ => None,
+                };
+                let piece = ((area_cells / (k * k) as f64) * FIXED).round() as u64;
+                let target = if matches!(kind, Kind::Bark) {
+                    &bark
+                } else {
+                    &leaf
+                };
+                let opaque = mask.map_or(k * k, |m| m.count) as u64;
+                if opaque == 0 {
+                    return;
+                }
+                // Pieces are counted a cell at a time, never one by one: centroids lie in
+                // the triangle and a cell index is monotone in each coordinate, so pieces
+                // whose centroids lie, by a margin far above their rounding, inside one
+                // cell all go to the cell each of them would. A triangle inside one cell
+                // gives it all its pieces at once; others walk each row of pieces in runs.
+                let q = p.map(|v| (v - origin) * inv_cell);
+                let far = q.iter().map(|v| v.abs().max_element()).fold(0.0, f64::max);
+                let margin = CELL_MARGIN * (1.0 + far + (origin * inv_cell).abs().max_element());
+                let one_cell = |lo: DVec3, hi: DVec3| -> Option<usize> {
+                    let (lo, hi) = (lo - margin, hi + margin);
+                    let cells = [0, 1, 2].map(|a| (axis_cell(lo[a], a), axis_cell(hi[a], a)));
+                    cells
+                        .iter()
+                        .all(|(l, h)| l == h)
+                        .then(|| dims.index(cells[0].0, cells[1].0, cells[2].0))
+                };
+                if let Some(cell) = one_cell(q[0].min(q[1]).min(q[2]), q[0].max(q[1]).max(q[2])) {
+                    target[cell].fetch_add(opaque * piece, Ordering::Relaxed);
+                    return;
+                }
+                let count = |from: usize, to: usize| -> u64 {
+                    mask.map_or(to - from, |m| m.count_in(from, to)) as u64
+                };
+                sums.clear();
+                let mut add = |cell: usize, area: u64| {
+                    // Consecutive pieces mostly share a cell: look at the last one first.
+                    match sums.iter().rposition(|(c, _)| *c == cell) {
+                        Some(at) => sums[at].1 += area,
+                        None => sums.push((cell, area)),
+                    }
+                };
+                let inv_k = 1.0 / k as f64;
+                // From one centroid of a row to the next, in cells.
+                let step = e2 * inv_k * inv_cell;
+                // Its reciprocal: a run's length is rounded down to whole pieces after a
+                // margin of about 1e-6 pieces, far above a product's rounding.
+                let per_step = step.recip();
+                let mut n0 = 0;
+                for (offset, rows) in piece_rows(k) {
+                    for i in 0..rows {
+                        // As `pieces` orders them: row `i` holds pieces `n0..n0 + rows - i`.
+                        let base = p[0] + e1 * ((i as f64 + offset) * inv_k);
+                        let centre = |j: usize| base + e2 * ((j as f64 + offset) * inv_k);
+                        // Walk the row in runs of pieces that share a cell: piece `j`'s cell
+                        // is computed as for any piece, and the run goes on while the
+                        // centroids (linear in `j`, `step` apart) stay a margin inside it.
+                        let last = rows - i - 1;
+                        let mut j = 0;
+                        while j <= last {
+                            let q = (centre(j) - origin) * inv_cell;
+                            let cell = [0, 1, 2].map(|a| axis_cell(q[a], a));
+                            let mut end = last;
+                            for a in 0..3 {
+                                // The clamped end cells reach past the grid.
+                                let below = if cell[a] == 1 {
+                                    f64::NEG_INFINITY
+                                } else {
+                                    cell[a] as f64 + margin
+                                };
+                                let above = if cell[a] as i64 == hi[a] {
+                                    f64::INFINITY
+                                } else {
+                                    (cell[a] + 1) as f64 - margin
+                                };
+                                let room = match step[a] {
+                                    d if d > 0.0 => (above - q[a]) * per_step[a],
+                                    d if d < 0.0 => (below - q[a]) * per_step[a],
+                                    _ => f64::INFINITY,
+                                };
+                                // `room < 0`: piece `j` itself lies within the margin. The
+                                // cast truncates, which is the floor here.
+                                let more = if room >= 0.0 {
+                                    room.min(last as f64) as usize
+                                } else {
+                                    0
+                                };
+                                end = end.min(j + more);
                             }
+                            let opaque = count(n0 + j, n0 + end + 1);
+                            if opaque > 0 {
+                                add(dims.index(cell[0], cell[1], cell[2]), opaque * piece);
+                            }
+                            j = end + 1;
                         }
-                        let cell = cell_of(p[0] + e1 * s + e2 * r);
-                        if sums.get(last).is_some_and(|(c, _)| *c == cell) {
-                            sums[last].1 += piece;
-                        } else if let Some(at) = sums.iter().position(|(c, _)| *c == cell) {
-                            sums[at].1 += piece;
-                            last = at;
-                        } else {
-                            last = sums.len();
-                            sums.push((cell, piece));
-                        }
+                        n0 += rows - i;
                     }
                 }
-            }
-            let target = if matches!(kind, Kind::Bark) {
-                &bark
-            } else {
-                &leaf
-            };
-            for &(cell, a) in sums.iter() {
-                target[cell].fetch_add(a, Ordering::Relaxed);
-            }
-        });
+                for &(cell, a) in sums.iter() {
+                    target[cell].fetch_add(a, Ordering::Relaxed);
+                }
+            },
+        );
     let cell2 = placement.cell * placement.cell;
     let to_area = |v: Vec<AtomicU64>| -> Vec<f64> {
         v.into_iter()

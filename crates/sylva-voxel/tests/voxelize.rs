@@ -746,3 +746,140 @@ fn plant_area_is_the_same_on_any_thread_count() {
         one.total_leaf_area()
     );
 }
+
+/// The plant area piece by piece, as the rule states it: each of a triangle's `k²`
+/// sub-triangles gives its area to the cell holding its centroid, a leaf's only where the
+/// nearest texel there is opaque. The voxelizer counts pieces a run or a cell at a time; its
+/// sums must be these, exactly.
+fn reference_plant_area(
+    model: &Model,
+    p: &GridPlacement,
+    alpha_test: bool,
+) -> (Vec<f64>, Vec<f64>) {
+    const FIXED: f64 = 4_294_967_296.0;
+    let dims = p.dims;
+    let (mut leaf, mut bark) = (vec![0u64; dims.sites()], vec![0u64; dims.sites()]);
+    let hi = [dims.nx - 2, dims.ny - 2, dims.nz - 2].map(|n| n as i64);
+    let inv_cell = 1.0 / p.cell;
+    let origin = glam::DVec3::from_array(p.origin);
+    let mesh = &model.mesh;
+    for (t, &m) in mesh.indices.iter().zip(&mesh.material_ids) {
+        let material = &model.materials[m as usize];
+        let texture = match (material.kind, &material.texture) {
+            (MaterialKind::Leaf, Some(t)) if alpha_test => Some(t),
+            _ => None,
+        };
+        let pos = t.map(|i| glam::DVec3::from_array(mesh.positions[i as usize].map(f64::from)));
+        let (e1, e2) = (pos[1] - pos[0], pos[2] - pos[0]);
+        let area = 0.5 * e1.cross(e2).length() * inv_cell * inv_cell;
+        if area.is_nan() || area <= 0.0 {
+            continue;
+        }
+        let longest = e1.length().max(e2.length()).max((pos[2] - pos[1]).length()) * inv_cell;
+        let mut k = ((longest * 8.0).ceil() as usize).clamp(1, 256);
+        if texture.is_some() {
+            k = k.max(32);
+        }
+        let piece = ((area / (k * k) as f64) * FIXED).round() as u64;
+        let uv = t.map(|i| mesh.uvs[i as usize].map(f64::from));
+        for (offset, rows) in [(1.0 / 3.0, k), (2.0 / 3.0, k - 1)] {
+            for i in 0..rows {
+                for j in 0..rows - i {
+                    let inv_k = 1.0 / k as f64;
+                    let (s, r) = ((i as f64 + offset) * inv_k, (j as f64 + offset) * inv_k);
+                    if let Some(tex) = texture {
+                        let u = uv[0][0] + (uv[1][0] - uv[0][0]) * s + (uv[2][0] - uv[0][0]) * r;
+                        let v = uv[0][1] + (uv[1][1] - uv[0][1]) * s + (uv[2][1] - uv[0][1]) * r;
+                        let (x, y) = sylva_geom::nearest_texel_coords(
+                            u as f32, v as f32, tex.width, tex.height, tex.wrap,
+                        );
+                        if !sylva_geom::is_opaque(tex.pixels[(y * tex.width + x) as usize]) {
+                            continue;
+                        }
+                    }
+                    let q = (pos[0] + e1 * s + e2 * r - origin) * inv_cell;
+                    let c = |v: f64, a: usize| (v.floor() as i64).clamp(1, hi[a]) as usize;
+                    let cell = dims.index(c(q.x, 0), c(q.y, 1), c(q.z, 2));
+                    match material.kind {
+                        MaterialKind::Wood => bark[cell] += piece,
+                        _ => leaf[cell] += piece,
+                    }
+                }
+            }
+        }
+    }
+    let area = |v: Vec<u64>| {
+        v.into_iter()
+            .map(|a| a as f64 / FIXED * (p.cell * p.cell))
+            .collect()
+    };
+    (area(leaf), area(bark))
+}
+
+#[test]
+fn plant_area_is_the_sum_over_every_piece() {
+    // Random meshes: small and large triangles (up to 256 pieces an edge), textured leaves
+    // with texture coordinates beyond [0, 1].
+    let mut models: Vec<(Model, GridPlacement)> = [(1, Wrap::Repeat), (2, Wrap::Clamp)]
+        .into_iter()
+        .map(|(seed, wrap)| {
+            let model = random_model(seed, wrap);
+            (model, GridPlacement::fit([0.0; 3], [10.0; 3], 11).unwrap())
+        })
+        .collect();
+    // Leaf quads with their corners on cell faces and edges (cells of edge 3 from the
+    // origin), two sharing one uv layout and a dozen with layouts of their own (more than a
+    // worker keeps), some reaching past the grid into its clamped end cells.
+    let mut rng = SplitMix64::new(7);
+    let tex = random_texture(&mut rng, 16, 16, Wrap::Clamp);
+    let mut mesh = Mesh::default();
+    let snap = |v: f64| ((v * 4.0).round() / 4.0 * 3.0) as f32;
+    for n in 0..16 {
+        let mut r = || snap(rng.next_f64() * 6.0 - 0.5);
+        let (x, y, z) = (r(), r(), r());
+        let (w, d) = (r().abs() + 0.75, r().abs() + 0.75);
+        let uv = |u: f32, v: f32| {
+            if n < 2 {
+                [u, v]
+            } else {
+                [u * 0.5 + n as f32 * 0.03, v * 0.7]
+            }
+        };
+        let a = mesh.push_vertex(Vec3::new(x, y, z), Vec3::Y, uv(0.0, 0.0));
+        let b = mesh.push_vertex(Vec3::new(x + w, y, z), Vec3::Y, uv(1.0, 0.0));
+        let c = mesh.push_vertex(Vec3::new(x + w, y + d, z + d), Vec3::Y, uv(1.0, 1.0));
+        let e = mesh.push_vertex(Vec3::new(x, y + d, z + d), Vec3::Y, uv(0.0, 1.0));
+        mesh.push_triangle(a, b, c, LEAF);
+        mesh.push_triangle(a, c, e, if n % 4 == 3 { WOOD } else { LEAF });
+    }
+    models.push((
+        Model::new("snapped", mesh, materials(Some(tex))),
+        unit_placement(),
+    ));
+    for (model, p) in &models {
+        for alpha_test in [true, false] {
+            let a = plant_area(model, p, alpha_test).unwrap();
+            let (leaf, bark) = reference_plant_area(model, p, alpha_test);
+            let occupied = leaf.iter().filter(|&&v| v > 0.0).count();
+            assert!(occupied > 10, "{}: only {occupied} leaf cells", model.name);
+            for (i, (got, want)) in a.leaf.iter().zip(&leaf).enumerate() {
+                assert_eq!(
+                    got,
+                    want,
+                    "{}: leaf area of cell {:?}",
+                    model.name,
+                    p.dims.coords(i)
+                );
+            }
+            for (i, (got, want)) in a.bark.iter().zip(&bark).enumerate() {
+                assert_eq!(
+                    got,
+                    want,
+                    "{}: bark area of cell {:?}",
+                    model.name,
+                    p.dims.coords(i)
+                );
+            }
+        }
+    }
+}
