@@ -7,7 +7,7 @@
 //! outline: at least 32). Areas are summed as 2⁻³² cell² fixed-point integers, so the result
 //! is the same for any thread count and triangle order.
 //!
-//! The pieces are counted without visiting each (a catalpa at 128 has 120 M of them): the
+//! The pieces are counted without visiting each (a catalpa at 128 has 118 M opaque ones): the
 //! opaque ones of a leaf come from a mask per uv layout (a plant's leaves share a few), and
 //! runs of pieces along a row that lie in one cell are added at once. Both give exactly the
 //! sums of the piece-by-piece rule, which the tests keep as the reference.
