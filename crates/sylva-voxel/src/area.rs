@@ -149,23 +149,20 @@ fn pieces(k: usize) -> impl Iterator<Item = (f64, f64)> {
 /// Which of a leaf triangle's [`pieces`] lie on opaque texels.
 struct PieceMask {
     bits: Vec<u64>,
-    count: usize,
 }
 
 impl PieceMask {
     fn new(o: &Opacity, uv: [[f32; 2]; 3], k: usize) -> PieceMask {
         let uv = uv.map(|t| t.map(f64::from));
         let mut bits = vec![0u64; (k * k).div_ceil(64)];
-        let mut count = 0;
         for (n, (s, r)) in pieces(k).enumerate() {
             let u = uv[0][0] + (uv[1][0] - uv[0][0]) * s + (uv[2][0] - uv[0][0]) * r;
             let v = uv[0][1] + (uv[1][1] - uv[0][1]) * s + (uv[2][1] - uv[0][1]) * r;
             if o.at(u, v) {
                 bits[n / 64] |= 1 << (n % 64);
-                count += 1;
             }
         }
-        PieceMask { bits, count }
+        PieceMask { bits }
     }
 
     /// Opaque pieces among `from..to`.
@@ -299,7 +296,11 @@ pub fn plant_area(
                 } else {
                     &leaf
                 };
-                let opaque = mask.map_or(k * k, |m| m.count) as u64;
+                // Opaque pieces among `from..to`.
+                let count = |from: usize, to: usize| -> u64 {
+                    mask.map_or(to - from, |m| m.count_in(from, to)) as u64
+                };
+                let opaque = count(0, k * k);
                 if opaque == 0 {
                     return;
                 }
@@ -323,9 +324,6 @@ pub fn plant_area(
                     target[cell].fetch_add(opaque * piece, Ordering::Relaxed);
                     return;
                 }
-                let count = |from: usize, to: usize| -> u64 {
-                    mask.map_or(to - from, |m| m.count_in(from, to)) as u64
-                };
                 sums.clear();
                 let mut add = |cell: usize, area: u64| {
                     // Consecutive pieces mostly share a cell: look at the last one first.

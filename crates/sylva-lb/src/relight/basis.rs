@@ -607,13 +607,13 @@ impl BasisSet {
     }
 }
 
-/// The medium and solve schedule of a basis set as `key=value` metadata (basis grid files and
-/// compressed basis files share it).
 /// A flag's metadata value.
 fn yes_no(flag: bool) -> String {
     if flag { "yes" } else { "no" }.to_string()
 }
 
+/// The medium and solve schedule of a basis set as `key=value` metadata (basis grid files and
+/// compressed basis files share it).
 pub fn basis_metadata(medium: &MediumParams, options: &BasisOptions) -> Vec<(String, String)> {
     let mut metadata = vec![
         (
@@ -884,24 +884,20 @@ mod tests {
             }
         }
         let meta = basis_metadata(&medium, &BasisOptions::papers(dims));
-        let bad = |k: &str| match k {
-            "extrapolate" => Some("maybe"),
-            k => meta
-                .iter()
-                .find(|(key, _)| key == k)
-                .map(|(_, v)| v.as_str()),
-        };
-        let e = parse_basis_metadata(&bad).unwrap_err();
-        assert!(e.contains("'extrapolate' = 'maybe'"), "{e}");
-        let bad = |k: &str| match k {
-            "coarse_start" => Some("1"),
-            k => meta
-                .iter()
-                .find(|(key, _)| key == k)
-                .map(|(_, v)| v.as_str()),
-        };
-        let e = parse_basis_metadata(&bad).unwrap_err();
-        assert!(e.contains("'coarse_start' = '1' is not yes or no"), "{e}");
+        for (flag, wrong, message) in [
+            ("extrapolate", "maybe", "'extrapolate' = 'maybe'"),
+            ("coarse_start", "1", "'coarse_start' = '1' is not yes or no"),
+        ] {
+            let bad = |k: &str| match k {
+                k if k == flag => Some(wrong),
+                k => meta
+                    .iter()
+                    .find(|(key, _)| key == k)
+                    .map(|(_, v)| v.as_str()),
+            };
+            let e = parse_basis_metadata(&bad).unwrap_err();
+            assert!(e.contains(message), "{e}");
+        }
     }
 
     #[test]
